@@ -1,0 +1,5 @@
+import sys
+
+from cpc2urdf.cli import main
+
+sys.exit(main())

@@ -1,0 +1,67 @@
+"""The ``cpc2urdf`` command line: ``main(argv) -> int``.
+
+Each sub-command lives in its own module of this package and exposes ``add_parser(subparsers)``,
+which registers the command and sets ``run=<function(args) -> int>``. Heavy imports happen inside
+``run`` so that ``cpc2urdf --help`` stays fast.
+
+Exit codes: 0 success, 1 a check failed (e.g. ``check`` found a discrepancy), 2 bad input (one
+line on stderr naming the problem, no traceback, no partial output file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from cpc2urdf.errors import Cpc2UrdfError
+
+# Sub-command modules, in the order `--help` lists them.
+COMMANDS = (
+    "export",
+    "bench",
+    "study",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        # One line, exit code 2 (argparse's own default prints usage too).
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from cpc2urdf import __version__
+
+    parser = _Parser(
+        prog="cpc2urdf",
+        description="Calibrate active robot heads (CPC identification, hand-eye) and export a URDF.",
+    )
+    parser.add_argument("--version", action="version", version=f"cpc2urdf {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name in COMMANDS:
+        importlib.import_module(f"cpc2urdf.cli.{name}").add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (0 ok, 1 check failed, 2 bad input)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, --version, or a usage error
+        return int(e.code) if isinstance(e.code, int) else 2
+    try:
+        return int(args.run(args))
+    except Cpc2UrdfError as e:
+        print(f"cpc2urdf {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cpc2urdf {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,15 @@
+"""``cpc2urdf bench NAME``: speed/accuracy benchmarks, each against a reference in the same run."""
+
+from __future__ import annotations
+
+import argparse
+
+from cpc2urdf.cli._registry import add_group
+
+BENCHMARKS: dict[str, tuple[str, str]] = {
+    "fk": ("cpc2urdf.validation.bench_fk", "vectorised CPC forward kinematics vs a Pinocchio loop"),
+}
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    add_group(subparsers, "bench", "run a benchmark", BENCHMARKS)

@@ -1,0 +1,13 @@
+"""``cpc2urdf study NAME``: seeded Monte Carlo studies that reproduce the papers' figures."""
+
+from __future__ import annotations
+
+import argparse
+
+from cpc2urdf.cli._registry import add_group
+
+STUDIES: dict[str, tuple[str, str]] = {}
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    add_group(subparsers, "study", "run a study (tables and PNG plots)", STUDIES)

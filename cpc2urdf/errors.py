@@ -1,0 +1,58 @@
+"""One exception family for everything cpc2urdf rejects.
+
+Every error a user can cause (a bad file, a bad argument, degenerate data) derives from
+:class:`Cpc2UrdfError`. The CLI prints its message as one line and exits with code 2; the
+Python API lets it propagate. Messages name the file, the field or joint, and what was expected.
+"""
+
+from __future__ import annotations
+
+
+class Cpc2UrdfError(Exception):
+    """Base class of every error cpc2urdf raises on purpose."""
+
+
+class InputFileError(Cpc2UrdfError):
+    """A file is missing, unreadable, not JSON, or has the wrong format tag.
+
+    Args:
+        path: The file (or ``"<string>"``).
+        problem: What is wrong, naming the field where there is one.
+    """
+
+    def __init__(self, path: object, problem: str) -> None:
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class SpecError(Cpc2UrdfError):
+    """A robot spec or model describes an impossible robot (unknown parent, bad limits, NaN)."""
+
+
+class UnknownNameError(Cpc2UrdfError):
+    """A joint or frame name that the robot does not have.
+
+    Args:
+        kind: ``"joint"`` or ``"frame"``.
+        name: The name that was asked for.
+        known: The names that exist.
+    """
+
+    def __init__(self, kind: str, name: str, known: list[str] | tuple[str, ...]) -> None:
+        self.kind = kind
+        self.name = name
+        self.known = list(known)
+        super().__init__(f"unknown {kind} {name!r}; known {kind}s: {', '.join(self.known)}")
+
+
+class OutputError(Cpc2UrdfError):
+    """An output file cannot be written (missing folder, no permission)."""
+
+
+class DegenerateDataError(Cpc2UrdfError):
+    """The data cannot determine what was asked (a joint never moved, too few poses, ...)."""
+
+
+class ConfigurationError(Cpc2UrdfError):
+    """A joint configuration of the wrong shape, non-finite, or outside the joint limits."""

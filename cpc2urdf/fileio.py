@@ -1,0 +1,112 @@
+"""Reading JSON files with one clear error, and writing files atomically.
+
+An output file is written to a temporary file in the same folder and renamed over the target, so
+a failure never leaves a partial or corrupted file behind.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from cpc2urdf.errors import InputFileError, OutputError
+
+
+def read_json(path: str | os.PathLike[str]) -> Any:
+    """Load a JSON file, raising :class:`InputFileError` naming the file and the problem."""
+    p = Path(path)
+    if not p.exists():
+        raise InputFileError(p, "no such file")
+    if p.is_dir():
+        raise InputFileError(p, "is a folder, expected a JSON file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputFileError(p, f"cannot read: {e}") from e
+    try:
+        return json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as e:
+        raise InputFileError(p, f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
+    except ValueError as e:
+        raise InputFileError(p, str(e)) from e
+
+
+def _reject_constant(name: str) -> float:
+    # json accepts NaN/Infinity by default; a calibration file must not contain them.
+    raise ValueError(f"non-finite number {name} is not allowed")
+
+
+def require_format(doc: Any, expected: str, path: object) -> Mapping[str, Any]:
+    """Check that ``doc`` is an object whose ``format`` tag is ``expected`` (any ``@`` version
+    of the same family is named in the error)."""
+    if not isinstance(doc, Mapping):
+        raise InputFileError(path, f"expected a JSON object with \"format\": \"{expected}\"")
+    tag = doc.get("format")
+    if tag != expected:
+        raise InputFileError(path, f"format is {tag!r}, expected {expected!r}")
+    return doc
+
+
+def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (temp file in the same folder, then rename).
+
+    Raises:
+        OutputError: The folder does not exist or is not writable, or the path is a folder.
+    """
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise OutputError(f"{p}: is a folder, expected a file path")
+    if not folder.is_dir():
+        raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
+    except OSError as e:
+        raise OutputError(f"{p}: cannot write ({e.strerror})") from e
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, p)
+    except OSError as e:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise OutputError(f"{p}: cannot write ({e.strerror})") from e
+    return p
+
+
+def dumps(doc: Any) -> str:
+    """Deterministic JSON text (sorted keys are not used: field order is part of the format)."""
+    return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+
+
+def write_json(path: str | os.PathLike[str], doc: Any) -> Path:
+    """Atomically write ``doc`` as JSON (NaN/inf refused)."""
+    try:
+        text = dumps(doc)
+    except ValueError as e:
+        raise OutputError(f"{path}: refusing to write non-finite numbers ({e})") from e
+    return write_atomic(path, text)
+
+
+def finite_float(value: Any, where: str) -> float:
+    """``value`` as a finite float, or ``ValueError`` naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{where} must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{where} must be finite, got {value!r}")
+    return v
+
+
+def float_list(value: Any, n: int, where: str) -> list[float]:
+    """``value`` as a list of ``n`` finite floats, or ``ValueError`` naming ``where``."""
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise ValueError(f"{where} must be a list of {n} numbers, got {value!r}")
+    return [finite_float(v, f"{where}[{i}]") for i, v in enumerate(value)]

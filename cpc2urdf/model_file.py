@@ -1,0 +1,148 @@
+"""Model files (``cpc2urdf/model@1``): a nominal or identified robot, ready for URDF export.
+
+Same tree fields as a robot spec (see :mod:`cpc2urdf.spec`), but every joint and frame carries
+its CPC constants under ``"cpc"`` and ``world_to_base`` is required::
+
+    {
+      "format": "cpc2urdf/model@1",
+      "name": "iis_head",
+      "units": {"length": "m", "angle": "rad"},
+      "world_to_base": {"cpc": {"b": [0, 0, 1], "beta": 0, "l": [0, 0, 0]}},
+      "joints": [{"name": "table_x", "type": "prismatic", "parent": "base",
+                  "lower": 0, "upper": 1, "velocity": 0.1, "effort": 100,
+                  "cpc": {"b": [0, 0, 1], "beta": 0, "l": [0, 0, 0]}}, ...],
+      "frames": [{"name": "plate_left", "parent": "vergence_left", "kind": "plate",
+                  "cpc": {...}}, ...],
+      "provenance": {...}, "uncertainty": {...}, "residuals": {...}     # optional, free-form
+    }
+
+Files are written in SI units with full float precision; they may be read in mm/deg.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from cpc2urdf.errors import Cpc2UrdfError, InputFileError
+from cpc2urdf.fileio import read_json, require_format, write_json
+from cpc2urdf.model import BASE, CPCModel
+from cpc2urdf.spec import ROBOT_FORMAT, RobotSpec, cpc_to_json, parse_placement, parse_tree, spec_from_json
+from cpc2urdf.units import Units
+
+MODEL_FORMAT = "cpc2urdf/model@1"
+# Free-form sections a model file may carry; they round-trip untouched in CPCModel.metadata.
+OPTIONAL_SECTIONS = ("description", "provenance", "uncertainty", "residuals", "handeye", "notes")
+
+
+def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
+    """Parse a ``cpc2urdf/model@1`` document; errors name ``source`` and the field."""
+    try:
+        d = require_format(doc, MODEL_FORMAT, source)
+        allowed = {"format", "name", "units", "world_to_base", "joints", "frames", *OPTIONAL_SECTIONS}
+        unknown = set(d) - allowed
+        if unknown:
+            raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
+        units = Units.from_json(d.get("units"))
+        structure, geo_j, geo_f = parse_tree(d, units)
+        if "world_to_base" not in d:
+            raise ValueError("lacks 'world_to_base'")
+        T_wb = parse_placement(d["world_to_base"], units, "world_to_base")
+        joints, frames = {}, {}
+        for j, g in zip(structure.joints, geo_j, strict=True):
+            if g is None:
+                raise ValueError(f"joint {j.name!r} lacks 'cpc'")
+            joints[j.name] = parse_placement(g, units, f"joint {j.name!r}.cpc")
+        for f, g in zip(structure.frames, geo_f, strict=True):
+            if g is None:
+                raise ValueError(f"frame {f.name!r} lacks 'cpc'")
+            frames[f.name] = parse_placement(g, units, f"frame {f.name!r}.cpc")
+        metadata = {k: d[k] for k in OPTIONAL_SECTIONS if k in d}
+        return CPCModel(structure, T_wb, joints, frames, metadata)
+    except InputFileError:
+        raise
+    except (ValueError, Cpc2UrdfError) as e:
+        raise InputFileError(source, str(e)) from e
+
+
+def model_to_json(model: CPCModel) -> dict[str, Any]:
+    """The model as a ``cpc2urdf/model@1`` document in SI units."""
+    s = model.structure
+    joints = []
+    for j in s.joints:
+        entry: dict[str, Any] = {
+            "name": j.name,
+            "type": j.type,
+            "parent": j.parent,
+            "lower": j.lower,
+            "upper": j.upper,
+            "velocity": j.velocity,
+            "effort": j.effort,
+        }
+        if j.calibration_range is not None:
+            entry["calibration_range"] = list(j.calibration_range)
+        entry["cpc"] = cpc_to_json(model.joints[j.name])
+        joints.append(entry)
+    frames = []
+    for f in s.frames:
+        fe: dict[str, Any] = {"name": f.name, "parent": f.parent, "kind": f.kind}
+        if f.layout is not None:
+            fe["layout"] = [list(p) for p in f.layout]
+        fe["cpc"] = cpc_to_json(model.frames[f.name])
+        frames.append(fe)
+    doc: dict[str, Any] = {
+        "format": MODEL_FORMAT,
+        "name": s.name,
+        "units": {"length": "m", "angle": "rad"},
+        "world_to_base": {"cpc": cpc_to_json(model.world_to_base)},
+        "joints": joints,
+        "frames": frames,
+    }
+    for k in OPTIONAL_SECTIONS:
+        if k in model.metadata:
+            doc[k] = model.metadata[k]
+    return doc
+
+
+def save_model(model: CPCModel, path: str | Path) -> Path:
+    """Write ``model`` atomically as a model file."""
+    return write_json(path, model_to_json(model))
+
+
+def _shipped_spec_path(name: str) -> Path | None:
+    from cpc2urdf.robots import spec_path  # data package; resolves shipped robot names
+
+    return spec_path(name)
+
+
+def load_robot(name_or_path: str | Path) -> RobotSpec:
+    """A shipped robot by name (e.g. ``"iis_head"``), or a robot spec / model file by path.
+
+    A model file yields a spec whose nominal model is the file's model.
+    """
+    text = str(name_or_path)
+    shipped = _shipped_spec_path(text) if "/" not in text and not text.endswith(".json") else None
+    if shipped is not None:
+        return spec_from_json(read_json(shipped), text)
+    doc = read_json(text)
+    if isinstance(doc, Mapping) and doc.get("format") == MODEL_FORMAT:
+        model = model_from_json(doc, text)
+        return RobotSpec(model.structure, model, text)
+    if isinstance(doc, Mapping) and doc.get("format") == ROBOT_FORMAT:
+        return spec_from_json(doc, text)
+    from cpc2urdf.robots import available
+
+    raise InputFileError(
+        text,
+        f"format is {doc.get('format') if isinstance(doc, Mapping) else None!r}, expected "
+        f"{MODEL_FORMAT!r} or {ROBOT_FORMAT!r} (or a shipped robot name: {', '.join(available())})",
+    )
+
+
+def load_model(name_or_path: str | Path) -> CPCModel:
+    """A model: a model file, or the nominal model of a robot spec or shipped robot name."""
+    return load_robot(name_or_path).nominal_model()
+
+
+__all__ = ["BASE", "MODEL_FORMAT", "load_model", "load_robot", "model_from_json", "model_to_json", "save_model"]

@@ -1,0 +1,47 @@
+"""A small progress bar for long studies (stderr; no dependency).
+
+Usage::
+
+    for item in progress(items, "fig11"):
+        ...
+
+It redraws one line at most every 0.2 s and prints a final line with the elapsed time. With
+``CPC2URDF_PROGRESS=0`` in the environment it is silent (tests set this).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Iterable, Iterator, Sized
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterator[T]:
+    """Yield ``items`` while drawing ``label [#####.....] k/n  elapsed  eta`` on stderr."""
+    if total is None and isinstance(items, Sized):
+        total = len(items)
+    quiet = os.environ.get("CPC2URDF_PROGRESS", "1") == "0"
+    start = last = time.perf_counter()
+    k = 0
+    for k, item in enumerate(items, 1):
+        yield item
+        now = time.perf_counter()
+        if not quiet and (now - last > 0.2 or k == total):
+            last = now
+            elapsed = now - start
+            if total:
+                width = 30
+                fill = int(width * k / total)
+                eta = elapsed / k * (total - k)
+                line = f"\r{label} [{'#' * fill}{'.' * (width - fill)}] {k}/{total} {elapsed:6.1f}s eta {eta:6.1f}s"
+            else:
+                line = f"\r{label} {k} {elapsed:6.1f}s"
+            sys.stderr.write(line)
+            sys.stderr.flush()
+    if not quiet and k:
+        sys.stderr.write(f"\r{label}: {k} done in {time.perf_counter() - start:.1f}s" + " " * 30 + "\n")
+        sys.stderr.flush()

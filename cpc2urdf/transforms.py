@@ -1,0 +1,207 @@
+"""Homogeneous transforms and the CPC rotation of eq. (4).
+
+Conventions used across the package:
+
+- ``T_a_b`` is the pose of frame ``b`` in frame ``a``: a (4, 4) matrix mapping b-coordinates to
+  a-coordinates, as Pinocchio's ``aMb``. ``T_world_plate = T_world_base @ T_base_plate``.
+- Points and directions carry their frame: ``p_world``, ``axis_base``.
+- SI units: metres and radians.
+
+Functions that take an angle also accept an array of angles of shape (N,) and then return a
+stack of shape (N, 4, 4): forward kinematics is vectorised over configurations this way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+
+def rot_z(theta: ArrayLike) -> Array:
+    """``Rot(z, theta)`` of eq. (2).
+
+    Args:
+        theta: Angle [rad], scalar or shape (N,).
+
+    Returns:
+        Shape (4, 4), or (N, 4, 4) for an array of angles.
+    """
+    t = np.asarray(theta, dtype=float)
+    c, s = np.cos(t), np.sin(t)
+    T = np.zeros(t.shape + (4, 4))
+    T[..., 0, 0] = c
+    T[..., 0, 1] = -s
+    T[..., 1, 0] = s
+    T[..., 1, 1] = c
+    T[..., 2, 2] = 1.0
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def rot_x(alpha: ArrayLike) -> Array:
+    """``Rot(x, alpha)``, shape (4, 4) or (N, 4, 4); ``alpha`` in [rad]."""
+    t = np.asarray(alpha, dtype=float)
+    c, s = np.cos(t), np.sin(t)
+    T = np.zeros(t.shape + (4, 4))
+    T[..., 0, 0] = 1.0
+    T[..., 1, 1] = c
+    T[..., 1, 2] = -s
+    T[..., 2, 1] = s
+    T[..., 2, 2] = c
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def trans(xyz: ArrayLike) -> Array:
+    """``Trans(l)`` of eq. (2).
+
+    Args:
+        xyz: Translation [m], shape (3,) or (N, 3).
+
+    Returns:
+        Shape (4, 4) or (N, 4, 4).
+    """
+    v = np.asarray(xyz, dtype=float)
+    T = np.zeros(v.shape[:-1] + (4, 4))
+    T[..., 0, 0] = T[..., 1, 1] = T[..., 2, 2] = T[..., 3, 3] = 1.0
+    T[..., :3, 3] = v
+    return T
+
+
+def trans_z(d: ArrayLike) -> Array:
+    """``Trans(0, 0, d)`` of eq. (6); ``d`` [m] scalar or shape (N,)."""
+    t = np.asarray(d, dtype=float)
+    T = np.zeros(t.shape + (4, 4))
+    T[..., 0, 0] = T[..., 1, 1] = T[..., 2, 2] = T[..., 3, 3] = 1.0
+    T[..., 2, 3] = t
+    return T
+
+
+def homogeneous(R: ArrayLike, p: ArrayLike) -> Array:
+    """Stack a rotation (3, 3) and a translation (3,) [m] into a (4, 4) transform."""
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(R, dtype=float)
+    T[:3, 3] = np.asarray(p, dtype=float)
+    return T
+
+
+def inverse(T: ArrayLike) -> Array:
+    """Inverse of a rigid transform, shape (..., 4, 4), without a general matrix inverse."""
+    T = np.asarray(T, dtype=float)
+    R = T[..., :3, :3]
+    Rt = np.swapaxes(R, -1, -2)
+    out = np.zeros_like(T)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+# Below this value of 1 + b_z, eq. (4) loses precision (it divides by 1 + b_z); we switch to the
+# equivalent axis-angle form. Exactly b = -z is the CPC singularity: the axis k of eq. (4) is then
+# undefined and we fix it to x, so the transform is still exact (the parametrisation is merely
+# not continuous there).
+_BZ_SWITCH = 1e-6
+
+
+def cpc_rotation(b: ArrayLike) -> Array:
+    """The CPC rotation ``R_i`` of eq. (4): maps z onto the unit vector ``b``.
+
+    ``R(b) = Rot(k, phi)`` with ``k = z x b / |z x b|`` and ``phi = acos(b_z)``. Eq. (4) is used
+    as printed for ``b_z > -1 + 1e-6``; closer to ``b = -z`` the equivalent Rodrigues form is
+    used (eq. (4) divides by ``1 + b_z``).
+
+    Args:
+        b: Unit axis ``[b_x, b_y, b_z]``, shape (3,).
+
+    Returns:
+        Rotation matrix, shape (3, 3).
+    """
+    bx, by, bz = (float(v) for v in np.asarray(b, dtype=float))
+    if 1.0 + bz > _BZ_SWITCH:
+        c = 1.0 + bz
+        return np.array(
+            [
+                [1.0 - bx * bx / c, -bx * by / c, bx],
+                [-bx * by / c, 1.0 - by * by / c, by],
+                [-bx, -by, bz],
+            ]
+        )
+    s = math.hypot(bx, by)
+    kx, ky = (-by / s, bx / s) if s > 1e-15 else (1.0, 0.0)  # k = z x b / |z x b|
+    phi = math.atan2(s, bz)
+    K = np.array([[0.0, 0.0, ky], [0.0, 0.0, -kx], [-ky, kx, 0.0]])
+    return np.eye(3) + math.sin(phi) * K + (1.0 - math.cos(phi)) * (K @ K)
+
+
+def rotation_z(angle: float) -> Array:
+    """3x3 rotation about z by ``angle`` [rad] (eq. (24))."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def matrix_from_rpy(rpy: ArrayLike) -> Array:
+    """URDF convention: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``; ``rpy`` [rad], shape (3,)."""
+    r, p, y = (float(v) for v in np.asarray(rpy, dtype=float))
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def rpy_from_matrix(R: ArrayLike) -> Array:
+    """Inverse of :func:`matrix_from_rpy`, exact to rounding even near pitch = ±90°.
+
+    Pitch and yaw are read off the first column; roll is then solved from
+    ``Ry(p)^T Rz(y)^T R``, so any rounding in yaw (ill-conditioned at gimbal lock) is absorbed by
+    roll and the reconstructed matrix still matches to ~1e-16.
+
+    Returns:
+        ``[roll, pitch, yaw]`` [rad].
+    """
+    R = np.asarray(R, dtype=float)
+    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
+    yaw = math.atan2(R[1, 0], R[0, 0]) if math.hypot(R[0, 0], R[1, 0]) > 1e-300 else 0.0
+    cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+    Rz_t = np.array([[cy, sy, 0.0], [-sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    Ry_t = np.array([[cp, 0.0, -sp], [0.0, 1.0, 0.0], [sp, 0.0, cp]])
+    Rx = Ry_t @ Rz_t @ R
+    roll = math.atan2(Rx[2, 1], Rx[1, 1])
+    return np.array([roll, pitch, yaw])
+
+
+def rotation_error(R_a: ArrayLike, R_b: ArrayLike) -> Array:
+    """Angle [rad] of ``R_a^T R_b``, shape (...,), robust for tiny and large angles."""
+    R_a = np.asarray(R_a, dtype=float)
+    R_b = np.asarray(R_b, dtype=float)
+    D = np.swapaxes(R_a, -1, -2) @ R_b
+    # atan2(|skew|, trace part) keeps full precision near 0 and near pi.
+    w = np.stack(
+        [D[..., 2, 1] - D[..., 1, 2], D[..., 0, 2] - D[..., 2, 0], D[..., 1, 0] - D[..., 0, 1]],
+        axis=-1,
+    )
+    s = 0.5 * np.linalg.norm(w, axis=-1)
+    c = 0.5 * (np.trace(D, axis1=-2, axis2=-1) - 1.0)
+    return np.arctan2(s, c)
+
+
+def project_to_rotation(M: ArrayLike) -> Array:
+    """Nearest rotation matrix to ``M`` in the Frobenius norm (polar decomposition via SVD)."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    return U @ D @ Vt
+
+
+def rotation_defect(R: ArrayLike) -> float:
+    """Largest entry of ``|R^T R - I|`` plus ``|det R - 1|``: 0 for an exact rotation."""
+    R = np.asarray(R, dtype=float)
+    return float(np.max(np.abs(R.T @ R - np.eye(3))) + abs(np.linalg.det(R) - 1.0))
