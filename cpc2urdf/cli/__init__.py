@@ -19,7 +19,9 @@ from cpc2urdf.errors import Cpc2UrdfError
 
 # Sub-command modules, in the order `--help` lists them.
 COMMANDS = (
+    "demo",
     "export",
+    "check",
     "bench",
     "study",
 )

@@ -1,0 +1,306 @@
+"""Cross-check a URDF against the CPC model with three independent URDF parsers.
+
+- Pinocchio (``pin.buildModelFromUrdf``): pose of every frame at N configurations;
+- yourdfpy (its own XML parser and scene graph): the same poses;
+- urdfdom (``check_urdf``, shipped with ``pin``): parses the file and prints the link tree; it
+  exposes no poses, so for it we check that it parses and that its tree equals the model's.
+
+Every named frame, ``base`` and every joint's link frame is compared, at seeded random
+configurations inside the joint limits plus the two limit corners. A URDF that passes agrees with
+the CPC model to ``FK_AGREEMENT_TOL`` (1e-9 m / 1e-9 rad) in both FK parsers.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cpc2urdf.errors import InputFileError
+from cpc2urdf.model import BASE, CPCModel
+from cpc2urdf.tolerances import FK_AGREEMENT_TOL
+from cpc2urdf.transforms import Array, rotation_error
+from cpc2urdf.urdf import link_name
+
+LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
+
+
+@dataclass
+class ParserReport:
+    """What one parser saw.
+
+    Attributes:
+        parser: ``"pinocchio"``, ``"yourdfpy"`` or ``"urdfdom"``.
+        ok: True when everything it can check agrees within tolerance.
+        max_position_error: Worst frame position discrepancy [m], None if it gives no poses.
+        max_rotation_error: Worst frame rotation discrepancy [rad], None if it gives no poses.
+        worst_frame: The frame where the worst discrepancy occurred.
+        problems: Structural problems (missing frames/joints, wrong types or limits).
+    """
+
+    parser: str
+    ok: bool
+    max_position_error: float | None = None
+    max_rotation_error: float | None = None
+    worst_frame: str | None = None
+    problems: list[str] = field(default_factory=list)
+    note: str = ""
+
+
+@dataclass
+class CrossCheckReport:
+    """The result of :func:`cross_check`."""
+
+    urdf: str
+    n_configurations: int
+    frames: list[str]
+    parsers: list[ParserReport]
+    tolerance: float = FK_AGREEMENT_TOL
+
+    @property
+    def ok(self) -> bool:
+        return all(p.ok for p in self.parsers)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "urdf": self.urdf,
+            "ok": self.ok,
+            "tolerance": self.tolerance,
+            "n_configurations": self.n_configurations,
+            "frames": self.frames,
+            "parsers": [p.__dict__ for p in self.parsers],
+        }
+
+    def format(self) -> str:
+        lines = [
+            f"cross-check of {self.urdf}: {len(self.frames)} frames at {self.n_configurations} "
+            f"configurations, tolerance {self.tolerance:g} m / {self.tolerance:g} rad"
+        ]
+        for p in self.parsers:
+            if p.max_position_error is None:
+                err = "no poses (parse + tree only)"
+            else:
+                err = (
+                    f"worst position {p.max_position_error:.3e} m, rotation "
+                    f"{p.max_rotation_error:.3e} rad (at {p.worst_frame})"
+                )
+            lines.append(f"  {p.parser:10s} {'OK  ' if p.ok else 'FAIL'} {err}{'; ' + p.note if p.note else ''}")
+            lines.extend(f"             - {msg}" for msg in p.problems)
+        lines.append("result: " + ("all parsers agree with the CPC model" if self.ok else "DISCREPANCY"))
+        return "\n".join(lines)
+
+
+def _compared_frames(model: CPCModel) -> list[str]:
+    s = model.structure
+    return [BASE, *(link_name(n) for n in s.joint_names), *s.frame_names]
+
+
+def _reference_poses(model: CPCModel, Q: Array) -> dict[str, Array]:
+    """CPC poses (N, 4, 4) of every compared frame, keyed by URDF link name."""
+    _, link = model.link_poses(Q)
+    ref = {link_name(n): link[:, i] for i, n in enumerate(model.structure.joint_names)}
+    ref.update(model.fk(Q, [BASE, *model.structure.frame_names]))
+    return ref
+
+
+def sample_configurations(model: CPCModel, n: int, seed: int = 0) -> Array:
+    """``n`` seeded uniform configurations within the limits, plus both limit corners."""
+    s = model.structure
+    rng = np.random.default_rng(seed)
+    Q = rng.uniform(s.lower, s.upper, size=(max(n - 2, 0), s.n_joints))
+    return np.vstack([s.lower, s.upper, Q])[: max(n, 2)]
+
+
+def _worst(report: ParserReport, errors: dict[str, tuple[float, float]]) -> None:
+    pos = max(errors.items(), key=lambda kv: kv[1][0])
+    rot = max(errors.items(), key=lambda kv: kv[1][1])
+    report.max_position_error = pos[1][0]
+    report.max_rotation_error = rot[1][1]
+    report.worst_frame = pos[0] if pos[1][0] >= rot[1][1] else rot[0]
+    if report.max_position_error > FK_AGREEMENT_TOL or report.max_rotation_error > FK_AGREEMENT_TOL:
+        report.ok = False
+
+
+def _compare(ref: Array, got: Array) -> tuple[float, float]:
+    dp = float(np.max(np.linalg.norm(ref[:, :3, 3] - got[:, :3, 3], axis=-1)))
+    dr = float(np.max(rotation_error(ref[:, :3, :3], got[:, :3, :3])))
+    return dp, dr
+
+
+def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
+    """FK of every compared frame with Pinocchio vs the CPC model."""
+    import pinocchio as pin
+
+    rep = ParserReport("pinocchio", True)
+    try:
+        pmodel = pin.buildModelFromUrdf(urdf_path)
+    except Exception as e:  # pinocchio raises plain RuntimeError/ValueError on bad XML
+        rep.ok = False
+        rep.problems.append(f"cannot load: {str(e).strip().splitlines()[0] if str(e).strip() else e}")
+        return rep
+    s = model.structure
+    idx_q = {}
+    for j in s.joints:
+        if not pmodel.existJointName(j.name):
+            rep.problems.append(f"joint {j.name!r} missing")
+            continue
+        jm = pmodel.joints[pmodel.getJointId(j.name)]
+        if jm.nq != 1:
+            rep.problems.append(f"joint {j.name!r} has nq={jm.nq}, expected 1 (continuous joint?)")
+            continue
+        idx_q[j.name] = jm.idx_q
+        lo, hi = pmodel.lowerPositionLimit[jm.idx_q], pmodel.upperPositionLimit[jm.idx_q]
+        if abs(lo - j.lower) > LIMIT_TOL or abs(hi - j.upper) > LIMIT_TOL:
+            rep.problems.append(f"joint {j.name!r} limits [{lo}, {hi}] != [{j.lower}, {j.upper}]")
+    if pmodel.nq != s.n_joints:
+        rep.problems.append(f"model has nq={pmodel.nq}, expected {s.n_joints}")
+    frames = _compared_frames(model)
+    fids = {}
+    for f in frames:
+        # getFrameId returns nframes for an unknown name instead of raising: check explicitly.
+        if not pmodel.existFrame(f, pin.FrameType.BODY):
+            rep.problems.append(f"frame {f!r} missing")
+        else:
+            fids[f] = pmodel.getFrameId(f, pin.FrameType.BODY)
+    if rep.problems:
+        rep.ok = False
+        return rep
+    data = pmodel.createData()
+    ref = _reference_poses(model, Q)
+    got = {f: np.empty((len(Q), 4, 4)) for f in frames}
+    qp = np.zeros(pmodel.nq)
+    for k, q in enumerate(Q):
+        for i, name in enumerate(s.joint_names):
+            qp[idx_q[name]] = q[i]
+        pin.framesForwardKinematics(pmodel, data, qp)
+        for f in frames:
+            got[f][k] = data.oMf[fids[f]].homogeneous
+    _worst(rep, {f: _compare(ref[f], got[f]) for f in frames})
+    return rep
+
+
+def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
+    """FK of every compared frame with yourdfpy vs the CPC model."""
+    import yourdfpy
+
+    rep = ParserReport("yourdfpy", True)
+    try:
+        robot = yourdfpy.URDF.load(
+            urdf_path, load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False
+        )
+    except Exception as e:  # lxml/yourdfpy errors have no common base
+        rep.ok = False
+        rep.problems.append(f"cannot load: {e}")
+        return rep
+    s = model.structure
+    names = list(robot.actuated_joint_names)
+    missing = [n for n in s.joint_names if n not in names]
+    extra = [n for n in names if n not in s.joint_names]
+    if missing or extra:
+        rep.problems.append(f"actuated joints differ: missing {missing}, unexpected {extra}")
+    for j in s.joints:
+        if j.name in robot.joint_map:
+            uj = robot.joint_map[j.name]
+            if uj.type != j.type:
+                rep.problems.append(f"joint {j.name!r} has type {uj.type}, expected {j.type}")
+            elif uj.limit is None or abs(uj.limit.lower - j.lower) > LIMIT_TOL or abs(uj.limit.upper - j.upper) > LIMIT_TOL:
+                rep.problems.append(f"joint {j.name!r} limits differ")
+    frames = _compared_frames(model)
+    for f in frames:
+        if f not in robot.link_map:
+            rep.problems.append(f"frame {f!r} missing")
+    if rep.problems:
+        rep.ok = False
+        return rep
+    order = [s.joint_index(n) for n in names]
+    ref = _reference_poses(model, Q)
+    got = {f: np.empty((len(Q), 4, 4)) for f in frames}
+    for k, q in enumerate(Q):
+        robot.update_cfg(q[order])
+        for f in frames:
+            got[f][k] = robot.get_transform(frame_to=f, frame_from="world")
+    _worst(rep, {f: _compare(ref[f], got[f]) for f in frames})
+    return rep
+
+
+def check_urdfdom_executable() -> str | None:
+    """Path of urdfdom's ``check_urdf`` (installed with ``pin``), or None."""
+    found = shutil.which("check_urdf")
+    if found:
+        return found
+    try:
+        import cmeel  # type: ignore[import-not-found]  # pin's binary prefix
+
+        cand = Path(cmeel.__file__).resolve().parent.parent / "cmeel.prefix" / "bin" / "check_urdf"
+    except ImportError:
+        return None
+    return str(cand) if cand.is_file() else None
+
+
+def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
+    """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's."""
+    rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
+    exe = check_urdfdom_executable()
+    if exe is None:
+        rep.ok = False
+        rep.problems.append("check_urdf not found (it ships with the 'pin' package)")
+        return rep
+    proc = subprocess.run(
+        [exe, urdf_path], capture_output=True, text=True, timeout=60, env={**os.environ, "LC_ALL": "C"}
+    )
+    if proc.returncode != 0 or "Successfully Parsed XML" not in proc.stdout:
+        rep.ok = False
+        msg = (proc.stderr or proc.stdout).strip().splitlines()
+        rep.problems.append(f"check_urdf failed: {msg[-1] if msg else proc.returncode}")
+        return rep
+    edges = set()
+    stack: list[tuple[int, str]] = []
+    root = re.search(r"root Link: (\S+)", proc.stdout)
+    if root:
+        stack.append((-1, root.group(1)))
+    for line in proc.stdout.splitlines():
+        m = re.match(r"^(\s*)child\(\d+\):\s+(\S+)", line)
+        if not m:
+            continue
+        depth = len(m.group(1))
+        while stack and stack[-1][0] >= depth:
+            stack.pop()
+        if stack:
+            edges.add((stack[-1][1], m.group(2)))
+        stack.append((depth, m.group(2)))
+    s = model.structure
+    expected = {("world", BASE)}
+    expected |= {(link_name(j.parent), link_name(j.name)) for j in s.joints}
+    expected |= {(link_name(f.parent), f.name) for f in s.frames}
+    if edges != expected:
+        rep.ok = False
+        rep.problems.append(
+            f"link tree differs: missing {sorted(expected - edges)}, unexpected {sorted(edges - expected)}"
+        )
+    return rep
+
+
+def cross_check(model: CPCModel, urdf_path: str | Path, n: int = 100, seed: int = 0) -> CrossCheckReport:
+    """Compare ``urdf_path`` with ``model`` using Pinocchio, yourdfpy and urdfdom.
+
+    Args:
+        model: The CPC model the URDF should describe.
+        urdf_path: The URDF file.
+        n: Number of configurations (seeded uniform within limits, incl. both limit corners).
+        seed: Seed of the configurations.
+
+    Raises:
+        InputFileError: The URDF file does not exist.
+    """
+    path = str(urdf_path)
+    if not Path(path).is_file():
+        raise InputFileError(path, "no such file")
+    Q = sample_configurations(model, n, seed)
+    reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
+    return CrossCheckReport(path, len(Q), _compared_frames(model), reports)
