@@ -1,0 +1,419 @@
+"""Stage-1 measurements: joint readings with measured frame poses (``cpc2urdf/measurements@1``).
+
+In memory a :class:`MeasurementSet` holds N records of one robot: the readings ``q`` (N, n) and,
+per measured frame, ``T_world_<frame>`` (N, 4, 4), NaN where a record lacks that frame. On disk::
+
+    {"format": "cpc2urdf/measurements@1",
+     "robot": "iis_head",                       # shipped robot name, or a robot spec/model file
+     "units": {"length": "mm", "angle": "deg"}, # optional, default m/rad
+     "description": "...",                      # optional, free text
+     "noise": {...}, "provenance": {...},       # optional, free-form, round-tripped
+     "records": [
+       {"label": "q0",                                          # optional
+        "joints": {"table_x": 500, "pan": 90, ...},             # every joint, file units
+        "poses": {"plate_left": {"matrix": [[...], ...]},       # T_world_<frame>
+                  "plate_right": {"xyz": [...], "quat_xyzw": [...]}},
+        "points": {"plate_left": [[x, y, z], ..., null, ...]}}  # measured circle centres
+     ]}
+
+A record's ``points`` give a plate's measured circle centres in world, one per entry of the
+plate's ``layout`` (same order; ``null`` for a circle that was not seen). The pose is then
+estimated on load by rigid registration (Shih et al. sec. 3.3) unless the record also gives it
+under ``poses`` (a given pose wins; the points are kept). See ``docs/measurements.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cpc2urdf.errors import Cpc2UrdfError, InputFileError, UnknownNameError
+from cpc2urdf.fileio import finite_float, read_json, require_format, write_json
+from cpc2urdf.model import RobotStructure
+from cpc2urdf.poses import pose_from_json, pose_to_json
+from cpc2urdf.spec import RobotSpec
+from cpc2urdf.units import Units
+
+MEASUREMENTS_FORMAT = "cpc2urdf/measurements@1"
+# Free-form top-level sections that round-trip untouched in MeasurementSet.metadata.
+OPTIONAL_SECTIONS = ("description", "noise", "provenance", "notes")
+_RECORD_KEYS = {"label", "joints", "poses", "points"}
+
+
+@dataclass
+class MeasurementSet:
+    """N records of joint readings with measured frame poses, for one robot.
+
+    Attributes:
+        structure: The robot's tree (joint order = column order of ``q``).
+        q: Joint readings [m] / [rad], shape (N, n), in ``structure.joint_names`` order.
+        poses: Frame name -> measured ``T_world_<frame>``, shape (N, 4, 4); all-NaN matrices
+            where a record lacks that frame.
+        source: Where the set came from (a file path, or ``"<memory>"``); errors name it.
+        robot: How the robot is referred to in files (a shipped name or a spec/model path), or
+            None if the set was built in memory without one (then it cannot be saved).
+        labels: One label per record (``"record i"`` when the file gives none).
+        points: Plate name -> measured circle centres in world [m], shape (N, K, 3) in the
+            plate's layout order, NaN where not measured. Only plates whose points were given.
+        fit_rms: Plate name -> RMS registration residual [m], shape (N,), for poses that were
+            estimated from points (NaN elsewhere).
+        metadata: Free-form file sections (``description``, ``noise``, ``provenance``, ``notes``).
+    """
+
+    structure: RobotStructure
+    q: NDArray[np.float64]
+    poses: dict[str, NDArray[np.float64]]
+    source: str = "<memory>"
+    robot: str | None = None
+    labels: list[str] = field(default_factory=list)
+    points: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    fit_rms: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        s = self.structure
+        self.q = np.array(self.q, dtype=float)
+        if self.q.ndim != 2 or self.q.shape[1] != s.n_joints:
+            raise ValueError(f"q must have shape (N, {s.n_joints}), got {self.q.shape}")
+        N = self.q.shape[0]
+        if not self.labels:
+            self.labels = [f"record {i}" for i in range(N)]
+        if len(self.labels) != N:
+            raise ValueError(f"need {N} labels, got {len(self.labels)}")
+        for name, T in list(self.poses.items()):
+            s.frame(name)
+            T = np.asarray(T, dtype=float)
+            if T.shape != (N, 4, 4):
+                raise ValueError(f"poses[{name!r}] must have shape ({N}, 4, 4), got {T.shape}")
+            self.poses[name] = T
+        for name, P in list(self.points.items()):
+            layout = s.frame(name).layout
+            P = np.asarray(P, dtype=float)
+            if layout is None or P.shape != (N, len(layout), 3):
+                raise ValueError(f"points[{name!r}] must have shape (N, K, 3) for a plate with a layout")
+            self.points[name] = P
+
+    # ---- queries -------------------------------------------------------------------------------
+
+    @property
+    def n_records(self) -> int:
+        return int(self.q.shape[0])
+
+    def __len__(self) -> int:
+        return self.n_records
+
+    @property
+    def frames(self) -> list[str]:
+        """Frames with at least one measured pose, in the structure's frame order."""
+        return [f for f in self.structure.frame_names if f in self.poses and bool(self.has_pose(f).any())]
+
+    def has_pose(self, frame: str) -> NDArray[np.bool_]:
+        """Which records measured ``frame``: boolean array of shape (N,)."""
+        self.structure.frame(frame)  # UnknownNameError for a typo
+        if frame not in self.poses:
+            return np.zeros(self.n_records, dtype=bool)
+        return np.all(np.isfinite(self.poses[frame]), axis=(1, 2))
+
+    def subset(self, index: ArrayLike) -> MeasurementSet:
+        """The records selected by ``index`` (integer indices or a boolean mask of shape (N,))."""
+        idx = np.arange(self.n_records)[np.asarray(index)]
+        return MeasurementSet(
+            self.structure,
+            self.q[idx],
+            {k: v[idx] for k, v in self.poses.items()},
+            self.source,
+            self.robot,
+            [self.labels[int(i)] for i in idx],
+            {k: v[idx] for k, v in self.points.items()},
+            {k: v[idx] for k, v in self.fit_rms.items()},
+            dict(self.metadata),
+        )
+
+    @classmethod
+    def from_arrays(
+        cls,
+        structure: RobotStructure,
+        q: ArrayLike,
+        poses: Mapping[str, ArrayLike],
+        *,
+        robot: str | None = None,
+        labels: Sequence[str] | None = None,
+        metadata: Mapping[str, Any] | None = None,
+        source: str = "<memory>",
+    ) -> MeasurementSet:
+        """Build a set from arrays (copies them). ``q``: (N, n); each pose array: (N, 4, 4)."""
+        return cls(
+            structure,
+            np.array(q, dtype=float),
+            {k: np.array(v, dtype=float) for k, v in poses.items()},
+            source,
+            robot,
+            list(labels or []),
+            metadata=dict(metadata or {}),
+        )
+
+
+# ---- reading ------------------------------------------------------------------------------------
+
+
+def _resolve_robot(ref: Any, base_dir: Path | None) -> RobotSpec:
+    from cpc2urdf.model_file import load_robot
+
+    if not isinstance(ref, str) or not ref:
+        raise ValueError(f"'robot' must be a shipped robot name or a robot file path, got {ref!r}")
+    looks_like_path = "/" in ref or os.sep in ref or ref.endswith(".json")
+    if looks_like_path and base_dir is not None and not os.path.isabs(ref):
+        candidate = base_dir / ref
+        if candidate.exists():  # relative paths are relative to the measurement file first
+            return load_robot(candidate)
+    if not looks_like_path and not os.path.exists(ref):
+        from cpc2urdf.robots import available, spec_path
+
+        if spec_path(ref) is None:
+            raise ValueError(
+                f"robot {ref!r} is neither a shipped robot ({', '.join(available())}) nor a file"
+            )
+    return load_robot(ref)
+
+
+def measurements_from_json(
+    doc: Any,
+    source: str = "<measurements>",
+    *,
+    robot: RobotSpec | None = None,
+    base_dir: str | os.PathLike[str] | None = None,
+) -> MeasurementSet:
+    """Parse a ``cpc2urdf/measurements@1`` document.
+
+    Args:
+        doc: The parsed JSON document.
+        source: Name used in error messages (the file path).
+        robot: Use this robot instead of resolving the document's ``robot`` field.
+        base_dir: Folder against which a relative robot path is tried first (default: the
+            folder of ``source`` if it is a file path).
+
+    Raises:
+        InputFileError: Naming ``source``, the record index and the field: wrong format tag,
+            unknown/missing joints, unknown frames, a record without poses or points, a
+            non-orthonormal matrix, NaN, unknown units, degenerate circle points.
+    """
+    try:
+        d = require_format(doc, MEASUREMENTS_FORMAT, source)
+        allowed = {"format", "robot", "units", "records", *OPTIONAL_SECTIONS}
+        unknown = set(d) - allowed
+        if unknown:
+            raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
+        units = Units.from_json(d.get("units"))
+        if robot is None:
+            if "robot" not in d:
+                raise ValueError("lacks 'robot' (a shipped robot name or a robot spec/model file path)")
+            if base_dir is None and source and not source.startswith("<"):
+                base_dir = Path(source).parent
+            robot = _resolve_robot(d["robot"], Path(base_dir) if base_dir is not None else None)
+        ref = d.get("robot") if isinstance(d.get("robot"), str) else robot.source
+        records = d.get("records")
+        if not isinstance(records, list) or not records:
+            raise ValueError("'records' must be a non-empty list of records")
+        return _parse_records(records, robot.structure, units, source, ref, d)
+    except InputFileError as e:
+        if e.path == str(source):
+            raise
+        # An error in the referenced robot file: say which measurement file pointed at it.
+        raise InputFileError(source, f"robot {d.get('robot')!r}: {e}") from e
+    except (ValueError, Cpc2UrdfError) as e:
+        raise InputFileError(source, str(e)) from e
+
+
+def _parse_records(
+    records: list[Any],
+    s: RobotStructure,
+    units: Units,
+    source: str,
+    robot_ref: str | None,
+    doc: Mapping[str, Any],
+) -> MeasurementSet:
+    from cpc2urdf.identification.registration import plate_pose_from_points, registration_rms
+
+    N, n = len(records), s.n_joints
+    q = np.empty((N, n))
+    labels: list[str] = []
+    poses: dict[str, NDArray[np.float64]] = {}
+    points: dict[str, NDArray[np.float64]] = {}
+
+    def slot(store: dict[str, NDArray[np.float64]], name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+        if name not in store:
+            store[name] = np.full((N, *shape), np.nan)
+        return store[name]
+
+    for i, rec in enumerate(records):
+        where = f"records[{i}]"
+        if not isinstance(rec, Mapping):
+            raise ValueError(f"{where} must be an object with 'joints' and 'poses' and/or 'points'")
+        extra = set(rec) - _RECORD_KEYS
+        if extra:
+            raise ValueError(f"{where} has unknown keys {sorted(extra)}; expected some of {sorted(_RECORD_KEYS)}")
+        label = rec.get("label", f"record {i}")
+        if not isinstance(label, str):
+            raise ValueError(f"{where}.label must be a string, got {label!r}")
+        labels.append(label)
+        joints = rec.get("joints")
+        if not isinstance(joints, Mapping):
+            raise ValueError(f"{where}.joints must be an object {{joint name: reading}}")
+        for name in joints:
+            if name not in s.joint_names:
+                raise ValueError(
+                    f"{where}.joints: unknown joint {name!r}; robot {s.name!r} has {', '.join(s.joint_names)}"
+                )
+        missing = [j for j in s.joint_names if j not in joints]
+        if missing:
+            raise ValueError(f"{where}.joints lacks {missing} (every joint needs a reading)")
+        for k, j in enumerate(s.joints):
+            v = finite_float(joints[j.name], f"{where}.joints.{j.name}") * units.joint_scale(j.type)
+            if not (j.lower - 1e-9 <= v <= j.upper + 1e-9):
+                unit = units.length_name if j.type == "prismatic" else units.angle_name
+                scale = units.joint_scale(j.type)
+                raise ValueError(
+                    f"{where}.joints.{j.name} = {joints[j.name]} {unit} is outside the joint limits "
+                    f"[{j.lower / scale:.6g}, {j.upper / scale:.6g}] {unit} (wrong units?)"
+                )
+            q[i, k] = v
+        rec_poses = rec.get("poses", {})
+        rec_points = rec.get("points", {})
+        if not isinstance(rec_poses, Mapping):
+            raise ValueError(f"{where}.poses must be an object {{frame name: pose}}")
+        if not isinstance(rec_points, Mapping):
+            raise ValueError(f"{where}.points must be an object {{plate name: [[x, y, z], ...]}}")
+        if not rec_poses and not rec_points:
+            raise ValueError(f"{where} has no 'poses' and no 'points': a record must measure at least one frame")
+        for name, obj in rec_poses.items():
+            _known_frame(s, name, f"{where}.poses")
+            slot(poses, name, (4, 4))[i] = pose_from_json(obj, units, f"{where}.poses.{name}")
+        for name, pts in rec_points.items():
+            frame = _known_frame(s, name, f"{where}.points")
+            if frame.layout is None:
+                raise ValueError(
+                    f"{where}.points.{name}: frame {name!r} has no circle 'layout' in the robot spec, "
+                    "so its pose cannot be estimated from points"
+                )
+            K = len(frame.layout)
+            if not isinstance(pts, list) or len(pts) != K:
+                raise ValueError(
+                    f"{where}.points.{name} must list {K} points [x, y, z] (null for an unseen circle), "
+                    f"one per layout circle"
+                )
+            P = slot(points, name, (K, 3))
+            for k, p in enumerate(pts):
+                if p is None:
+                    continue
+                if not isinstance(p, list) or len(p) != 3:
+                    raise ValueError(f"{where}.points.{name}[{k}] must be [x, y, z] or null, got {p!r}")
+                P[i, k] = [finite_float(v, f"{where}.points.{name}[{k}][{c}]") * units.length for c, v in enumerate(p)]
+    # Poses from points (sec. 3.3) where the record did not give the pose itself.
+    fit_rms: dict[str, NDArray[np.float64]] = {}
+    for name, P in points.items():
+        layout = np.array(s.frame(name).layout)
+        have = np.any(np.isfinite(P[..., 0]), axis=1)
+        T = slot(poses, name, (4, 4))
+        rms = np.full(N, np.nan)
+        for i in np.flatnonzero(have):
+            if np.all(np.isfinite(T[i])):
+                continue
+            T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{name}")
+            rms[i] = registration_rms(T[i], layout, P[i])
+        fit_rms[name] = rms
+    metadata = {k: doc[k] for k in OPTIONAL_SECTIONS if k in doc}
+    return MeasurementSet(s, q, poses, source, robot_ref, labels, points, fit_rms, metadata)
+
+
+def _known_frame(s: RobotStructure, name: str, where: str) -> Any:
+    try:
+        return s.frame(name)
+    except UnknownNameError:
+        raise ValueError(
+            f"{where}: unknown frame {name!r}; robot {s.name!r} has {', '.join(s.frame_names)}"
+        ) from None
+
+
+def load_measurements(path: str | os.PathLike[str], *, robot: RobotSpec | None = None) -> MeasurementSet:
+    """Read a measurement file (see the module docstring and ``docs/measurements.md``).
+
+    Args:
+        path: The ``cpc2urdf/measurements@1`` JSON file.
+        robot: Use this robot instead of the file's ``robot`` reference.
+
+    Raises:
+        InputFileError: Naming the file, the record index and the field.
+    """
+    return measurements_from_json(read_json(path), str(path), robot=robot)
+
+
+# ---- writing ------------------------------------------------------------------------------------
+
+
+def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dict[str, Any]:
+    """The set as a ``cpc2urdf/measurements@1`` document in SI units (full precision).
+
+    Args:
+        ms: The measurements.
+        robot: Robot reference to write (default ``ms.robot``).
+
+    Raises:
+        ValueError: No robot reference to write.
+    """
+    ref = robot or ms.robot
+    if not ref:
+        raise ValueError("the measurement set has no robot reference (pass robot='iis_head' or a spec path)")
+    s = ms.structure
+    records = []
+    for i in range(ms.n_records):
+        rec: dict[str, Any] = {"label": ms.labels[i], "joints": s.q_to_dict(ms.q[i])}
+        poses = {f: pose_to_json(ms.poses[f][i]) for f in s.frame_names if f in ms.poses and ms.has_pose(f)[i]}
+        if poses:
+            rec["poses"] = poses
+        pts = {}
+        for f in s.frame_names:
+            if f in ms.points and np.any(np.isfinite(ms.points[f][i])):
+                pts[f] = [None if not np.all(np.isfinite(p)) else [float(v) for v in p] for p in ms.points[f][i]]
+        if pts:
+            rec["points"] = pts
+        records.append(rec)
+    doc: dict[str, Any] = {"format": MEASUREMENTS_FORMAT, "robot": ref, "units": {"length": "m", "angle": "rad"}}
+    for k in OPTIONAL_SECTIONS:
+        if k in ms.metadata:
+            doc[k] = ms.metadata[k]
+    doc["records"] = records
+    return doc
+
+
+def save_measurements(ms: MeasurementSet, path: str | os.PathLike[str], *, robot: str | None = None) -> Path:
+    """Write ``ms`` atomically as a measurement file (SI units; poses as matrices).
+
+    Args:
+        ms: The measurements.
+        path: Output file.
+        robot: Robot reference to write (default ``ms.robot``); a relative path is resolved
+            against the measurement file's folder when read back.
+    """
+    try:
+        doc = measurements_to_json(ms, robot=robot)
+    except ValueError as e:
+        from cpc2urdf.errors import OutputError
+
+        raise OutputError(f"{path}: {e}") from e
+    return write_json(path, doc)
+
+
+__all__ = [
+    "MEASUREMENTS_FORMAT",
+    "MeasurementSet",
+    "load_measurements",
+    "measurements_from_json",
+    "measurements_to_json",
+    "save_measurements",
+]
