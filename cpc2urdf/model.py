@@ -75,8 +75,10 @@ class CPCParams:
         n = math.sqrt(sum(v * v for v in self.b))
         if abs(n - 1.0) > 1e-6:
             raise SpecError(f"CPC axis b must be a unit vector, |b| = {n:.9g} (b = {list(self.b)})")
-        # Store exactly unit length so that eq. (4) is exactly a rotation.
-        object.__setattr__(self, "b", tuple(float(v) / n for v in self.b))
+        # Store unit length so that eq. (4) is a rotation to rounding; a vector already unit to
+        # rounding is kept bit for bit, so that files round-trip exactly.
+        scale = 1.0 if abs(n - 1.0) <= 4e-16 else n
+        object.__setattr__(self, "b", tuple(float(v) / scale for v in self.b))
         object.__setattr__(self, "beta", float(self.beta))
         object.__setattr__(self, "l", tuple(float(v) for v in self.l))
 

@@ -53,11 +53,11 @@ def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
         for j, g in zip(structure.joints, geo_j, strict=True):
             if g is None:
                 raise ValueError(f"joint {j.name!r} lacks 'cpc'")
-            joints[j.name] = parse_placement(g, units, f"joint {j.name!r}.cpc")
+            joints[j.name] = parse_placement(g, units, f"joint {j.name!r}")
         for f, g in zip(structure.frames, geo_f, strict=True):
             if g is None:
                 raise ValueError(f"frame {f.name!r} lacks 'cpc'")
-            frames[f.name] = parse_placement(g, units, f"frame {f.name!r}.cpc")
+            frames[f.name] = parse_placement(g, units, f"frame {f.name!r}")
         metadata = {k: d[k] for k in OPTIONAL_SECTIONS if k in d}
         return CPCModel(structure, T_wb, joints, frames, metadata)
     except InputFileError:
@@ -125,6 +125,10 @@ def load_robot(name_or_path: str | Path) -> RobotSpec:
     shipped = _shipped_spec_path(text) if "/" not in text and not text.endswith(".json") else None
     if shipped is not None:
         return spec_from_json(read_json(shipped), text)
+    if not Path(text).exists():
+        from cpc2urdf.robots import available
+
+        raise InputFileError(text, f"no such file, and not a shipped robot name ({', '.join(available())})")
     doc = read_json(text)
     if isinstance(doc, Mapping) and doc.get("format") == MODEL_FORMAT:
         model = model_from_json(doc, text)

@@ -1,0 +1,90 @@
+"""CLI of the foundation: export, check, bench fk, demo; exit codes and one-line errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from cpc2urdf.cli import main
+from cpc2urdf.model_file import load_model, model_to_json
+
+
+def run(argv, capsys):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_export_then_check_passes(tmp_path, capsys):
+    code, out, _ = run(["export", "iis_head", "-o", str(tmp_path / "h.urdf")], capsys)
+    assert code == 0 and "6 joints" in out
+    code, out, _ = run(["check", str(tmp_path / "h.urdf"), "--model", "iis_head", "-n", "20"], capsys)
+    assert code == 0
+    assert "pinocchio  OK" in out and "yourdfpy   OK" in out and "urdfdom    OK" in out
+
+
+def test_check_reports_a_tampered_urdf_with_exit_1(tmp_path, capsys):
+    run(["export", "iis_head", "-o", str(tmp_path / "h.urdf")], capsys)
+    text = (tmp_path / "h.urdf").read_text()
+    # move the left vergence axis by 1 micrometre: a model/URDF mismatch the check must see
+    tampered = text.replace('xyz="0.05 ', 'xyz="0.050001 ', 1)
+    assert tampered != text
+    (tmp_path / "t.urdf").write_text(tampered)
+    code, out, _ = run(["check", str(tmp_path / "t.urdf"), "--model", "iis_head", "-n", "10", "--json"], capsys)
+    assert code == 1
+    report = json.loads(out)
+    by = {p["parser"]: p for p in report["parsers"]}
+    assert not by["pinocchio"]["ok"] and not by["yourdfpy"]["ok"]
+    assert 5e-7 < by["pinocchio"]["max_position_error"] < 1e-5
+
+
+def test_check_names_missing_frames(tmp_path, capsys):
+    m = load_model("iis_head").without_frames(["camera"])
+    from cpc2urdf.urdf import write_urdf
+
+    write_urdf(m, tmp_path / "nocam.urdf")
+    code, out, _ = run(["check", str(tmp_path / "nocam.urdf"), "--model", "iis_head", "-n", "3"], capsys)
+    assert code == 1 and "frame 'camera_left_optical' missing" in out
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["export", "no_such_robot", "-o", "{tmp}/x.urdf"], "no_such_robot: no such file, and not a shipped robot name"),
+        (["export", "iis_head", "-o", "{tmp}/missing/x.urdf"], "folder {tmp}/missing does not exist"),
+        (["export", "{tmp}/bad.json", "-o", "{tmp}/x.urdf"], "bad.json: not valid JSON"),
+        (["export", "{tmp}/cycle.json", "-o", "{tmp}/x.urdf"], "do not connect to 'base'"),
+        (["check", "{tmp}/none.urdf", "--model", "iis_head"], "none.urdf: no such file"),
+        (["check", "{tmp}/x.urdf", "--model", "iis_head", "-n", "0"], "--configurations must be at least 1"),
+        (["export", "iis_head"], "the following arguments are required: -o/--output"),
+    ],
+)
+def test_bad_input_one_line_exit_2_no_partial_file(tmp_path, capsys, argv, expected):
+    (tmp_path / "bad.json").write_text('{"format": "cpc2urdf/model@1", "name": ')
+    doc = model_to_json(load_model("iis_head"))
+    doc["joints"][0]["parent"] = "tilt"
+    (tmp_path / "cycle.json").write_text(json.dumps(doc))
+    before = set(tmp_path.iterdir())
+    code, out, err = run([a.replace("{tmp}", str(tmp_path)) for a in argv], capsys)
+    assert code == 2
+    assert expected.replace("{tmp}", str(tmp_path)) in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert set(tmp_path.iterdir()) == before  # nothing written
+
+
+def test_console_script_and_module_entry_point(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "cpc2urdf", "export", "nope", "-o", str(tmp_path / "x")], capture_output=True, text=True)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+
+
+def test_bench_fk_small(capsys):
+    code, out, _ = run(["bench", "fk", "--configurations", "200", "--repeat", "1", "--json"], capsys)
+    r = json.loads(out)
+    assert code == 0 and r["max_abs_difference"] < 1e-12 and r["cpc_vectorised_per_s"] > 0
+
+
+def test_demo_runs(tmp_path, capsys):
+    code, out, _ = run(["demo", "-o", str(tmp_path / "demo")], capsys)
+    assert code == 0, out
+    assert (tmp_path / "demo" / "nominal.urdf").is_file()
