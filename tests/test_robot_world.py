@@ -1,0 +1,155 @@
+"""AX = ZB solvers (identification/robot_world.py): Li's Kronecker and dual quaternion methods,
+Zhuang's quaternion method, the joint refinement; against the truth and OpenCV."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from test_handeye import EXACT, add_noise, make_data, random_pose
+
+from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.identification.robot_world import (
+    ALL_METHODS,
+    ROBOT_WORLD_METHODS,
+    calibrate,
+    calibrate_robot_world,
+    refine,
+    solve_kronecker,
+)
+from cpc2urdf.transforms import homogeneous, inverse, rotation_error
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_noise_free_recovery(method: str) -> None:
+    rng = np.random.default_rng(0)
+    X, Z, H, C = make_data(rng)
+    r = calibrate(H, C, method)
+    assert np.abs(r.X - X).max() < EXACT
+    assert np.abs(r.Z - Z).max() < EXACT
+    assert r.rms_translation() < EXACT and r.rms_rotation() < EXACT
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_noise_free_recovery_minimal_three_poses(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    X, Z, H, C = make_data(rng, 3)
+    for method in ROBOT_WORLD_METHODS:
+        r = calibrate_robot_world(H, C, method)
+        assert np.abs(r.X - X).max() < 1e-8, method
+        assert np.abs(r.Z - Z).max() < 1e-8, method
+
+
+# OpenCV: calibrateRobotWorldHandEye(R_world2cam, t_world2cam, R_base2gripper, t_base2gripper)
+# -> (R_base2world, t_base2world, R_gripper2cam, t_gripper2cam), "a2b" mapping a-coordinates to b.
+# Its "world" is our target: world2cam = T_camera_target; base2gripper = T_hand_base =
+# inv(T_base_hand); base2world = T_target_base = inv(Z); gripper2cam = T_camera_hand = inv(X).
+def opencv_robot_world(H: np.ndarray, C: np.ndarray, method: int) -> tuple[np.ndarray, np.ndarray]:
+    Hi = inverse(H)
+    R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
+        C[:, :3, :3], C[:, :3, 3], Hi[:, :3, :3], Hi[:, :3, 3], method=method
+    )
+    return inverse(homogeneous(R_gc, t_gc.ravel())), inverse(homogeneous(R_bw, t_bw.ravel()))
+
+
+@pytest.mark.parametrize("cv_method", [cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI, cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH])
+def test_agrees_with_opencv_noise_free(cv_method: int) -> None:
+    rng = np.random.default_rng(1)
+    X, Z, H, C = make_data(rng)
+    X_cv, Z_cv = opencv_robot_world(H, C, cv_method)
+    assert np.abs(X_cv - X).max() < EXACT and np.abs(Z_cv - Z).max() < EXACT
+    for method in ROBOT_WORLD_METHODS:
+        r = calibrate_robot_world(H, C, method)
+        assert np.abs(r.X - X_cv).max() < EXACT and np.abs(r.Z - Z_cv).max() < EXACT
+
+
+def test_kronecker_equals_opencv_li_in_its_frame() -> None:
+    # OpenCV's LI solves the inverted equation (T_camera_target inv(Z) = inv(X) T_hand_base): fed
+    # those matrices, our Kronecker solver is the same least-squares problem, even with noise.
+    rng = np.random.default_rng(2)
+    _, _, H, C = make_data(rng, 10)
+    C = add_noise(rng, C, 0.01, 0.003)
+    X_cv, Z_cv = opencv_robot_world(H, C, cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI)
+    Xp, Zp = solve_kronecker(C, inverse(H))  # A' = T_camera_target, B' = T_hand_base
+    assert np.abs(inverse(Xp) - Z_cv).max() < 1e-9
+    assert np.abs(inverse(Zp) - X_cv).max() < 1e-9
+
+
+@pytest.mark.parametrize("method", ROBOT_WORLD_METHODS)
+def test_noisy_data_close(method: str) -> None:
+    rng = np.random.default_rng(3)
+    X, Z, H, C = make_data(rng, 20)
+    C = add_noise(rng, C, math.radians(0.1), 0.0005)
+    r = calibrate_robot_world(H, C, method)
+    assert rotation_error(r.X[:3, :3], X[:3, :3]) < math.radians(0.3)
+    assert np.linalg.norm(r.X[:3, 3] - X[:3, 3]) < 0.005
+    assert np.linalg.norm(r.Z[:3, 3] - Z[:3, 3]) < 0.005
+
+
+def test_refinement_lowers_its_cost() -> None:
+    rng = np.random.default_rng(4)
+    X, Z, H, C = make_data(rng, 12)
+    C = add_noise(rng, C, math.radians(0.3), 0.002)
+    B = inverse(C)
+    X0, Z0 = solve_kronecker(H, B)
+
+    def cost(Xe: np.ndarray, Ze: np.ndarray) -> float:
+        AX, ZB = H @ Xe, Ze @ B
+        rot = Rotation.from_matrix((inverse(AX) @ ZB)[:, :3, :3]).as_rotvec() * 0.1
+        return float(np.sum((AX[:, :3, 3] - ZB[:, :3, 3]) ** 2) + np.sum(rot**2))
+
+    X1, Z1 = refine(H, B, X0, Z0)
+    assert cost(X1, Z1) < cost(X0, Z0)
+    # stationary: refining again from the optimum does not move it
+    X2, Z2 = refine(H, B, X1, Z1)
+    assert np.abs(X2 - X1).max() < 1e-7 and np.abs(Z2 - Z1).max() < 1e-7
+
+
+def test_zhuang_refuses_hand_rotation_near_180() -> None:
+    rng = np.random.default_rng(0)
+    X, Z, H, _ = make_data(rng, 6)
+    H[2, :3, :3] = Rotation.from_rotvec(np.array([0.0, 0.6, 0.8]) * math.radians(179.7)).as_matrix()
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    with pytest.raises(DegenerateDataError, match=r"zhuang.*poses \[2\].*180"):
+        calibrate_robot_world(H, C, "zhuang")
+    for method in ("kronecker", "dual_quaternion"):  # the other methods do not care
+        assert np.abs(calibrate_robot_world(H, C, method).X - X).max() < EXACT
+    H[2, :3, :3] = Rotation.from_rotvec(np.array([0.0, 0.6, 0.8]) * math.radians(175.0)).as_matrix()
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    r = calibrate_robot_world(H, C, "zhuang")
+    assert any("within 10 deg of 180" in w for w in r.warnings)
+
+
+def test_dual_quaternion_with_quaternion_sign_flips() -> None:
+    # Poses whose quaternions have w < 0 under a naive convention, and a target 180 deg away.
+    rng = np.random.default_rng(6)
+    X = random_pose(rng, scale=0.1)
+    Z = homogeneous(Rotation.from_rotvec([math.pi, 0.0, 0.0]).as_matrix(), [0.5, 0.2, 1.0])
+    H = np.array([random_pose(rng, max_angle=3.1) for _ in range(8)])
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    r = calibrate_robot_world(H, C, "dual_quaternion")
+    assert np.abs(r.X - X).max() < EXACT and np.abs(r.Z - Z).max() < EXACT
+
+
+@pytest.mark.parametrize("method", ROBOT_WORLD_METHODS)
+def test_degenerate_inputs(method: str) -> None:
+    rng = np.random.default_rng(0)
+    X, Z, H, C = make_data(rng, 6)
+    with pytest.raises(DegenerateDataError, match="at least 3"):
+        calibrate_robot_world(H[:2], C[:2], method)
+    with pytest.raises(DegenerateDataError, match="inconsistent directions"):
+        calibrate_robot_world(H, inverse(C), method)
+    Hp = np.array([homogeneous(Rotation.from_euler("z", a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+                   for a in np.linspace(0, 1.5, 6)])
+    with pytest.raises(DegenerateDataError, match="parallel axes"):
+        calibrate_robot_world(Hp, inverse(X)[None] @ inverse(Hp) @ Z[None], method)
+
+
+def test_unknown_method() -> None:
+    rng = np.random.default_rng(0)
+    _, _, H, C = make_data(rng, 4)
+    with pytest.raises(ValueError, match="unknown method"):
+        calibrate(H, C, "magic")
