@@ -61,8 +61,8 @@ class MeasurementSet:
         labels: One label per record (``"record i"`` when the file gives none).
         points: Plate name -> measured circle centres in world [m], shape (N, K, 3) in the
             plate's layout order, NaN where not measured. Only plates whose points were given.
-        fit_rms: Plate name -> RMS registration residual [m], shape (N,), for poses that were
-            estimated from points (NaN elsewhere).
+        fit_rms: Plate name -> RMS distance [m] between the measured points and the layout
+            placed at the record's pose, shape (N,) (NaN where the record has no points).
         metadata: Free-form file sections (``description``, ``noise``, ``provenance``, ``notes``).
     """
 
@@ -322,9 +322,8 @@ def _parse_records(
         T = slot(poses, name, (4, 4))
         rms = np.full(N, np.nan)
         for i in np.flatnonzero(have):
-            if np.all(np.isfinite(T[i])):
-                continue
-            T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{name}")
+            if not np.all(np.isfinite(T[i])):
+                T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{name}")
             rms[i] = registration_rms(T[i], layout, P[i])
         fit_rms[name] = rms
     metadata = {k: doc[k] for k in OPTIONAL_SECTIONS if k in doc}

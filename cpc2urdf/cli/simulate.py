@@ -1,0 +1,138 @@
+"""``cpc2urdf simulate ROBOT -o DIR``: a simulated stage-1 experiment as files.
+
+Writes ``DIR/measurements.json`` (the one-joint-at-a-time protocol with noise),
+``DIR/truth.json`` (the true robot as a model file) and ``DIR/heldout.json`` (random
+configurations inside the calibration range with their true poses). See docs/measurements.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "simulate",
+        help="simulate a stage-1 calibration experiment (measurements, truth, held-out set)",
+        description="Simulate measuring a robot's calibration plates with a stereo rig while moving one "
+        "joint at a time (Shih et al. sec. 4.1): a true robot = nominal + random geometric error, "
+        "placed ~1.5 m in front of a 600 mm-baseline rig. Writes DIR/measurements.json, "
+        "DIR/truth.json and DIR/heldout.json. Same seed, same files.",
+    )
+    p.add_argument("robot", help="shipped robot name (e.g. iis_head) or robot spec/model file with nominal geometry")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--M", type=int, default=9, help="values per joint over its calibration range (default 9)")
+    p.add_argument("--noise", choices=("fig10", "stereo", "none"), default="fig10",
+                   help="fig10: Gaussian pose noise (Shih et al. Fig. 10); stereo: pixel noise -> "
+                   "triangulation -> registration; none (default fig10)")
+    p.add_argument("--sigma-mm", type=float, default=0.5, help="fig10: std of each translation entry [mm] (default 0.5)")
+    p.add_argument("--sigma-deg", type=float, default=0.5,
+                   help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5)")
+    p.add_argument("--pixel-sigma", type=float, default=0.15,
+                   help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15)")
+    p.add_argument("--geometry-error-mm", type=float, default=1.0,
+                   help="true robot: std of each CPC offset component error [mm] (default 1)")
+    p.add_argument("--geometry-error-deg", type=float, default=0.5,
+                   help="true robot: std of each CPC axis/placement rotation error [deg] (default 0.5)")
+    p.add_argument("--heldout", type=int, default=50, metavar="N", help="held-out configurations (default 50)")
+    p.add_argument("--range", action="append", default=[], metavar="JOINT=LO:HI",
+                   help="calibration range of a joint in mm or deg (repeatable; default: the spec's)")
+    p.add_argument("--baseline-mm", type=float, default=600.0, help="rig baseline [mm] (default 600)")
+    p.add_argument("--distance-mm", type=float, default=1500.0,
+                   help="distance from the rig to the plates [mm] (default 1500)")
+    p.add_argument("--focal-px", type=float, default=1600.0, help="rig focal length [px], 1280x1024 images (default 1600)")
+    p.add_argument("--allow-out-of-view", action="store_true",
+                   help="do not fail when a plate leaves a camera's view (stereo noise then loses circles)")
+    p.set_defaults(run=run)
+
+
+def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float, float]]:
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.model import RobotStructure
+
+    assert isinstance(structure, RobotStructure)
+    out: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, sep, rest = item.partition("=")
+        lo_s, sep2, hi_s = rest.partition(":")
+        try:
+            if not sep or not sep2:
+                raise ValueError
+            lo, hi = float(lo_s), float(hi_s)
+            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+                raise ValueError
+        except ValueError:
+            raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
+        j = structure.joint(name)
+        scale = 1e-3 if j.type == "prismatic" else math.pi / 180
+        out[name] = (lo * scale, hi * scale)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.errors import ConfigurationError, OutputError
+    from cpc2urdf.fileio import dumps, write_atomic
+    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.stereo import StereoRig
+    from cpc2urdf.measurements import measurements_to_json
+    from cpc2urdf.model_file import load_robot, model_to_json
+
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{out}: exists and is not a folder")
+    if args.M < 2:
+        raise ConfigurationError(f"--M must be at least 2, got {args.M}")
+    if args.heldout < 0:
+        raise ConfigurationError(f"--heldout must be >= 0, got {args.heldout}")
+    for flag in ("baseline_mm", "distance_mm", "focal_px"):
+        v = getattr(args, flag)
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
+    spec = load_robot(args.robot)
+    # A robot file is referred to relative to DIR, so the files can move together.
+    text = str(args.robot)
+    is_path = "/" in text or text.endswith(".json")
+    ref = os.path.relpath(os.path.abspath(text), os.path.abspath(out)) if is_path else text
+    rig = StereoRig.verged(baseline=args.baseline_mm / 1000, distance=args.distance_mm / 1000, focal_px=args.focal_px)
+    exp = simulate_experiment(
+        spec,
+        seed=args.seed,
+        M=args.M,
+        noise=args.noise,
+        sigma_t=args.sigma_mm / 1000,
+        sigma_r=math.radians(args.sigma_deg),
+        pixel_sigma=args.pixel_sigma,
+        geometry_error_t=args.geometry_error_mm / 1000,
+        geometry_error_r=math.radians(args.geometry_error_deg),
+        n_heldout=args.heldout,
+        rig=rig,
+        ranges=_parse_ranges(args.range, spec.structure),
+        require_view=not args.allow_out_of_view,
+        robot_ref=ref,
+        show_progress=(args.M * spec.structure.n_joints + args.heldout) > 5000,
+    )
+    # Everything is computed before anything is written; each file is written atomically.
+    texts = {
+        "measurements.json": dumps(measurements_to_json(exp.measured)),
+        "truth.json": dumps(model_to_json(exp.truth)),
+        "heldout.json": dumps(measurements_to_json(exp.heldout)),
+    }
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"{out}: cannot create folder ({e.strerror})") from e
+    for name, t in texts.items():
+        write_atomic(out / name, t)
+    view = exp.measured.metadata["provenance"]["view"]
+    noise = {"fig10": f"fig10 noise {args.sigma_mm:g} mm / {args.sigma_deg:g} deg",
+             "stereo": f"stereo noise {args.pixel_sigma:g} px", "none": "no noise"}[args.noise]
+    print(
+        f"wrote {out}/measurements.json ({exp.measured.n_records} records, {noise}), {out}/truth.json, "
+        f"{out}/heldout.json ({exp.heldout.n_records} records); plates {view['distance_range_m'][0]:.2f}-"
+        f"{view['distance_range_m'][1]:.2f} m from the rig, >= {view['min_margin_px']:.0f} px inside the images"
+    )
+    return 0
