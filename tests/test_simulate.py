@@ -1,0 +1,177 @@
+"""The stage-1 simulator: protocol, truth, view, noise-free exactness, reproducible files, CLI errors."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from cpc2urdf.cli import main
+from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.identification.simulate import (
+    calibration_ranges,
+    check_view,
+    measured_frames,
+    perturbed_model,
+    protocol_configurations,
+    simulate_experiment,
+)
+from cpc2urdf.identification.stereo import StereoRig
+from cpc2urdf.measurements import load_measurements
+from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
+from cpc2urdf.model_file import load_model, load_robot, save_model
+from cpc2urdf.robots import spec_path
+
+PLATE = tuple((x, y, 0.0) for x in (-0.025, 0.0, 0.025) for y in (-0.025, 0.0, 0.025))
+
+
+def test_protocol_is_one_joint_at_a_time() -> None:
+    s = load_robot("iis_head").structure
+    r = calibration_ranges(s)
+    np.testing.assert_allclose(r[2], np.radians([60, 120]))  # pan: the spec's calibration_range
+    q, labels = protocol_configurations(r, 9, s.joint_names)
+    assert q.shape == (6 * 9 + 1, 6) and len(labels) == 55 and labels[0] == "q0"
+    q0 = r.mean(axis=1)
+    np.testing.assert_allclose(q[0], q0)
+    for i in range(6):
+        block = q[1 + 9 * i: 1 + 9 * (i + 1)]
+        np.testing.assert_allclose(np.delete(block, i, axis=1), np.delete(np.tile(q0, (9, 1)), i, axis=1))
+        np.testing.assert_allclose(block[:, i], np.linspace(*r[i], 9))
+    with pytest.raises(ConfigurationError, match="M must be at least 2"):
+        protocol_configurations(r, 1, s.joint_names)
+    with pytest.raises(ConfigurationError, match="must lie within the limits"):
+        calibration_ranges(s, {"pan": (-1.0, 1.0)})
+
+
+def test_truth_has_the_requested_geometric_error() -> None:
+    rng = np.random.default_rng(0)
+    nominal = load_robot("iis_head").nominal_model()
+    dl, ang = [], []
+    for _ in range(60):
+        true = perturbed_model(nominal, rng, 1e-3, math.radians(0.5))
+        for name in nominal.structure.joint_names:
+            a, b = nominal.joints[name], true.joints[name]
+            dl.append(np.subtract(b.l, a.l))
+            ang.append(Rotation.from_matrix(b.rotation() @ a.rotation().T).magnitude())
+    assert abs(np.std(dl) / 1e-3 - 1) < 0.1
+    assert abs(np.sqrt(np.mean(np.square(ang))) / math.radians(0.5) - 1) < 0.1
+
+
+def test_noise_free_measurements_are_the_truth_and_plates_stay_in_view() -> None:
+    truth, ms, held = simulate_experiment("iis_head", seed=3, M=5, noise="none", n_heldout=20)
+    s = truth.structure
+    assert ms.n_records == 6 * 5 + 1 and held.n_records == 20
+    assert ms.frames == ["plate_left", "plate_right"] == measured_frames(s)
+    for f in ms.frames:
+        np.testing.assert_array_equal(ms.poses[f], truth.fk(ms.q, [f])[f])
+        np.testing.assert_array_equal(held.poses[f], truth.fk(held.q, [f])[f])
+    r = calibration_ranges(s)
+    assert np.all((held.q >= r[:, 0]) & (held.q <= r[:, 1]))
+    nominal = load_robot("iis_head").nominal_model()
+    assert truth.joints["tilt"] != nominal.joints["tilt"]
+    view = check_view(truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
+    assert view.ok and view.min_margin_px > 20
+    assert 1.2 < view.distance_range[0] < view.distance_range[1] < 1.8  # ~1.5 m from the rig
+
+
+def test_noise_changes_measurements_not_the_truth() -> None:
+    t1, m1, h1 = simulate_experiment("iis_head", seed=7, M=3, noise="fig10", n_heldout=5)
+    t2, m2, h2 = simulate_experiment("iis_head", seed=7, M=3, noise="stereo", n_heldout=5)
+    assert t1.joints == t2.joints and t1.world_to_base == t2.world_to_base
+    np.testing.assert_array_equal(h1.q, h2.q)
+    true = t1.fk(m1.q, ["plate_left"])["plate_left"]
+    e1 = np.linalg.norm(m1.poses["plate_left"][:, :3, 3] - true[:, :3, 3], axis=1)
+    assert 0.1e-3 < np.sqrt(np.mean(e1**2)) / np.sqrt(3) < 1e-3  # sigma 0.5 mm per entry
+    assert m2.points["plate_left"].shape == (19, 9, 3)
+    assert np.all(m2.fit_rms["plate_left"] < 2e-3)
+    assert m1.metadata["noise"] == {"model": "fig10", "sigma_t_m": 0.5e-3, "sigma_r_rad": math.radians(0.5)}
+
+
+def test_any_robot_with_plates() -> None:
+    joints = [Joint("pan", "revolute", "base", -1.0, 1.0), Joint("tilt", "revolute", "pan", -0.5, 0.5)]
+    frames = [Frame("plate", "tilt", "plate", PLATE), Frame("cam", "tilt", "camera")]
+    s = RobotStructure("pan_tilt", joints, frames)
+    model = CPCModel(s, CPCParams(), {"pan": CPCParams(), "tilt": CPCParams((0.0, 1.0, 0.0), 0.0, (0.0, 0.0, 0.1))},
+                     {"plate": CPCParams((1.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.1)), "cam": CPCParams()})
+    truth, ms, held = simulate_experiment(model, M=4, n_heldout=3, noise="stereo", robot_ref="pan_tilt.json")
+    assert ms.n_records == 9 and ms.frames == ["plate"] and held.robot == "pan_tilt.json"
+    assert not ms.has_pose("cam").any()
+
+
+def test_view_failure_is_explained() -> None:
+    with pytest.raises(ConfigurationError, match=r"the rig does not see plate_\w+ at pan \d/5"):
+        simulate_experiment("iis_head", M=5, ranges={"pan": (0.0, math.pi)}, n_heldout=0)
+    # ...unless asked to go on: then the stereo model loses circles but the run completes.
+    _, ms, _ = simulate_experiment("iis_head", M=3, ranges={"pan": (0.0, math.pi)}, n_heldout=0,
+                                   require_view=False)
+    assert ms.metadata["provenance"]["view"]["problems"]
+
+
+def test_cli_writes_reproducible_loadable_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["simulate", "iis_head", "--M", "4", "--heldout", "7", "--seed", "11"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 0
+    assert main([*args, "-o", str(tmp_path / "b")]) == 0
+    assert main([*args[:-1], "12", "-o", str(tmp_path / "c")]) == 0
+    for name in ("measurements.json", "truth.json", "heldout.json"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    assert (tmp_path / "a" / "truth.json").read_bytes() != (tmp_path / "c" / "truth.json").read_bytes()
+    assert "25 records" in capsys.readouterr().out
+    ms = load_measurements(tmp_path / "a" / "measurements.json")
+    held = load_measurements(tmp_path / "a" / "heldout.json")
+    truth = load_model(tmp_path / "a" / "truth.json")
+    assert ms.n_records == 25 and held.n_records == 7
+    np.testing.assert_allclose(held.poses["plate_left"], truth.fk(held.q, ["plate_left"])["plate_left"], atol=1e-12)
+
+
+def test_cli_robot_file_is_referenced_relative_to_the_output(tmp_path: Path) -> None:
+    save_model(load_robot("iis_head").nominal_model(), tmp_path / "head.json")
+    out = tmp_path / "runs" / "one"
+    assert main(["simulate", str(tmp_path / "head.json"), "-o", str(out), "--M", "2", "--heldout", "0",
+                 "--noise", "stereo"]) == 0
+    assert json.loads((out / "measurements.json").read_text())["robot"] == "../../head.json"
+    ms = load_measurements(out / "measurements.json")
+    assert ms.points["plate_left"].shape == (13, 9, 3)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--robot-typo"], "unrecognized arguments"),
+        (["--noise", "gauss"], "invalid choice: 'gauss'"),
+        (["--M", "1"], "--M must be at least 2"),
+        (["--sigma-mm", "nan"], "sigma_t must be a finite number"),
+        (["--range", "roll=0:10"], "unknown joint 'roll'"),
+        (["--range", "pan=10"], "expected JOINT=LO:HI"),
+        (["--range", "pan=0:180"], "the rig does not see plate_"),
+        (["--range", "pan=-10:10"], "must lie within the limits"),
+        (["--baseline-mm", "0"], "--baseline-mm must be a positive number"),
+    ],
+)
+def test_cli_bad_input_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
+) -> None:
+    out = tmp_path / "out"
+    assert main(["simulate", "iis_head", "-o", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
+    assert not out.exists()  # no partial output
+
+
+def test_cli_bad_robot_and_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "no_such_head", "-o", str(tmp_path / "x")]) == 2
+    assert "no_such_head" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    assert main(["simulate", "iis_head", "-o", str(tmp_path / "file")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    # A spec without nominal geometry cannot be simulated.
+    doc = json.loads(spec_path("iis_head").read_text())
+    doc.pop("geometry")
+    for item in doc["joints"] + doc["frames"]:
+        item.pop("nominal")
+    (tmp_path / "tree_only.json").write_text(json.dumps(doc))
+    assert main(["simulate", str(tmp_path / "tree_only.json"), "-o", str(tmp_path / "y")]) == 2
+    assert "no nominal geometry" in capsys.readouterr().err
