@@ -1,0 +1,124 @@
+"""``cpc2urdf handeye poses.json --method NAME|all [--json]``: hand-eye / robot-world calibration."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+METHOD_NOTES = {
+    "tsai": "AX = XB, Tsai & Lenz 1989",
+    "park_martin": "AX = XB, Park & Martin 1994",
+    "daniilidis": "AX = XB, Daniilidis 1999 (dual quaternions)",
+    "kronecker": "AX = ZB, Li et al. 2010 (Kronecker product)",
+    "dual_quaternion": "AX = ZB, Li et al. 2010 (dual quaternions)",
+    "zhuang": "AX = ZB, Zhuang et al. 1994 (quaternions, two stages)",
+    "refined": "AX = ZB, Kronecker start + joint nonlinear least squares",
+}
+X_DIRECTION = "X = T_hand_camera: camera pose in the hand frame (maps camera to hand coordinates)"
+Z_DIRECTION = "Z = T_base_target: target pose in the robot base frame (maps target to base coordinates)"
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    from cpc2urdf.identification.robot_world import ALL_METHODS
+
+    p = subparsers.add_parser(
+        "handeye",
+        help="hand-eye (X = T_hand_camera) and robot-world (Z = T_base_target) calibration",
+        description="Solve A X = X B or A X = Z B from a cpc2urdf/handeye-poses@1 file (records "
+        "of T_base_hand and T_camera_target, see docs/handeye.md). Prints X = T_hand_camera, "
+        "Z = T_base_target and the residual of every pose in mm and degrees.",
+    )
+    p.add_argument("poses", help="hand-eye pose file (cpc2urdf/handeye-poses@1)")
+    p.add_argument("--method", default="kronecker", choices=[*ALL_METHODS, "all"],
+                   help="solver, or 'all' to compare every solver side by side (default kronecker)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON (SI units + mm/deg residuals)")
+    p.set_defaults(run=run)
+
+
+def _pose_line(T: Any) -> str:
+    from cpc2urdf.transforms import rpy_from_matrix
+
+    xyz = T[:3, 3] * 1e3
+    rpy = [math.degrees(v) for v in rpy_from_matrix(T[:3, :3])]
+    return (f"xyz = [{xyz[0]:10.4f} {xyz[1]:10.4f} {xyz[2]:10.4f}] mm   "
+            f"rpy = [{rpy[0]:9.4f} {rpy[1]:9.4f} {rpy[2]:9.4f}] deg")
+
+
+def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.errors import DegenerateDataError
+    from cpc2urdf.identification.handeye_file import load_handeye_poses
+    from cpc2urdf.identification.robot_world import ALL_METHODS, calibrate
+
+    data = load_handeye_poses(args.poses)
+    methods = list(ALL_METHODS) if args.method == "all" else [args.method]
+    results, refused = {}, {}
+    for m in methods:
+        try:
+            results[m] = calibrate(data.T_base_hand, data.T_camera_target, m)
+        except DegenerateDataError as e:
+            if len(methods) == 1:
+                raise DegenerateDataError(f"{args.poses}: {e}") from e
+            refused[m] = str(e)
+    if not results:  # every solver refused: the data is the problem, say it once
+        raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
+
+    if args.json:
+        doc: dict[str, Any] = {
+            "poses": str(args.poses),
+            "n_poses": len(data.labels),
+            "labels": list(data.labels),
+            "units": {"length": "m", "angle": "rad"},
+        }
+        if args.method == "all":
+            doc["results"] = {m: r.to_json() for m, r in results.items()}
+            doc["refused"] = refused
+        else:
+            doc.update(results[args.method].to_json())
+        print(json.dumps(doc, indent=2))
+        return 0
+
+    n = len(data.labels)
+    who = ", ".join(x for x in (data.camera and f"camera {data.camera}", data.hand and f"hand {data.hand}") if x)
+    print(f"hand-eye calibration of {args.poses}: {n} poses" + (f" ({who})" if who else ""))
+    print(f"  {X_DIRECTION}")
+    print(f"  {Z_DIRECTION}")
+    print("  residual of pose k: camera pose T_base_hand[k] X vs Z inv(T_camera_target[k]), "
+          "position [mm] and angle [deg]")
+    if len(results) == 1 and not refused:
+        (m, r), = results.items()
+        print(f"\nmethod {m} ({METHOD_NOTES[m]})")
+        print(f"X  {_pose_line(r.X)}")
+        for row in r.X[:3]:
+            print("     [" + " ".join(f"{v:13.9f}" for v in row[:3]) + f" {row[3] * 1e3:12.6f} mm]")
+        print(f"Z  {_pose_line(r.Z)}")
+        for row in r.Z[:3]:
+            print("     [" + " ".join(f"{v:13.9f}" for v in row[:3]) + f" {row[3] * 1e3:12.6f} mm]")
+        print(f"\n{'pose':>20s} {'translation [mm]':>17s} {'rotation [deg]':>15s}")
+        for k, lab in enumerate(data.labels):
+            print(f"{lab:>20s} {r.residual_translation[k] * 1e3:17.4f} {math.degrees(r.residual_rotation[k]):15.4f}")
+        print(f"{'RMS':>20s} {r.rms_translation() * 1e3:17.4f} {math.degrees(r.rms_rotation()):15.4f}")
+        for w in r.warnings:
+            print(f"warning: {w}")
+        return 0
+
+    print()
+    for m, r in results.items():
+        print(f"{m:16s} X  {_pose_line(r.X)}")
+        print(f"{'':16s} Z  {_pose_line(r.Z)}")
+        print(f"{'':16s} RMS residual {r.rms_translation() * 1e3:.4f} mm, "
+              f"{math.degrees(r.rms_rotation()):.4f} deg   ({METHOD_NOTES[m]})")
+    for m, why in refused.items():
+        print(f"{m:16s} refused: {why}")
+    names = list(results)
+    print("\nresidual per pose [mm / deg]")
+    print(f"{'pose':>20s} " + " ".join(f"{m:>18s}" for m in names))
+    for k, lab in enumerate(data.labels):
+        cells = [f"{results[m].residual_translation[k] * 1e3:8.3f} /{math.degrees(results[m].residual_rotation[k]):8.4f}"
+                 for m in names]
+        print(f"{lab:>20s} " + " ".join(f"{c:>18s}" for c in cells))
+    warned = {w for r in results.values() for w in r.warnings}
+    for w in sorted(warned):
+        print(f"warning: {w}")
+    return 0
