@@ -321,7 +321,7 @@ def _parse_records(
         have = np.any(np.isfinite(P[..., 0]), axis=1)
         T = slot(poses, name, (4, 4))
         rms = np.full(N, np.nan)
-        for i in np.flatnonzero(have):
+        for i in np.flatnonzero(have).tolist():
             if not np.all(np.isfinite(T[i])):
                 T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{name}")
             rms[i] = registration_rms(T[i], layout, P[i])

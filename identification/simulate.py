@@ -293,7 +293,7 @@ def check_view(
                 if not seen[i].all()
                 else f"seen at {math.degrees(ang[i]):.0f} deg from face-on (limit {math.degrees(max_angle):.0f})"
             )
-            problems.append(f"{f} at {labels[i]}: {why}")
+            problems.append(f"{f} at {labels[int(i)]}: {why}")
     d = np.concatenate(dists)
     return ViewReport(not problems, problems, min_margin, max_ang, (float(d.min()), float(d.max())))
 
