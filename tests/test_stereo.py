@@ -71,3 +71,17 @@ def test_json_round_trip_and_errors() -> None:
         StereoRig.from_json(bad)
     with pytest.raises(ValueError, match="R must be a rotation"):
         StereoRig(rig.K1, rig.D1, rig.K2, rig.D2, 2 * rig.R, rig.T)
+
+
+def test_stereo_study_runs_small_and_matches_first_order_depth(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from cpc2urdf.cli import main
+    from cpc2urdf.identification.study_stereo_noise import run_study
+
+    result = run_study(samples=300, pixel_sigmas=(0.1, 0.5))
+    for row in result["rows"]:
+        assert row["depth_rms_mm"] == pytest.approx(row["depth_pred_mm"], rel=0.1)
+        assert row["plate_pos_rms_mm"] < row["circle_rms_mm"]
+    assert result["rows"][1]["circle_rms_mm"] == pytest.approx(5 * result["rows"][0]["circle_rms_mm"], rel=0.15)
+    assert main(["study", "stereo", "--samples", "5", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "stereo_noise.png").stat().st_size > 1000
+    assert "| 0.50 |" in (tmp_path / "stereo_noise.md").read_text()

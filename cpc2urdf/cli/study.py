@@ -6,7 +6,9 @@ import argparse
 
 from cpc2urdf.cli._registry import add_group
 
-STUDIES: dict[str, tuple[str, str]] = {}
+STUDIES: dict[str, tuple[str, str]] = {
+    "stereo": ("cpc2urdf.identification.study_stereo_noise", "plate pose error of the stereo rig vs pixel noise"),
+}
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
