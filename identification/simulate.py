@@ -436,7 +436,9 @@ def simulate_experiment(
     rng_geometry, rng_noise, rng_heldout = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
     q_held = random_configurations(r, n_heldout, rng_heldout)
 
-    w2b = world_to_base or place_in_front_of_rig(nominal, rig, np.vstack([q, q_held]), frames)
+    # The placement depends on the robot and ranges only (a fixed sample), not on the seed.
+    q_place = np.vstack([q, random_configurations(r, 256, np.random.default_rng(0))])
+    w2b = world_to_base or place_in_front_of_rig(nominal, rig, q_place, frames)
     truth = perturbed_model(nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r)
     view = check_view(truth, rig, np.vstack([q, q_held]), frames,
                       labels + [f"heldout {i}" for i in range(n_heldout)])
