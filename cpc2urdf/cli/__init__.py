@@ -25,6 +25,8 @@ COMMANDS = (
     "bench",
     "study",
     "simulate",
+    "identify",
+    "accuracy",
     "handeye",
 )
 
