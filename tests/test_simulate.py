@@ -130,7 +130,7 @@ def test_cli_writes_reproducible_loadable_files(tmp_path: Path, capsys: pytest.C
 def test_cli_robot_file_is_referenced_relative_to_the_output(tmp_path: Path) -> None:
     save_model(load_robot("iis_head").nominal_model(), tmp_path / "head.json")
     out = tmp_path / "runs" / "one"
-    assert main(["simulate", str(tmp_path / "head.json"), "-o", str(out), "--M", "2", "--heldout", "0",
+    assert main(["simulate", str(tmp_path / "head.json"), "-o", str(out), "--M", "2", "--heldout", "1",
                  "--noise", "stereo"]) == 0
     assert json.loads((out / "measurements.json").read_text())["robot"] == "../../head.json"
     ms = load_measurements(out / "measurements.json")
@@ -149,6 +149,7 @@ def test_cli_robot_file_is_referenced_relative_to_the_output(tmp_path: Path) -> 
         (["--range", "pan=0:180"], "the rig does not see plate_"),
         (["--range", "pan=-10:10"], "must lie within the limits"),
         (["--baseline-mm", "0"], "--baseline-mm must be a positive number"),
+        (["--heldout", "0"], "--heldout must be at least 1"),
     ],
 )
 def test_cli_bad_input_exits_2_with_one_line(

@@ -86,8 +86,8 @@ def run(args: argparse.Namespace) -> int:
         raise OutputError(f"{out}: exists and is not a folder")
     if args.M < 2:
         raise ConfigurationError(f"--M must be at least 2, got {args.M}")
-    if args.heldout < 0:
-        raise ConfigurationError(f"--heldout must be >= 0, got {args.heldout}")
+    if args.heldout < 1:  # a measurement file needs at least one record
+        raise ConfigurationError(f"--heldout must be at least 1, got {args.heldout}")
     for flag in ("baseline_mm", "distance_mm", "focal_px"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
