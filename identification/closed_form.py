@@ -185,7 +185,7 @@ class _Solver:
                 f"({', '.join(e.frames)}) together with a reference record"
             )
         A = np.concatenate(blocks).reshape(-1, 3)
-        _, S, Vt = np.linalg.svd(A)
+        _, S, Vt = np.linalg.svd(A, full_matrices=False)  # eq. (35): smallest singular vector
         if S[1] < RANK_TOL:
             raise DegenerateDataError(
                 f"joint {joint!r}: its measured rotations do not determine its axis (every sweep "

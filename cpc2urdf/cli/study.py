@@ -8,6 +8,7 @@ from cpc2urdf.cli._registry import add_group
 
 STUDIES: dict[str, tuple[str, str]] = {
     "stereo": ("cpc2urdf.identification.study_stereo_noise", "plate pose error of the stereo rig vs pixel noise"),
+    "fig11": ("cpc2urdf.identification.study_fig11", "Shih et al. Fig. 11: positioning error vs M and noise"),
 }
 
 
