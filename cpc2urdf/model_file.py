@@ -28,7 +28,14 @@ from typing import Any
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError
 from cpc2urdf.fileio import read_json, require_format, write_json
 from cpc2urdf.model import BASE, CPCModel
-from cpc2urdf.spec import ROBOT_FORMAT, RobotSpec, cpc_to_json, parse_placement, parse_tree, spec_from_json
+from cpc2urdf.spec import (
+    ROBOT_FORMAT,
+    RobotSpec,
+    cpc_to_json,
+    parse_placement,
+    parse_tree,
+    spec_from_json,
+)
 from cpc2urdf.units import Units
 
 MODEL_FORMAT = "cpc2urdf/model@1"

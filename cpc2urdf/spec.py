@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from cpc2urdf.dh import cpc_from_dh, dh_matrix
+from cpc2urdf.dh import dh_matrix
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError, SpecError
 from cpc2urdf.fileio import finite_float, float_list, read_json, require_format
 from cpc2urdf.model import BASE, IDENTITY, CPCModel, CPCParams, Frame, Joint, RobotStructure

@@ -53,7 +53,7 @@ def test_nominal_iis_head_is_table_3_dh_chain():
     Q = rng.uniform(s.lower, s.upper, size=(300, 6))
     fk = model.fk(Q)
     for k, q in enumerate(Q):
-        qd = dict(zip(s.joint_names, q))
+        qd = dict(zip(s.joint_names, q, strict=False))
         trunk = A("table_x", qd["table_x"]) @ A("table_y", qd["table_y"]) @ A("pan", qd["pan"]) @ A("tilt", qd["tilt"])
         np.testing.assert_allclose(fk["plate_left"][k], trunk @ A("vergence_left", qd["vergence_left"]), atol=1e-12)
         np.testing.assert_allclose(fk["plate_right"][k], trunk @ A("vergence_right", qd["vergence_right"]), atol=1e-12)

@@ -8,8 +8,8 @@ import pytest
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.model_file import load_model, load_robot, model_to_json, save_model
-from cpc2urdf.spec import load_spec
 from cpc2urdf.robots import available, spec_path
+from cpc2urdf.spec import load_spec
 from random_trees import random_tree
 
 

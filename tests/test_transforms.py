@@ -74,6 +74,6 @@ def test_project_to_rotation_is_nearest():
     np.testing.assert_allclose(P.T @ P, np.eye(3), atol=1e-14)
     # nearest: no other rotation (the true one, small perturbations of P) is closer to M
     assert np.linalg.norm(P - M) <= np.linalg.norm(R - M)
-    for k in range(20):
+    for _k in range(20):
         Q = Rotation.from_rotvec(1e-4 * rng.normal(size=3)).as_matrix() @ P
         assert np.linalg.norm(P - M) <= np.linalg.norm(Q - M)
