@@ -129,7 +129,8 @@ class ClosedFormDetails:
 class _Solver:
     """One identification run; the steps are methods so each reads as the paper's text."""
 
-    def __init__(self, ms: MeasurementSet, protocol: Protocol) -> None:
+    def __init__(self, ms: MeasurementSet, protocol: Protocol, shared_axes: bool = True) -> None:
+        self.shared_axes = shared_axes
         self.ms = ms
         self.s: RobotStructure = ms.structure
         self.p = protocol
@@ -294,11 +295,29 @@ class _Solver:
 
     # ---- Step 2: translations -------------------------------------------------------------------
 
-    def _columns(self) -> list[tuple[str, str, int]]:
-        cols: list[tuple[str, str, int]] = []
+    def _split(self, joint: str) -> bool:
+        """The paper's eq. (11)/(15): a revolute joint carrying several branches gets one axis
+        frame, hence one offset, per branch (``l_3L``, ``l_3R``) unless axes are shared."""
+        return (not self.shared_axes and self.s.joint(joint).type == "revolute"
+                and len(self.elements[joint]) > 1)
+
+    def _key(self, joint: str, frame: str | None = None) -> str:
+        """Column block of ``joint``'s unknowns as seen from ``frame`` (default: its first branch)."""
+        if not self._split(joint):
+            return joint
+        elems = self.elements[joint]
+        e = next((e for e in elems if frame in e.frames), elems[0])
+        return f"{joint}@{e.name}"
+
+    def _columns(self) -> list[tuple[str, int]]:
+        cols: list[tuple[str, int]] = []
         for j in self.s.joints:
-            cols.append((j.name, "l_xy" if j.type == "revolute" else "u", 2 if j.type == "revolute" else 3))
-        cols += [(f, "l", 3) for f in self.p.frames]
+            width = 2 if j.type == "revolute" else 3
+            if self._split(j.name):
+                cols += [(f"{j.name}@{e.name}", width) for e in self.elements[j.name]]
+            else:
+                cols.append((j.name, width))
+        cols += [(f, 3) for f in self.p.frames]
         return cols
 
     def _system(self, R_axis: dict[str, Array], R_frame: dict[str, Array]) -> tuple[Array, Array, dict[str, slice]]:
@@ -306,7 +325,7 @@ class _Solver:
         cols = self._columns()
         where: dict[str, slice] = {}
         k = 0
-        for name, _, width in cols:
+        for name, width in cols:
             where[name] = slice(k, k + width)
             k += width
         G_rows, y_rows = [], []
@@ -316,7 +335,7 @@ class _Solver:
             for j in self.s.path_to(f):
                 ji = self.s.joint_index(j)
                 if self.s.joint(j).type == "revolute":
-                    G[:, :, where[j]] = R_axis[j][idx][:, :, :2]  # ^w R-bar of eq. (62)
+                    G[:, :, where[self._key(j, f)]] = R_axis[j][idx][:, :, :2]  # ^w R-bar of eq. (62)
                 else:
                     G[:, :, where[j]] = self.q[idx, ji][:, None, None] * R_axis[j][idx]  # q_i ^w r_z
             G[:, :, where[f]] = R_frame[f][idx]  # ^w R_5 l_5 of eq. (58)
@@ -342,9 +361,10 @@ class _Solver:
         labels = [""] * G.shape[1]
         for name, sl in where.items():
             for c in range(sl.start, sl.stop):
+                joint = name.split("@")[0]
                 labels[c] = f"the offset of {name!r}" if name in self.p.frames else (
-                    f"the axis line of joint {name!r}" if self.s.joint(name).type == "revolute"
-                    else f"the direction of prismatic joint {name!r}"
+                    f"the axis line of joint {joint!r}" if self.s.joint(joint).type == "revolute"
+                    else f"the direction of prismatic joint {joint!r}"
                 )
         x = self._lstsq(G, y, labels)
         # |u| = 1 (the paper's constraint on ^w r_{0,z}, ^w r_{1,z}); re-solve the rest with u fixed.
@@ -382,13 +402,17 @@ class _Solver:
             if e.is_frame:
                 return R_frame[e.name][0] @ x[where[e.name]]
             if self.s.joint(e.name).type == "revolute":
-                return R_axis[e.name][0] @ np.array([*x[where[e.name]], 0.0])
+                return R_axis[e.name][0] @ np.array([*x[where[self._key(e.name)]], 0.0])
             node = e.name
 
     # ---- Step 3: CPC parameters ---------------------------------------------------------------
 
-    def step3_model(self, nominal: CPCModel | None) -> CPCModel:
-        """Eqs. (65)-(67): prismatic axis frames, base frame, then every CPC constant."""
+    def step3_model(self, nominal: CPCModel | None, branch: str | None = None) -> CPCModel:
+        """Eqs. (65)-(67): prismatic axis frames, base frame, then every CPC constant.
+
+        With ``shared_axes=False``, ``branch`` (a measured frame) picks which branch's copy of a
+        shared joint's offset the model uses: that model is the paper's chain to ``branch``.
+        """
         rot = dict(self.rot_in_parent)
         s = self.s
         for j in s.joints:
@@ -408,14 +432,15 @@ class _Solver:
         joints: dict[str, CPCParams] = {}
         for j in s.joints:
             R = rot[j.name]
-            l = np.array([*self.x[self.where[j.name]], 0.0]) if j.type == "revolute" else np.zeros(3)
+            key = self._key(j.name, branch)
+            l = np.array([*self.x[self.where[key]], 0.0]) if j.type == "revolute" else np.zeros(3)
             joints[j.name] = CPCParams.from_matrix(homogeneous(R, R @ l))
         frames: dict[str, CPCParams] = {}
         for f in self.p.frames:
             R = rot[f]
             frames[f] = CPCParams.from_matrix(homogeneous(R, R @ self.x[self.where[f]]))
         for j, params in joints.items():
-            if params.b[2] < 0:
+            if params.b[2] < -0.1:  # near-perpendicular axes (b_z ~ 0) may take either sign
                 self.details.notes.append(
                     f"joint {j!r}: b_z = {params.b[2]:.3f} < 0: its axis points against its parent's "
                     "(kept: the sign follows the direction in which the reading increases)"
@@ -494,6 +519,26 @@ def identify_closed_form(
     solver.step2_translations()
     model = solver.step3_model(nominal)
     return model, solver.details
+
+
+def identify_paper_branches(ms: MeasurementSet, *, protocol: Protocol | None = None) -> dict[str, CPCModel]:
+    """The paper's own model, eq. (15): a joint carrying several branches (the head's tilt) has
+    one axis frame *per branch* (``l_3L``, ``l_3R``), i.e. one more axis-line offset (2
+    parameters) per extra branch: 34 parameters for the IIS-head instead of 32.
+
+    Steps 1 and 3 are those of :func:`identify_closed_form`; Step 2 (eq. (62)) gives each branch
+    its own offset columns for such joints. The result is not one tree, so it is returned as one
+    model per measured frame, valid for that frame only (for comparisons; see
+    ``cpc2urdf study fig11``).
+
+    Returns:
+        ``{frame: model}`` where ``model.fk(q)[frame]`` is the paper's prediction for ``frame``.
+    """
+    protocol = protocol or recognise_protocol(ms)
+    solver = _Solver(ms, protocol, shared_axes=False)
+    solver.step1_rotations()
+    solver.step2_translations()
+    return {f: solver.step3_model(None, branch=f) for f in protocol.frames}
 
 
 def provenance(ms: MeasurementSet, protocol: Protocol, details: ClosedFormDetails) -> dict[str, Any]:
