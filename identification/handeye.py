@@ -303,39 +303,70 @@ def _translation_given_rotation(A: Array, B: Array, R_X: Array) -> Array:
     return np.linalg.lstsq(M, rhs, rcond=None)[0]
 
 
-def solve_tsai(A: Array, B: Array) -> Array:
-    """Tsai & Lenz (1989) for ``A_i X = X B_i`` from relative motions (N, 4, 4) each.
+# Relative rotations closer than this to 180 deg have an ambiguous axis sign (R(n, pi) = R(-n, pi)):
+# noise can flip it between a hand motion and its camera motion. They are left out of a first
+# estimate and then sign-aligned with it (below).
+AMBIGUOUS_AXIS_ANGLE = math.radians(170.0)
 
-    Rotation from the modified Rodrigues vectors ``P = 2 sin(theta/2) n``:
-    ``skew(P_A + P_B) P'_X = P_B - P_A``, ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)``; then the
-    translation by least squares. Returns X, shape (4, 4).
+
+def _align_axis_signs(VA: Array, VB: Array, solve: Any) -> Array:
+    """Solve a rotation from axis vectors ``VA ~ R_X VB`` (N, 3) robustly near 180 deg.
+
+    First ``solve`` on the motions whose angle is below :data:`AMBIGUOUS_AXIS_ANGLE` (if two
+    or more), then flip the ``VB`` whose direction disagrees with that estimate, and solve again
+    on all motions. Returns the rotation (3, 3).
     """
-    def modified_rodrigues(R: Array) -> Array:
-        r = Rotation.from_matrix(R).as_rotvec()
-        th = np.linalg.norm(r, axis=-1, keepdims=True)
-        safe = np.where(th > 1e-300, th, 1.0)
-        return np.where(th > 1e-300, 2.0 * np.sin(th / 2.0) * r / safe, r)
+    th = np.linalg.norm(VA, axis=-1)
+    ok = th < 2.0 * math.sin(AMBIGUOUS_AXIS_ANGLE / 2.0) if solve is _tsai_rotation else th < AMBIGUOUS_AXIS_ANGLE
+    if ok.all() or ok.sum() < 2:
+        return solve(VA, VB)
+    R1 = solve(VA[ok], VB[ok])
+    VB = np.where((np.einsum("ki,ki->k", VB @ R1.T, VA) < 0)[:, None], -VB, VB)
+    return solve(VA, VB)
 
-    PA = modified_rodrigues(A[:, :3, :3])
-    PB = modified_rodrigues(B[:, :3, :3])
+
+def _modified_rodrigues(R: Array) -> Array:
+    """Tsai-Lenz's ``P = 2 sin(theta/2) n`` of rotations (N, 3, 3) -> (N, 3)."""
+    r = Rotation.from_matrix(R).as_rotvec()
+    th = np.linalg.norm(r, axis=-1, keepdims=True)
+    safe = np.where(th > 1e-300, th, 1.0)
+    return np.where(th > 1e-300, 2.0 * np.sin(th / 2.0) * r / safe, r)
+
+
+def _tsai_rotation(PA: Array, PB: Array) -> Array:
+    """Tsai-Lenz rotation step (``P_A = R_X P_B``): ``skew(P_A + P_B) P'_X = P_B - P_A``, then
+    ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)`` and ``R_X`` from ``P_X``."""
     M = np.concatenate([_skew(a + b) for a, b in zip(PA, PB, strict=True)])
-    rhs = (PB - PA).reshape(-1)
-    Pp = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    Pp = np.linalg.lstsq(M, (PB - PA).reshape(-1), rcond=None)[0]
     P = 2.0 * Pp / math.sqrt(1.0 + Pp @ Pp)
     n2 = float(P @ P)
     R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * _skew(P))
-    R = project_to_rotation(R)
+    return project_to_rotation(R)
+
+
+def solve_tsai(A: Array, B: Array) -> Array:
+    """Tsai & Lenz (1989) for ``A_i X = X B_i`` from relative motions (N, 4, 4) each.
+
+    Rotation from the modified Rodrigues vectors ``P = 2 sin(theta/2) n`` (:func:`_tsai_rotation`),
+    with axis signs of near-180-deg motions aligned (:func:`_align_axis_signs`); then the
+    translation by least squares. Returns X, shape (4, 4).
+    """
+    R = _align_axis_signs(_modified_rodrigues(A[:, :3, :3]), _modified_rodrigues(B[:, :3, :3]), _tsai_rotation)
     return homogeneous(R, _translation_given_rotation(A, B, R))
+
+
+def _park_martin_rotation(alpha: Array, beta: Array) -> Array:
+    return project_to_rotation((beta.T @ alpha).T)
 
 
 def solve_park_martin(A: Array, B: Array) -> Array:
     """Park & Martin (1994): ``R_X = (M^T M)^(-1/2) M^T`` with ``M = sum beta_i alpha_i^T``,
-    ``alpha = log R_A``, ``beta = log R_B`` (the polar factor of ``M^T``); then the translation by
-    least squares. Relative motions (N, 4, 4) each; returns X, shape (4, 4)."""
+    ``alpha = log R_A``, ``beta = log R_B`` (the polar factor of ``M^T``, computed by SVD), axis
+    signs of near-180-deg motions aligned; then the translation by least squares. Relative
+    motions (N, 4, 4) each; returns X, shape (4, 4)."""
     alpha = Rotation.from_matrix(A[:, :3, :3]).as_rotvec()
     beta = Rotation.from_matrix(B[:, :3, :3]).as_rotvec()
-    M = beta.T @ alpha
-    R = project_to_rotation(M.T)
+    R = _align_axis_signs(alpha, beta, _park_martin_rotation)
     return homogeneous(R, _translation_given_rotation(A, B, R))
 
 

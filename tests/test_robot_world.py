@@ -4,6 +4,7 @@ Zhuang's quaternion method, the joint refinement; against the truth and OpenCV."
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_handeye import EXACT, add_noise, make_data, random_pose
 
+from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.robot_world import (
     ALL_METHODS,
@@ -153,3 +155,32 @@ def test_unknown_method() -> None:
     _, _, H, C = make_data(rng, 4)
     with pytest.raises(ValueError, match="unknown method"):
         calibrate(H, C, "magic")
+
+
+def test_tsai_and_park_martin_survive_motions_near_180_deg() -> None:
+    # Pairs of poses 179.9 deg apart: noise flips the axis sign of some B relative to their A.
+    rng = np.random.default_rng(7)
+    X, Z, H, _ = make_data(rng, 10)
+    for k in range(0, 10, 2):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        H[k + 1, :3, :3] = Rotation.from_rotvec(axis * math.radians(179.9)).as_matrix() @ H[k, :3, :3]
+    C = add_noise(rng, inverse(X)[None] @ inverse(H) @ Z[None], math.radians(0.2), 0.0005)
+    for method in ("tsai", "park_martin"):
+        r = calibrate(H, C, method)
+        assert rotation_error(r.X[:3, :3], X[:3, :3]) < math.radians(0.3), method
+
+
+def test_li2010_study_runs_tiny(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cpc2urdf.identification import study_li2010 as st
+
+    res = st.run_study(repeats=1, pose_counts=(3, 5), ratio_counts=(4,))
+    assert {r["method"] for r in res["rows"]} == set(st.PAPER_METHODS + st.EXTRA_METHODS)
+    assert all(r["X_rot"] < 0.1 and r["Z_mm"] < 50 for r in res["rows"])
+    report = st.format_report(res)
+    assert "Kronecker < dual quaternion < quaternion" in report and "Tsai/TSAI" in report
+    # noise-free sanity of the metric: the truth has zero error
+    assert st.pose_errors(st.X_TRUE, st.Z_TRUE) == {"X_rot": 0.0, "X_mm": 0.0, "Z_rot": 0.0, "Z_mm": 0.0}
+    assert main(["study", "li2010", "--repeats", "1", "--max-poses", "3", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "li2010.md").exists() and (tmp_path / "li2010_fig1c.png").stat().st_size > 1000
+    assert main(["study", "li2010", "--repeats", "0", "--out", str(tmp_path)]) == 2
