@@ -36,8 +36,24 @@ def closed_form(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
     return model.with_params(metadata=meta)
 
 
+def refined(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
+    """Closed form, then weighted least squares of every record (:mod:`cpc2urdf.identification.refine`)."""
+    from cpc2urdf.identification.refine import identify_refined
+
+    return identify_refined(ms, nominal)
+
+
+def refined_robust(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
+    """As ``refined``, rejecting gross outliers (named in the model's notes)."""
+    from cpc2urdf.identification.refine import identify_refined
+
+    return identify_refined(ms, nominal, robust=True)
+
+
 METHODS: dict[str, Method] = {
     "closed-form": closed_form,
+    "refined": refined,
+    "refined-robust": refined_robust,
 }
 
 

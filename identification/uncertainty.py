@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import Cpc2UrdfError
-from cpc2urdf.identification.identifiability import RANK_TOL
+from cpc2urdf.identification.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.parametrization import Parametrization
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
@@ -160,10 +160,7 @@ def covariance_from_jacobian(
     r = np.asarray(residuals, dtype=float)
     norms = np.linalg.norm(J, axis=0)
     d = np.where(norms > 0, norms, 1.0)
-    Js = J / d
-    if Js.shape[0] < Js.shape[1]:
-        Js = np.vstack([Js, np.zeros((Js.shape[1] - Js.shape[0], Js.shape[1]))])
-    _, s, Vt = np.linalg.svd(np.linalg.qr(Js, mode="r"))  # = SVD of Js, cheaper (see identifiability)
+    _, s, Vt = np.linalg.svd(triangular_factor(J / d))  # = SVD of J / d, cheaper under load
     keep = s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL
     rank = int(keep.sum())
     # (J^T J)^+ restricted to the identifiable subspace, undoing the column scaling.

@@ -158,3 +158,36 @@ def test_bad_input(head):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         refine(head, ms)  # clean full-rank data: no warning at all
+
+
+def test_identify_cli_method_refined(tmp_path):
+    from cpc2urdf.cli import main
+    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.uncertainty import predicted_position_std
+    from cpc2urdf.measurements import save_measurements
+
+    truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)
+    path = save_measurements(measured, tmp_path / "m.json", robot="iis_head")
+    assert main(["identify", str(path), "-o", str(tmp_path / "cf.json")]) == 0
+    assert main(["identify", str(path), "-o", str(tmp_path / "r.json"), "--method", "refined"]) == 0
+    cf, ref = load_model(tmp_path / "cf.json"), load_model(tmp_path / "r.json")
+    assert ref.metadata["provenance"]["method"] == "refined"
+    assert ref.metadata["provenance"]["sigma_source"] == "measurement file noise section"
+    assert heldout_error(ref, truth, heldout.q) < heldout_error(cf, truth, heldout.q)
+    std = predicted_position_std(ref, heldout.q)
+    assert set(std) == set(PLATES) and np.all((std["plate_left"] > 0) & (std["plate_left"] < 2e-3))
+    # Cameras ride along with their plates.
+    for cam, plate in (("camera_left_optical", "plate_left"), ("camera_right_optical", "plate_right")):
+        rel_cf = np.linalg.solve(cf.fk(heldout.q[:1], [plate])[plate][0], cf.fk(heldout.q[:1], [cam])[cam][0])
+        rel_r = np.linalg.solve(ref.fk(heldout.q[:1], [plate])[plate][0], ref.fk(heldout.q[:1], [cam])[cam][0])
+        np.testing.assert_allclose(rel_r, rel_cf, atol=1e-12)
+    # Random configurations (no protocol): the closed form cannot start, the nominal model does.
+    rng = np.random.default_rng(7)
+    q = random_q(truth, 30, rng)
+    free = measure(truth, q, rng, 0.0, 0.0)
+    free = MeasurementSet.from_arrays(truth.structure, q, free.poses, robot="iis_head")
+    path2 = save_measurements(free, tmp_path / "free.json", robot="iis_head")
+    assert main(["identify", str(path2), "-o", str(tmp_path / "free_model.json"), "--method", "refined"]) == 0
+    m = load_model(tmp_path / "free_model.json")
+    assert m.metadata["provenance"]["start"] == "nominal"
+    assert heldout_error(m, truth, heldout.q) < 1e-9
