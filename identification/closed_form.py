@@ -282,7 +282,11 @@ class _Solver:
         self.R_world_base = project_to_rotation(acc)
 
     def rotation_fk(self) -> tuple[dict[str, Array], dict[str, Array]]:
-        """World rotations predicted by the Step-1 model: (axis frames by joint, measured frames)."""
+        """World rotations predicted by the Step-1 model: (axis frames by joint, measured frames).
+
+        Eqs. (25), (26) for any tree. Typo in the paper: eq. (25) prints ``Rot(z, q_2)`` after
+        ``R_2``; joint 2 is prismatic, it is the pan's ``Rot(z, q_3)`` as in eq. (26).
+        """
         N = self.N
         link: dict[str, Array] = {BASE: np.broadcast_to(self.R_world_base, (N, 3, 3))}
         axis: dict[str, Array] = {}
@@ -337,7 +341,9 @@ class _Solver:
                 if self.s.joint(j).type == "revolute":
                     G[:, :, where[self._key(j, f)]] = R_axis[j][idx][:, :, :2]  # ^w R-bar of eq. (62)
                 else:
-                    G[:, :, where[j]] = self.q[idx, ji][:, None, None] * R_axis[j][idx]  # q_i ^w r_z
+                    # q_i ^w r_{i-1,z} u: a prismatic joint moves along its axis frame's z. Typo in
+                    # the paper: eqs. (27), (28) print q_1 r_{0,x} + q_2 r_{1,x}; eq. (58) has r_z.
+                    G[:, :, where[j]] = self.q[idx, ji][:, None, None] * R_axis[j][idx]
             G[:, :, where[f]] = R_frame[f][idx]  # ^w R_5 l_5 of eq. (58)
             G_rows.append(G.reshape(-1, k))
             y_rows.append(self.p_meas[f][idx].reshape(-1))
@@ -352,7 +358,7 @@ class _Solver:
                 f"the translation system of eq. (64) is rank deficient ({G.shape[0]} equations, "
                 f"{G.shape[1]} unknowns, rank {rank}): the data do not fix {worst}"
             )
-        return x
+        return np.asarray(x, dtype=float)
 
     def step2_translations(self) -> None:
         """Eqs. (58)-(64), then ``|u| = 1`` enforced and the base origin fixed (eq. (67))."""
@@ -423,7 +429,8 @@ class _Solver:
             rot[j.name] = rot[j.name] @ Rb.T
             for c in self.elements[j.name]:
                 rot[c.name] = Rb @ rot[c.name]
-        # The base frame is the axis frame of its first element (the paper's frame 0, eq. (14)).
+        # The base frame is the axis frame of its first element (the paper's frame 0, eq. (14));
+        # its origin is the point chosen in Step 2 (eq. (67), which prints l'_0 for l_0).
         first = self.elements[BASE][0].name
         R_rebase = rot[first]
         R_world_base = self.R_world_base @ R_rebase
@@ -439,10 +446,10 @@ class _Solver:
         for f in self.p.frames:
             R = rot[f]
             frames[f] = CPCParams.from_matrix(homogeneous(R, R @ self.x[self.where[f]]))
-        for j, params in joints.items():
+        for name, params in joints.items():
             if params.b[2] < -0.1:  # near-perpendicular axes (b_z ~ 0) may take either sign
                 self.details.notes.append(
-                    f"joint {j!r}: b_z = {params.b[2]:.3f} < 0: its axis points against its parent's "
+                    f"joint {name!r}: b_z = {params.b[2]:.3f} < 0: its axis points against its parent's "
                     "(kept: the sign follows the direction in which the reading increases)"
                 )
         kept = [f for f in s.frames if f.name in frames]

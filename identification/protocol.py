@@ -155,8 +155,7 @@ def recognise_protocol(ms: MeasurementSet, tol: float = READING_TOL) -> Protocol
     if not frames:
         raise DegenerateDataError(f"{ms.source}: no frame has a measured pose")
     for i, j in enumerate(s.joints):
-        distinct = np.unique(np.round(q[:, i] / tol)) if len(q) else []
-        if len(distinct) < 2:
+        if len(np.unique(np.round(q[:, i] / tol))) < 2:
             raise DegenerateDataError(
                 f"joint {j.name!r} has fewer than two distinct readings (all {len(q)} records read "
                 f"{_fmt(q[0, i])}): it was never moved, so its axis cannot be identified"
