@@ -28,6 +28,7 @@ COMMANDS = (
     "identify",
     "accuracy",
     "handeye",
+    "view",
 )
 
 

@@ -1,0 +1,147 @@
+"""``cpc2urdf view URDF_OR_MODEL [--target X Y Z] [--nominal OTHER] [--measurements FILE] [--html OUT]``.
+
+Without ``--html`` the scene is served by meshcat on localhost: the URL is printed and the command
+waits until interrupted (Ctrl-C stops the server and exits 0). With ``--html`` it writes one
+self-contained page (no server, no network) and exits; ``--screenshot PNG`` also renders that page
+in headless Chromium. See ``docs/view.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+from cpc2urdf.errors import ConfigurationError
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "view",
+        help="show a head (calibrated or nominal) in meshcat, in a browser",
+        description="Show a robot from its URDF visuals in meshcat, with axis triads on plate and "
+        "camera frames; with --target the head fixates it (gaze solver) and a ray runs along each "
+        "optical axis; --nominal adds another model as a translucent ghost; --measurements draws "
+        "measured plate positions and bars to the model's predictions. Serves on localhost until "
+        "Ctrl-C, or writes a self-contained page with --html. Lengths in m, angles in rad.",
+    )
+    p.add_argument("robot", metavar="URDF_OR_MODEL", help=".urdf, model file, robot spec, or shipped robot name")
+    p.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point to fixate, in world [m]")
+    p.add_argument("--nominal", metavar="OTHER", help="another model/URDF of the same robot, shown as a ghost")
+    p.add_argument("--measurements", metavar="FILE", help="a cpc2urdf/measurements@1 file of this robot")
+    p.add_argument("--html", metavar="OUT.html", help="write a self-contained page instead of serving")
+    p.add_argument("--screenshot", metavar="OUT.png", help="with --html: also render it in headless Chromium")
+    p.add_argument(
+        "--q",
+        nargs="+",
+        metavar="Q",
+        help="configuration: NAME=VALUE pairs (others mid-range) or one value per joint in order "
+        "[rad]/[m]; with --target, where the gaze solve starts",
+    )
+    p.add_argument(
+        "--cameras",
+        nargs=2,
+        metavar=("LEFT", "RIGHT"),
+        default=["camera_left_optical", "camera_right_optical"],
+        help="camera optical frames for the gaze (default: %(default)s)",
+    )
+    p.add_argument("--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)")
+    p.add_argument("--no-sweep", action="store_true", help="leave out the joint sweep animation")
+    p.set_defaults(run=run)
+
+
+def _numbers(values: list[str], what: str) -> list[float]:
+    out = []
+    for v in values:
+        try:
+            x = float(v)
+        except ValueError:
+            raise ConfigurationError(f"{what} must be numbers, got {v!r}") from None
+        if not math.isfinite(x):
+            raise ConfigurationError(f"{what} must be finite, got {v!r}")
+        out.append(x)
+    return out
+
+
+def parse_q(values: list[str] | None) -> dict[str, float] | list[float] | None:
+    """``--q`` as ``{joint: value}`` (``NAME=VALUE`` items) or a list of values in joint order."""
+    if not values:
+        return None
+    if all("=" in v for v in values):
+        out: dict[str, float] = {}
+        for item in values:
+            name, _, value = item.partition("=")
+            out[name] = _numbers([value], f"--q {name}")[0]
+        return out
+    if any("=" in v for v in values):
+        raise ConfigurationError("--q takes either NAME=VALUE pairs or one number per joint, not both")
+    return _numbers(values, "--q values")
+
+
+def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.validation.view import load_view_robot, screenshot_html, write_view_html
+
+    if args.screenshot and not args.html:
+        raise ConfigurationError("--screenshot needs --html (the page to render)")
+    target = _numbers(args.target, "--target X Y Z") if args.target else None
+    robot = load_view_robot(args.robot)
+    options: dict[str, Any] = {
+        "q": parse_q(args.q),
+        "target": target,
+        "cameras": tuple(args.cameras),
+        "policy": args.policy,
+    }
+    if args.nominal:
+        options["ghost"] = load_view_robot(args.nominal)
+    if args.measurements:
+        from cpc2urdf.measurements import load_measurements
+
+        options["measurements"] = load_measurements(args.measurements)
+
+    if args.html:
+        summary = write_view_html(args.html, robot, sweep=not args.no_sweep, **options)
+        print(summary.format())
+        print(f"wrote {args.html} (self-contained; open it in a browser)")
+        if args.screenshot:
+            png = screenshot_html(args.html, args.screenshot)
+            print(f"wrote {png}")
+        return 0
+    return _serve(robot, options, sweep=not args.no_sweep)
+
+
+def _serve(robot: Any, options: dict[str, Any], *, sweep: bool) -> int:
+    """Serve the scene with meshcat's server until Ctrl-C."""
+    import signal
+    import subprocess
+    import time
+
+    import meshcat
+
+    from cpc2urdf.validation.view import build_view
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    # Ctrl-C and `kill` both stop the server cleanly (a background job may start with SIGINT
+    # ignored, and SIGTERM would otherwise skip the cleanup and orphan meshcat's server).
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    vis = meshcat.Visualizer()  # starts meshcat's server on localhost; prints the URL
+    try:
+        summary = build_view(vis, robot, sweep=sweep, **options)
+        print(summary.format())
+        print(f"serving at {vis.url()} (Ctrl-C to stop)", flush=True)
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        print("stopped")
+        return 0
+    finally:
+        proc = getattr(vis.window, "server_proc", None)
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:  # a stuck server is killed, never waited on forever
+                proc.kill()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

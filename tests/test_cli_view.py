@@ -1,0 +1,138 @@
+"""``cpc2urdf view``: the page it writes (checked in headless Chromium), serving until Ctrl-C,
+and one clear line with exit code 2 for bad input."""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+from test_view import (
+    TARGET,
+    calibrated_head,
+    check_picture,
+    measurements_of,
+    require_chromium,
+)
+
+from cpc2urdf.cli import main
+from cpc2urdf.measurements import save_measurements
+from cpc2urdf.model_file import load_model, save_model
+from cpc2urdf.urdf import write_urdf
+
+
+def test_view_is_a_registered_command(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["view", "--help"]) == 0
+    assert "--target" in capsys.readouterr().out
+
+
+def test_html_page_with_screenshot_in_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    require_chromium()
+    html, png = tmp_path / "head.html", tmp_path / "head.png"
+    t0 = time.perf_counter()
+    assert main(["view", "iis_head", "--html", str(html), "--screenshot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert f"wrote {html}" in out and f"wrote {png}" in out
+    print(f"view + Chromium screenshot: {time.perf_counter() - t0:.1f} s")
+    # Without a target: the head, and no target colour (the negative control of test_view).
+    check_picture(png, None, target=False)
+    assert "<script src" not in html.read_text()
+
+
+def test_html_with_target_nominal_measurements_and_q(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cal = calibrated_head()
+    model_path = save_model(cal, tmp_path / "calibrated.json")
+    urdf = write_urdf(load_model("iis_head"), tmp_path / "nominal.urdf")
+    meas = save_measurements(measurements_of(load_model("iis_head")), tmp_path / "meas.json", robot="iis_head")
+    html = tmp_path / "view.html"
+    argv = ["view", str(model_path), "--target", *map(str, TARGET), "--nominal", str(urdf)]
+    argv += ["--measurements", str(meas), "--q", "pan=1.5", "tilt=0.5", "--html", str(html)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "target" in out and "ghost:" in out and "measurements: 24 plate positions" in out
+    assert html.stat().st_size > 100_000  # meshcat's viewer script is inline
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["missing.json"], "missing.json"),
+        (["missing.urdf"], "missing.urdf: no such file"),
+        (["iis_head", "--target", "1", "2", "x"], "must be numbers, got 'x'"),
+        (["iis_head", "--target", "1", "2"], "expected 3 arguments"),
+        (["iis_head", "--target", "1", "nan", "2"], "must be finite"),
+        (["iis_head", "--target", "-0.3", "-0.4", "0.66", "--cameras", "camera_left_optical", "eye"], "unknown frame 'eye'"),
+        (["iis_head", "--q", "neck=0.1"], "unknown joint 'neck'"),
+        (["iis_head", "--q", "1", "2"], "needs 6 values"),
+        (["iis_head", "--q", "pan=4"], "outside its limits"),
+        (["iis_head", "--nominal", "nothere.urdf"], "nothere.urdf: no such file"),
+        (["iis_head", "--measurements", "nothere.json"], "nothere.json"),
+        (["iis_head", "--screenshot", "x.png"], "--screenshot needs --html"),
+    ],
+)
+def test_bad_input_one_line_exit_2(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    html = tmp_path / "out.html"
+    html_args = [] if "--screenshot" in args else ["--html", str(html)]
+    assert main(["view", *args, *html_args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not html.exists()  # no partial output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_measured_frame_the_robot_lacks(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    no_plates = save_model(load_model("iis_head").without_frames(["plate"]), tmp_path / "cams.json")
+    meas = save_measurements(measurements_of(load_model("iis_head"), n=2), tmp_path / "m.json", robot="iis_head")
+    html = tmp_path / "out.html"
+    assert main(["view", str(no_plates), "--measurements", str(meas), "--html", str(html)]) == 2
+    assert "unknown frame 'plate_left'" in capsys.readouterr().err
+    assert not html.exists()
+
+
+def test_output_folder_missing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["view", "iis_head", "--html", str(tmp_path / "no" / "v.html")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_serves_until_interrupted(tmp_path: Path) -> None:
+    """Without --html: prints the URL, the page is served, Ctrl-C stops it (exit 0, server gone)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cpc2urdf", "view", "iis_head", "--target", *map(str, TARGET)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        url = None
+        deadline = time.monotonic() + 60.0
+        lines = []
+        while time.monotonic() < deadline and proc.poll() is None:
+            line = proc.stdout.readline()  # type: ignore[union-attr]
+            lines.append(line)
+            m = re.search(r"serving at (http://\S+)", line)
+            if m:
+                url = m.group(1)
+                break
+        assert url is not None, "".join(lines) + (proc.stderr.read() if proc.poll() is not None else "")  # type: ignore[union-attr]
+        assert "fixated" in "".join(lines)
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200 and b"meshcat" in r.read().lower()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        assert "stopped" in out
+        with pytest.raises(OSError):
+            urllib.request.urlopen(url, timeout=2)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()

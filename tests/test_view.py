@@ -1,0 +1,276 @@
+"""The meshcat view: scene contents checked against the CPC model, and the page checked in a
+real browser (headless Chromium, software WebGL) by looking at the screenshot's pixels."""
+
+from __future__ import annotations
+
+import colorsys
+import math
+import re
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+import umsgpack
+from matplotlib.colors import rgb_to_hsv
+
+from cpc2urdf.errors import ConfigurationError, InputFileError, UnknownNameError
+from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.model_file import load_model
+from cpc2urdf.tolerances import FK_AGREEMENT_TOL
+from cpc2urdf.urdf import HEAD_RGBA, write_urdf
+from cpc2urdf.validation.view import (
+    GHOST_RGBA,
+    TARGET_RGBA,
+    StaticWindow,
+    build_view,
+    find_chromium,
+    load_view_robot,
+    screenshot_html,
+    static_visualizer,
+    write_view_html,
+)
+
+TARGET = np.array([-0.3, -0.4, 0.66])  # [m] in front of the nominal IIS-head's cameras
+SIZE = (1024, 768)
+
+
+# ---- helpers --------------------------------------------------------------------------------
+
+
+def calibrated_head(seed: int = 0, joints: tuple[str, ...] = ("table_x", "table_y", "pan", "tilt")) -> CPCModel:
+    """The nominal IIS-head with the constants of ``joints`` perturbed (a 'calibrated' head).
+
+    Perturbing only the neck keeps the two eyes' geometry nominal, so targets stay exactly
+    fixatable; perturbed vergence axes that no longer share a plane make exact binocular
+    fixation impossible (the gaze solver then reports the best in-limit answer, unreachable).
+    """
+    m = load_model("iis_head")
+    rng = np.random.default_rng(seed)
+    params = {}
+    for name in joints:
+        p = m.joints[name]
+        b = np.array(p.b) + rng.normal(0.0, 0.01, 3)
+        params[name] = CPCParams(tuple(b / np.linalg.norm(b)), p.beta, tuple(np.array(p.l) + rng.normal(0, 0.01, 3)))
+    return m.with_params(joints=params)
+
+
+def measurements_of(model: CPCModel, n: int = 12, seed: int = 0) -> MeasurementSet:
+    """Noise-free plate poses of ``model`` at seeded configurations in the calibration range."""
+    s = model.structure
+    rng = np.random.default_rng(seed)
+    lo = [j.calibration_range[0] for j in s.joints]
+    hi = [j.calibration_range[1] for j in s.joints]
+    q = rng.uniform(lo, hi, (n, s.n_joints))
+    return MeasurementSet.from_arrays(s, q, model.fk(q, ["plate_left", "plate_right"]), robot="iis_head")
+
+
+def decoded(window: StaticWindow) -> dict[str, dict[str, object]]:
+    """The recorded scene: path -> {"object": ..., "transform": (4, 4), "properties": [...]}."""
+    out: dict[str, dict[str, object]] = {}
+
+    def visit(node: object, path: str) -> None:
+        entry: dict[str, object] = {}
+        if node.object is not None:  # type: ignore[attr-defined]
+            entry["object"] = umsgpack.unpackb(node.object)["object"]  # type: ignore[attr-defined]
+        if node.transform is not None:  # type: ignore[attr-defined]
+            m = umsgpack.unpackb(node.transform)["matrix"]  # type: ignore[attr-defined]
+            entry["transform"] = np.array(m, dtype=float).reshape(4, 4).T  # meshcat: column-major
+        entry["properties"] = [umsgpack.unpackb(p) for p in node.properties]  # type: ignore[attr-defined]
+        entry["animation"] = node.animation  # type: ignore[attr-defined]
+        out[path] = entry
+        for k, child in node.items():  # type: ignore[attr-defined]
+            visit(child, f"{path}/{k}")
+
+    visit(window.tree, "")
+    return out
+
+
+def colour_mask(img: np.ndarray, rgba: tuple[float, ...], hue_tol_deg: float = 12.0) -> np.ndarray:
+    """Pixels of the hue of ``rgba`` (shading changes brightness, not hue), saturated enough."""
+    hsv = rgb_to_hsv(np.clip(img[..., :3], 0.0, 1.0))
+    h0 = colorsys.rgb_to_hsv(*rgba[:3])[0]
+    dh = np.abs((hsv[..., 0] - h0 + 0.5) % 1.0 - 0.5) * 360.0
+    return (dh < hue_tol_deg) & (hsv[..., 1] > 0.4) & (hsv[..., 2] > 0.15)
+
+
+def require_chromium() -> None:
+    if find_chromium() is None:
+        pytest.fail(
+            "Chromium is not installed: the browser test needs it (apt-get install -y chromium, "
+            "or set CPC2URDF_CHROMIUM to a Chrome/Chromium executable)"
+        )
+
+
+def check_picture(png: Path, summary: object, *, target: bool, ghost: bool = False) -> None:
+    """The screenshot shows the head (its colour, over a plausible area), the target where the
+    camera placement says it is, and the ghost when one was given."""
+    img = matplotlib.image.imread(str(png))[..., :3]
+    assert img.shape[:2] == (SIZE[1], SIZE[0])
+    assert img.std() > 0.05, "blank page: WebGL did not render"
+    assert len(np.unique((img * 255).astype(np.uint8).reshape(-1, 3), axis=0)) > 200
+    head = colour_mask(img, HEAD_RGBA)
+    ys, xs = np.nonzero(head)
+    assert head.mean() > 0.01, f"head colour covers only {head.mean():.2%} of the picture"
+    # The head fills the view: its pixels span a good part of the picture, centred in it.
+    assert xs.max() - xs.min() > 0.2 * SIZE[0] and ys.max() - ys.min() > 0.3 * SIZE[1]
+    assert 0.2 * SIZE[0] < xs.mean() < 0.8 * SIZE[0] and 0.2 * SIZE[1] < ys.mean() < 0.8 * SIZE[1]
+    magenta = colour_mask(img, TARGET_RGBA)
+    if target:
+        assert magenta.sum() > 100, "target sphere not visible"
+        ty, tx = np.nonzero(magenta)
+        u, v = summary.pixel(summary.target, *SIZE)  # type: ignore[attr-defined]
+        # The sphere is drawn where the camera placement projects the target (independent check).
+        assert math.hypot(tx.mean() - u, ty.mean() - v) < 10.0
+    else:
+        assert magenta.sum() < 20, "target colour without a target"
+    green = colour_mask(img, GHOST_RGBA, hue_tol_deg=20.0)
+    if ghost:
+        assert green.sum() > 1000, "ghost not visible"
+
+
+# ---- scene contents (no browser) ------------------------------------------------------------
+
+
+def test_scene_matches_the_cpc_model_and_the_gaze_fixates() -> None:
+    model = calibrated_head()
+    vis = static_visualizer()
+    summary = build_view(vis, model, target=TARGET.tolist(), sweep=False)
+    scene = decoded(vis.window)
+    assert summary.gaze is not None
+    q = np.array([summary.q[j] for j in model.structure.joint_names])
+    T_world = model.fk(q)
+    # Shown link poses (sent as float64) = the CPC model's FK, independent of Pinocchio.
+    for frame, T in T_world.items():
+        shown = scene[f"/meshcat/head/{frame}"]["transform"]
+        assert np.allclose(shown, T, atol=FK_AGREEMENT_TOL, rtol=0), frame
+    # Triads on every plate and camera frame, visuals on every link.
+    for frame in model.structure.frame_names:
+        for axis in "xyz":
+            assert "object" in scene[f"/meshcat/head/{frame}/triad/{axis}"]
+    assert "object" in scene["/meshcat/target"]
+    assert np.allclose(scene["/meshcat/target"]["transform"][:3, 3], TARGET, atol=1e-6)
+    # Each ray runs along the optical axis to the point nearest the target.
+    for cam in ("camera_left_optical", "camera_right_optical"):
+        ray = scene[f"/meshcat/head/{cam}/ray"]
+        length = ray["object"]["geometries"][0]["height"]
+        T = T_world[cam]
+        end = T[:3, 3] + length * T[:3, 2]
+        d = TARGET - T[:3, 3]
+        assert np.linalg.norm(end - (T[:3, 3] + (d @ T[:3, 2]) * T[:3, 2])) < 1e-6
+        angle = math.atan2(np.linalg.norm(np.cross(T[:3, 2], d)), d @ T[:3, 2])
+        assert angle < 1e-9  # fixated, by the CPC model's FK (independent of the solver)
+        assert np.linalg.norm(end - TARGET) < 1e-9
+    assert summary.gaze.reachable
+    colours = {e["object"]["materials"][0]["color"] for e in scene.values() if "object" in e and "materials" in e["object"]}
+    head_hex = (round(255 * HEAD_RGBA[0]) << 16) | (round(255 * HEAD_RGBA[1]) << 8) | round(255 * HEAD_RGBA[2])
+    assert head_hex in colours
+
+
+def test_nominal_head_fixates_and_skewed_eyes_are_reported_unreachable() -> None:
+    summary = build_view(static_visualizer(), "iis_head", target=TARGET, sweep=False)
+    assert summary.gaze is not None and summary.gaze.reachable
+    assert max(summary.gaze.pointing_error.values()) < 1e-9
+    assert "fixated" in summary.format()
+    skewed = calibrated_head(joints=("vergence_left", "vergence_right"))
+    vis = static_visualizer()
+    summary = build_view(vis, skewed, target=TARGET, sweep=False)
+    assert summary.gaze is not None and not summary.gaze.reachable
+    assert "reachable=False" in summary.format()
+    assert min(summary.gaze.pointing_error.values()) > 1e-6
+    assert "object" in decoded(vis.window)["/meshcat/head/camera_left_optical/ray"]
+
+
+def test_residuals_agree_with_the_cpc_model() -> None:
+    nominal = load_model("iis_head")
+    ms = measurements_of(nominal)
+    # Viewing the model that made the measurements: zero residuals.
+    vis = static_visualizer()
+    s0 = build_view(vis, nominal, measurements=ms, sweep=False)
+    assert s0.n_measured == 2 * len(ms) and s0.residual_max < 1e-12
+    # A calibrated (different) head: the residuals are the CPC model's prediction errors.
+    cal = calibrated_head()
+    vis = static_visualizer()
+    s1 = build_view(vis, cal, measurements=ms, ghost="iis_head", sweep=False)
+    pred = cal.fk(ms.q, ["plate_left", "plate_right"])
+    r = np.concatenate([np.linalg.norm(pred[f][:, :3, 3] - ms.poses[f][:, :3, 3], axis=1) for f in ("plate_left", "plate_right")])
+    assert math.isclose(s1.residual_max, r.max(), rel_tol=1e-9)
+    assert math.isclose(s1.residual_rms, math.sqrt(np.mean(r**2)), rel_tol=1e-9)
+    scene = decoded(vis.window)
+    bars = [p for p in scene if p.startswith("/meshcat/measurements/residual/") and p.count("/") == 4]
+    assert len(bars) == len(r)
+    lengths = sorted(scene[p]["object"]["geometries"][0]["height"] for p in bars)
+    assert np.allclose(lengths, np.sort(r) * s1.residual_scale, rtol=1e-6)
+    ghosts = [p for p in scene if p.startswith("/meshcat/ghost/") and "object" in scene[p]]
+    assert ghosts and all(scene[p]["object"]["materials"][0]["opacity"] < 1 for p in ghosts)
+    # A missing pose (NaN) is skipped, not drawn.
+    ms.poses["plate_left"][0] = np.nan
+    s2 = build_view(static_visualizer(), cal, measurements=ms, sweep=False)
+    assert s2.n_measured == 2 * len(ms) - 1
+
+
+def test_sweep_starts_at_the_shown_configuration_and_loads_last(tmp_path: Path) -> None:
+    html_path = tmp_path / "v.html"
+    summary = write_view_html(html_path, "iis_head", target=TARGET)
+    html = html_path.read_text()
+    # Self-contained: no external script, stylesheet or fetch of anything but inline data.
+    assert "<script src" not in html and "<link" not in html
+    blobs = re.findall(r'^"([A-Za-z0-9+/=]+)"', html, flags=re.M)
+    commands = [umsgpack.unpackb(__import__("base64").b64decode(b)) for b in blobs]
+    assert commands[-1]["type"] == "set_animation"  # after every object it animates
+    assert commands[-1]["options"]["play"] is False  # the page opens in the gaze configuration
+    anims = commands[-1]["animations"]
+    shown = load_view_robot("iis_head").link_poses(np.array(list(summary.q.values())))
+    for a in anims:
+        link = a["path"].split("/")[-1]
+        track = {t["name"]: t["keys"] for t in a["clip"]["tracks"]}
+        assert np.allclose(track[".position"][0]["value"], shown[link][:3, 3], atol=1e-9)
+        assert len(track[".position"]) > 20
+
+
+def test_bad_input_is_rejected_clearly(tmp_path: Path) -> None:
+    with pytest.raises(ConfigurationError, match="three numbers"):
+        build_view(static_visualizer(), "iis_head", target=[1.0, 2.0])
+    with pytest.raises(ConfigurationError, match="finite"):
+        build_view(static_visualizer(), "iis_head", target=[1.0, float("nan"), 2.0])
+    with pytest.raises(UnknownNameError, match="unknown frame 'eye'"):
+        build_view(static_visualizer(), "iis_head", target=TARGET, cameras=("camera_left_optical", "eye"))
+    with pytest.raises(UnknownNameError, match="unknown joint 'neck'"):
+        build_view(static_visualizer(), "iis_head", q={"neck": 0.1})
+    with pytest.raises(ConfigurationError, match="outside its limits"):
+        build_view(static_visualizer(), "iis_head", q={"pan": -1.0})
+    with pytest.raises(InputFileError, match="no such file"):
+        load_view_robot(tmp_path / "missing.urdf")
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'>")
+    with pytest.raises(InputFileError, match="bad.urdf"):
+        load_view_robot(bad)
+    # Measurements of frames the viewed robot lacks.
+    no_plates = load_model("iis_head").without_frames(["plate"])
+    with pytest.raises(UnknownNameError, match="plate_left"):
+        build_view(static_visualizer(), no_plates, measurements=measurements_of(load_model("iis_head"), n=2))
+
+
+def test_plain_urdf_gets_triads_from_frame_names(tmp_path: Path) -> None:
+    urdf = write_urdf(calibrated_head(), tmp_path / "head.urdf")
+    robot = load_view_robot(urdf)
+    assert robot.kinds["plate_left"] == "plate" and robot.kinds["camera_right_optical"] == "camera"
+    vis = static_visualizer()
+    build_view(vis, robot, q={"pan": 1.2}, sweep=False)
+    scene = decoded(vis.window)
+    assert "object" in scene["/meshcat/head/camera_left_optical/triad/z"]
+
+
+# ---- the page in a real browser ---------------------------------------------------------------
+
+
+def test_page_in_headless_chromium_shows_head_target_and_ghost(tmp_path: Path) -> None:
+    require_chromium()
+    cal = calibrated_head()
+    html = tmp_path / "view.html"
+    summary = write_view_html(html, cal, target=TARGET, ghost="iis_head", measurements=measurements_of(cal))
+    png = screenshot_html(html, tmp_path / "view.png", size=SIZE)
+    check_picture(png, summary, target=True, ghost=True)
+    # Residual bars of a head viewed against its own measurements are zero: none drawn.
+    assert summary.residual_max < 1e-12
