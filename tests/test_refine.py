@@ -191,3 +191,15 @@ def test_identify_cli_method_refined(tmp_path):
     m = load_model(tmp_path / "free_model.json")
     assert m.metadata["provenance"]["start"] == "nominal"
     assert heldout_error(m, truth, heldout.q) < 1e-9
+
+
+def test_crb_study_runs_with_tiny_sizes(tmp_path):
+    import json
+
+    from cpc2urdf.cli import main
+
+    assert main(["study", "crb", "--trials", "2", "--heldout", "5", "--M", "4", "--out", str(tmp_path)]) == 0
+    s = json.loads((tmp_path / "crb.json").read_text())["summary"]
+    assert s["n_params"] == 32 and (tmp_path / "crb.png").stat().st_size > 10_000
+    assert 0.3 < s["estimators"]["refined"]["param_ratio"] < 2.0
+    assert main(["study", "crb", "--trials", "1", "--out", str(tmp_path)]) == 2
