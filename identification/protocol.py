@@ -114,8 +114,9 @@ def find_reference(q: NDArray[np.float64], joint_names: tuple[str, ...], labels:
     i = int(bad[0])
     moved = [n for n, d in zip(joint_names, _differing(q[i], mode, tol), strict=True) if d]
     more = f" (and {len(bad) - 1} more records)" if len(bad) > 1 else ""
+    name = labels[i] if labels[i] == f"record {i}" else f"{labels[i]} (record {i})"
     raise DegenerateDataError(
-        f"{labels[i]} (record {i}) moved several joints away from the reference configuration q0: "
+        f"{name} moved several joints away from the reference configuration q0: "
         f"{', '.join(moved)}{more}; the closed-form identification (sec. 4.1) needs one joint "
         "moved at a time"
     )
