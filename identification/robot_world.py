@@ -67,8 +67,20 @@ NEAR_180_WARN = math.radians(10.0)
 ROTATION_SCALE = 0.1
 
 
-def solve_kronecker(A: Array, B: Array) -> tuple[Array, Array]:
-    """Li et al. eq. (19): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4)."""
+def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array, Array]:
+    """Li et al. eq. (19): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4) [m].
+
+    The least squares mixes 9 dimensionless rotation rows with 3 translation rows per pose, so
+    its noisy solution depends on the length unit: ``length_unit`` [m] is the unit the
+    translations are expressed in while solving (1.0: metres, as OpenCV; 1e-3: millimetres,
+    which weights the translation rows 1000 times more). Noise-free data is solved exactly
+    either way.
+    """
+    if length_unit != 1.0:
+        S = np.diag([1.0 / length_unit] * 3 + [1.0])
+        Si = np.diag([length_unit] * 3 + [1.0])
+        Xs, Zs = solve_kronecker(S @ A @ Si, S @ B @ Si)
+        return Si @ Xs @ S, Si @ Zs @ S
     n = len(A)
     I3 = np.eye(3)
     M = np.zeros((12 * n, 24))
