@@ -112,6 +112,23 @@ def test_random_trees_exact() -> None:
     assert all(v >= 3 for v in seen.values()), seen
 
 
+def test_plate_on_the_base_and_several_root_joints() -> None:
+    from cpc2urdf.model import Frame
+    from cpc2urdf.random_models import random_params
+
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        truth = random_model(rng, 4, p_branch=0.7)
+        truth = truth.with_frame(Frame("plate_base", "base", "plate"), random_params(rng))
+        q = protocol_q(truth, 3, rng)
+        poses = {f: np.broadcast_to(T, (len(q), 4, 4)) for f, T in truth.fk(q, plates(truth)).items()}
+        model, _ = identify_closed_form(MeasurementSet.from_arrays(truth.structure, q, poses))
+        assert_same_fk(truth, model, [f for f in plates(truth) if f != "plate_base"], rng)
+        # (model.fk returns one (4, 4) pose for a frame on the base whatever the number of q)
+        T = np.broadcast_to(model.fk(q, ["plate_base"])["plate_base"], (len(q), 4, 4))
+        np.testing.assert_allclose(T, poses["plate_base"], atol=1e-12)
+
+
 def test_missing_poses_in_some_records_are_tolerated() -> None:
     rng = np.random.default_rng(5)
     nominal = load_robot("iis_head").nominal_model()
