@@ -274,3 +274,44 @@ def test_page_in_headless_chromium_shows_head_target_and_ghost(tmp_path: Path) -
     check_picture(png, summary, target=True, ghost=True)
     # Residual bars of a head viewed against its own measurements are zero: none drawn.
     assert summary.residual_max < 1e-12
+
+
+ARM_URDF = """<?xml version="1.0"?>
+<robot name="arm">
+  <material name="blue"><color rgba="0.15 0.35 0.85 1"/></material>
+  <link name="base"><visual><geometry><box size="0.2 0.2 0.05"/></geometry><material name="blue"/></visual></link>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="l1"/><axis xyz="1 0 0"/>
+    <limit lower="-0.2" upper="0.2" effort="1" velocity="1"/></joint>
+  <link name="l1"><visual><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.03" length="0.2"/></geometry>
+    <material name="blue"/></visual></link>
+  <joint name="turn" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <link name="l2"><visual><origin xyz="0 0 0.1"/><geometry><sphere radius="0.05"/></geometry></visual></link>
+</robot>
+"""
+
+
+def test_any_urdf_robot(tmp_path: Path) -> None:
+    """Not a head: world z stays up, the whole robot is framed, visuals sit where Pinocchio says."""
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM_URDF)
+    vis = static_visualizer()
+    summary = build_view(vis, path, q={"slide": 0.1, "turn": 0.5})
+    assert np.allclose(summary.up, [0.0, 0.0, 1.0])
+    scene = decoded(vis.window)
+    T_l2 = scene["/meshcat/head/l2"]["transform"]
+    # l2 = Trans(0.1, 0, 0) Trans(0, 0, 0.2) Rot(y, 0.5); its sphere 0.1 m along its z.
+    c, s = math.cos(0.5), math.sin(0.5)
+    assert np.allclose(T_l2[:3, 3], [0.1, 0.0, 0.2]) and np.allclose(T_l2[:3, :3], [[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    sphere = [p for p in scene if p.startswith("/meshcat/head/l2/") and "object" in scene[p]]
+    assert len(sphere) == 1 and np.allclose(scene[sphere[0]]["transform"][:3, 3], [0.0, 0.0, 0.1])
+    # Every link origin is in front of the viewer camera and on screen.
+    for link in ("base", "l1", "l2"):
+        u, v = summary.pixel(scene[f"/meshcat/head/{link}"]["transform"][:3, 3])
+        assert 0 < u < SIZE[0] and 0 < v < SIZE[1]
+    path.write_text(ARM_URDF.replace("</robot>", ""))
+    with pytest.raises(InputFileError, match="not well-formed XML"):
+        load_view_robot(path)
+    path.write_text(ARM_URDF.replace('type="revolute"', 'type="continuous"'))
+    with pytest.raises(InputFileError, match="joint 'turn' is continuous"):
+        load_view_robot(path)

@@ -160,15 +160,12 @@ class ViewRobot:
                 )
         return q
 
-    def _pin_q(self, q: ArrayLike) -> Array:
-        return np.asarray(q, dtype=float)
-
     def link_poses(self, q: ArrayLike) -> dict[str, Array]:
         """``T_world_<link>`` of every URDF link, each of shape (4, 4), at ``q`` (shape (n,))."""
         import pinocchio as pin
 
         data = self.model.createData()
-        pin.framesForwardKinematics(self.model, data, self._pin_q(q))
+        pin.framesForwardKinematics(self.model, data, np.asarray(q, dtype=float))
         return {
             f.name: data.oMf[i].homogeneous.copy()
             for i, f in enumerate(self.model.frames)
@@ -227,8 +224,14 @@ def load_view_robot(source: str | os.PathLike[str] | Any) -> ViewRobot:
 
 
 def _robot_from_urdf(text: str, label: str, kinds: dict[str, str], metadata: dict[str, Any]) -> ViewRobot:
+    import xml.etree.ElementTree as ET
+
     import pinocchio as pin
 
+    try:  # urdfdom prints its own multi-line complaints about malformed XML; say it in one line
+        ET.fromstring(text)
+    except ET.ParseError as e:
+        raise InputFileError(label, f"not well-formed XML ({e})") from e
     try:
         model = pin.buildModelFromXML(text)
         visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL)
@@ -239,8 +242,11 @@ def _robot_from_urdf(text: str, label: str, kinds: dict[str, str], metadata: dic
     for jid in range(1, model.njoints):
         j = model.joints[jid]
         if j.nq != 1 or j.nv != 1:
+            short = j.shortname().replace("JointModel", "")
+            kind = {"RUBX": "continuous", "RUBY": "continuous", "RUBZ": "continuous", "RUBUnaligned": "continuous",
+                    "FreeFlyer": "floating", "Planar": "planar"}.get(short, short)
             raise InputFileError(
-                label, f"joint {model.names[jid]!r} is {j.shortname()}; the view supports revolute and prismatic joints"
+                label, f"joint {model.names[jid]!r} is {kind}; the view supports revolute and prismatic joints"
             )
         names.append(str(model.names[jid]))
         lower.append(float(model.lowerPositionLimit[j.idx_q]))
@@ -518,8 +524,9 @@ def build_view(
         cameras: The two camera optical frames (left, right) used for the gaze.
         policy: The gaze solver's redundancy policy (``"cyclopean"``, ``"min-motion"``, ...).
         sweep: Add the joint sweep animation (paused at t = 0).
-        upright: Turn the scene so that the first revolute joint's axis (a head's pan axis)
-            points up on screen; False keeps world z up. The world triad shows world axes.
+        upright: For a head (camera frames), turn the scene so that its first revolute joint's
+            axis (the pan axis) points up on screen; False keeps world z up. The world triad
+            shows the world axes.
 
     Raises:
         UnknownNameError: A camera or measured frame, or a joint, the robot does not have.
@@ -577,7 +584,7 @@ def build_view(
         missing = [j for j in robot.joint_names if j not in ghost_robot.joint_names]
         if missing:
             raise InputFileError(ghost_robot.source, f"lacks joints {missing} of {robot.name!r}; cannot pose it alike")
-        q_ghost = ghost_robot.q_from(dict(summary.q), base=ghost_robot.default_q())
+        q_ghost = _ghost_q(ghost_robot, robot, q0)
         gv, _ = _visuals(ghost_robot, q_ghost)
         for v in gv:
             node = vis["ghost"][v.link][v.name]
@@ -601,6 +608,14 @@ def build_view(
     eye, centre = _place_camera(vis, np.array(points), up, forward)
     summary.camera_position, summary.camera_target, summary.up = eye, centre, up
     return summary
+
+
+def _ghost_q(ghost: ViewRobot, robot: ViewRobot, q: Array) -> Array:
+    """The ghost's readings equal to ``robot``'s at ``q`` (shape (n,)), joint by joint by name,
+    within the ghost's own limits."""
+    by_name = dict(zip(robot.joint_names, q.tolist(), strict=True))
+    qg = np.array([by_name.get(j, m) for j, m in zip(ghost.joint_names, ghost.default_q(), strict=True)])
+    return np.clip(qg, ghost.lower, ghost.upper)
 
 
 def _translation(p: Array) -> Array:
@@ -659,8 +674,7 @@ def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobo
                 for link, T in robot.link_poses(q).items():
                     f["head"][link].set_transform(T)
                 if ghost is not None:
-                    qg = ghost.q_from(dict(zip(robot.joint_names, q.tolist(), strict=True)), base=ghost.default_q())
-                    for link, T in ghost.link_poses(qg).items():
+                    for link, T in ghost.link_poses(_ghost_q(ghost, robot, q)).items():
                         f["ghost"][link].set_transform(T)
         frame += SWEEP_KEYS
     vis.window.send(_SetAnimationLast(anim, play=False))
@@ -679,9 +693,13 @@ class _SetAnimationLast(SetAnimation):
 
 
 def _up_direction(robot: ViewRobot, q: Array, T_links: dict[str, Array], cameras: Sequence[str]) -> Array:
-    """The world direction shown as "up": the axis of the first revolute joint (a head's pan
-    axis), pointing from the base towards the cameras; world z for a robot without one."""
+    """The world direction shown as "up": for a head (a robot with camera frames) the axis of
+    its first revolute joint (the pan axis), pointing from the base towards the cameras; world z
+    for any other robot."""
     import pinocchio as pin
+
+    if "camera" not in robot.kinds.values():
+        return np.array([0.0, 0.0, 1.0])
 
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, q)
@@ -706,11 +724,14 @@ def _revolute_axis(shortname: str) -> Array:
 def _focus_points(robot: ViewRobot, T_links: dict[str, Array], visuals: list[_Visual]) -> list[Array]:
     """Where the head is: the bounding-box corners of the visuals on links moved by a revolute
     joint and on plate/camera frames (the XY table and base may lie outside the view; the viewer
-    can zoom out)."""
+    can zoom out). A robot without plate or camera frames is framed whole."""
     import pinocchio as pin
 
-    head_links = set(robot.kinds)
-    for jid in range(1, robot.model.njoints):
+    if not robot.kinds:  # not a head with plates or cameras: frame the whole robot
+        head_links = set(T_links)
+    else:
+        head_links = set(robot.kinds)
+    for jid in range(1, robot.model.njoints if robot.kinds else 1):
         if robot.model.joints[jid].shortname().startswith("JointModelR"):
             for f in robot.model.frames:
                 if f.type == pin.FrameType.BODY and _descends(robot.model, f.parentJoint, jid):
