@@ -72,17 +72,30 @@ def test_missing_poses_are_skipped(head):
     assert heldout_error(res.model, truth, qh) < 1e-10
 
 
-def test_refined_never_worse_than_start_on_heldout(head):
+def test_refined_beats_the_closed_form_on_seeded_trials():
+    """From the closed form: the weighted cost never rises (it is what is minimised), the
+    parameter error relative to the bound drops in every trial (100/100 in the crb study), and the
+    held-out error drops on average (per trial it is one noisy draw: 88/100 in the study)."""
+    from cpc2urdf.identification.closed_form import identify_closed_form
+    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.study_crb import _bound
+
+    e_cf, e_ref = [], []
     for seed in range(4):
-        rng = np.random.default_rng(10 + seed)
-        truth = perturbed(head, rng)
-        ms = measure(truth, protocol_q(truth, 9), rng, SIGMA_T, SIGMA_R)
-        start = perturbed(truth, rng, 1e-3, 0.003)  # stand-in for the closed form (~mm off)
-        res = refine(start, ms, SIGMA_T, SIGMA_R)
-        qh = random_q(truth, 100, rng)
-        assert heldout_error(res.model, truth, qh) <= heldout_error(start, truth, qh)
-        assert heldout_error(res.model, truth, qh) < 0.5e-3
-        assert 0.7 < res.covariance.variance_factor < 1.3
+        truth, ms, held = simulate_experiment("iis_head", seed=seed, M=9, n_heldout=100)
+        cf, _ = identify_closed_form(ms)
+        res = refine(cf, ms, SIGMA_T, SIGMA_R)
+        chart = Parametrization(cf, PLATES)
+        use = {f: ms.has_pose(f) for f in PLATES}
+        prob = _Problem(chart, ms.q, ms.poses, use, SIGMA_T, SIGMA_R)
+        assert res.cost <= 0.5 * float(np.sum(prob.residuals(np.zeros(32)) ** 2))
+        tchart, C = _bound(truth, ms.q, list(PLATES), SIGMA_T, SIGMA_R)
+        F = np.linalg.inv(C)
+        d_cf, d_ref = tchart.vector_from_model(cf), tchart.vector_from_model(res.model)
+        assert d_ref @ F @ d_ref < d_cf @ F @ d_cf
+        e_cf.append(heldout_error(cf, truth, held.q))
+        e_ref.append(heldout_error(res.model, truth, held.q))
+    assert np.mean(e_ref) < 0.95 * np.mean(e_cf)
 
 
 def _corrupt(ms: MeasurementSet, rng, fraction=0.05):
