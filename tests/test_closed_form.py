@@ -212,3 +212,20 @@ def test_paper_eq15_model_has_one_tilt_frame_per_branch_and_is_exact_too() -> No
     gap = {j: np.abs(left.joints[j].to_vector() - right.joints[j].to_vector()).max() for j in truth.structure.joint_names}
     assert all(gap[j] == 0.0 for j in gap if j != "tilt")
     assert gap["tilt"] < 1e-9  # on exact data the two branches' tilt lines coincide
+
+
+def test_property_random_trees_any_seed() -> None:
+    """Hypothesis over random robots (derandomised: the same examples every run)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=25, deadline=None, derandomize=True)
+    @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7), serial=st.booleans(), M=st.integers(2, 4))
+    def check(seed: int, n: int, serial: bool, M: int) -> None:
+        rng = np.random.default_rng(seed)
+        truth = random_model(rng, n, serial=serial, p_prismatic=0.5)
+        ms = measure(truth, protocol_q(truth, M, rng), plates(truth))
+        model, _ = identify_closed_form(ms)
+        assert_same_fk(truth, model, plates(truth), rng)
+
+    check()
