@@ -1,0 +1,797 @@
+"""Gaze control: joint values that point both cameras' optical axes at a 3D target.
+
+A target ``p_world`` [m] is *fixated* when the optical (z) axis of each camera frame passes
+through it, in front of the camera. The solver works on the Pinocchio model of a URDF (nominal
+or calibrated head alike): it never assumes orthogonal axes or cameras on their axes.
+
+Method (one :meth:`GazeSolver.solve` call):
+
+1. **Initial guess.** The table (prismatic joints shared by both cameras) stays at its reading;
+   neck (revolute joints shared by both cameras) and eyes start from the entry of a small table,
+   computed once from the model, whose cyclopean ray passes closest to the target (or from
+   ``q_current`` when that is closer, e.g. when tracking).
+2. **Task-priority Gauss-Newton with joint limits as constraints.** Priority 1 is fixation: per
+   eye the residual ``u - e_z`` with ``u`` the unit target direction in the camera frame (zero only
+   when the camera looks *at*, not away from, the target; its norm is ``2 sin(err/2)``). Its
+   Jacobian comes from Pinocchio's LOCAL frame Jacobians: ``dp_cam = -v - w x p_cam``. Priority 2
+   is the redundancy policy (below), solved only in the null space of priority 1. A joint that
+   reaches a limit with the step pushing outwards is held there (active set) and the step is
+   re-solved over the others; it is released when the gradient pulls it back inside.
+3. **Answer.** ``reachable`` is True when both eyes point at the target to within
+   :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL`, in front of the cameras, inside the limits.
+   Otherwise the solver has converged to the in-limit configuration that minimises the sum of the
+   squared residuals of the two eyes, and says why (``status``).
+
+Redundancy policies (the secondary task):
+
+- ``"cyclopean"`` (default): the table stays where it is; neck and eyes move; among the
+  fixating configurations the one with zero *version* (the eyes turned equally and oppositely
+  from their home readings, the middle of their limits), so the cyclopean axis faces the target
+  and the eyes converge symmetrically on it.
+- ``"min-motion"``: the table stays; the fixating configuration nearest ``q_current`` (Euclidean
+  in the readings of neck and eyes, [rad]).
+- ``"eyes-only"``: only the eye joints move (head and table still); reachable only if the target
+  happens to lie where the eyes alone can converge.
+- ``"use-table"``: every joint may move; zero version, the cyclopean point (midpoint of the camera
+  centres) at ``viewing_distance`` [m] from the target, and the least table motion.
+
+On a head whose two eyes turn about one common axis (the IIS-head), the nominal model fixates a
+target with one degree of freedom to spare (pan vs version). A calibrated model whose eyes do not
+sweep exactly the same plane has none: binocular fixation with the table fixed is then a square
+problem with isolated solutions (or none), and the policy only chooses the starting point. The
+solver reports that honestly through ``reachable``/``status`` instead of clamping.
+
+Frames: ``T_world_x`` is the pose of ``x`` in ``world``; points carry their frame (``p_world``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+
+if TYPE_CHECKING:
+    from cpc2urdf.model import CPCModel
+
+Array = NDArray[np.float64]
+
+POLICIES: tuple[str, ...] = ("cyclopean", "min-motion", "eyes-only", "use-table")
+DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
+DEFAULT_VIEWING_DISTANCE = 0.6  # [m]: use-table policy, cyclopean point to target
+
+# Solver settings.
+MAX_ITERATIONS = 60
+MAX_STEP = 0.5  # [rad] or [m]: the largest joint change of one Gauss-Newton step
+NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
+BACKTRACKS = 8  # step halvings allowed per iteration
+CONVERGED_RESIDUAL = 1e-30  # [-]: |u_L - e_z|^2 + |u_R - e_z|^2 below which fixation is exact
+CONVERGED_STEP = 1e-11  # [rad] or [m]: ... and the policy step is this small
+_EMPTY = np.empty((0, 0))
+_PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")
+_REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
+
+STATUS_FIXATED = "fixated"
+STATUS_LIMITS = "joint_limits"  # the best in-limit configuration does not fixate; a joint is at a limit
+STATUS_BEHIND = "behind"  # an eye would have to look away from the target
+STATUS_TOO_CLOSE = "too_close"  # the target is closer to the cameras than their baseline
+STATUS_NO_SOLUTION = "no_solution"  # no limit active, yet the two eyes cannot both fixate
+STATUSES = (STATUS_FIXATED, STATUS_LIMITS, STATUS_BEHIND, STATUS_TOO_CLOSE, STATUS_NO_SOLUTION)
+
+
+@dataclass(frozen=True)
+class GazeSolution:
+    """The answer of :meth:`GazeSolver.solve`. Nothing is moved.
+
+    Attributes:
+        q: Joint readings [rad]/[m], shape (n,), in ``joint_names`` order; always inside the limits.
+        joint_names: Names of the joints, in the order of ``q``.
+        reachable: True if both eyes fixate the target (see module docstring).
+        status: One of :data:`STATUSES`: ``"fixated"`` or why not.
+        pointing_error: Angle between each optical axis and the direction to the target [rad],
+            shape (2,) (left, right).
+        miss_distance: Distance from the target to each optical ray (half-line in front of the
+            camera) [m], shape (2,).
+        fixation_point: Midpoint of the closest points of the two optical axes (world) [m],
+            shape (3,), or None when the axes are parallel.
+        vergence: Angle between the two optical axes [rad].
+        at_limit: Names of the joints at one of their limits.
+        iterations: Gauss-Newton iterations used.
+        policy: The redundancy policy used.
+        target: The target (world) [m], shape (3,).
+    """
+
+    q: Array
+    joint_names: tuple[str, ...]
+    reachable: bool
+    status: str
+    pointing_error: Array
+    miss_distance: Array
+    fixation_point: Array | None
+    vergence: float
+    at_limit: tuple[str, ...]
+    iterations: int
+    policy: str
+    target: Array
+
+    @property
+    def joints(self) -> dict[str, float]:
+        """``{joint name: reading}`` [rad]/[m]."""
+        return {n: float(v) for n, v in zip(self.joint_names, self.q, strict=True)}
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (SI units)."""
+        return {
+            "target": self.target.tolist(),
+            "policy": self.policy,
+            "reachable": self.reachable,
+            "status": self.status,
+            "joints": self.joints,
+            "pointing_error_rad": {"left": float(self.pointing_error[0]), "right": float(self.pointing_error[1])},
+            "miss_distance_m": {"left": float(self.miss_distance[0]), "right": float(self.miss_distance[1])},
+            "fixation_point": None if self.fixation_point is None else self.fixation_point.tolist(),
+            "vergence_rad": self.vergence,
+            "at_limit": list(self.at_limit),
+            "iterations": self.iterations,
+        }
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """The result of :meth:`GazeSolver.track`.
+
+    Attributes:
+        t: Sample times [s], shape (T,).
+        q: Commanded joint readings [rad]/[m], shape (T, n): velocity-limited steps towards
+            ``q_goal``.
+        q_goal: The solved (warm-started) fixating readings per sample, shape (T, n).
+        reachable: Whether each target could be fixated, shape (T,).
+        pointing_error: Per-sample pointing error of the *commanded* ``q``, shape (T, 2) [rad].
+        locked: Per-sample flag: the commanded ``q`` equals the goal (not velocity-limited), shape (T,).
+        joint_names: Names of the joints, in the order of the columns of ``q``.
+    """
+
+    t: Array
+    q: Array
+    q_goal: Array
+    reachable: NDArray[np.bool_]
+    pointing_error: Array
+    locked: NDArray[np.bool_]
+    joint_names: tuple[str, ...]
+
+
+@dataclass
+class _Eye:
+    frame_id: int
+    name: str
+
+
+@dataclass
+class _State:
+    """Per-configuration quantities of both eyes (computed by :meth:`GazeSolver._evaluate`)."""
+
+    r: Array  # (6,) fixation residual, [u_L - e_z, u_R - e_z]
+    J: Array  # (6, n) its Jacobian
+    origins: Array  # (2, 3) camera centres (world) [m]
+    axes: Array  # (2, 3) optical axes (world)
+    p_cam: Array  # (2, 3) target in each camera frame [m]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class GazeSolver:
+    """Gaze inverse kinematics on the Pinocchio model of a URDF.
+
+    Args:
+        urdf: URDF text or the path of a ``.urdf`` file.
+        cameras: Names of the left and right camera optical frames (z along the optical axis).
+        viewing_distance: Preferred distance [m] from the cyclopean point to the target for the
+            ``"use-table"`` policy.
+
+    Raises:
+        UnknownNameError: a camera frame the URDF does not have.
+        SpecError: the URDF has joints with more than one degree of freedom (continuous,
+            floating, planar), or the two cameras share every joint (no eye joints).
+    """
+
+    def __init__(
+        self,
+        urdf: str | Path,
+        cameras: Sequence[str] = DEFAULT_CAMERAS,
+        *,
+        viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+    ) -> None:
+        import pinocchio as pin
+
+        self._pin = pin
+        text = str(urdf)
+        if isinstance(urdf, Path) or (not text.lstrip().startswith("<") and text.endswith(".urdf")):
+            from cpc2urdf.errors import InputFileError
+
+            path = Path(text)
+            if not path.is_file():
+                raise InputFileError(path, "no such URDF file")
+            text = path.read_text()
+        try:
+            model = pin.buildModelFromXML(text)
+        except Exception as e:  # Pinocchio raises ValueError/RuntimeError on bad XML
+            raise SpecError(f"cannot build a Pinocchio model from the URDF: {e}") from e
+        self.model = model
+        self.data = model.createData()
+        if len(cameras) != 2:
+            raise ConfigurationError(f"need exactly two camera frames (left, right), got {list(cameras)}")
+        known = [f.name for f in model.frames]
+        eyes = []
+        for name in cameras:
+            if not model.existFrame(name):
+                raise UnknownNameError("frame", name, known)
+            eyes.append(_Eye(model.getFrameId(name), name))
+        self._eyes = eyes
+        self.cameras: tuple[str, str] = (cameras[0], cameras[1])
+
+        names: list[str] = []
+        kinds: list[str] = []
+        for jid in range(1, model.njoints):
+            joint = model.joints[jid]
+            short = joint.shortname().replace("JointModel", "")
+            if joint.nq != 1 or joint.nv != 1 or short not in _PRISMATIC + _REVOLUTE:
+                raise SpecError(
+                    f"joint {model.names[jid]!r} is {short}; the gaze solver handles only revolute "
+                    "and prismatic joints with limits (no continuous, floating or planar joints)"
+                )
+            if joint.idx_q != jid - 1:
+                raise SpecError("unexpected Pinocchio joint ordering")
+            names.append(str(model.names[jid]))
+            kinds.append("prismatic" if short in _PRISMATIC else "revolute")
+        self.joint_names: tuple[str, ...] = tuple(names)
+        self.n = len(names)
+        self.lower: Array = np.array(model.lowerPositionLimit, dtype=float)
+        self.upper: Array = np.array(model.upperPositionLimit, dtype=float)
+        self.velocity_limit: Array = np.array(model.velocityLimit, dtype=float)
+        if not (np.all(np.isfinite(self.lower)) and np.all(np.isfinite(self.upper))):
+            raise SpecError("every joint needs finite <limit lower/upper> for gaze control")
+        self.home: Array = 0.5 * (self.lower + self.upper)
+
+        # Joints on each camera's path: shared ones move the head, the others are the eyes.
+        paths = []
+        for eye in eyes:
+            jid = model.frames[eye.frame_id].parentJoint
+            path = set()
+            while jid > 0:
+                path.add(jid - 1)
+                jid = model.parents[jid]
+            paths.append(path)
+        shared = paths[0] & paths[1]
+        self._table = np.array(sorted(i for i in shared if kinds[i] == "prismatic"), dtype=int)
+        self._neck = np.array(sorted(i for i in shared if kinds[i] == "revolute"), dtype=int)
+        self._eye_joints = [np.array(sorted(p - shared), dtype=int) for p in paths]
+        if any(len(e) == 0 for e in self._eye_joints):
+            raise SpecError(f"cameras {list(self.cameras)} share all their joints: nothing can verge")
+        self._eyes_all = np.concatenate(self._eye_joints)
+        self.viewing_distance = float(viewing_distance)
+        self._version_sign = self._eye_version_sign()
+        self._build_guess_table()
+
+    # ---- construction helpers -------------------------------------------------------------------
+
+    @classmethod
+    def from_model(cls, model: CPCModel, cameras: Sequence[str] = DEFAULT_CAMERAS, **kwargs: Any) -> GazeSolver:
+        """A solver for a :class:`cpc2urdf.model.CPCModel` (via its URDF)."""
+        from cpc2urdf.urdf import urdf_from_model
+
+        for name in cameras:
+            model.structure.frame(name)  # UnknownNameError with the model's frame names
+        return cls(urdf_from_model(model), cameras, **kwargs)
+
+    def _eye_version_sign(self) -> float:
+        """+1 if the first eye joints of both eyes turn about (nearly) the same world direction."""
+        pin = self._pin
+        pin.computeJointJacobians(self.model, self.data, self.home)
+        # The world Jacobian's angular column of a revolute joint is its axis direction.
+        J = pin.getJointJacobian(self.model, self.data, int(self._eye_joints[0][0]) + 1, pin.WORLD)
+        a0 = J[3:, self._eye_joints[0][0]]
+        J = pin.getJointJacobian(self.model, self.data, int(self._eye_joints[1][0]) + 1, pin.WORLD)
+        a1 = J[3:, self._eye_joints[1][0]]
+        return 1.0 if float(a0 @ a1) >= 0.0 else -1.0
+
+    def _build_guess_table(self) -> None:
+        """Cyclopean rays over a grid of neck readings, in the frame of the last table link.
+
+        The table only translates the head, so rays expressed in the table link frame do not
+        depend on the table readings.
+        """
+        pin = self._pin
+        grids = [np.linspace(self.lower[i], self.upper[i], 13 if k == 0 else 9) for k, i in enumerate(self._neck)]
+        if grids:
+            mesh = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, len(grids))
+        else:
+            mesh = np.zeros((1, 0))
+        self._table_link = int(max(self._table)) + 1 if len(self._table) else 0
+        origins, dirs, qs = [], [], []
+        for row in mesh:
+            q = self.home.copy()
+            q[self._neck] = row
+            pin.framesForwardKinematics(self.model, self.data, q)
+            T_world_table = self.data.oMi[self._table_link]
+            o = [T_world_table.actInv(self.data.oMf[e.frame_id].translation) for e in self._eyes]
+            z = [T_world_table.rotation.T @ self.data.oMf[e.frame_id].rotation[:, 2] for e in self._eyes]
+            c = 0.5 * (o[0] + o[1])
+            d = z[0] + z[1]
+            origins.append(c)
+            dirs.append(d / np.linalg.norm(d))
+            qs.append(q)
+        self._guess_origin = np.array(origins)
+        self._guess_dir = np.array(dirs)
+        self._guess_q = np.array(qs)
+        q = self.home
+        pin.framesForwardKinematics(self.model, self.data, q)
+        o0 = self.data.oMf[self._eyes[0].frame_id].translation
+        o1 = self.data.oMf[self._eyes[1].frame_id].translation
+        self.baseline = float(np.linalg.norm(o0 - o1))
+
+    # ---- evaluation ---------------------------------------------------------------------------
+
+    def _evaluate(self, q: Array, p: Array, jacobian: bool = True) -> _State:
+        pin = self._pin
+        model, data = self.model, self.data
+        if jacobian:
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+        else:
+            pin.framesForwardKinematics(model, data, q)
+        r = np.empty(6)
+        J = np.empty((6, self.n)) if jacobian else _EMPTY
+        origins = np.empty((2, 3))
+        axes = np.empty((2, 3))
+        p_cam = np.empty((2, 3))
+        for k, eye in enumerate(self._eyes):
+            T = data.oMf[eye.frame_id]
+            R = T.rotation
+            o = T.translation
+            pc = R.T @ (p - o)
+            x, y, z = pc.tolist()
+            nrm = math.sqrt(x * x + y * y + z * z) or 1e-300
+            u = pc / nrm
+            r[3 * k : 3 * k + 3] = u
+            r[3 * k + 2] -= 1.0
+            origins[k] = o
+            axes[k] = R[:, 2]
+            p_cam[k] = pc
+            if jacobian:
+                Jl = pin.getFrameJacobian(model, data, eye.frame_id, pin.LOCAL)
+                # d p_cam = -v - w x p_cam = -v + [p_cam]x w  (v, w: LOCAL twist of the camera);
+                # d u = (I - u u^T) d p_cam / |p_cam|.
+                S = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+                dpc = S @ Jl[3:] - Jl[:3]
+                J[3 * k : 3 * k + 3] = (dpc - u[:, None] * (u @ dpc)) / nrm
+        return _State(r, J, origins, axes, p_cam)
+
+    # ---- policy (priority 2) --------------------------------------------------------------------
+
+    def _free(self, policy: str) -> Array:
+        if policy == "eyes-only":
+            return self._eyes_all
+        if policy == "use-table":
+            return np.arange(self.n)
+        return np.sort(np.concatenate([self._neck, self._eyes_all]))
+
+    def _secondary(self, policy: str, q: Array, q_ref: Array, p: Array, st: _State) -> tuple[Array, Array]:
+        """Residual (k,) and Jacobian (k, n) of the policy's secondary task."""
+        n = self.n
+        rows: list[Array] = []
+        res: list[float] = []
+        if policy in ("cyclopean", "use-table"):
+            # version: (eye_L - home_L) + s (eye_R - home_R) = 0, first eye joint of each side
+            iL, iR = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
+            row = np.zeros(n)
+            row[iL] = 1.0
+            row[iR] = self._version_sign
+            rows.append(row)
+            res.append(float(row @ (q - self.home)))
+        if policy == "use-table":
+            # cyclopean point at the viewing distance: d|c - p|/dq through the table's translation
+            c = 0.5 * (st.origins[0] + st.origins[1])
+            d = c - p
+            dist = float(np.linalg.norm(d))
+            row = np.zeros(n)
+            Jc = 0.5 * (st.extra["Jo"][0] + st.extra["Jo"][1])
+            row[:] = (d / max(dist, 1e-12)) @ Jc
+            rows.append(row)
+            res.append(dist - self.viewing_distance)
+            for i in self._table:  # least table motion (weight: 1 m ~ 10 rad)
+                row = np.zeros(n)
+                row[i] = 0.1
+                rows.append(row)
+                res.append(0.1 * float(q[i] - q_ref[i]))
+        if policy == "min-motion":
+            for i in self._free(policy):
+                row = np.zeros(n)
+                row[i] = 1.0
+                rows.append(row)
+                res.append(float(q[i] - q_ref[i]))
+        if not rows:
+            return np.zeros(0), np.zeros((0, n))
+        return np.array(res), np.array(rows)
+
+    # ---- the solve ----------------------------------------------------------------------------
+
+    def _check_target(self, p_world: ArrayLike) -> Array:
+        try:
+            p = np.asarray(p_world, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ConfigurationError(f"target must be 3 numbers [m], got {p_world!r}") from e
+        if p.shape != (3,):
+            raise ConfigurationError(f"target must have shape (3,) [m], got shape {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ConfigurationError(f"target must be finite, got {p.tolist()}")
+        return p
+
+    def _check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
+        if q is None:
+            return None
+        if isinstance(q, Mapping):
+            unknown = set(q) - set(self.joint_names)
+            if unknown:
+                raise UnknownNameError("joint", sorted(unknown)[0], self.joint_names)
+            missing = [n for n in self.joint_names if n not in q]
+            if missing:
+                raise ConfigurationError(f"q_current lacks joints {missing}")
+            q = [q[n] for n in self.joint_names]
+        try:
+            qa = np.asarray(q, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ConfigurationError(f"q_current must be {self.n} numbers, got {q!r}") from e
+        if qa.shape != (self.n,):
+            raise ConfigurationError(
+                f"q_current must have shape ({self.n},) for joints {list(self.joint_names)}, got shape {qa.shape}"
+            )
+        if not np.all(np.isfinite(qa)):
+            raise ConfigurationError(f"q_current must be finite, got {qa.tolist()}")
+        tol = 1e-9
+        bad = np.flatnonzero((qa < self.lower - tol) | (qa > self.upper + tol))
+        if bad.size:
+            i = int(bad[0])
+            raise ConfigurationError(
+                f"q_current: joint {self.joint_names[i]!r} reading {qa[i]:.9g} outside its limits "
+                f"[{self.lower[i]:.9g}, {self.upper[i]:.9g}]"
+            )
+        return np.clip(qa, self.lower, self.upper)
+
+    def initial_guess(self, p_world: ArrayLike, q_current: ArrayLike | None = None) -> Array:
+        """The geometric starting point of :meth:`solve` (table from ``q_current`` or home).
+
+        The neck readings of the precomputed grid whose cyclopean ray passes closest to the
+        target (angle seen from the cyclopean point), eyes at home.
+        """
+        p = self._check_target(p_world)
+        qc = self._check_q(q_current)
+        q = (self.home if qc is None else qc).copy()
+        return self._guess(p, q)
+
+    def _guess(self, p: Array, q: Array) -> Array:
+        pin = self._pin
+        if self._table_link:
+            pin.forwardKinematics(self.model, self.data, q)
+            p_t = self.data.oMi[self._table_link].actInv(p)
+        else:
+            p_t = p
+        v = p_t - self._guess_origin
+        cosang = np.einsum("ij,ij->i", v, self._guess_dir) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+        best = self._guess_q[int(np.argmax(cosang))]
+        out = q.copy()
+        out[self._neck] = best[self._neck]
+        out[self._eyes_all] = self.home[self._eyes_all]
+        return out
+
+    def solve(
+        self,
+        p_world: ArrayLike,
+        q_current: ArrayLike | Mapping[str, float] | None = None,
+        policy: str = "cyclopean",
+        *,
+        q_start: ArrayLike | None = None,
+        max_iterations: int = MAX_ITERATIONS,
+    ) -> GazeSolution:
+        """Joint readings that fixate ``p_world`` with both cameras. Moves nothing.
+
+        Args:
+            p_world: Target in ``world`` [m], shape (3,).
+            q_current: Current readings [rad]/[m], shape (n,) or ``{joint: reading}``; the table
+                (and for ``"eyes-only"`` the neck) stays here; ``"min-motion"`` moves least from
+                here. None: the middle of every joint's limits.
+            policy: One of :data:`POLICIES`.
+            q_start: Optional starting point of the iteration (e.g. the previous solution when
+                tracking), shape (n,); fixed joints are taken from ``q_current`` regardless.
+            max_iterations: Gauss-Newton iteration cap.
+
+        Returns:
+            A :class:`GazeSolution`; unreachable targets give ``reachable=False`` with the best
+            in-limit readings and the residual, never an exception.
+
+        Raises:
+            ConfigurationError: a target or ``q_current`` with NaN/inf or the wrong shape, a
+                reading outside the limits, or an unknown policy.
+        """
+        if policy not in POLICIES:
+            raise ConfigurationError(f"unknown gaze policy {policy!r}; expected one of {', '.join(POLICIES)}")
+        p = self._check_target(p_world)
+        qc = self._check_q(q_current)
+        q_ref = self.home.copy() if qc is None else qc
+        free = self._free(policy)
+        if q_start is not None:
+            q0 = np.clip(np.asarray(q_start, dtype=float).reshape(self.n), self.lower, self.upper)
+            fixed = np.setdiff1d(np.arange(self.n), free)
+            q0[fixed] = q_ref[fixed]
+        elif policy == "eyes-only":
+            q0 = q_ref.copy()
+        elif policy == "min-motion" and qc is not None:
+            q0 = q_ref.copy()
+        else:
+            q0 = self._guess(p, q_ref)
+        q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations)
+        return self._answer(p, q, it, policy, st)
+
+    def _iterate(
+        self, p: Array, q: Array, q_ref: Array, policy: str, free: Array, max_iterations: int
+    ) -> tuple[Array, int, _State]:
+        """Task-priority Gauss-Newton with an active set of joints held at their limits."""
+        lo, hi = self.lower, self.upper
+        q = q.copy()
+        held = np.zeros(self.n, dtype=bool)
+        use_table = policy == "use-table"
+        prev = math.inf
+        it = 0
+        st = self._evaluate(q, p)
+        for it in range(1, max_iterations + 1):  # noqa: B007
+            if use_table:
+                st.extra["Jo"] = [
+                    self.data.oMf[e.frame_id].rotation
+                    @ self._pin.getFrameJacobian(self.model, self.data, e.frame_id, self._pin.LOCAL)[:3]
+                    for e in self._eyes
+                ]
+            r1 = st.r
+            rr = float(r1 @ r1)
+            if held.any():
+                # release held joints whose gradient of |r1|^2 pulls them back inside
+                g = st.J.T @ r1
+                held &= ((q <= lo) & (g > 0)) | ((q >= hi) & (g < 0))
+            act = free[~held[free]]
+            if act.size == 0:
+                break
+            block = np.flatnonzero(((q <= lo) | (q >= hi)) & ~held)
+            dq, d1 = self._step(policy, q, q_ref, p, st, act, block)
+            for _ in range(4):
+                nq = q + dq
+                out = (nq < lo) | (nq > hi)
+                if not out.any():
+                    break
+                # A joint at a limit that fixation itself pushes outwards is held there (active
+                # set); one pushed out only by the policy is kept still by the policy instead.
+                push = ((q <= lo) & (d1 < 0)) | ((q >= hi) & (d1 > 0))
+                by_policy = out & ~(((q + d1) < lo) | ((q + d1) > hi))
+                new_block = np.union1d(block, np.flatnonzero(by_policy))
+                if not push.any() and new_block.size == block.size:
+                    break
+                held |= push
+                block = new_block
+                act = free[~held[free]]
+                if act.size == 0:
+                    dq = np.zeros(self.n)
+                    break
+                dq, d1 = self._step(policy, q, q_ref, p, st, act, block)
+            nq = q + dq
+            if ((nq < lo) | (nq > hi)).any():
+                # shorten the step to the first limit it meets (projected steps would zig-zag)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    t = np.where(dq < 0, (lo - q) / dq, np.where(dq > 0, (hi - q) / dq, np.inf))
+                t = t[(q > lo) & (q < hi)]  # joints already at a limit are projected instead
+                if t.size:
+                    dq = dq * max(min(float(np.min(t)), 1.0), 0.0)
+                nq = np.clip(q + dq, lo, hi)
+            step = float(np.max(np.abs(dq)))
+            if rr < CONVERGED_RESIDUAL and step < CONVERGED_STEP:
+                break
+            if rr >= prev * (1.0 - 1e-6) and step < 1e-8:
+                break  # stalled at a least-squares minimum (unreachable target)
+            prev = rr
+            new = self._evaluate(nq, p)
+            for _ in range(BACKTRACKS):  # halve steps that increase the fixation residual
+                rn = float(new.r @ new.r)
+                if rn <= rr or rn < 1e-20:
+                    break
+                dq *= 0.5
+                nq = np.clip(q + dq, lo, hi)
+                new = self._evaluate(nq, p)
+            q = nq
+            st = new
+        return q, it, st
+
+    def _step(
+        self, policy: str, q: Array, q_ref: Array, p: Array, st: _State, act: Array, block: Array | None = None
+    ) -> tuple[Array, Array]:
+        """One task-priority Gauss-Newton step over the joints ``act``, and its priority-1 part.
+
+        Priority 1 (fixation) takes the truncated pseudo-inverse step; priority 2 (policy) moves
+        only in the exact null space of priority 1 (eigenvectors of ``J1^T J1`` with eigenvalue
+        below :data:`NULL_EIGENVALUE`), and not the joints in ``block`` (held by their limits).
+        """
+        J1 = st.J[:, act]
+        lam, V = np.linalg.eigh(J1.T @ J1)
+        # Levenberg-Marquardt damping mu = |r1|^2 (Yamashita-Fukushima: quadratic convergence on
+        # consistent problems even where J1 is singular). Directions weaker than the damping
+        # (or than NULL_EIGENVALUE) belong to the null space: fixation cannot use them now.
+        mu = float(st.r @ st.r)
+        rng = lam > max(mu, NULL_EIGENVALUE)
+        Vr = V[:, rng]
+        d = d1 = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[rng] + mu))
+        r2, J2full = self._secondary(policy, q, q_ref, p, st)
+        if r2.size and not rng.all():
+            V0 = V[:, ~rng]
+            N = V0 @ V0.T  # projector onto the null space of J1
+            if block is not None and block.size:
+                b = np.flatnonzero(np.isin(act, block))
+                if b.size:
+                    Nb = N[:, b]
+                    N = N - Nb @ np.linalg.pinv(N[np.ix_(b, b)], rcond=1e-9) @ Nb.T
+            J2 = J2full[:, act]
+            J2N = J2 @ N
+            e2 = r2 + J2 @ d
+            z, *_ = np.linalg.lstsq(J2N, -e2, rcond=1e-9)
+            d = d + N @ z
+        step = np.zeros(self.n)
+        step[act] = d
+        primary = np.zeros(self.n)
+        primary[act] = d1
+        m = float(np.max(np.abs(d)))
+        if m > MAX_STEP:
+            step *= MAX_STEP / m
+            primary *= MAX_STEP / m
+        return step, primary
+
+    def _answer(self, p: Array, q: Array, iterations: int, policy: str, st: _State) -> GazeSolution:
+        err = np.empty(2)
+        miss = np.empty(2)
+        for k in range(2):
+            x, y, z = st.p_cam[k]
+            lateral = math.hypot(x, y)
+            err[k] = math.atan2(lateral, z)
+            miss[k] = lateral if z >= 0 else math.sqrt(x * x + y * y + z * z)
+        fix = _closest_point(st.origins, st.axes)
+        zc = float(st.axes[0] @ st.axes[1])
+        vergence = math.acos(max(-1.0, min(1.0, zc)))
+        tol = 1e-12
+        lim = (q <= self.lower + tol) | (q >= self.upper - tol)
+        at_limit = tuple(self.joint_names[i] for i in np.flatnonzero(lim))
+        reachable = bool(err[0] <= GAZE_POINTING_TOL and err[1] <= GAZE_POINTING_TOL)
+        if reachable:
+            status = STATUS_FIXATED
+        elif np.any(st.p_cam[:, 2] <= 0):
+            status = STATUS_BEHIND
+        elif float(np.min(np.linalg.norm(st.p_cam, axis=1))) < self.baseline:
+            status = STATUS_TOO_CLOSE
+        elif at_limit:
+            status = STATUS_LIMITS
+        else:
+            status = STATUS_NO_SOLUTION
+        return GazeSolution(
+            q=q,
+            joint_names=self.joint_names,
+            reachable=reachable,
+            status=status,
+            pointing_error=err,
+            miss_distance=miss,
+            fixation_point=fix,
+            vergence=vergence,
+            at_limit=at_limit,
+            iterations=iterations,
+            policy=policy,
+            target=p.copy(),
+        )
+
+    # ---- tracking -----------------------------------------------------------------------------
+
+    def track(
+        self,
+        targets: ArrayLike,
+        dt: float,
+        max_velocity: ArrayLike | None = None,
+        *,
+        q_current: ArrayLike | None = None,
+        policy: str = "cyclopean",
+    ) -> Trajectory:
+        """Follow a moving target: warm-started solves and a velocity-limited joint trajectory.
+
+        Each sample solves for the target from the previous goal (one or two iterations when the
+        target moves little), then moves the commanded readings towards the goal by at most
+        ``max_velocity * dt`` per joint.
+
+        Args:
+            targets: Target positions (world) [m], shape (T, 3), one per sample.
+            dt: Sample period [s].
+            max_velocity: Per-joint speed limit [rad/s]/[m/s], shape (n,) or a scalar; None: the
+                URDF velocity limits.
+            q_current: Readings at the first sample, shape (n,); None: the first solution.
+            policy: Redundancy policy (see :data:`POLICIES`).
+
+        Returns:
+            A :class:`Trajectory`.
+        """
+        P = np.asarray(targets, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] == 0:
+            raise ConfigurationError(f"targets must have shape (T, 3) [m], got shape {P.shape}")
+        if not np.all(np.isfinite(P)):
+            raise ConfigurationError("targets contain NaN or inf")
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            raise ConfigurationError(f"dt must be a positive number of seconds, got {dt!r}")
+        vmax = self.velocity_limit if max_velocity is None else np.broadcast_to(
+            np.asarray(max_velocity, dtype=float), (self.n,)
+        )
+        if not (np.all(np.isfinite(vmax)) and np.all(vmax > 0)):
+            raise ConfigurationError(f"max_velocity must be positive and finite, got {np.asarray(vmax).tolist()}")
+        qc = self._check_q(q_current)
+        T = P.shape[0]
+        Q = np.empty((T, self.n))
+        G = np.empty((T, self.n))
+        ok = np.zeros(T, dtype=bool)
+        err = np.empty((T, 2))
+        locked = np.zeros(T, dtype=bool)
+        step = vmax * dt
+        q_cmd = qc
+        goal: Array | None = None
+        for k in range(T):
+            ref = q_cmd if q_cmd is not None else None
+            sol = self.solve(P[k], ref, policy, q_start=goal)
+            goal = sol.q
+            if q_cmd is None:
+                q_cmd = goal.copy()
+            delta = np.clip(goal - q_cmd, -step, step)
+            q_cmd = q_cmd + delta
+            locked[k] = bool(np.all(np.abs(goal - q_cmd) <= 1e-15))
+            if locked[k]:
+                q_cmd = goal.copy()
+            G[k] = goal
+            Q[k] = q_cmd
+            ok[k] = sol.reachable
+            st = self._evaluate(q_cmd, P[k], jacobian=False)
+            err[k] = [math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam]
+        return Trajectory(np.arange(T) * dt, Q, G, ok, err, locked, self.joint_names)
+
+    # ---- convenience --------------------------------------------------------------------------
+
+    def camera_poses(self, q: ArrayLike) -> tuple[Array, Array]:
+        """``T_world_<camera>`` of the left and right camera at readings ``q`` (shape (n,)), each (4, 4)."""
+        qa = np.asarray(q, dtype=float)
+        if qa.shape != (self.n,) or not np.all(np.isfinite(qa)):
+            raise ConfigurationError(f"q must be {self.n} finite readings, got shape {qa.shape}")
+        self._pin.framesForwardKinematics(self.model, self.data, qa)
+        return tuple(self.data.oMf[e.frame_id].homogeneous.copy() for e in self._eyes)  # type: ignore[return-value]
+
+
+def _closest_point(origins: Array, axes: Array) -> Array | None:
+    """Midpoint of the closest points of two lines ``origins[k] + t axes[k]``; None if parallel."""
+    d0, d1 = axes
+    w = origins[0] - origins[1]
+    a, b, c = d0 @ d0, d0 @ d1, d1 @ d1
+    den = a * c - b * b
+    if den < 1e-14:
+        return None
+    dd, e = d0 @ w, d1 @ w
+    s = (b * e - c * dd) / den
+    t = (a * e - b * dd) / den
+    return 0.5 * (origins[0] + s * d0 + origins[1] + t * d1)
+
+
+def solver_for(name_or_path: str | Path, cameras: Sequence[str] = DEFAULT_CAMERAS, **kwargs: Any) -> GazeSolver:
+    """A solver for a ``.urdf`` file, a model file, a robot spec or a shipped robot name."""
+    text = str(name_or_path)
+    if text.endswith(".urdf"):
+        return GazeSolver(Path(text), cameras, **kwargs)
+    from cpc2urdf.model_file import load_model
+
+    return GazeSolver.from_model(load_model(text), cameras, **kwargs)
