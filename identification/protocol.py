@@ -18,15 +18,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import RobotStructure
 
-# Two readings of a joint within this are the same reading [rad] or [m]; transducers resolve
-# 0.004 deg / 0.005 mm on the IIS-head (Table 2), far above it.
-READING_TOL = 1e-9
+# Two readings of a joint within this are the same reading: a joint driven back to q0 may read a
+# count or two off. The IIS-head's transducers resolve 0.0036-0.005 deg and 0.005 mm (Table 2);
+# sweep steps are degrees and centimetres.
+READING_TOL = {"revolute": 1e-4, "prismatic": 1e-5}  # [rad], [m]
 
 
 @dataclass(frozen=True)
@@ -60,22 +61,29 @@ def _fmt(v: float) -> str:
     return f"{v:.9g}"
 
 
-def _differing(q: NDArray[np.float64], q0: NDArray[np.float64], tol: float) -> NDArray[np.bool_]:
+def joint_tolerances(structure: RobotStructure, tol: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Per joint reading tolerance, shape (n,): ``tol`` (scalar or (n,)), else :data:`READING_TOL`."""
+    if tol is None:
+        return np.array([READING_TOL[j.type] for j in structure.joints])
+    return np.broadcast_to(np.asarray(tol, dtype=float), (structure.n_joints,)).copy()
+
+
+def _differing(q: NDArray[np.float64], q0: NDArray[np.float64], tol: ArrayLike) -> NDArray[np.bool_]:
     return np.abs(q - q0) > tol
 
 
-def _mode_configuration(q: NDArray[np.float64], tol: float) -> NDArray[np.float64]:
+def _mode_configuration(q: NDArray[np.float64], tol: NDArray[np.float64]) -> NDArray[np.float64]:
     """Per joint, the most frequent reading (ties: the one seen first)."""
     q0 = np.empty(q.shape[1])
     for i in range(q.shape[1]):
         col = q[:, i]
-        counts = np.sum(np.abs(col[:, None] - col[None, :]) <= tol, axis=1)
+        counts = np.sum(np.abs(col[:, None] - col[None, :]) <= tol[i], axis=1)
         q0[i] = col[int(np.argmax(counts))]  # argmax returns the first maximum
     return q0
 
 
 def find_reference(q: NDArray[np.float64], joint_names: tuple[str, ...], labels: list[str] | None = None,
-                   tol: float = READING_TOL) -> NDArray[np.float64]:
+                   tol: ArrayLike = 1e-9) -> NDArray[np.float64]:
     """The reference configuration ``q0`` of one-joint-at-a-time data.
 
     ``q0`` is the configuration every record differs from in at most one joint. It is found as
@@ -86,12 +94,13 @@ def find_reference(q: NDArray[np.float64], joint_names: tuple[str, ...], labels:
         q: Readings, shape (N, n).
         joint_names: Names of the n joints (for messages).
         labels: Record labels (for messages).
-        tol: Readings closer than this are equal [rad]/[m].
+        tol: Readings closer than this are equal [rad]/[m], scalar or per joint (n,).
 
     Raises:
         DegenerateDataError: No record is at ``q0``, or some record moved several joints.
     """
     labels = labels or [f"record {i}" for i in range(len(q))]
+    tol = np.broadcast_to(np.asarray(tol, dtype=float), (q.shape[1],))
     mode = _mode_configuration(q, tol)
 
     def conforming(q0: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -130,12 +139,13 @@ def _frames_below(structure: RobotStructure, frames: tuple[str, ...]) -> dict[st
     return {j: tuple(v) for j, v in below.items()}
 
 
-def recognise_protocol(ms: MeasurementSet, tol: float = READING_TOL) -> Protocol:
+def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Protocol:
     """Find ``q0``, the reference records and each joint's sweep, and check the data suffice.
 
     Args:
         ms: The measurements (any record order).
-        tol: Readings closer than this are equal [rad]/[m].
+        tol: Readings closer than this are equal [rad]/[m], scalar or per joint (n,); default
+            :data:`READING_TOL` by joint type.
 
     Returns:
         The :class:`Protocol`.
@@ -145,6 +155,7 @@ def recognise_protocol(ms: MeasurementSet, tol: float = READING_TOL) -> Protocol
     """
     s = ms.structure
     q = ms.q
+    tol = joint_tolerances(s, tol)
     if ms.n_records == 0:
         raise DegenerateDataError(f"{ms.source}: no records")
     empty = [f for f in ms.poses if not ms.has_pose(f).any()]
@@ -156,7 +167,7 @@ def recognise_protocol(ms: MeasurementSet, tol: float = READING_TOL) -> Protocol
     if not frames:
         raise DegenerateDataError(f"{ms.source}: no frame has a measured pose")
     for i, j in enumerate(s.joints):
-        if len(np.unique(np.round(q[:, i] / tol))) < 2:
+        if np.ptp(q[:, i]) <= tol[i]:
             raise DegenerateDataError(
                 f"joint {j.name!r} has fewer than two distinct readings (all {len(q)} records read "
                 f"{_fmt(q[0, i])}): it was never moved, so its axis cannot be identified"
@@ -196,4 +207,4 @@ def recognise_protocol(ms: MeasurementSet, tol: float = READING_TOL) -> Protocol
     return Protocol(q0, reference, sweeps, frames, below)
 
 
-__all__ = ["READING_TOL", "Protocol", "find_reference", "recognise_protocol"]
+__all__ = ["READING_TOL", "Protocol", "find_reference", "joint_tolerances", "recognise_protocol"]

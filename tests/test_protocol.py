@@ -91,3 +91,21 @@ def test_no_pose_at_q0_or_in_a_sweep_is_named() -> None:
     poses[f][4:7] = np.nan
     with pytest.raises(DegenerateDataError, match="joint 'j1' was moved in 3 records but none"):
         recognise_protocol(MeasurementSet.from_arrays(ms.structure, q, poses))
+
+
+def test_readings_off_by_a_count_still_count_as_q0() -> None:
+    """A joint driven back to q0 may read a transducer count off (Table 2: ~6e-5 rad, 5e-6 m)."""
+    ms, q = _data(n=3)
+    rng = np.random.default_rng(2)
+    jittered = q.copy()
+    for k in range(1, len(q)):
+        moved = (k - 1) // 3
+        for i in range(3):
+            if i != moved:
+                step = 6e-5 if ms.structure.joints[i].type == "revolute" else 5e-6
+                jittered[k, i] += step * rng.integers(-1, 2)
+    ms2 = MeasurementSet.from_arrays(ms.structure, jittered, ms.poses)
+    p = recognise_protocol(ms2)
+    assert [len(p.sweeps[n]) for n in ms.structure.joint_names] == [3, 3, 3]
+    with pytest.raises(DegenerateDataError, match="moved several joints|no reference configuration"):
+        recognise_protocol(ms2, tol=1e-9)  # exact equality: the jitter breaks the protocol
