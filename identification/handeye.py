@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
@@ -72,7 +72,8 @@ def as_pose_stack(poses: ArrayLike | Sequence[ArrayLike], name: str) -> Array:
     return T
 
 
-def _pairs(n: int) -> tuple[Array, Array]:
+def _pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Index arrays of every pair i < j of n poses."""
     i, j = np.triu_indices(n, k=1)
     return i, j
 

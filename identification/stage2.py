@@ -129,8 +129,8 @@ def project_target(T_camera_target: Array, intrinsics: CameraIntrinsics = DEFAUL
     front of the camera, inside the image (margin :data:`IMAGE_MARGIN`), printed face towards it."""
     p_cam = TARGET_LAYOUT @ T_camera_target[:3, :3].T + T_camera_target[:3, 3]
     rvec, _ = cv2.Rodrigues(T_camera_target[:3, :3])
-    uv, _ = cv2.projectPoints(TARGET_LAYOUT, rvec, T_camera_target[:3, 3], intrinsics.K, intrinsics.D)
-    uv = uv.reshape(-1, 2)
+    projected, _ = cv2.projectPoints(TARGET_LAYOUT, rvec, T_camera_target[:3, 3], intrinsics.K, intrinsics.D)
+    uv: Array = np.asarray(projected, dtype=float).reshape(-1, 2)
     facing = T_camera_target[:3, 2] @ T_camera_target[:3, 3] < 0  # normal points back at the camera
     inside = (
         np.all(p_cam[:, 2] > 0.05)
@@ -274,7 +274,6 @@ def calibrate_cameras(
     """
     results: dict[str, HandEyeResult] = {}
     out = model
-    section: dict[str, Any] = {}
     for camera, C in obs.T_camera_target.items():
         hand = HAND_OF_CAMERA[camera]
         try:
@@ -282,25 +281,38 @@ def calibrate_cameras(
         except DegenerateDataError as e:
             raise DegenerateDataError(f"{camera}: {e}") from e
         results[camera] = r
-        plate = model.structure.frame(hand)
-        T_link_camera = model.frames[hand].matrix() @ r.X
-        out = out.with_frame(Frame(camera, plate.parent, "camera"), CPCParams.from_matrix(T_link_camera))
-        section[camera] = {
-            "hand": hand,
-            "method": method,
-            "n_poses": len(C),
-            "pixel_noise_px": obs.pixel_noise,
-            "T_hand_camera": r.X.tolist(),
-            "T_base_target": r.Z.tolist(),
-            "rms_translation_mm": r.rms_translation() * 1e3,
-            "rms_rotation_deg": math.degrees(r.rms_rotation()),
-            "residual_translation_mm": (r.residual_translation * 1e3).tolist(),
-            "residual_rotation_deg": np.degrees(r.residual_rotation).tolist(),
-            "warnings": list(r.warnings),
-        }
-    section["units"] = {"length": "m", "angle": "rad", "note": "T_* matrices in metres; residuals in mm/deg"}
-    out = out.with_params(metadata={**out.metadata, "handeye": section})
+        out = with_camera_frame(out, camera, hand, r, {"pixel_noise_px": obs.pixel_noise})
     return out, results
+
+
+def with_camera_frame(
+    model: CPCModel, camera: str, hand: str, result: HandEyeResult, extra: dict[str, Any] | None = None
+) -> CPCModel:
+    """A copy of ``model`` with frame ``camera`` (kind ``camera``) on the link carrying ``hand``,
+    at ``T_link_hand @ X``, and the solution recorded in ``metadata["handeye"][camera]``.
+
+    Raises:
+        UnknownNameError: ``hand`` is not a frame of the model.
+    """
+    h = model.structure.frame(hand)
+    T_link_camera = model.frames[hand].matrix() @ result.X
+    out = model.with_frame(Frame(camera, h.parent, "camera"), CPCParams.from_matrix(T_link_camera))
+    section = dict(out.metadata.get("handeye") or {})
+    section[camera] = {
+        "hand": hand,
+        "method": result.method,
+        "n_poses": len(result.residual_translation),
+        **(extra or {}),
+        "T_hand_camera": result.X.tolist(),
+        "T_base_target": result.Z.tolist(),
+        "rms_translation_mm": result.rms_translation() * 1e3,
+        "rms_rotation_deg": math.degrees(result.rms_rotation()),
+        "residual_translation_mm": (result.residual_translation * 1e3).tolist(),
+        "residual_rotation_deg": np.degrees(result.residual_rotation).tolist(),
+        "warnings": list(result.warnings),
+    }
+    section["units"] = {"note": "T_* matrices in metres; residuals in mm and deg"}
+    return out.with_params(metadata={**out.metadata, "handeye": section})
 
 
 @dataclass
@@ -436,6 +448,7 @@ __all__ = [
     "TARGET_SIZE",
     "calibrate_cameras",
     "camera_errors",
+    "with_camera_frame",
     "default_target_placement",
     "perturb_cameras",
     "pose_from_image_points",

@@ -90,17 +90,19 @@ def _opencv_li(A: Array, B: Array) -> tuple[Array, Array]:
 
     C, Hi = inverse(B), inverse(A)  # world2cam = T_camera_target, base2gripper = T_hand_base
     R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
-        C[:, :3, :3], C[:, :3, 3], Hi[:, :3, :3], Hi[:, :3, 3], method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI)
-    return inverse(homogeneous(R_gc, t_gc.ravel())), inverse(homogeneous(R_bw, t_bw.ravel()))
+        list(C[:, :3, :3]), list(C[:, :3, 3]), list(Hi[:, :3, :3]), list(Hi[:, :3, 3]),
+        method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI)
+    return (inverse(homogeneous(R_gc, np.asarray(t_gc).ravel())),
+            inverse(homogeneous(R_bw, np.asarray(t_bw).ravel())))
 
 
 def _opencv_tsai(A: Array, B: Array) -> Array:
     import cv2
 
     C = inverse(B)  # gripper2base = T_base_hand, target2cam = T_camera_target
-    R, t = cv2.calibrateHandEye(A[:, :3, :3], A[:, :3, 3], C[:, :3, :3], C[:, :3, 3],
+    R, t = cv2.calibrateHandEye(list(A[:, :3, :3]), list(A[:, :3, 3]), list(C[:, :3, :3]), list(C[:, :3, 3]),
                                 method=cv2.CALIB_HAND_EYE_TSAI)
-    return homogeneous(R, t.ravel())
+    return homogeneous(R, np.asarray(t).ravel())
 
 
 def run_study(

@@ -142,3 +142,29 @@ def test_file_errors_name_the_field() -> None:
         handeye_poses_from_json({"format": HANDEYE_POSES_FORMAT, "records": [{"T_base_hand": {"matrix": np.eye(4).tolist()}}]}, "f.json")
     with pytest.raises(InputFileError, match="non-empty list"):
         handeye_poses_from_json({"format": HANDEYE_POSES_FORMAT, "records": []}, "f.json")
+
+
+def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cpc2urdf.identification import stage2 as s2
+    from cpc2urdf.model_file import load_model, save_model
+
+    nominal = load_model("iis_head")
+    truth = s2.perturb_cameras(nominal, np.random.default_rng(2))
+    identified = save_model(truth.without_frames(["camera"]), tmp_path / "identified.json")
+    r = s2.run_stage2(truth, truth, n_poses=5, pixel_noise=0.0, seed=1)
+    poses = s2.write_pose_files(r, tmp_path)["camera_right_optical"]
+    out = tmp_path / "calibrated.json"
+    assert main(["handeye", str(poses), "--method", "park_martin", "--model", str(identified), "-o", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    cal = load_model(out)
+    assert cal.structure.frame("camera_right_optical").kind == "camera"
+    assert np.abs(cal.frames["camera_right_optical"].matrix() - truth.frames["camera_right_optical"].matrix()).max() < 1e-8
+    assert cal.metadata["handeye"]["camera_right_optical"]["method"] == "park_martin"
+
+    bad = tmp_path / "bad_out.json"
+    for argv in (["--model", str(identified)],  # no -o
+                 ["--model", str(identified), "-o", str(bad), "--method", "all"],
+                 ["--model", str(identified), "-o", str(bad), "--hand", "nope"],
+                 ["--model", str(identified), "-o", str(bad), "--camera", "plate_left"]):
+        _run_bad(["handeye", str(poses), *argv], capsys)
+        assert not bad.exists()

@@ -34,6 +34,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--method", default="kronecker", choices=[*ALL_METHODS, "all"],
                    help="solver, or 'all' to compare every solver side by side (default kronecker)")
     p.add_argument("--json", action="store_true", help="print the result as JSON (SI units + mm/deg residuals)")
+    p.add_argument("--model", help="model file (or shipped robot) to put the camera frame into; needs -o")
+    p.add_argument("-o", "--output", help="write MODEL with the camera frame added (atomically)")
+    p.add_argument("--camera", help="camera frame name (default: the pose file's 'camera')")
+    p.add_argument("--hand", help="hand frame name in MODEL (default: the pose file's 'hand')")
     p.set_defaults(run=run)
 
 
@@ -46,12 +50,39 @@ def _pose_line(T: Any) -> str:
             f"rpy = [{rpy[0]:9.4f} {rpy[1]:9.4f} {rpy[2]:9.4f}] deg")
 
 
+def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
+    """Validate --model/-o/--camera/--hand before solving; returns the model or None."""
+    from cpc2urdf.errors import ConfigurationError, UnknownNameError
+
+    if (args.model is None) != (args.output is None):
+        raise ConfigurationError("--model and -o/--output go together (the model to extend and where to write it)")
+    if args.model is None:
+        return None
+    if args.method == "all":
+        raise ConfigurationError("--model needs one --method (not 'all') to decide which X to store")
+    camera, hand = args.camera or data.camera, args.hand or data.hand
+    if not camera or not hand:
+        raise ConfigurationError(
+            f"{args.poses}: give the camera and hand frame names (--camera/--hand, or 'camera'/'hand' in the pose file)")
+    from cpc2urdf.model_file import load_model
+
+    model = load_model(args.model)
+    try:
+        model.structure.frame(hand)
+    except UnknownNameError as e:
+        raise ConfigurationError(f"{args.model}: hand {e}") from e
+    if camera in model.structure.frame_names and model.structure.frame(camera).kind != "camera":
+        raise ConfigurationError(f"{args.model}: frame {camera!r} exists and is not a camera frame")
+    return model
+
+
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import DegenerateDataError
     from cpc2urdf.identification.handeye_file import load_handeye_poses
     from cpc2urdf.identification.robot_world import ALL_METHODS, calibrate
 
     data = load_handeye_poses(args.poses)
+    model = _check_model_args(args, data)
     methods = list(ALL_METHODS) if args.method == "all" else [args.method]
     results, refused = {}, {}
     for m in methods:
@@ -63,6 +94,13 @@ def run(args: argparse.Namespace) -> int:
             refused[m] = str(e)
     if not results:  # every solver refused: the data is the problem, say it once
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
+    if model is not None:
+        from cpc2urdf.identification.stage2 import with_camera_frame
+        from cpc2urdf.model_file import save_model
+
+        camera, hand = args.camera or data.camera, args.hand or data.hand
+        out = with_camera_frame(model, camera, hand, results[args.method], {"poses": str(args.poses)})
+        path = save_model(out, args.output)
 
     if args.json:
         doc: dict[str, Any] = {
@@ -76,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
             doc["refused"] = refused
         else:
             doc.update(results[args.method].to_json())
+        if model is not None:
+            doc["wrote"] = str(path)
         print(json.dumps(doc, indent=2))
         return 0
 
@@ -101,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'RMS':>20s} {r.rms_translation() * 1e3:17.4f} {math.degrees(r.rms_rotation()):15.4f}")
         for w in r.warnings:
             print(f"warning: {w}")
+        if model is not None:
+            print(f"wrote {path}: frame {camera} on the link of {hand} at T_link_{hand} @ X")
         return 0
 
     print()
