@@ -168,3 +168,21 @@ def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.Captu
                  ["--model", str(identified), "-o", str(bad), "--camera", "plate_left"]):
         _run_bad(["handeye", str(poses), *argv], capsys)
         assert not bad.exists()
+
+
+def test_cli_all_reports_a_refusing_solver(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import math
+
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(3)
+    X, Z, H, _ = make_data(rng, 6)
+    H[4, :3, :3] = Rotation.from_rotvec(np.array([0.6, 0.0, 0.8]) * math.radians(179.8)).as_matrix()
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    path = tmp_path / "p.json"
+    save_handeye_poses(path, H, C)
+    assert main(["handeye", str(path), "--method", "all"]) == 0
+    out = capsys.readouterr().out
+    assert "zhuang           refused: quaternion method" in out
+    assert main(["handeye", str(path), "--method", "zhuang"]) == 2
+    assert "180 deg" in capsys.readouterr().err
