@@ -72,9 +72,13 @@ MAX_ITERATIONS = 60
 MAX_STEP = 0.5  # [rad] or [m]: the largest joint change of one Gauss-Newton step
 NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
 BACKTRACKS = 8  # step halvings allowed per iteration
+PHASE2_DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping factor (x |r1|^2) when solving fixation alone
 CONVERGED_RESIDUAL = 1e-30  # [-]: |u_L - e_z|^2 + |u_R - e_z|^2 below which fixation is exact
+FLOOR_RESIDUAL = 1e-22  # [-]: ... or below this once steps stop (pointing error ~1e-11 rad)
 CONVERGED_STEP = 1e-11  # [rad] or [m]: ... and the policy step is this small
 _EMPTY = np.empty((0, 0))
+_NONE = np.empty(0)
+_NONE_INT = np.empty(0, dtype=int)
 _PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")
 _REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
 
@@ -534,13 +538,33 @@ class GazeSolver:
             q0 = q_ref.copy()
         else:
             q0 = self._guess(p, q_ref)
-        q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations)
+        q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
+        if float(st.r @ st.r) > FLOOR_RESIDUAL and it < max_iterations:
+            # Phase 2: fixation alone. Reached when the policy's preferred configuration does
+            # not fixate: on a calibrated head (fixation has no spare freedom, only a weak
+            # direction the policy was holding) or where a limit blocks the preferred one.
+            q, it2, st = self._iterate(p, q, q_ref, policy, free, max_iterations - it, secondary=False)
+            it += it2
         return self._answer(p, q, it, policy, st)
 
     def _iterate(
-        self, p: Array, q: Array, q_ref: Array, policy: str, free: Array, max_iterations: int
+        self,
+        p: Array,
+        q: Array,
+        q_ref: Array,
+        policy: str,
+        free: Array,
+        max_iterations: int,
+        *,
+        secondary: bool,
     ) -> tuple[Array, int, _State]:
-        """Task-priority Gauss-Newton with an active set of joints held at their limits."""
+        """Task-priority Gauss-Newton with an active set of joints held at their limits.
+
+        With ``secondary=False`` only fixation is solved (with light damping), and the loop
+        runs until it converges or stalls; with ``secondary=True`` it also stops when the
+        fixation residual stops falling (the policy then holds a direction fixation needs).
+        """
+        slow = 0
         lo, hi = self.lower, self.upper
         q = q.copy()
         held = np.zeros(self.n, dtype=bool)
@@ -565,26 +589,29 @@ class GazeSolver:
             if act.size == 0:
                 break
             block = np.flatnonzero(((q <= lo) | (q >= hi)) & ~held)
-            dq, d1 = self._step(policy, q, q_ref, p, st, act, block)
+            dq, d1 = self._step(policy if secondary else None, q, q_ref, p, st, act, block)
             for _ in range(4):
                 nq = q + dq
                 out = (nq < lo) | (nq > hi)
                 if not out.any():
                     break
-                # A joint at a limit that fixation itself pushes outwards is held there (active
-                # set); one pushed out only by the policy is kept still by the policy instead.
-                push = ((q <= lo) & (d1 < 0)) | ((q >= hi) & (d1 > 0))
-                by_policy = out & ~(((q + d1) < lo) | ((q + d1) > hi))
-                new_block = np.union1d(block, np.flatnonzero(by_policy))
-                if not push.any() and new_block.size == block.size:
-                    break
-                held |= push
-                block = new_block
-                act = free[~held[free]]
-                if act.size == 0:
-                    dq = np.zeros(self.n)
-                    break
-                dq, d1 = self._step(policy, q, q_ref, p, st, act, block)
+                new_block = np.union1d(block, np.flatnonzero(out))
+                if new_block.size == block.size:
+                    # The null space cannot keep them inside: fixation itself needs them
+                    # beyond the limit. Hold those at a limit (active set); others get a
+                    # shortened step below.
+                    push = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
+                    if not push.any():
+                        break
+                    held |= push
+                    block = np.setdiff1d(block, np.flatnonzero(push))
+                    act = free[~held[free]]
+                    if act.size == 0:
+                        dq = np.zeros(self.n)
+                        break
+                else:
+                    block = new_block
+                dq, d1 = self._step(policy if secondary else None, q, q_ref, p, st, act, block)
             nq = q + dq
             if ((nq < lo) | (nq > hi)).any():
                 # shorten the step to the first limit it meets (projected steps would zig-zag)
@@ -595,12 +622,28 @@ class GazeSolver:
                     dq = dq * max(min(float(np.min(t)), 1.0), 0.0)
                 nq = np.clip(q + dq, lo, hi)
             step = float(np.max(np.abs(dq)))
-            if rr < CONVERGED_RESIDUAL and step < CONVERGED_STEP:
+            if rr < CONVERGED_RESIDUAL or (rr < FLOOR_RESIDUAL and step < CONVERGED_STEP):
                 break
             if rr >= prev * (1.0 - 1e-6) and step < 1e-8:
                 break  # stalled at a least-squares minimum (unreachable target)
+            if secondary and rr > CONVERGED_RESIDUAL and rr > 0.5 * prev:
+                slow += 1
+                if slow >= 2:
+                    break
+            else:
+                slow = 0
             prev = rr
             new = self._evaluate(nq, p)
+            if not secondary and float(new.r @ new.r) > rr:
+                # Watchdog: a long step along a weakly determined direction (the calibrated
+                # head's version) lands off the curved solution set; one corrective step from
+                # there usually ends below the start. Accept the pair if it does.
+                dq2, _ = self._step(None, nq, q_ref, p, new, act, None)
+                nq2 = np.clip(nq + dq2, lo, hi)
+                new2 = self._evaluate(nq2, p)
+                if float(new2.r @ new2.r) < rr:
+                    q, st = nq2, new2
+                    continue
             for _ in range(BACKTRACKS):  # halve steps that increase the fixation residual
                 rn = float(new.r @ new.r)
                 if rn <= rr or rn < 1e-20:
@@ -613,7 +656,7 @@ class GazeSolver:
         return q, it, st
 
     def _step(
-        self, policy: str, q: Array, q_ref: Array, p: Array, st: _State, act: Array, block: Array | None = None
+        self, policy: str | None, q: Array, q_ref: Array, p: Array, st: _State, act: Array, block: Array | None = None
     ) -> tuple[Array, Array]:
         """One task-priority Gauss-Newton step over the joints ``act``, and its priority-1 part.
 
@@ -626,24 +669,30 @@ class GazeSolver:
         # Levenberg-Marquardt damping mu = |r1|^2 (Yamashita-Fukushima: quadratic convergence on
         # consistent problems even where J1 is singular). Directions weaker than the damping
         # (or than NULL_EIGENVALUE) belong to the null space: fixation cannot use them now.
-        mu = float(st.r @ st.r)
+        mu = float(st.r @ st.r) * (1.0 if policy is not None else PHASE2_DAMPING)
         rng = lam > max(mu, NULL_EIGENVALUE)
         Vr = V[:, rng]
         d = d1 = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[rng] + mu))
-        r2, J2full = self._secondary(policy, q, q_ref, p, st)
-        if r2.size and not rng.all():
+        if not rng.all():
             V0 = V[:, ~rng]
             N = V0 @ V0.T  # projector onto the null space of J1
-            if block is not None and block.size:
-                b = np.flatnonzero(np.isin(act, block))
-                if b.size:
-                    Nb = N[:, b]
-                    N = N - Nb @ np.linalg.pinv(N[np.ix_(b, b)], rcond=1e-9) @ Nb.T
-            J2 = J2full[:, act]
-            J2N = J2 @ N
-            e2 = r2 + J2 @ d
-            z, *_ = np.linalg.lstsq(J2N, -e2, rcond=1e-9)
-            d = d + N @ z
+            b = np.flatnonzero(np.isin(act, block)) if block is not None and block.size else _NONE_INT
+            if b.size:  # the null space may not move the blocked joints
+                Nb = N[:, b]
+                N = N - Nb @ np.linalg.pinv(N[np.ix_(b, b)], rcond=1e-9) @ Nb.T
+            if policy is not None:
+                r2, J2full = self._secondary(policy, q, q_ref, p, st)
+                if r2.size:
+                    J2 = J2full[:, act]
+                    z, *_ = np.linalg.lstsq(J2 @ N, -(r2 + J2 @ d), rcond=1e-9)
+                    d = d + N @ z
+            if b.size:
+                # keep blocked joints still by trading their motion for null-space motion
+                # (which leaves fixation unchanged to first order), as far as it can
+                N0 = V0 @ V0.T
+                Nb = N0[:, b]
+                d = d - Nb @ (np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9) @ d[b])
+                d1 = d1 - Nb @ (np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9) @ d1[b])
         step = np.zeros(self.n)
         step[act] = d
         primary = np.zeros(self.n)
