@@ -207,3 +207,23 @@ def test_result_json_states_directions() -> None:
     assert doc["X"]["direction"].startswith("T_hand_camera")
     assert doc["Z"]["direction"].startswith("T_base_target")
     assert len(doc["residual_translation_mm"]) == 4
+
+
+def test_opencv_answers_where_we_refuse() -> None:
+    # The motivation (opencv#24871, #17986, #20974): on degenerate data OpenCV returns an
+    # X far from the truth without raising; we refuse with a reason.
+    rng = np.random.default_rng(0)
+    X, Z, H, C = make_data(rng, 8)
+    axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
+    Hp = np.array([homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+                   for a in np.linspace(-1.0, 1.0, 6)])
+    cases = [(Hp, inverse(X)[None] @ inverse(Hp) @ Z[None], "parallel axes"),
+             (H, inverse(C), "inconsistent directions")]
+    for Hc, Cc, reason in cases:
+        try:
+            X_cv = opencv_hand_eye(Hc, Cc, "tsai")
+            assert np.linalg.norm(X_cv[:3, 3] - X[:3, 3]) > 0.01  # silently wrong
+        except cv2.error:
+            pass  # a future OpenCV may refuse too
+        with pytest.raises(DegenerateDataError, match=reason):
+            calibrate_hand_eye(Hc, Cc, "tsai")
