@@ -452,8 +452,10 @@ class CPCModel:
             else:
                 self.structure.frame(name)  # raises UnknownNameError
                 p = self._frame_parent[name]
-                parent = self._T_world_base if p < 0 else link[:, p]
-                T = parent @ self._frame_E[name]
+                if p < 0:  # a frame fixed to the base: the same pose at every configuration
+                    T = np.broadcast_to(self._T_world_base @ self._frame_E[name], (qq.shape[0], 4, 4)).copy()
+                else:
+                    T = link[:, p] @ self._frame_E[name]
             out[name] = T[0] if single else T
         return out
 

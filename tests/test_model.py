@@ -108,3 +108,13 @@ def test_model_requires_geometry_for_every_name():
     s = RobotStructure("r", [Joint("a", "revolute")], [Frame("f", "a")])
     with pytest.raises(SpecError, match="no geometry for \\['f'\\]"):
         CPCModel(s, CPCParams(), {"a": CPCParams()}, {})
+
+
+def test_frames_on_the_base_have_the_batch_shape():
+    s = RobotStructure("r", [Joint("a", "revolute")], [Frame("fixed", BASE), Frame("tip", "a")])
+    m = CPCModel(s, CPCParams(l=(1.0, 0, 0)), {"a": CPCParams()}, {"fixed": CPCParams(l=(0, 2.0, 0)), "tip": CPCParams()})
+    one = m.fk(np.array([0.3]))["fixed"]
+    many = m.fk(np.zeros((4, 1)))["fixed"]
+    assert one.shape == (4, 4) and many.shape == (4, 4, 4)
+    np.testing.assert_allclose(one[:3, 3], [1.0, 2.0, 0.0])
+    np.testing.assert_allclose(many[2], one)
