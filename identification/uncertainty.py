@@ -246,7 +246,7 @@ def position_covariance(
 
 
 def predicted_position_std(
-    model: CPCModel, q: ArrayLike, frames: Sequence[str] | None = None
+    model: CPCModel, q: ArrayLike, frames: Sequence[str] | None = None, *, measurement_noise: bool = False
 ) -> dict[str, Array]:
     """Predicted standard deviation of each identified frame's origin at configurations ``q``.
 
@@ -256,18 +256,22 @@ def predicted_position_std(
         model: A model carrying an ``"uncertainty"`` section (``identify --method refined``).
         q: Configurations [rad]/[m], shape (N, n) in ``structure.joint_names`` order, or (n,).
         frames: Frames to report (default: every identified frame).
+        measurement_noise: Add the measuring system's own noise (``3 sigma_t^2``, the sigma the
+            identification assumed): the expected error against *measured* held-out poses, as
+            opposed to true ones (simulations).
 
     Returns:
-        Frame -> ``sqrt(trace(Sigma_p))`` [m] (the RMS Euclidean position error expected from
-        the identification alone), shape (N,); ``inf`` where the data did not determine it.
+        Frame -> ``sqrt(trace(Sigma_p) [+ 3 sigma_t^2])`` [m] (the RMS Euclidean position error
+        expected from the identification), shape (N,); ``inf`` where the data did not determine it.
 
     Raises:
         NoUncertaintyError: The model has no usable uncertainty section.
     """
     cov = covariance_of_model(model)
     Sigma, determined = position_covariance(model, cov, q, frames)
+    extra = 3.0 * cov.sigma_t**2 * (cov.variance_factor if cov.scale == "a_posteriori" else 1.0) if measurement_noise else 0.0
     return {
-        f: np.where(determined[f], np.sqrt(np.clip(np.trace(S, axis1=1, axis2=2), 0.0, None)), np.inf)
+        f: np.where(determined[f], np.sqrt(np.clip(np.trace(S, axis1=1, axis2=2), 0.0, None) + extra), np.inf)
         for f, S in Sigma.items()
     }
 

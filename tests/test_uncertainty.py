@@ -77,6 +77,8 @@ def test_position_std_agrees_with_sampling_the_parameters(refined):
         sampled = np.sqrt(np.mean(dev[f], axis=0))
         np.testing.assert_allclose(pred[f], sampled, rtol=0.12)
         assert np.all((pred[f] > 1e-5) & (pred[f] < 1e-3))  # tens to hundreds of micrometres
+    noisy = predicted_position_std(model, q, measurement_noise=True)
+    np.testing.assert_allclose(noisy["plate_left"] ** 2, pred["plate_left"] ** 2 + 3 * SIGMA_T**2)
     Sigma, det = position_covariance(model, cov, q, ["plate_left"])
     assert Sigma["plate_left"].shape == (4, 3, 3) and det["plate_left"].all()
 
