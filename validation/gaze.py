@@ -311,7 +311,10 @@ class GazeSolver:
         depend on the table readings.
         """
         pin = self._pin
-        grids = [np.linspace(self.lower[i], self.upper[i], 13 if k == 0 else 9) for k, i in enumerate(self._neck)]
+        # interior grid points only: a start on a limit would hold that joint from the outset
+        grids = [
+            np.linspace(self.lower[i], self.upper[i], (13 if k == 0 else 9) + 2)[1:-1] for k, i in enumerate(self._neck)
+        ]
         if grids:
             mesh = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, len(grids))
         else:
@@ -686,13 +689,16 @@ class GazeSolver:
                     J2 = J2full[:, act]
                     z, *_ = np.linalg.lstsq(J2 @ N, -(r2 + J2 @ d), rcond=1e-9)
                     d = d + N @ z
-            if b.size:
-                # keep blocked joints still by trading their motion for null-space motion
-                # (which leaves fixation unchanged to first order), as far as it can
-                N0 = V0 @ V0.T
+            exact = lam <= NULL_EIGENVALUE
+            if b.size and exact.any():
+                # keep blocked joints still by trading their motion for motion in the exact
+                # null space (which leaves fixation unchanged to first order), as far as it can
+                V00 = V[:, exact]
+                N0 = V00 @ V00.T
                 Nb = N0[:, b]
-                d = d - Nb @ (np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9) @ d[b])
-                d1 = d1 - Nb @ (np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9) @ d1[b])
+                Pb = np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9)
+                d = d - Nb @ (Pb @ d[b])
+                d1 = d1 - Nb @ (Pb @ d1[b])
         step = np.zeros(self.n)
         step[act] = d
         primary = np.zeros(self.n)
