@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 from test_view import (
+    SIZE,
     TARGET,
     calibrated_head,
     check_picture,
@@ -24,6 +25,7 @@ from cpc2urdf.cli import main
 from cpc2urdf.measurements import save_measurements
 from cpc2urdf.model_file import load_model, save_model
 from cpc2urdf.urdf import write_urdf
+from cpc2urdf.validation.view import build_view, screenshot_html, static_visualizer
 
 
 def test_view_is_a_registered_command(capsys: pytest.CaptureFixture[str]) -> None:
@@ -31,7 +33,9 @@ def test_view_is_a_registered_command(capsys: pytest.CaptureFixture[str]) -> Non
     assert "--target" in capsys.readouterr().out
 
 
-def test_html_page_with_screenshot_in_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_html_page_with_screenshot_in_chromium(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     require_chromium()
     html, png = tmp_path / "head.html", tmp_path / "head.png"
     t0 = time.perf_counter()
@@ -44,11 +48,15 @@ def test_html_page_with_screenshot_in_chromium(tmp_path: Path, capsys: pytest.Ca
     assert "<script src" not in html.read_text()
 
 
-def test_html_with_target_nominal_measurements_and_q(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_html_with_target_nominal_measurements_and_q(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     cal = calibrated_head()
     model_path = save_model(cal, tmp_path / "calibrated.json")
     urdf = write_urdf(load_model("iis_head"), tmp_path / "nominal.urdf")
-    meas = save_measurements(measurements_of(load_model("iis_head")), tmp_path / "meas.json", robot="iis_head")
+    meas = save_measurements(
+        measurements_of(load_model("iis_head")), tmp_path / "meas.json", robot="iis_head"
+    )
     html = tmp_path / "view.html"
     argv = ["view", str(model_path), "--target", *map(str, TARGET), "--nominal", str(urdf)]
     argv += ["--measurements", str(meas), "--q", "pan=1.5", "tilt=0.5", "--html", str(html)]
@@ -66,7 +74,19 @@ def test_html_with_target_nominal_measurements_and_q(tmp_path: Path, capsys: pyt
         (["iis_head", "--target", "1", "2", "x"], "must be numbers, got 'x'"),
         (["iis_head", "--target", "1", "2"], "expected 3 arguments"),
         (["iis_head", "--target", "1", "nan", "2"], "must be finite"),
-        (["iis_head", "--target", "-0.3", "-0.4", "0.66", "--cameras", "camera_left_optical", "eye"], "unknown frame 'eye'"),
+        (
+            [
+                "iis_head",
+                "--target",
+                "-0.3",
+                "-0.4",
+                "0.66",
+                "--cameras",
+                "camera_left_optical",
+                "eye",
+            ],
+            "unknown frame 'eye'",
+        ),
         (["iis_head", "--q", "neck=0.1"], "unknown joint 'neck'"),
         (["iis_head", "--q", "1", "2"], "needs 6 values"),
         (["iis_head", "--q", "pan=4"], "outside its limits"),
@@ -76,7 +96,11 @@ def test_html_with_target_nominal_measurements_and_q(tmp_path: Path, capsys: pyt
     ],
 )
 def test_bad_input_one_line_exit_2(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    args: list[str],
+    message: str,
 ) -> None:
     monkeypatch.chdir(tmp_path)
     html = tmp_path / "out.html"
@@ -90,7 +114,9 @@ def test_bad_input_one_line_exit_2(
 
 def test_measured_frame_the_robot_lacks(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     no_plates = save_model(load_model("iis_head").without_frames(["plate"]), tmp_path / "cams.json")
-    meas = save_measurements(measurements_of(load_model("iis_head"), n=2), tmp_path / "m.json", robot="iis_head")
+    meas = save_measurements(
+        measurements_of(load_model("iis_head"), n=2), tmp_path / "m.json", robot="iis_head"
+    )
     html = tmp_path / "out.html"
     assert main(["view", str(no_plates), "--measurements", str(meas), "--html", str(html)]) == 2
     assert "unknown frame 'plate_left'" in capsys.readouterr().err
@@ -122,10 +148,16 @@ def test_serves_until_interrupted(tmp_path: Path) -> None:
             if m:
                 url = m.group(1)
                 break
-        assert url is not None, "".join(lines) + (proc.stderr.read() if proc.poll() is not None else "")  # type: ignore[union-attr]
+        assert url is not None, "".join(lines) + (
+            proc.stderr.read() if proc.poll() is not None else ""
+        )  # type: ignore[union-attr]
         assert "fixated" in "".join(lines)
         with urllib.request.urlopen(url, timeout=10) as r:
             assert r.status == 200 and b"meshcat" in r.read().lower()
+        # The served scene, as a browser sees it through meshcat's websocket.
+        require_chromium()
+        png = screenshot_html(url, tmp_path / "live.png", size=SIZE, budget_ms=3000)
+        check_picture(png, build_view(static_visualizer(), "iis_head", target=TARGET), target=True)
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 0, err

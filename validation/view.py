@@ -29,6 +29,7 @@ import base64
 import math
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -81,8 +82,8 @@ CHROMIUM_FLAGS = (
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
     "--hide-scrollbars",
-    "--host-resolver-rules=MAP * ~NOTFOUND",  # no name resolves: the page must not need a network
 )
+NO_NETWORK_FLAG = "--host-resolver-rules=MAP * ~NOTFOUND"  # for files: the page must not need a network
 
 
 # ---- the robot, through its URDF and Pinocchio ----------------------------------------------
@@ -127,7 +128,9 @@ class ViewRobot:
         """The middle of every joint's range [rad]/[m], shape (n,)."""
         return 0.5 * (self.lower + self.upper)
 
-    def q_from(self, values: Mapping[str, float] | ArrayLike | None, *, base: ArrayLike | None = None) -> Array:
+    def q_from(
+        self, values: Mapping[str, float] | ArrayLike | None, *, base: ArrayLike | None = None
+    ) -> Array:
         """A configuration of shape (n,) from ``{joint: value}`` (others from ``base``, default
         the middle of the ranges) or from n values in :attr:`joint_names` order.
 
@@ -223,7 +226,9 @@ def load_view_robot(source: str | os.PathLike[str] | Any) -> ViewRobot:
     return _robot_from_urdf(text, label, kinds, metadata)
 
 
-def _robot_from_urdf(text: str, label: str, kinds: dict[str, str], metadata: dict[str, Any]) -> ViewRobot:
+def _robot_from_urdf(
+    text: str, label: str, kinds: dict[str, str], metadata: dict[str, Any]
+) -> ViewRobot:
     import xml.etree.ElementTree as ET
 
     import pinocchio as pin
@@ -243,10 +248,17 @@ def _robot_from_urdf(text: str, label: str, kinds: dict[str, str], metadata: dic
         j = model.joints[jid]
         if j.nq != 1 or j.nv != 1:
             short = j.shortname().replace("JointModel", "")
-            kind = {"RUBX": "continuous", "RUBY": "continuous", "RUBZ": "continuous", "RUBUnaligned": "continuous",
-                    "FreeFlyer": "floating", "Planar": "planar"}.get(short, short)
+            kind = {
+                "RUBX": "continuous",
+                "RUBY": "continuous",
+                "RUBZ": "continuous",
+                "RUBUnaligned": "continuous",
+                "FreeFlyer": "floating",
+                "Planar": "planar",
+            }.get(short, short)
             raise InputFileError(
-                label, f"joint {model.names[jid]!r} is {kind}; the view supports revolute and prismatic joints"
+                label,
+                f"joint {model.names[jid]!r} is {kind}; the view supports revolute and prismatic joints",
             )
         names.append(str(model.names[jid]))
         lower.append(float(model.lowerPositionLimit[j.idx_q]))
@@ -258,7 +270,9 @@ def _robot_from_urdf(text: str, label: str, kinds: dict[str, str], metadata: dic
     links = tuple(f.name for f in model.frames if f.type == pin.FrameType.BODY)
     robot_name = str(model.name) or label
     kinds = {**{ln: _kind_from_name(ln) for ln in links if _kind_from_name(ln) != "frame"}, **kinds}
-    return ViewRobot(robot_name, label, text, model, visual, tuple(names), lo, hi, links, kinds, metadata)
+    return ViewRobot(
+        robot_name, label, text, model, visual, tuple(names), lo, hi, links, kinds, metadata
+    )
 
 
 # ---- configurations: given, or the gaze solution -------------------------------------------
@@ -295,7 +309,11 @@ def gaze_configuration(
     from cpc2urdf.validation.gaze import GazeSolver
 
     solver = GazeSolver(robot.urdf, tuple(cameras))
-    sol = solver.solve(np.asarray(p_world, dtype=float), q_current=np.asarray(q_current, dtype=float), policy=policy)
+    sol = solver.solve(
+        np.asarray(p_world, dtype=float),
+        q_current=np.asarray(q_current, dtype=float),
+        policy=policy,
+    )
     by_name = dict(zip(sol.joint_names, np.asarray(sol.q, dtype=float).tolist(), strict=True))
     q = np.array([by_name[j] for j in robot.joint_names])
     errors = dict(zip(cameras, np.asarray(sol.pointing_error, dtype=float).tolist(), strict=True))
@@ -313,7 +331,9 @@ def _hex(rgba: Sequence[float]) -> int:
 def _material(rgba: Sequence[float], opacity: float | None = None) -> mg.Material:
     a = float(rgba[3]) if opacity is None else opacity
     if a < 1.0:
-        return mg.MeshLambertMaterial(color=_hex(rgba), transparent=True, opacity=a, depthWrite=False)
+        return mg.MeshLambertMaterial(
+            color=_hex(rgba), transparent=True, opacity=a, depthWrite=False
+        )
     return mg.MeshLambertMaterial(color=_hex(rgba))
 
 
@@ -352,7 +372,9 @@ class _Visual:
 
     def corners_link(self) -> Array:
         """The 8 corners of its bounding box in the link frame [m], shape (8, 3)."""
-        signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+        signs = np.array(
+            [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float
+        )
         local = signs * self.half
         return local @ self.T_link_visual[:3, :3].T + self.T_link_visual[:3, 3]
 
@@ -395,7 +417,9 @@ def _bar(p0: Array, p1: Array) -> tuple[Array, float]:
 
 
 def _triad(vis: meshcat.Visualizer, scale: float = 1.0) -> None:
-    for axis, rgba in zip(range(3), ((0.9, 0.1, 0.1, 1), (0.1, 0.75, 0.1, 1), (0.1, 0.2, 0.95, 1)), strict=True):
+    for axis, rgba in zip(
+        range(3), ((0.9, 0.1, 0.1, 1), (0.1, 0.75, 0.1, 1), (0.1, 0.2, 0.95, 1)), strict=True
+    ):
         end = np.zeros(3)
         end[axis] = scale * TRIAD_LENGTH
         T, length = _bar(np.zeros(3), end)
@@ -447,7 +471,9 @@ class ViewSummary:
     camera_target: Array = field(default_factory=lambda: np.zeros(3))
     up: Array = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
 
-    def pixel(self, p_world: ArrayLike, width: int = 1024, height: int = 768) -> tuple[float, float]:
+    def pixel(
+        self, p_world: ArrayLike, width: int = 1024, height: int = 768
+    ) -> tuple[float, float]:
         """Where ``p_world`` [m], shape (3,), appears in a ``width`` x ``height`` [px] screenshot
         of the page before the user moves the camera: (column, row) from the top left [px]."""
         back = self.camera_position - self.camera_target
@@ -466,7 +492,9 @@ class ViewSummary:
         """A few lines for a terminal."""
         lines = [f"robot {self.robot}: " + ", ".join(f"{k}={v:.6g}" for k, v in self.q.items())]
         if self.target is not None and self.gaze is not None:
-            err = ", ".join(f"{k} {math.degrees(v):.3g} deg" for k, v in self.gaze.pointing_error.items())
+            err = ", ".join(
+                f"{k} {math.degrees(v):.3g} deg" for k, v in self.gaze.pointing_error.items()
+            )
             lines.append(
                 f"target {np.array2string(self.target, precision=4)} m: {self.gaze.status}"
                 f" (reachable={self.gaze.reachable}; pointing error {err})"
@@ -479,7 +507,9 @@ class ViewSummary:
                 f" max {1e3 * self.residual_max:.3g} mm (bars magnified x{self.residual_scale:.3g})"
             )
         if self.skipped_visuals:
-            lines.append(f"note: {self.skipped_visuals} URDF visuals could not be drawn (unsupported shape or mesh)")
+            lines.append(
+                f"note: {self.skipped_visuals} URDF visuals could not be drawn (unsupported shape or mesh)"
+            )
         return "\n".join(lines)
 
 
@@ -542,13 +572,17 @@ def build_view(
             robot.frame(c)
         gaze = gaze_configuration(robot, p_target, q0, cameras, policy)
         q0 = gaze.q
-    summary = ViewSummary(robot.name, dict(zip(robot.joint_names, q0.tolist(), strict=True)), p_target, gaze)
+    summary = ViewSummary(
+        robot.name, dict(zip(robot.joint_names, q0.tolist(), strict=True)), p_target, gaze
+    )
 
     vis.delete()
     vis["/Background"].set_property("top_color", list(BACKGROUND_TOP))
     vis["/Background"].set_property("bottom_color", list(BACKGROUND_BOTTOM))
     vis["/Grid"].set_property("visible", False)
-    vis["/Axes"].set_property("visible", False)  # meshcat's axes sit at the viewer origin, not world
+    vis["/Axes"].set_property(
+        "visible", False
+    )  # meshcat's axes sit at the viewer origin, not world
     _triad(vis["world"], 2.0)
 
     head = vis["head"]
@@ -583,7 +617,10 @@ def build_view(
         ghost_robot = ghost if isinstance(ghost, ViewRobot) else load_view_robot(ghost)
         missing = [j for j in robot.joint_names if j not in ghost_robot.joint_names]
         if missing:
-            raise InputFileError(ghost_robot.source, f"lacks joints {missing} of {robot.name!r}; cannot pose it alike")
+            raise InputFileError(
+                ghost_robot.source,
+                f"lacks joints {missing} of {robot.name!r}; cannot pose it alike",
+            )
         q_ghost = _ghost_q(ghost_robot, robot, q0)
         gv, _ = _visuals(ghost_robot, q_ghost)
         for v in gv:
@@ -603,7 +640,9 @@ def build_view(
     if p_target is not None and eyes:
         forward = p_target - np.mean(eyes, axis=0)
     else:
-        forward = np.mean([T_links[c][:3, 2] for c in cameras if c in T_links] or [np.array([1.0, 0, 0])], axis=0)
+        forward = np.mean(
+            [T_links[c][:3, 2] for c in cameras if c in T_links] or [np.array([1.0, 0, 0])], axis=0
+        )
     up = _up_direction(robot, q0, T_links, cameras) if upright else np.array([0.0, 0.0, 1.0])
     eye, centre = _place_camera(vis, np.array(points), up, forward)
     summary.camera_position, summary.camera_target, summary.up = eye, centre, up
@@ -614,7 +653,9 @@ def _ghost_q(ghost: ViewRobot, robot: ViewRobot, q: Array) -> Array:
     """The ghost's readings equal to ``robot``'s at ``q`` (shape (n,)), joint by joint by name,
     within the ghost's own limits."""
     by_name = dict(zip(robot.joint_names, q.tolist(), strict=True))
-    qg = np.array([by_name.get(j, m) for j, m in zip(ghost.joint_names, ghost.default_q(), strict=True)])
+    qg = np.array(
+        [by_name.get(j, m) for j, m in zip(ghost.joint_names, ghost.default_q(), strict=True)]
+    )
     return np.clip(qg, ghost.lower, ghost.upper)
 
 
@@ -624,11 +665,16 @@ def _translation(p: Array) -> Array:
     return T
 
 
-def _draw_measurements(vis: meshcat.Visualizer, robot: ViewRobot, ms: Any, summary: ViewSummary) -> list[Array]:
+def _draw_measurements(
+    vis: meshcat.Visualizer, robot: ViewRobot, ms: Any, summary: ViewSummary
+) -> list[Array]:
     names = list(ms.structure.joint_names)
     missing = [j for j in robot.joint_names if j not in names]
     if missing:
-        raise InputFileError(getattr(ms, "source", "<measurements>"), f"lacks joints {missing} of robot {robot.name!r}")
+        raise InputFileError(
+            getattr(ms, "source", "<measurements>"),
+            f"lacks joints {missing} of robot {robot.name!r}",
+        )
     cols = [names.index(j) for j in robot.joint_names]
     measured, predicted = [], []
     for frame, poses in ms.poses.items():
@@ -636,7 +682,9 @@ def _draw_measurements(vis: meshcat.Visualizer, robot: ViewRobot, ms: Any, summa
         for i in range(len(ms.q)):
             if np.all(np.isfinite(poses[i])):
                 measured.append(poses[i][:3, 3])
-                predicted.append(robot.link_poses(np.asarray(ms.q[i], dtype=float)[cols])[frame][:3, 3])
+                predicted.append(
+                    robot.link_poses(np.asarray(ms.q[i], dtype=float)[cols])[frame][:3, 3]
+                )
     if not measured:
         return []
     P_m, P_p = np.array(measured), np.array(predicted)
@@ -654,7 +702,9 @@ def _draw_measurements(vis: meshcat.Visualizer, robot: ViewRobot, ms: Any, summa
         if rk > 0:
             T, length = _bar(pm, pm + scale * (pp - pm))
             frac = (rk - rmin) / (rmax - rmin) if rmax > rmin else 1.0
-            vis["residual"][str(k)].set_object(mg.Cylinder(length, RESIDUAL_RADIUS), _material(_residual_rgba(frac)))
+            vis["residual"][str(k)].set_object(
+                mg.Cylinder(length, RESIDUAL_RADIUS), _material(_residual_rgba(frac))
+            )
             vis["residual"][str(k)].set_transform(T)
     return list(P_m)
 
@@ -692,7 +742,9 @@ class _SetAnimationLast(SetAnimation):
         return data
 
 
-def _up_direction(robot: ViewRobot, q: Array, T_links: dict[str, Array], cameras: Sequence[str]) -> Array:
+def _up_direction(
+    robot: ViewRobot, q: Array, T_links: dict[str, Array], cameras: Sequence[str]
+) -> Array:
     """The world direction shown as "up": for a head (a robot with camera frames) the axis of
     its first revolute joint (the pan axis), pointing from the base towards the cameras; world z
     for any other robot."""
@@ -707,7 +759,9 @@ def _up_direction(robot: ViewRobot, q: Array, T_links: dict[str, Array], cameras
         if robot.model.joints[jid].shortname().startswith("JointModelR"):
             M = data.oMi[jid].homogeneous
             axis = M[:3, :3] @ _revolute_axis(robot.model.joints[jid].shortname())
-            ref = [T_links[c][:3, 3] for c in cameras if c in T_links] or [T[:3, 3] for T in T_links.values()]
+            ref = [T_links[c][:3, 3] for c in cameras if c in T_links] or [
+                T[:3, 3] for T in T_links.values()
+            ]
             if float(axis @ (np.mean(ref, axis=0) - M[:3, 3])) < 0:
                 axis = -axis
             return axis / np.linalg.norm(axis)
@@ -718,10 +772,14 @@ def _revolute_axis(shortname: str) -> Array:
     if shortname.startswith("JointModelRevoluteUnaligned") or shortname.startswith("JointModelRUB"):
         return np.array([0.0, 0.0, 1.0])  # cpc2urdf writes z axes; unaligned axes are rare
     letter = shortname.replace("JointModelRUB", "").replace("JointModelR", "")[:1].upper()
-    return np.eye(3)["XYZ".index(letter)] if letter in "XYZ" and letter else np.array([0.0, 0.0, 1.0])
+    return (
+        np.eye(3)["XYZ".index(letter)] if letter in "XYZ" and letter else np.array([0.0, 0.0, 1.0])
+    )
 
 
-def _focus_points(robot: ViewRobot, T_links: dict[str, Array], visuals: list[_Visual]) -> list[Array]:
+def _focus_points(
+    robot: ViewRobot, T_links: dict[str, Array], visuals: list[_Visual]
+) -> list[Array]:
     """Where the head is: the bounding-box corners of the visuals on links moved by a revolute
     joint and on plate/camera frames (the XY table and base may lie outside the view; the viewer
     can zoom out). A robot without plate or camera frames is framed whole."""
@@ -785,9 +843,17 @@ def _place_camera(
     for _ in range(20):  # perspective: centre the *projected* extents, then fit the distance
         rel = P - centre
         u, v, w = rel @ right, rel @ cam_up, rel @ back
-        distance = float(np.max(np.maximum(w + (np.abs(u) + FRAME_MARGIN) / tan_u, w + (np.abs(v) + FRAME_MARGIN) / tan_v)))
+        distance = float(
+            np.max(
+                np.maximum(
+                    w + (np.abs(u) + FRAME_MARGIN) / tan_u, w + (np.abs(v) + FRAME_MARGIN) / tan_v
+                )
+            )
+        )
         x, y = u / (distance - w) / tan_u, v / (distance - w) / tan_v  # screen coordinates, -1..1
-        shift = 0.5 * (x.min() + x.max()) * tan_u * right + 0.5 * (y.min() + y.max()) * tan_v * cam_up
+        shift = (
+            0.5 * (x.min() + x.max()) * tan_u * right + 0.5 * (y.min() + y.max()) * tan_v * cam_up
+        )
         centre = centre + distance * shift
     offset = distance * back
     # meshcat's orbit controls always look at the viewer's origin, so the scene is turned and
@@ -797,7 +863,9 @@ def _place_camera(
     T[:3, :3] = R
     T[:3, 3] = -centre
     vis.set_transform(T)
-    vis["/Cameras/default/rotated/<object>"].set_property("position", [offset[0], offset[2], -offset[1]])
+    vis["/Cameras/default/rotated/<object>"].set_property(
+        "position", [offset[0], offset[2], -offset[1]]
+    )
     return R.T @ (centre + offset), R.T @ centre
 
 
@@ -850,8 +918,12 @@ class StaticWindow:
                 commands.append(node.transform)
             if node.animation is not None:
                 animations.append(node.animation)
-        blobs = ",\n".join(f'"{base64.b64encode(c).decode("ascii")}"' for c in commands + animations)
-        viewer_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text(encoding="utf-8")
+        blobs = ",\n".join(
+            f'"{base64.b64encode(c).decode("ascii")}"' for c in commands + animations
+        )
+        viewer_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text(
+            encoding="utf-8"
+        )
         return _PAGE.format(viewer_js=viewer_js.replace("</script", "<\\/script"), blobs=blobs)
 
 
@@ -885,7 +957,9 @@ def static_visualizer() -> meshcat.Visualizer:
     return meshcat.Visualizer(window=StaticWindow())
 
 
-def static_view_html(robot: ViewRobot | str | os.PathLike[str] | Any, **options: Any) -> tuple[str, ViewSummary]:
+def static_view_html(
+    robot: ViewRobot | str | os.PathLike[str] | Any, **options: Any
+) -> tuple[str, ViewSummary]:
     """The self-contained HTML page of :func:`build_view` (same options) and its summary."""
     vis = static_visualizer()
     summary = build_view(vis, robot, **options)
@@ -919,7 +993,7 @@ def find_chromium() -> str | None:
 
 
 def screenshot_html(
-    html_path: str | os.PathLike[str],
+    page: str | os.PathLike[str],
     png_path: str | os.PathLike[str],
     *,
     size: tuple[int, int] = (1024, 768),
@@ -929,42 +1003,65 @@ def screenshot_html(
     """Render a page in headless Chromium (software WebGL) and save a PNG screenshot.
 
     Args:
-        html_path: The page (e.g. from :func:`write_view_html`).
+        page: The page file (e.g. from :func:`write_view_html`), or an ``http://`` URL (a served
+            view; the static page needs no network, and Chromium is kept from resolving names).
         png_path: The PNG to write.
         size: Window width and height [px].
         budget_ms: Chromium's virtual time budget for the page to load and render [ms].
         timeout: Give up after this long [s] (the browser never waits for a user).
 
     Raises:
-        OutputError: No Chromium found (install Debian's ``chromium``), or it failed or timed out.
+        InputFileError: The page file does not exist.
+        OutputError: No Chromium found (install Debian's ``chromium``), it failed or timed out,
+            or the PNG's folder does not exist.
     """
     exe = find_chromium()
     if exe is None:
-        raise OutputError("no Chromium found: install it (apt-get install chromium) or set CPC2URDF_CHROMIUM")
-    html = Path(html_path).resolve()
+        raise OutputError(
+            "no Chromium found: install it (apt-get install chromium) or set CPC2URDF_CHROMIUM"
+        )
+    text = str(page)
+    flags = list(CHROMIUM_FLAGS)
+    if text.startswith(("http://", "https://")):
+        url = text
+    else:
+        flags.append(NO_NETWORK_FLAG)
+        html = Path(page).resolve()
+        if not html.is_file():
+            raise InputFileError(html, "no such file")
+        url = html.as_uri()
     png = Path(png_path).resolve()
-    if not html.is_file():
-        raise InputFileError(html, "no such file")
+    if not png.parent.is_dir():
+        raise OutputError(f"{png}: cannot write, folder {png.parent} does not exist")
     with tempfile.TemporaryDirectory(prefix="cpc2urdf-chromium-") as profile:
         tmp_png = Path(profile) / "shot.png"
         cmd = [
             exe,
-            *CHROMIUM_FLAGS,
+            *flags,
             f"--user-data-dir={profile}/profile",
             f"--window-size={size[0]},{size[1]}",
             f"--virtual-time-budget={budget_ms}",
             f"--screenshot={tmp_png}",
-            html.as_uri(),
+            url,
         ]
+        # Its own process group, so that a timeout ends the browser and all its helpers.
+        proc = subprocess.Popen(
+            cmd,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            start_new_session=True,
+        )
         try:
-            run = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+            _, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired as e:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
             raise OutputError(f"{png}: Chromium did not finish within {timeout:.0f} s") from e
-        if run.returncode != 0 or not tmp_png.is_file():
-            tail = (run.stderr.strip().splitlines() or ["no output"])[-1]
-            raise OutputError(f"{png}: Chromium failed (exit {run.returncode}): {tail}")
-        if not png.parent.is_dir():
-            raise OutputError(f"{png}: cannot write, folder {png.parent} does not exist")
+        if proc.returncode != 0 or not tmp_png.is_file():
+            tail = (err.strip().splitlines() or ["no output"])[-1]
+            raise OutputError(f"{png}: Chromium failed (exit {proc.returncode}): {tail}")
         shutil.move(str(tmp_png), str(png))
     return png
 

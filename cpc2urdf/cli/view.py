@@ -25,12 +25,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "measured plate positions and bars to the model's predictions. Serves on localhost until "
         "Ctrl-C, or writes a self-contained page with --html. Lengths in m, angles in rad.",
     )
-    p.add_argument("robot", metavar="URDF_OR_MODEL", help=".urdf, model file, robot spec, or shipped robot name")
-    p.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point to fixate, in world [m]")
-    p.add_argument("--nominal", metavar="OTHER", help="another model/URDF of the same robot, shown as a ghost")
-    p.add_argument("--measurements", metavar="FILE", help="a cpc2urdf/measurements@1 file of this robot")
-    p.add_argument("--html", metavar="OUT.html", help="write a self-contained page instead of serving")
-    p.add_argument("--screenshot", metavar="OUT.png", help="with --html: also render it in headless Chromium")
+    p.add_argument(
+        "robot",
+        metavar="URDF_OR_MODEL",
+        help=".urdf, model file, robot spec, or shipped robot name",
+    )
+    p.add_argument(
+        "--target", nargs=3, metavar=("X", "Y", "Z"), help="point to fixate, in world [m]"
+    )
+    p.add_argument(
+        "--nominal", metavar="OTHER", help="another model/URDF of the same robot, shown as a ghost"
+    )
+    p.add_argument(
+        "--measurements", metavar="FILE", help="a cpc2urdf/measurements@1 file of this robot"
+    )
+    p.add_argument(
+        "--html", metavar="OUT.html", help="write a self-contained page instead of serving"
+    )
+    p.add_argument(
+        "--screenshot", metavar="OUT.png", help="with --html: also render it in headless Chromium"
+    )
     p.add_argument(
         "--q",
         nargs="+",
@@ -45,7 +59,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         default=["camera_left_optical", "camera_right_optical"],
         help="camera optical frames for the gaze (default: %(default)s)",
     )
-    p.add_argument("--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)")
+    p.add_argument(
+        "--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)"
+    )
     p.add_argument("--no-sweep", action="store_true", help="leave out the joint sweep animation")
     p.set_defaults(run=run)
 
@@ -74,7 +90,9 @@ def parse_q(values: list[str] | None) -> dict[str, float] | list[float] | None:
             out[name] = _numbers([value], f"--q {name}")[0]
         return out
     if any("=" in v for v in values):
-        raise ConfigurationError("--q takes either NAME=VALUE pairs or one number per joint, not both")
+        raise ConfigurationError(
+            "--q takes either NAME=VALUE pairs or one number per joint, not both"
+        )
     return _numbers(values, "--q values")
 
 
