@@ -254,6 +254,7 @@ class GazeSolver:
             names.append(str(model.names[jid]))
             kinds.append("prismatic" if short in _PRISMATIC else "revolute")
         self.joint_names: tuple[str, ...] = tuple(names)
+        self.joint_kinds: dict[str, str] = dict(zip(names, kinds, strict=True))
         self.n = len(names)
         self.lower: Array = np.array(model.lowerPositionLimit, dtype=float)
         self.upper: Array = np.array(model.upperPositionLimit, dtype=float)

@@ -29,6 +29,7 @@ COMMANDS = (
     "accuracy",
     "handeye",
     "view",
+    "gaze",
 )
 
 

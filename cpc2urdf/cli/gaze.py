@@ -1,0 +1,75 @@
+"""``cpc2urdf gaze HEAD --target X Y Z``: joint readings that fixate a target with both cameras.
+
+Exit codes: 0 the target is fixated, 1 it is not reachable (the best in-limit readings and the
+residual are still printed), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+# Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
+# cpc2urdf.validation.gaze.
+POLICIES = ("cyclopean", "min-motion", "eyes-only", "use-table")
+DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
+DEFAULT_VIEWING_DISTANCE = 0.6  # [m]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "gaze",
+        help="solve gaze IK: joint readings that point both cameras at a 3D target",
+        description="Point both camera optical axes at a target (world frame, metres) on a head "
+        "given as a .urdf file, a model file, a robot spec or a shipped robot name (e.g. "
+        "iis_head). Prints the readings, reachability and residuals; moves nothing. Exit code "
+        "0 fixated, 1 unreachable, 2 bad input.",
+    )
+    p.add_argument("head", metavar="URDF_OR_MODEL", help=".urdf file, model file, robot spec or shipped robot name")
+    p.add_argument("--target", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="target in world [m]")
+    p.add_argument("--policy", choices=POLICIES, default="cyclopean", help="redundancy policy (default cyclopean)")
+    p.add_argument(
+        "--q-current",
+        nargs="+",
+        type=float,
+        metavar="Q",
+        help="current readings [rad]/[m], one per joint in URDF order (default: middle of the limits)",
+    )
+    p.add_argument(
+        "--viewing-distance",
+        type=float,
+        default=DEFAULT_VIEWING_DISTANCE,
+        help=f"use-table policy: cyclopean point to target [m] (default {DEFAULT_VIEWING_DISTANCE})",
+    )
+    p.add_argument(
+        "--cameras", nargs=2, default=list(DEFAULT_CAMERAS), metavar=("LEFT", "RIGHT"), help="camera optical frames"
+    )
+    p.add_argument("--json", action="store_true", help="print the solution as JSON (SI units)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.validation.gaze import solver_for
+
+    if not (math.isfinite(args.viewing_distance) and args.viewing_distance > 0):
+        raise ConfigurationError(f"--viewing-distance must be a positive number of metres, got {args.viewing_distance}")
+    solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
+    sol = solver.solve(args.target, args.q_current, args.policy)
+    if args.json:
+        print(json.dumps(sol.to_json(), indent=2))
+        return 0 if sol.reachable else 1
+    t = ", ".join(f"{v:.4f}" for v in sol.target)
+    print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")
+    kinds = solver.joint_kinds
+    for name, v in sol.joints.items():
+        shown = f"{math.degrees(v):10.4f} deg" if kinds[name] == "revolute" else f"{v:10.6f} m"
+        flag = "  (at limit)" if name in sol.at_limit else ""
+        print(f"  {name:16s} {shown}{flag}")
+    e, m = sol.pointing_error, sol.miss_distance
+    print(f"pointing error: left {e[0]:.3g} rad, right {e[1]:.3g} rad")
+    print(f"miss distance:  left {m[0]:.3g} m, right {m[1]:.3g} m")
+    fix = "none (axes parallel)" if sol.fixation_point is None else "(" + ", ".join(f"{v:.4f}" for v in sol.fixation_point) + ") m"
+    print(f"fixation point: {fix}; vergence {math.degrees(sol.vergence):.4f} deg")
+    return 0 if sol.reachable else 1
