@@ -53,7 +53,9 @@ WINDOW_MARGIN = 3  # [px] the centroid window extends this far beyond the thresh
 LINK_FACTOR = 1.6  # clustering links blobs closer than this x (pitch / radius) x blob radius
 MATCH_TOL = 0.25  # [-] max homography residual / smallest projected circle spacing
 MARKER_TOL = 0.35  # [-] max |log(area / predicted area)| of any circle for an accepted match
-MAX_EPIPOLAR_PX = 2.0  # [px] left/right detections disagreeing more than this are refused
+MAX_EPIPOLAR_PX = 1.0  # [px] left/right detections disagreeing more than this are refused
+MAX_PNP_RMS_PX = 0.5  # [px] a target pose reprojecting worse (RMS) is refused (wrong intrinsics)
+MAX_FIT_RMS = 1.0e-3  # [m] a plate layout fitting its triangulated circles worse is refused (2x the paper's 0.5 mm)
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
 
 
@@ -222,20 +224,20 @@ def _clusters(uv: Array, radius: Array, link_ratio: float) -> list[list[int]]:
     return sorted(groups.values(), key=lambda g: -len(g))
 
 
-def _split(uv: Array, group: list[int], k: int) -> list[list[int]]:
-    """Split a group of points (indices into ``uv``) into ``k`` groups at the ``k - 1`` longest
-    edges of its minimum spanning tree (single linkage cut at its largest gaps)."""
-    from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+def _split(uv: Array, group: list[int], k: int, size: int) -> list[list[int]]:
+    """Candidate plates in a group of points that holds ``k`` touching plates of ``size`` circles:
+    k-means centres (seeded, so reproducible), each with the ``size`` points nearest to it.
+    Candidates may overlap; identification decides which fit."""
+    from scipy.cluster.vq import kmeans2
 
     g = np.array(group)
-    d = np.linalg.norm(uv[g][:, None] - uv[g][None], axis=-1)
-    mst = minimum_spanning_tree(d).toarray()
-    edges = np.argwhere(mst > 0)
-    order = np.argsort(mst[mst > 0])[::-1]
-    for e in edges[order[: k - 1]]:
-        mst[e[0], e[1]] = 0.0
-    _, lab = connected_components(mst, directed=False)
-    return [g[lab == c].tolist() for c in range(lab.max() + 1)]
+    pts = uv[g]
+    centres, _ = kmeans2(pts, k, minit="++", seed=0)
+    out = []
+    for c in centres:
+        near = np.argsort(np.linalg.norm(pts - c, axis=1))[:size]
+        out.append(sorted(g[near].tolist()))
+    return out
 
 
 def _strict_hull(pts: Array, min_turn_deg: float = 12.0) -> list[int]:
@@ -379,6 +381,7 @@ def detect_plates(
     Dm = np.asarray(D, dtype=float)
     candidates: dict[str, list[tuple[PlateMatch, float]]] = {d.name: [] for d in designs}
     notes: dict[str, list[str]] = {d.name: [] for d in designs}
+    ambiguous: set[str] = set()
     for dark in sorted({d.dark_dots for d in designs}):
         group_designs = [d for d in designs if d.dark_dots == dark]
         blobs = find_blobs(img, dark=dark)
@@ -393,11 +396,16 @@ def detect_plates(
         ideal = undistort_to_pixels(uv, Km, Dm)
         ratio = max(_pitch(d) / float(np.min(d.radii)) for d in group_designs)
         n_needed = {d.n_circles for d in group_designs}
+        clusters = _clusters(ideal, rad, LINK_FACTOR * ratio)
         groups: list[list[int]] = []
-        for grp in _clusters(ideal, rad, LINK_FACTOR * ratio):
-            # Plates that touch in the image form one group: cut it at its widest gaps.
-            k = next((len(grp) // n for n in sorted(n_needed) if len(grp) > n and len(grp) % n == 0), 1)
-            groups.extend(_split(ideal, grp, k) if k > 1 else [grp])
+        for grp in clusters:
+            groups.append(grp)
+            # Plates that touch in the image form one group: also try it split into plates.
+            for n in sorted(n_needed):
+                k = int(round(len(grp) / n))
+                if len(grp) > n and k >= 2:
+                    groups.extend(_split(ideal, grp, k, n))
+        groups = [list(t) for t in dict.fromkeys(tuple(sorted(g)) for g in groups)]  # no duplicates
         for grp in groups:
             g = np.array(grp)
             for d in group_designs:
@@ -409,6 +417,7 @@ def detect_plates(
                 if best is None:
                     if n_ok > 1:
                         notes[d.name].append(f"{at}: {n_ok} circle orderings fit equally (marker circle not distinguishable)")
+                        ambiguous.add(d.name)
                     elif why:
                         notes[d.name].append(f"{at}: {why}")
                     elif fits:
@@ -420,7 +429,7 @@ def detect_plates(
                     notes[d.name].append(f"{at}: a circle touches the image border")
                     continue
                 candidates[d.name].append((PlateMatch(d.name, uv[idx], ideal[idx], H, rms, score), score))
-        sizes = [len(c) for c in groups]
+        sizes = [len(c) for c in clusters]
         for d in group_designs:
             if not candidates[d.name]:
                 partial = [s for s in sizes if 3 <= s < d.n_circles]
@@ -437,7 +446,8 @@ def detect_plates(
         elif len(c) > 1:
             out[d.name] = PlateAmbiguousError(image_name, d.name, f"{len(c)} groups of circles match this plate")
         else:
-            out[d.name] = PlateNotFoundError(image_name, d.name, "; ".join(dict.fromkeys(notes[d.name])) or "not found")
+            kind = PlateAmbiguousError if d.name in ambiguous else PlateNotFoundError
+            out[d.name] = kind(image_name, d.name, "; ".join(dict.fromkeys(notes[d.name])) or "not found")
     return out
 
 
@@ -516,6 +526,8 @@ def stereo_plate_poses(
     *,
     names: tuple[str, str] = ("left", "right"),
     correct_bias: bool = True,
+    max_epipolar_px: float = MAX_EPIPOLAR_PX,
+    max_fit_rms: float = MAX_FIT_RMS,
 ) -> dict[str, StereoPlatePose | DetectionError]:
     """Detect every plate in a stereo pair and estimate ``T_world_plate`` (world = left camera).
 
@@ -526,6 +538,9 @@ def stereo_plate_poses(
         designs: The plates.
         names: The two images' names for messages (e.g. file paths).
         correct_bias: Remove the predicted ellipse-centre offset (see the module docstring).
+        max_epipolar_px: Refuse a plate whose triangulated circles reproject worse (RMS) [px].
+        max_fit_rms: Refuse a plate whose layout fits its triangulated circles worse (RMS) [m].
+            Both catch a wrong rig file or swapped images, which otherwise give plausible poses.
 
     Returns:
         Per plate name, the pose or the :class:`DetectionError` saying why not.
@@ -559,12 +574,20 @@ def stereo_plate_poses(
             T, p, rms = _pose_from_uv(rig, d, uv_l, uv_r)
         pl, pr = rig.project(p)  # type: ignore[attr-defined]
         epi = float(np.sqrt(np.mean(np.concatenate([np.sum((pl - uv_l) ** 2, 1), np.sum((pr - uv_r) ** 2, 1)]))))
-        if epi > MAX_EPIPOLAR_PX:
+        if epi > max_epipolar_px:
             out[d.name] = InconsistentDetectionError(
                 f"{names[0]} + {names[1]}",
                 d.name,
                 f"left and right circle centres disagree by {epi:.2f} px RMS after triangulation "
-                f"(> {MAX_EPIPOLAR_PX} px): wrong rig file, or left/right images swapped?",
+                f"(> {max_epipolar_px} px): wrong rig file, or left/right images swapped?",
+            )
+            continue
+        if rms > max_fit_rms:
+            out[d.name] = InconsistentDetectionError(
+                f"{names[0]} + {names[1]}",
+                d.name,
+                f"the plate layout fits the triangulated circles with {rms * 1e3:.2f} mm RMS "
+                f"(> {max_fit_rms * 1e3:.2f} mm): wrong rig file (baseline, units), or left/right images swapped?",
             )
             continue
         # The printed face must point towards the left camera (origin of world).
@@ -620,7 +643,7 @@ def target_pose(
     *,
     image_name: str = "image",
     correct_bias: bool = True,
-    max_rms_px: float = MAX_EPIPOLAR_PX,
+    max_rms_px: float = MAX_PNP_RMS_PX,
 ) -> TargetPose | DetectionError:
     """``T_camera_target`` of a disk target in one image (``cv2.solvePnP``, IPPE then LM).
 

@@ -140,8 +140,6 @@ class PlateDesign:
 PLATE_CIRCLE_RADIUS = 0.005  # [m] the circles of the stage-1 plates
 PLATE_MARKER_RADIUS = 0.0065  # [m] the marker circle of a stage-1 plate
 PLATE_MARGIN = 0.01  # [m] plate edge beyond the outermost circle centres
-TARGET_DISK_RADIUS_FRACTION = 0.3  # stage-2 target: disk radius / grid pitch
-TARGET_MARKER_SCALE = 1.4  # stage-2 target: marker disk radius / disk radius
 
 
 def plate_design(
@@ -196,29 +194,41 @@ def robot_plate_designs(frames: Sequence[object]) -> list[PlateDesign]:
     return out
 
 
-def target_design(layout: ArrayLike, *, name: str = "target", marker_index: int = 0) -> PlateDesign:
-    """The stage-2 target: light disks on a black plate, disk radius 0.3 x the grid pitch.
+def target_design(
+    layout: ArrayLike | None = None,
+    *,
+    name: str = "target",
+    radius: float | None = None,
+    marker_index: int | None = None,
+    marker_radius: float | None = None,
+    size: tuple[float, float] | None = None,
+) -> PlateDesign:
+    """The stage-2 target: light disks on a black plate (Shih et al. Fig. 9).
+
+    Every argument defaults to the target of :mod:`cpc2urdf.identification.stage2` (5 x 5 disks,
+    40 mm pitch, 10 mm disks, a 14 mm marker disk at index 0, a 240 mm square plate).
 
     Args:
-        layout: Disk centres in the target frame [m], shape (K, 3) (e.g. the 5 x 5 grid).
+        layout: Disk centres in the target frame [m], shape (K, 3).
         name: Frame name.
-        marker_index: The disk drawn 1.4 x larger (a corner, so the grid's 4-fold symmetry is
-            broken and ``T_camera_target`` has a unique orientation).
+        radius: Disk radius [m].
+        marker_index: The enlarged disk (breaks the grid's 4-fold symmetry, so
+            ``T_camera_target`` has a unique orientation).
+        marker_radius: Its radius [m].
+        size: Plate outline (x, y) [m], centred on the layout's bounding box.
     """
-    lay = np.asarray(layout, dtype=float)
-    d = np.linalg.norm(lay[:, None, :2] - lay[None, :, :2], axis=-1)
-    pitch = float(np.min(d[d > 0]))
-    r = TARGET_DISK_RADIUS_FRACTION * pitch
-    return plate_design(
-        name,
-        lay,
-        marker_index=marker_index,
-        radius=r,
-        marker_radius=TARGET_MARKER_SCALE * r,
-        margin=pitch,
-        plate_level=0.08,
-        dot_level=0.9,
-    )
+    from cpc2urdf.identification import stage2
+
+    lay = stage2.TARGET_LAYOUT if layout is None else np.asarray(layout, dtype=float)
+    r = stage2.TARGET_DISK_RADIUS if radius is None else radius
+    mi = stage2.TARGET_MARKER_INDEX if marker_index is None else marker_index
+    mr = stage2.TARGET_MARKER_RADIUS if marker_radius is None else marker_radius
+    sx, sy = stage2.TARGET_SIZE if size is None else size
+    radii = np.full(len(lay), r)
+    radii[mi] = mr
+    cx, cy = (lay[:, :2].min(axis=0) + lay[:, :2].max(axis=0)) / 2
+    outline = (cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2)
+    return PlateDesign(name, lay, radii, outline, plate_level=0.08, dot_level=0.9, marker_index=mi)
 
 
 # ---- rendering ----------------------------------------------------------------------------------
@@ -385,6 +395,55 @@ def circle_centres_px(view: PinholeView, design: PlateDesign, T_world_plate: Arr
     return view.project(p_world)
 
 
+def hidden_circles(
+    view: PinholeView, plates: Sequence[tuple[PlateDesign, ArrayLike]], *, margin_px: float = 3.0
+) -> dict[str, int]:
+    """How many circles of each plate the camera cannot measure cleanly.
+
+    A circle counts as hidden when it is behind the camera, within ``margin_px`` plus its radius
+    of the image border, or within that distance of the outline of a plate drawn in front of it
+    (the renderer's depth order), or when its plate shows the camera its back.
+
+    Args:
+        view: The camera.
+        plates: (design, ``T_world_plate``) pairs.
+        margin_px: Clearance required [px].
+
+    Returns:
+        Plate name -> number of hidden circles (0 .. K).
+    """
+    w, h = view.image_size
+    items = [(d, np.asarray(T, dtype=float)) for d, T in plates]
+    depth = [float((view.T_camera_world @ T)[2, 3]) for _, T in items]
+    polys = []
+    for d, T in items:
+        T_cp = view.T_camera_world @ T
+        c = d.outline_corners() @ T_cp[:3, :3].T + T_cp[:3, 3]
+        s = np.linspace(0.0, 1.0, 17)[:, None]
+        edge = np.concatenate([c[i] * (1 - s) + c[(i + 1) % 4] * s for i in range(4)])
+        ok = bool(np.all(edge[:, 2] > NEAR_CLIP))
+        polys.append(PinholeView(view.K, view.D, view.image_size).project(edge).astype(np.float32) if ok else None)
+    out: dict[str, int] = {}
+    for a, (d, T) in enumerate(items):
+        T_cp = view.T_camera_world @ T
+        pc = d.layout @ T_cp[:3, :3].T + T_cp[:3, 3]
+        if np.any(pc[:, 2] < NEAR_CLIP) or -T_cp[:3, 3] @ T_cp[:3, 2] <= 0:
+            out[d.name] = d.n_circles
+            continue
+        uv = view.project(d.layout @ T[:3, :3].T + T[:3, 3])
+        r_px = d.radii * view.K[0, 0] / pc[:, 2]
+        clear = r_px + margin_px
+        hidden = (uv[:, 0] < clear) | (uv[:, 0] > w - 1 - clear) | (uv[:, 1] < clear) | (uv[:, 1] > h - 1 - clear)
+        for b, poly in enumerate(polys):
+            if b == a or poly is None or depth[b] >= depth[a]:
+                continue
+            for i in range(d.n_circles):
+                dist = cv2.pointPolygonTest(poly, (float(uv[i, 0]), float(uv[i, 1])), True)
+                hidden[i] |= dist > -clear[i]
+        out[d.name] = int(hidden.sum())
+    return out
+
+
 def write_image(path: object, image: NDArray[np.uint8]) -> None:
     """Write an image losslessly (PNG) and atomically, raising ``OutputError`` on failure."""
     import os
@@ -411,6 +470,7 @@ __all__ = [
     "PinholeView",
     "PlateDesign",
     "circle_centres_px",
+    "hidden_circles",
     "plate_design",
     "render_view",
     "robot_plate_designs",

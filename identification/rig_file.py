@@ -259,4 +259,75 @@ def save_rig(rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m") 
     return p
 
 
-__all__ = ["ALIASES", "load_rig", "save_rig"]
+# ---- single cameras (stage 2: the head's cameras) ----------------------------------------------------
+
+CAMERA_ALIASES: dict[str, tuple[str, ...]] = {
+    "K": ("K", "camera_matrix", "cameraMatrix", "M"),
+    "D": ("D", "distortion_coefficients", "distCoeffs", "dist_coeffs"),
+}
+
+
+def load_camera(path: str | os.PathLike[str]) -> tuple[Array, Array, tuple[int, int]]:
+    """Read one camera's intrinsics from an OpenCV FileStorage file (``cv2.calibrateCamera``).
+
+    Keys: ``K`` (or ``camera_matrix``, as OpenCV's calibration sample writes, or
+    ``cameraMatrix``), ``D`` (or ``distortion_coefficients``, ``distCoeffs``) and the image size
+    (``image_size`` or ``image_width`` + ``image_height``).
+
+    Returns:
+        ``(K, D, (width, height))``: K (3, 3) [px], D (5,).
+
+    Raises:
+        InputFileError: As :func:`load_rig`, naming the file and the key.
+    """
+    p = Path(path)
+    fs = _open(p)
+    try:
+        found = {}
+        for key, names in CAMERA_ALIASES.items():
+            node = None
+            for name in names:
+                n = fs.getNode(name)
+                if not n.empty() and not n.isNone():
+                    node = (name, n)
+                    break
+            if node is None:
+                raise InputFileError(p, f"missing key {' or '.join(names)}")
+            found[key] = (node[0], _matrix(node[1], node[0], p))
+        kname, K = found["K"]
+        K = _shaped(K, kname, (3, 3), p)
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or np.any(K[2] != [0.0, 0.0, 1.0]) or K[1, 0] != 0:
+            raise InputFileError(p, f"{kname} is not a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        D = _distortion(found["D"][1], found["D"][0], p)
+        size = _image_size(fs, p)
+    finally:
+        fs.release()
+    if size is None:
+        raise InputFileError(p, "missing key image_size ([width, height] in pixels) or image_width + image_height")
+    return K, D, size
+
+
+def save_camera(K: Array, D: Array, image_size: tuple[int, int], path: str | os.PathLike[str]) -> Path:
+    """Write one camera's intrinsics (``K``, ``D``, ``image_size``) as FileStorage YAML, atomically."""
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=".yaml", dir=folder)
+    os.close(fd)
+    try:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        fs.write("K", np.asarray(K, dtype=np.float64))
+        fs.write("D", np.asarray(D, dtype=np.float64).reshape(1, -1))
+        fs.write("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32))
+        fs.release()
+        os.replace(tmp, p)
+    except (OSError, cv2.error) as e:
+        raise OutputError(f"{p}: cannot write ({e})") from e
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return p
+
+
+__all__ = ["ALIASES", "CAMERA_ALIASES", "load_camera", "load_rig", "save_camera", "save_rig"]

@@ -25,6 +25,7 @@ COMMANDS = (
     "bench",
     "study",
     "simulate",
+    "measure",
     "identify",
     "accuracy",
     "handeye",
