@@ -69,6 +69,9 @@ OUTLIER_ALPHA = 1e-4  # [-]
 # loss turns from quadratic to robust around this norm, the 95 % point of a good pose.
 ROBUST_SCALE = 3.55  # [-]
 ROBUST_LOSSES = ("soft_l1", "cauchy", "huber")
+# Re-centre the chart when a local axis update exceeds this (|(db_x, db_y)| ~ sin of the turn).
+RECENTRE_TILT = 0.3  # [-]
+MAX_RECENTRES = 4
 # Solver tolerances (relative): tight enough to recover noise-free data to ~1e-12 m.
 SOLVER_TOL = 1e-12  # [-]
 
@@ -319,6 +322,12 @@ def _robust_gain(loss: str, z: Array) -> tuple[Array, Array]:
     return g, dg2 / (2.0 * g)
 
 
+def _max_tilt(chart: Parametrization, x: Array) -> float:
+    """Largest local axis turn ``|(db_x, db_y)|`` of any block of ``x``."""
+    tilts = [np.hypot(x[b.start], x[b.start + 1]) for b in chart.blocks]
+    return float(max(tilts)) if tilts else 0.0
+
+
 def _solve(problem: _Problem, x0: Array, max_nfev: int | None) -> Any:
     # MINPACK's Levenberg-Marquardt: no BLAS-threaded SVD per step (trf's SVD of the 660 x 32
     # Jacobian costs 10-40x more on a loaded machine), and robust losses are folded into the
@@ -393,13 +402,21 @@ def refine(
     def problem_for(use: dict[str, NDArray[np.bool_]]) -> _Problem:
         return _Problem(chart, q, poses, use, sigma_t, sigma_r)
 
-    x = np.zeros(chart.n_params)
     nfev = 0
     outliers: list[Outlier] = []
     use = dict(seen)
-    if robust:
-        sol = _solve(problem_for(use).robustified(robust_loss, ROBUST_SCALE), x, max_nfev)
+    # First fit; re-centre the chart on the current estimate while it has turned some axis by
+    # more than RECENTRE_TILT (a start far from the robot), so the local updates stay small.
+    x = np.zeros(chart.n_params)
+    for _ in range(MAX_RECENTRES + 1):
+        first = problem_for(use)
+        sol = _solve(first.robustified(robust_loss, ROBUST_SCALE) if robust else first, x, max_nfev)
         x, nfev = sol.x, nfev + sol.nfev
+        if _max_tilt(chart, x) < RECENTRE_TILT:
+            break
+        chart = Parametrization(chart.model_from_vector(x), frames)
+        x = np.zeros(chart.n_params)
+    if robust:
         all_poses = problem_for(seen)
         rejected: set[tuple[str, int]] = set()
         for it in range(5):  # reject, refit plainly, re-test everything; stop when stable
@@ -424,9 +441,6 @@ def refine(
             outliers.append(
                 Outlier(k, str(labels[k]), f, float(np.linalg.norm(dp[i])), float(np.linalg.norm(dr[i])), float(pv[f][i]))
             )
-    else:
-        sol = _solve(problem_for(use), x, max_nfev)
-        x, nfev = sol.x, nfev + sol.nfev
 
     refined = chart.model_from_vector(x)
     # Everything below is about the refined model in its own chart (x = 0 there).

@@ -59,6 +59,15 @@ def test_noise_free_data_recovered_exactly(head, design):
         np.testing.assert_allclose(res.model.fk(qh, [f])[f], truth.fk(qh, [f])[f], atol=FK_AGREEMENT_TOL)
 
 
+def test_far_start_converges_by_recentring_the_chart(head):
+    rng = np.random.default_rng(8)
+    truth = perturbed(head, rng)
+    ms = measure(truth, random_q(truth, 40, rng), rng, 0.0, 0.0)
+    start = perturbed(truth, rng, 0.1, 0.5)  # every placement 10 cm / ~30 deg off
+    res = refine(start, ms, SIGMA_T, SIGMA_R)
+    assert res.translation_rms < 1e-9 and res.rotation_rms < 1e-9
+
+
 def test_missing_poses_are_skipped(head):
     rng = np.random.default_rng(2)
     truth = perturbed(head, rng)
