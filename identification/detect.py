@@ -194,8 +194,8 @@ def undistort_to_pixels(uv: ArrayLike, K: ArrayLike, D: ArrayLike) -> Array:
     Dm = np.asarray(D, dtype=float).ravel()
     if not np.any(Dm):
         return pts.reshape(-1, 2).copy()
-    out = cv2.undistortPointsIter(pts, Km, Dm, None, Km, _UNDISTORT_CRITERIA)
-    return out.reshape(-1, 2)
+    out = cv2.undistortPointsIter(pts, Km, Dm, None, Km, _UNDISTORT_CRITERIA)  # type: ignore[call-overload]
+    return np.asarray(out, dtype=float).reshape(-1, 2)
 
 
 # ---- grouping and identification -----------------------------------------------------------------
@@ -242,7 +242,7 @@ def _split(uv: Array, group: list[int], k: int, size: int) -> list[list[int]]:
 
 def _strict_hull(pts: Array, min_turn_deg: float = 12.0) -> list[int]:
     """Indices of the convex-hull corners of ``pts`` (N, 2), dropping near-collinear ones."""
-    hull = cv2.convexHull(pts.astype(np.float32), returnPoints=False).ravel().tolist()
+    hull: list[int] = [int(i) for i in cv2.convexHull(pts.astype(np.float32), returnPoints=False).ravel()]
     changed = True
     while changed and len(hull) > 3:
         changed = False
@@ -308,13 +308,14 @@ def _match_design(design: PlateDesign, uv_ideal: Array, area: Array) -> tuple[li
             H0, _ = cv2.findHomography(L[iL], dst, 0)
             if H0 is None:
                 continue
-            pred = _apply_h(H0, L)
+            pred = _apply_h(np.asarray(H0, dtype=float), L)
             cost = np.linalg.norm(pred[:, None] - uv_ideal[None], axis=-1)
             rows, cols = linear_sum_assignment(cost)
             perm = cols[np.argsort(rows)]
-            H, _ = cv2.findHomography(L, uv_ideal[perm], 0)
-            if H is None:
+            H_, _ = cv2.findHomography(L, uv_ideal[perm], 0)
+            if H_ is None:
                 continue
+            H = np.asarray(H_, dtype=float)
             pred = _apply_h(H, L)
             res = np.linalg.norm(pred - uv_ideal[perm], axis=1)
             dp = np.linalg.norm(pred[:, None] - pred[None], axis=-1)

@@ -227,7 +227,7 @@ def read_grey(path: Path) -> NDArray[np.uint8]:
         img = (img / 257.0).round().astype(np.uint8)
     elif img.dtype != np.uint8:
         raise InputFileError(path, f"unsupported pixel type {img.dtype} (expected 8 or 16 bit)")
-    return img
+    return np.asarray(img, dtype=np.uint8)
 
 
 class RecordError(DetectionError):

@@ -66,7 +66,7 @@ class PinholeView:
         t = self.T_camera_world[:3, 3]
         rvec, _ = cv2.Rodrigues(R)
         uv, _ = cv2.projectPoints(p, rvec, t, self.K, _dist(self.D))
-        return uv.reshape(-1, 2)
+        return np.asarray(uv, dtype=float).reshape(-1, 2)
 
     def undistort_pixels(self, uv: ArrayLike) -> Array:
         """Normalised image coordinates (x/z, y/z) of distorted pixels, shape (N, 2)."""
@@ -78,8 +78,8 @@ class PinholeView:
             x = (pts[:, 0, 0] - K[0, 2] - K[0, 1] * (pts[:, 0, 1] - K[1, 2]) / K[1, 1]) / K[0, 0]
             y = (pts[:, 0, 1] - K[1, 2]) / K[1, 1]
             return np.stack([x, y], axis=1)
-        out = cv2.undistortPointsIter(pts, self.K, _dist(self.D), None, None, _UNDISTORT_CRITERIA)
-        return out.reshape(-1, 2)
+        out = cv2.undistortPointsIter(pts, self.K, _dist(self.D), None, None, _UNDISTORT_CRITERIA)  # type: ignore[call-overload]
+        return np.asarray(out, dtype=float).reshape(-1, 2)
 
 
 def _dist(D: Array) -> Array:
@@ -188,7 +188,7 @@ def robot_plate_designs(frames: Sequence[object]) -> list[PlateDesign]:
     for f in frames:
         if getattr(f, "kind", None) != "plate" or getattr(f, "layout", None) is None:
             continue
-        lay = np.asarray(f.layout, dtype=float)  # type: ignore[attr-defined]
+        lay = np.array(f.layout, dtype=np.float64)  # type: ignore[attr-defined]
         out.append(plate_design(f.name, lay, marker_index=(k + 1) % len(lay)))  # type: ignore[attr-defined]
         k += 1
     return out
@@ -234,7 +234,7 @@ def target_design(
 # ---- rendering ----------------------------------------------------------------------------------
 
 
-def _plane_coords(view: PinholeView, T_camera_plate: Array, uv: Array) -> tuple[Array, Array]:
+def _plane_coords(view: PinholeView, T_camera_plate: Array, uv: Array) -> tuple[Array, NDArray[np.bool_]]:
     """Plate-frame (x, y) [m] of the points seen at pixels ``uv`` (N, 2), and a validity mask."""
     xn = view.undistort_pixels(uv)
     d = np.concatenate([xn, np.ones((xn.shape[0], 1))], axis=1)  # rays in camera frame
@@ -250,7 +250,7 @@ def _plane_coords(view: PinholeView, T_camera_plate: Array, uv: Array) -> tuple[
     return xy, ok
 
 
-def _circle_distances(design: PlateDesign, xy: Array) -> tuple[Array, Array]:
+def _circle_distances(design: PlateDesign, xy: Array) -> tuple[Array, NDArray[np.intp]]:
     """Per point (N, 2): signed distance [m] to the nearest circle edge (< 0 inside) and that
     circle's index. Circles are smaller than half their spacing, so the nearest edge is the
     nearest (radius-corrected) circle's."""
@@ -266,7 +266,7 @@ def _circle_distances(design: PlateDesign, xy: Array) -> tuple[Array, Array]:
     return dist, idx
 
 
-def _outline_distance(design: PlateDesign, xy: Array) -> tuple[Array, Array]:
+def _outline_distance(design: PlateDesign, xy: Array) -> tuple[NDArray[np.bool_], Array]:
     """Per point (N, 2): inside the plate outline (bool) and distance [m] to its nearest edge
     (exact near the edges, a lower bound elsewhere)."""
     x0, x1, y0, y1 = design.outline
@@ -319,8 +319,8 @@ def _draw_plate(
     alpha = inside.astype(float)
     premult = alpha * level
     # Plate-plane size of a pixel: d(x, y)/d(u, v) by central differences.
-    gx = np.stack(np.gradient(xy[:, 0].reshape(us.shape)), axis=-1).reshape(-1, 2)
-    gy = np.stack(np.gradient(xy[:, 1].reshape(us.shape)), axis=-1).reshape(-1, 2)
+    gx = np.stack(list(np.gradient(xy[:, 0].reshape(us.shape))), axis=-1).reshape(-1, 2)
+    gy = np.stack(list(np.gradient(xy[:, 1].reshape(us.shape))), axis=-1).reshape(-1, 2)
     J = np.stack([gx[:, ::-1], gy[:, ::-1]], axis=1)  # rows: x, y; columns: d/du, d/dv
     scale = np.sqrt(np.sum(J**2, axis=(1, 2)))  # Frobenius >= the larger singular value
     near = ok & (np.minimum(d_outline, np.abs(d_circle)) <= scale)

@@ -178,7 +178,7 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
                 arrays[key] = _distortion(m, name, p)
             elif key == "R":
                 if m.size == 3:  # a Rodrigues vector
-                    m = cv2.Rodrigues(m.reshape(3, 1))[0]
+                    m = np.asarray(cv2.Rodrigues(m.reshape(3, 1))[0], dtype=float)
                 R = _shaped(m, name, (3, 3), p)
                 defect = float(np.max(np.abs(R.T @ R - np.eye(3))))
                 if defect > RIG_ROTATION_TOL or np.linalg.det(R) <= 0:
