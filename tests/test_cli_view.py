@@ -168,3 +168,10 @@ def test_serves_until_interrupted(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
+
+
+def test_bad_input_in_serve_mode_fails_before_serving(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["view", "iis_head", "--target", "1", "1", "1", "--cameras", "left", "right"]) == 2
+    captured = capsys.readouterr()
+    assert "unknown frame 'left'" in captured.err and len(captured.err.strip().splitlines()) == 1
+    assert "http" not in captured.out  # no server was started

@@ -12,7 +12,7 @@ import argparse
 import math
 from typing import Any
 
-from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.errors import ConfigurationError, OutputError
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -135,7 +135,9 @@ def _serve(robot: Any, options: dict[str, Any], *, sweep: bool) -> int:
 
     import meshcat
 
-    from cpc2urdf.validation.view import build_view
+    from cpc2urdf.validation.view import build_view, static_visualizer
+
+    build_view(static_visualizer(), robot, sweep=False, **options)  # bad input: fail before serving
 
     def stop(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt
@@ -143,7 +145,12 @@ def _serve(robot: Any, options: dict[str, Any], *, sweep: bool) -> int:
     # Ctrl-C and `kill` both stop the server cleanly (a background job may start with SIGINT
     # ignored, and SIGTERM would otherwise skip the cleanup and orphan meshcat's server).
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    vis = meshcat.Visualizer()  # starts meshcat's server on localhost; prints the URL
+    try:
+        vis = meshcat.Visualizer()  # starts meshcat's server on localhost; prints the URL
+    except (RuntimeError, OSError) as e:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        raise OutputError(f"cannot start meshcat's server ({e})") from e
     try:
         summary = build_view(vis, robot, sweep=sweep, **options)
         print(summary.format())
