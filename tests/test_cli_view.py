@@ -165,9 +165,13 @@ def test_serves_until_interrupted(tmp_path: Path) -> None:
         with pytest.raises(OSError):
             urllib.request.urlopen(url, timeout=2)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+        if proc.poll() is None:  # SIGTERM first: the command then stops meshcat's server too
+            proc.terminate()
+            try:
+                proc.communicate(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()
 
 
 def test_bad_input_in_serve_mode_fails_before_serving(capsys: pytest.CaptureFixture[str]) -> None:
