@@ -53,7 +53,7 @@ def user_robot(tmp_path: Path) -> tuple[CPCModel, Path, dict[str, Any]]:
 def test_user_robot_identifies_end_to_end(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
     truth, tmp, _ = user_robot
     out = tmp / "model.json"
-    assert main(["identify", str(tmp / "measurements.json"), "-o", str(out)]) == 0
+    assert main(["identify", str(tmp / "measurements.json"), "-o", str(out), "--method", "closed-form"]) == 0
     text = capsys.readouterr().out
     assert "closed-form identification of 'my_arm'" in text and "dropped" in text  # camera: no nominal
     model = load_model(out)
@@ -114,3 +114,18 @@ def test_unknown_method_and_missing_file(tmp_path: Path, capsys) -> None:  # typ
     assert main(["identify", "nope.json", "-o", str(tmp_path / "m.json"), "--method", "magic"]) == 2
     assert main(["identify", str(tmp_path / "nope.json"), "-o", str(tmp_path / "m.json")]) == 2
     assert "nope.json: no such file" in capsys.readouterr().err
+
+
+def test_default_method_is_refined_and_exact_on_noise_free_data(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
+    truth, tmp, _ = user_robot
+    out = tmp / "refined.json"
+    assert main(["identify", str(tmp / "measurements.json"), "-o", str(out)]) == 0
+    assert "refined identification of 'my_arm'" in capsys.readouterr().out
+    model = load_model(out)
+    assert "uncertainty" in model.metadata
+    plates = [f.name for f in truth.structure.frames if f.kind == "plate"]
+    s = truth.structure
+    Q = np.random.default_rng(3).uniform(s.lower, s.upper, (50, s.n_joints))
+    A, B = truth.fk(Q, plates), model.fk(Q, plates)
+    for f in plates:
+        assert np.max(np.abs(A[f] - B[f])) < FK_AGREEMENT_TOL

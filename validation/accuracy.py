@@ -40,6 +40,8 @@ class BranchAccuracy:
         max: Largest Euclidean error [m].
         mean_rotation: Mean rotation error [rad].
         max_rotation: Largest rotation error [rad].
+        predicted_rms: RMS Euclidean error [m] that the model's own covariance predicts for these
+            records (None when the model carries no ``uncertainty`` section).
     """
 
     frame: str
@@ -51,6 +53,7 @@ class BranchAccuracy:
     max: float
     mean_rotation: float
     max_rotation: float
+    predicted_rms: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """In mm and degrees, for machines (``cpc2urdf accuracy --json``)."""
@@ -63,6 +66,7 @@ class BranchAccuracy:
             "max_mm": self.max * 1e3,
             "mean_rotation_deg": float(np.degrees(self.mean_rotation)),
             "max_rotation_deg": float(np.degrees(self.max_rotation)),
+            "predicted_rms_mm": None if self.predicted_rms is None else self.predicted_rms * 1e3,
         }
 
 
@@ -75,8 +79,32 @@ def position_errors(model: CPCModel, ms: MeasurementSet, frame: str) -> tuple[Ar
     return e, rotation_error(T[:, :3, :3], ms.poses[frame][ok, :3, :3])
 
 
+def held_out_poses_are_true(ms: MeasurementSet) -> bool:
+    """True when the file says its poses are noise-free truth (``"noise": {"model": "none"}``,
+    as the simulator writes held-out sets); real measurements carry the rig's own noise."""
+    noise = ms.metadata.get("noise")
+    return isinstance(noise, dict) and noise.get("model") == "none"
+
+
+def predicted_rms(model: CPCModel, ms: MeasurementSet, frame: str) -> float | None:
+    """RMS position error [m] the identification's covariance predicts at the records of ``ms``
+    that measured ``frame`` (plus the measuring noise unless the poses are true ones); None if the
+    model has no uncertainty section."""
+    from cpc2urdf.identification.uncertainty import NoUncertaintyError, predicted_position_std
+
+    ok = ms.has_pose(frame)
+    try:
+        std = predicted_position_std(
+            model, ms.q[ok], [frame], measurement_noise=not held_out_poses_are_true(ms)
+        )[frame]
+    except NoUncertaintyError:
+        return None
+    return float(np.sqrt(np.mean(std**2)))
+
+
 def accuracy(model: CPCModel, ms: MeasurementSet) -> dict[str, BranchAccuracy]:
-    """Table 4 for every frame that both the model has and ``ms`` measured.
+    """Table 4 for every frame that both the model has and ``ms`` measured, with the error the
+    model's covariance predicts next to it when the model has one (``identify --method refined``).
 
     Raises:
         DegenerateDataError: The joints differ, or no measured frame is in the model.
@@ -100,6 +128,7 @@ def accuracy(model: CPCModel, ms: MeasurementSet) -> dict[str, BranchAccuracy]:
         out[f] = BranchAccuracy(
             f, len(e), a.mean(axis=0), a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
             float(d.mean()), float(np.sqrt(np.mean(d**2))), float(d.max()), float(r.mean()), float(r.max()),
+            predicted_rms(model, ms, f) if "uncertainty" in model.metadata else None,
         )
     return out
 
@@ -113,8 +142,13 @@ def format_table(report: dict[str, BranchAccuracy]) -> str:
             lines.append(f"  mu_{axis} = {b.mean_abs[k] * 1e3:7.3f} mm   sigma_{axis} = {b.std_abs[k] * 1e3:7.3f} mm")
         lines.append(f"  mean |e| = {b.mean * 1e3:.3f} mm   rms {b.rms * 1e3:.3f} mm   max {b.max * 1e3:.3f} mm")
         lines.append(f"  rotation: mean {np.degrees(b.mean_rotation):.4f} deg   max {np.degrees(b.max_rotation):.4f} deg")
+        if b.predicted_rms is not None:
+            lines.append(
+                f"  predicted rms {b.predicted_rms * 1e3:.3f} mm (identification covariance) "
+                f"vs observed rms {b.rms * 1e3:.3f} mm"
+            )
     lines.append("(mu, sigma: mean and sample standard deviation of the absolute error components in world)")
     return "\n".join(lines)
 
 
-__all__ = ["BranchAccuracy", "accuracy", "format_table", "position_errors"]
+__all__ = ["BranchAccuracy", "accuracy", "format_table", "held_out_poses_are_true", "position_errors", "predicted_rms"]

@@ -1,7 +1,8 @@
 """``cpc2urdf identify measurements.json -o model.json``: identify a robot's CPC model.
 
 Reads stage-1 measurements (``cpc2urdf/measurements@1``), runs an identification method
-(``--method``, default ``closed-form``: Shih et al. sec. 4.2; the registry is
+(``--method``, default ``refined``: the closed form of Shih et al. sec. 4.2, then maximum-likelihood
+refinement of every record, which reaches the Cramér-Rao bound (docs/refinement.md); the registry is
 :data:`cpc2urdf.identification.methods.METHODS`) and writes a model file with the sections
 ``provenance`` (method, data used), ``residuals`` (per record and per branch) and ``notes``.
 """
@@ -27,8 +28,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     p.add_argument("measurements", help="measurement file (cpc2urdf/measurements@1)")
     p.add_argument("-o", "--output", required=True, help="model file to write (atomically)")
-    p.add_argument("--method", choices=sorted(METHODS), default="closed-form",
-                   help="identification method (default closed-form)")
+    p.add_argument("--method", choices=sorted(METHODS), default="refined",
+                   help="identification method (default refined: closed form + maximum-likelihood "
+                   "refinement with covariance; closed-form: Shih et al. sec. 4.2 only)")
     p.add_argument("--robot", help="robot spec/model file or shipped name, instead of the file's 'robot'")
     p.set_defaults(run=run)
 
