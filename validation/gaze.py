@@ -281,7 +281,12 @@ class GazeSolver:
         self._eyes_all = np.concatenate(self._eye_joints)
         self.viewing_distance = float(viewing_distance)
         self._version_sign = self._eye_version_sign()
+        # version = (eye_L - home_L) + s (eye_R - home_R), first eye joint of each side
+        self._version_row = np.zeros(self.n)
+        self._version_row[self._eye_joints[0][0]] = 1.0
+        self._version_row[self._eye_joints[1][0]] = self._version_sign
         self._build_guess_table()
+        self.redundant = self._fixation_is_redundant()
 
     # ---- construction helpers -------------------------------------------------------------------
 
@@ -304,6 +309,31 @@ class GazeSolver:
         J = pin.getJointJacobian(self.model, self.data, int(self._eye_joints[1][0]) + 1, pin.WORLD)
         a1 = J[3:, self._eye_joints[1][0]]
         return 1.0 if float(a0 @ a1) >= 0.0 else -1.0
+
+    def _fixation_is_redundant(self) -> bool:
+        """Whether fixation by neck and eyes leaves an exact null space (e.g. the nominal IIS-head).
+
+        Tested at a converging home posture on the closest point of the two optical axes.
+        A calibrated head whose eyes do not sweep one plane has none: the redundancy policy
+        then has no freedom, and :meth:`solve` goes straight to solving fixation alone.
+        """
+        q = self.home.copy()
+        e0, e1 = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
+        for delta in (0.1, -0.1):
+            q[e0] = np.clip(self.home[e0] - delta, self.lower[e0], self.upper[e0])
+            q[e1] = np.clip(self.home[e1] + self._version_sign * delta, self.lower[e1], self.upper[e1])
+            self._pin.framesForwardKinematics(self.model, self.data, q)
+            o = np.array([self.data.oMf[e.frame_id].translation for e in self._eyes])
+            z = np.array([self.data.oMf[e.frame_id].rotation[:, 2] for e in self._eyes])
+            p = _closest_point(o, z)
+            if p is None:
+                continue
+            st = self._evaluate(q, p)
+            free = self._free("cyclopean")
+            J = st.J[:, free]
+            if np.all((p - o[0]) @ z[0] > 0) and (p - o[1]) @ z[1] > 0:
+                return bool(np.linalg.eigvalsh(J.T @ J)[0] <= NULL_EIGENVALUE)
+        return False
 
     def _build_guess_table(self) -> None:
         """Cyclopean rays over a grid of neck readings, in the frame of the last table link.
@@ -396,10 +426,9 @@ class GazeSolver:
         res: list[float] = []
         if policy in ("cyclopean", "use-table"):
             # version: (eye_L - home_L) + s (eye_R - home_R) = 0, first eye joint of each side
-            iL, iR = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
-            row = np.zeros(n)
-            row[iL] = 1.0
-            row[iR] = self._version_sign
+            row = self._version_row
+            if policy == "cyclopean":
+                return np.array([float(row @ (q - self.home))]), row[None, :]
             rows.append(row)
             res.append(float(row @ (q - self.home)))
         if policy == "use-table":
@@ -542,7 +571,10 @@ class GazeSolver:
             q0 = q_ref.copy()
         else:
             q0 = self._guess(p, q_ref)
-        q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
+        if self.redundant or policy == "use-table":
+            q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
+        else:  # the policy has no freedom to choose with: see _fixation_is_redundant
+            q, it, st = q0, 0, self._evaluate(q0, p)
         if float(st.r @ st.r) > FLOOR_RESIDUAL and it < max_iterations:
             # Phase 2: fixation alone. Reached when the policy's preferred configuration does
             # not fixate: on a calibrated head (fixation has no spare freedom, only a weak
@@ -678,28 +710,35 @@ class GazeSolver:
         Vr = V[:, rng]
         d = d1 = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[rng] + mu))
         if not rng.all():
+            # Null space of fixation (at this damping), in coordinates y: motion V0 @ y.
             V0 = V[:, ~rng]
-            N = V0 @ V0.T  # projector onto the null space of J1
+            exact = lam[~rng] <= NULL_EIGENVALUE
             b = np.flatnonzero(np.isin(act, block)) if block is not None and block.size else _NONE_INT
-            if b.size:  # the null space may not move the blocked joints
-                Nb = N[:, b]
-                N = N - Nb @ np.linalg.pinv(N[np.ix_(b, b)], rcond=1e-9) @ Nb.T
-            if policy is not None:
+            if b.size:
+                # Blocked joints (at a limit) must not move: first trade the fixation step's
+                # motion of them for motion in the exact null space (fixation unchanged to
+                # first order) as far as possible, then keep the policy off them.
+                if exact.any():
+                    Ve = V0[:, exact]
+                    y, *_ = np.linalg.lstsq(Ve[b], -d[b], rcond=1e-9)
+                    d = d + Ve @ y
+                    d1 = d
+                _, sv, Wt = np.linalg.svd(V0[b], full_matrices=True)
+                k = int(np.sum(sv > 1e-9))
+                V0 = V0 @ Wt[k:].T  # null space directions that leave the blocked joints still
+            if policy is not None and V0.shape[1]:
                 r2, J2full = self._secondary(policy, q, q_ref, p, st)
                 if r2.size:
-                    J2 = J2full[:, act]
-                    z, *_ = np.linalg.lstsq(J2 @ N, -(r2 + J2 @ d), rcond=1e-9)
-                    d = d + N @ z
-            exact = lam <= NULL_EIGENVALUE
-            if b.size and exact.any():
-                # keep blocked joints still by trading their motion for motion in the exact
-                # null space (which leaves fixation unchanged to first order), as far as it can
-                V00 = V[:, exact]
-                N0 = V00 @ V00.T
-                Nb = N0[:, b]
-                Pb = np.linalg.pinv(N0[np.ix_(b, b)], rcond=1e-9)
-                d = d - Nb @ (Pb @ d[b])
-                d1 = d1 - Nb @ (Pb @ d1[b])
+                    A2 = J2full[:, act] @ V0
+                    e2 = r2 + J2full[:, act] @ d
+                    if A2.shape[0] == 1 and A2.shape[1] == 1:
+                        a2 = float(A2[0, 0])
+                        y = np.array([-float(e2[0]) * a2 / (a2 * a2 + 1e-24)])
+                    else:
+                        M = A2.T @ A2
+                        M.flat[:: M.shape[0] + 1] += 1e-12
+                        y = -np.linalg.solve(M, A2.T @ e2)
+                    d = d + V0 @ y
         step = np.zeros(self.n)
         step[act] = d
         primary = np.zeros(self.n)
