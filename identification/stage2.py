@@ -347,10 +347,17 @@ class Stage2Result:
 
 
 def camera_errors(estimate: CPCModel, truth: CPCModel, cameras: Sequence[str]) -> dict[str, tuple[float, float]]:
-    """Per camera, the translation [m] and rotation [rad] error of ``T_link_camera``."""
+    """Per camera, the translation [m] and rotation [rad] error of ``X = T_hand_camera``.
+
+    Compared relative to the hand (the plate on the same link), not to the link frame: an
+    identified model's link frames are a gauge choice (the CPC conventions of sec. 2.2) that need
+    not coincide with the truth's, while the plate is a physical, measured frame.
+    """
     out = {}
     for c in cameras:
-        Te, Tt = estimate.frames[c].matrix(), truth.frames[c].matrix()
+        hand = HAND_OF_CAMERA[c]
+        Te = np.linalg.solve(estimate.frames[hand].matrix(), estimate.frames[c].matrix())
+        Tt = np.linalg.solve(truth.frames[hand].matrix(), truth.frames[c].matrix())
         out[c] = (float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])), float(rotation_error(Te[:3, :3], Tt[:3, :3])))
     return out
 

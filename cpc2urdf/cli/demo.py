@@ -1,8 +1,17 @@
 """``cpc2urdf demo``: the whole pipeline on the built-in IIS-head example.
 
-Stages (each writes its artefacts into the output folder and prints one summary line):
+Each stage runs the same command a user would type (through :func:`cpc2urdf.cli.main`), writes
+its artefacts into the output folder, and the demo stops at the first stage that fails:
 
-1. nominal IIS-head (Shih et al. Tables 2-3) -> model file -> URDF -> three-parser cross-check.
+1. nominal IIS-head (Shih et al. Tables 2-3) -> URDF -> three-parser cross-check;
+2. ``simulate``: a "true" head (nominal + geometric errors, camera mounts off by mm and degrees)
+   measured by a stereo rig, one joint at a time (sec. 4.1), plus held-out configurations;
+3. ``identify`` (closed form + maximum-likelihood refinement) -> ``export`` -> ``check``;
+4. ``accuracy``: the paper's Table 4 on the held-out configurations;
+5. stage 2: the head's cameras view a 5x5 disk target, solvePnP, hand-eye (Tsai, as the paper)
+   -> calibrated model with camera frames -> ``export`` -> ``check``;
+6. ``gaze``: fixate targets with the calibrated head (Pinocchio IK);
+7. ``view``: a self-contained meshcat page of the calibrated head fixating a target.
 """
 
 from __future__ import annotations
@@ -16,39 +25,87 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p = subparsers.add_parser(
         "demo",
         help="run the pipeline on the built-in IIS-head example",
-        description="Run the pipeline on the built-in IIS-head example and write every artefact "
-        "into the output folder.",
+        description="Run the pipeline on the built-in IIS-head example (simulate -> identify -> "
+        "export -> check -> accuracy -> hand-eye -> gaze -> view) and write every artefact into "
+        "the output folder.",
     )
     p.add_argument("-o", "--output", default="demo-out", help="output folder (default: demo-out)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random step (default 0)")
     p.set_defaults(run=run)
 
 
-def _step(title: str) -> float:
-    print(f"\n== {title}")
-    return time.perf_counter()
+class _Stages:
+    def __init__(self) -> None:
+        self.k = 0
+        self.t = time.perf_counter()
+
+    def start(self, title: str) -> None:
+        self.k += 1
+        self.t = time.perf_counter()
+        print(f"\n== {self.k}. {title}", flush=True)
+
+    def done(self) -> None:
+        print(f"   ({time.perf_counter() - self.t:.1f} s)", flush=True)
+
+
+def _cli(*argv: str) -> None:
+    from cpc2urdf.cli import main
+    from cpc2urdf.errors import Cpc2UrdfError
+
+    print("$ cpc2urdf " + " ".join(argv), flush=True)
+    code = main(list(argv))
+    if code != 0:
+        raise Cpc2UrdfError(f"demo stage 'cpc2urdf {' '.join(argv)}' ended with exit code {code}")
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from cpc2urdf.errors import OutputError
+    from cpc2urdf.identification.stage2 import perturb_cameras, run_stage2, write_pose_files
     from cpc2urdf.model_file import load_model, save_model
-    from cpc2urdf.urdf import write_urdf
-    from cpc2urdf.validation.crosscheck import cross_check
 
     out = Path(args.output)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise OutputError(f"{out}: cannot create output folder ({e.strerror})") from e
+    d = str(out)
+    seed = str(args.seed)
+    st = _Stages()
 
-    t = _step("1. nominal IIS-head -> model file -> URDF -> cross-check")
-    nominal = load_model("iis_head")
-    save_model(nominal, out / "nominal_model.json")
-    write_urdf(nominal, out / "nominal.urdf", source="iis_head (nominal, Shih et al. Table 3)")
-    report = cross_check(nominal, out / "nominal.urdf", n=100, seed=args.seed)
-    print(report.format())
-    print(f"   wrote {out / 'nominal_model.json'}, {out / 'nominal.urdf'} ({time.perf_counter() - t:.1f}s)")
-    if not report.ok:
-        return 1
-    print(f"\ndemo finished: artefacts in {out}/")
+    st.start("nominal IIS-head -> URDF -> cross-check (Pinocchio, yourdfpy, urdfdom)")
+    _cli("export", "iis_head", "-o", f"{d}/nominal.urdf")
+    _cli("check", f"{d}/nominal.urdf", "--model", "iis_head")
+    st.done()
+
+    st.start("simulate the stage-1 experiment: stereo rig measures both plates, one joint at a time")
+    _cli("simulate", "iis_head", "-o", f"{d}/sim", "--seed", seed)
+    # The simulated real head's camera mounts differ from the drawing by millimetres and degrees;
+    # stage 2 has to find them.
+    truth = perturb_cameras(load_model(f"{d}/sim/truth.json"), np.random.default_rng(args.seed))
+    save_model(truth, f"{d}/sim/truth.json")
+    st.done()
+
+    st.start("identify (closed form + maximum likelihood) -> URDF -> cross-check")
+    _cli("identify", f"{d}/sim/measurements.json", "-o", f"{d}/stage1_model.json")
+    _cli("export", f"{d}/stage1_model.json", "-o", f"{d}/stage1.urdf")
+    _cli("check", f"{d}/stage1.urdf", "--model", f"{d}/stage1_model.json")
+    st.done()
+
+    st.start("held-out accuracy (Shih et al. Table 4)")
+    _cli("accuracy", f"{d}/stage1_model.json", f"{d}/sim/heldout.json")
+    st.done()
+
+    st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, Tsai)")
+    result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed)
+    print(result.summary())
+    paths = write_pose_files(result, out)
+    save_model(result.model, f"{d}/model.json")
+    _cli("handeye", str(paths["camera_left_optical"]), "--method", "all")
+    _cli("export", f"{d}/model.json", "-o", f"{d}/head.urdf")
+    _cli("check", f"{d}/head.urdf", "--model", f"{d}/model.json")
+    st.done()
+
+    print(f"\ndemo finished: the calibrated head is {d}/model.json and {d}/head.urdf")
     return 0
