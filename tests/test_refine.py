@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 import warnings
 
 import numpy as np
@@ -157,16 +156,16 @@ def test_robust_mode_flags_a_wrong_joint_reading(head):
     assert "record 20" in res.summary()
 
 
-def test_m9_refinement_is_fast(head):
+def test_m9_refinement_converges_in_few_evaluations(head):
+    # Speed is measured by `cpc2urdf study crb` (docs/refinement.md), not asserted here: a timing
+    # threshold in a unit test fails on a loaded machine. What the test pins is the work done.
     rng = np.random.default_rng(5)
     truth = perturbed(head, rng)
     ms = measure(truth, protocol_q(truth, 9), rng, SIGMA_T, SIGMA_R)
     start = perturbed(truth, rng, 1e-3, 0.003)
-    refine(start, ms, SIGMA_T, SIGMA_R)  # warm-up (imports, caches)
-    t = time.perf_counter()
     res = refine(start, ms, SIGMA_T, SIGMA_R)
-    assert time.perf_counter() - t < 1.0
     assert res.n_poses == 2 * 55
+    assert res.iterations <= 20
 
 
 def test_bad_input(head):
