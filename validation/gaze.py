@@ -72,6 +72,8 @@ MAX_ITERATIONS = 60
 MAX_STEP = 0.5  # [rad] or [m]: the largest joint change of one Gauss-Newton step
 NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
 BACKTRACKS = 8  # step halvings allowed per iteration
+MIN_TARGET_DISTANCE = 1e-9  # [m]: a target this close to a camera centre cannot be pointed at
+STALL_RESIDUAL = 1e-12  # [-]: fixation alone stops when |r1|^2 above this falls < 5 % in 3 steps
 PHASE2_DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping factor (x |r1|^2) when solving fixation alone
 CONVERGED_RESIDUAL = 1e-30  # [-]: |u_L - e_z|^2 + |u_R - e_z|^2 below which fixation is exact
 FLOOR_RESIDUAL = 1e-22  # [-]: ... or below this once steps stop (pointing error ~1e-11 rad)
@@ -394,7 +396,7 @@ class GazeSolver:
             o = T.translation
             pc = R.T @ (p - o)
             x, y, z = pc.tolist()
-            nrm = math.sqrt(x * x + y * y + z * z) or 1e-300
+            nrm = math.sqrt(x * x + y * y + z * z) or 1e-300  # target on a camera centre: see _answer
             u = pc / nrm
             r[3 * k : 3 * k + 3] = u
             r[3 * k + 2] -= 1.0
@@ -666,6 +668,10 @@ class GazeSolver:
                 slow += 1
                 if slow >= 2:
                     break
+            elif not secondary and rr > STALL_RESIDUAL and rr > 0.95 * prev:
+                slow += 1  # linear convergence to a non-zero minimum: an unreachable target
+                if slow >= 6:
+                    break
             else:
                 slow = 0
             prev = rr
@@ -755,7 +761,8 @@ class GazeSolver:
         for k in range(2):
             x, y, z = st.p_cam[k]
             lateral = math.hypot(x, y)
-            err[k] = math.atan2(lateral, z)
+            # a target on the camera centre has no direction: count it as missed by pi
+            err[k] = math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi
             miss[k] = lateral if z >= 0 else math.sqrt(x * x + y * y + z * z)
         fix = _closest_point(st.origins, st.axes)
         zc = float(st.axes[0] @ st.axes[1])
