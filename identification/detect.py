@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -508,7 +508,6 @@ class StereoPlatePose:
     fit_rms: float
     epipolar_rms: float
     bias_px: float = 0.0
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 def _pose_from_uv(rig: object, design: PlateDesign, uv_l: Array, uv_r: Array) -> tuple[Array, Array, float]:

@@ -489,6 +489,30 @@ def measure_head_images(
     )
 
 
+def stage2_observations(result: HeadImageMeasurement, cameras: Mapping[str, HeadCamera]) -> Any:
+    """The records every camera measured, as :class:`cpc2urdf.identification.stage2.Stage2Observations`
+    (for :func:`~cpc2urdf.identification.stage2.calibrate_cameras`, which puts the cameras into
+    the model). ``T_base_target`` is unknown from images and left as NaN; ``image_points`` empty.
+
+    Raises:
+        DegenerateDataError: Fewer than 3 records seen by every camera.
+    """
+    from cpc2urdf.identification.stage2 import CameraIntrinsics, Stage2Observations
+
+    names = list(result.T_camera_target)
+    common = [lab for lab in result.labels[names[0]] if all(lab in result.labels[c] for c in names)]
+    if len(common) < 3:
+        raise DegenerateDataError(f"only {len(common)} records were measured by every camera ({', '.join(names)}); need 3")
+    idx = {c: [result.labels[c].index(lab) for lab in common] for c in names}
+    cam = cameras[names[0]]
+    intr = CameraIntrinsics(float(cam.K[0, 0]), float(cam.K[1, 1]), float(cam.K[0, 2]), float(cam.K[1, 2]),
+                            int(cam.image_size[0]), int(cam.image_size[1]), tuple(float(v) for v in cam.D))
+    return Stage2Observations(
+        result.q[names[0]][idx[names[0]]], {c: result.T_camera_target[c][idx[c]] for c in names}, {}, intr,
+        float("nan"), np.full((4, 4), np.nan),
+    )
+
+
 def write_handeye_files(
     result: HeadImageMeasurement, model: CPCModel, folder: str | Path, *, hands: Mapping[str, str] | None = None
 ) -> dict[str, Path]:
@@ -751,6 +775,7 @@ __all__ = [
     "read_joints_csv",
     "render_experiment",
     "render_head_experiment",
+    "stage2_observations",
     "write_handeye_files",
     "write_joints_csv",
 ]

@@ -216,11 +216,17 @@ def test_joints_csv_round_trip(tmp_path: Path) -> None:
         read_joints_csv(p, STRUCTURE)
 
 
-def test_stage2_from_head_camera_images(experiment: tuple[Path, object], tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def head(experiment: tuple[Path, object], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder, _ = experiment
+    out = tmp_path_factory.mktemp("head") / "head"
+    render_head_experiment(out, load_model(folder / "truth.json"), n_poses=5, seed=3)
+    return out
+
+
+def test_stage2_from_head_camera_images(experiment: tuple[Path, object], head: Path, tmp_path: Path) -> None:
     folder, exp = experiment
     truth = load_model(folder / "truth.json")
-    head = tmp_path / "head"
-    render_head_experiment(head, truth, n_poses=4, seed=2)
     out = tmp_path / "poses"
     assert main(["measure", str(head), "--stage2", "--model", str(folder / "truth.json"), "-o", str(out)]) == 0
     T_base_target = np.array(__import__("json").loads((head / "target_truth.json").read_text())["T_base_target"])
@@ -235,3 +241,21 @@ def test_stage2_from_head_camera_images(experiment: tuple[Path, object], tmp_pat
         # T_base_hand comes from the given model: closing the loop gives one T_base_target.
         T_bh = inverse(truth.T_world_base())[None] @ truth.fk_frame(hand, q)
         np.testing.assert_allclose(poses.T_base_hand, T_bh, atol=1e-9)
+
+
+def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, object], head: Path) -> None:
+    from cpc2urdf.identification.measure_images import (
+        HeadCamera,
+        measure_head_images,
+        stage2_observations,
+    )
+    from cpc2urdf.identification.rig_file import load_camera
+    from cpc2urdf.identification.stage2 import calibrate_cameras, camera_errors
+
+    folder, _ = experiment
+    truth = load_model(folder / "truth.json")
+    cams = {c: HeadCamera(*load_camera(head / f"{c}.yaml")) for c in ("camera_left_optical", "camera_right_optical")}
+    res = measure_head_images(head, cams, truth.structure)
+    model, results = calibrate_cameras(truth.without_frames(["camera"]), stage2_observations(res, cams), "tsai")
+    for c, (dt, dr) in camera_errors(model, truth, list(cams)).items():
+        assert dt < 0.5e-3 and np.degrees(dr) < 0.05, (c, dt, np.degrees(dr))

@@ -12,6 +12,7 @@ STUDIES: dict[str, tuple[str, str]] = {
     "li2010": ("cpc2urdf.identification.study_li2010", "Li et al. 2010 Fig. 1: AX=ZB errors vs number of poses"),
     "fig11": ("cpc2urdf.identification.study_fig11", "Shih et al. Fig. 11: positioning error vs M and noise"),
     "crb": ("cpc2urdf.identification.study_crb", "closed form and refinement vs the Cramér-Rao bound (M = 9, 0.5 mm)"),
+    "images": ("cpc2urdf.identification.study_images", "image pipeline: centre, pose and identification errors from rendered images"),
 }
 
 
