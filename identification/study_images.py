@@ -135,7 +135,7 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
                 r = res[d.name]
                 if not isinstance(r, Exception):
                     T = T_true[d.name][i]
-                    sys_err[corr_flag].append((np.linalg.norm(r.T_world_plate[:3, 3] - T[:3, 3]) * 1e3,
+                    sys_err[corr_flag].append((float(np.linalg.norm(r.T_world_plate[:3, 3] - T[:3, 3])) * 1e3,
                                                math.degrees(float(rotation_error(r.T_world_plate[:3, :3], T[:3, :3])))))
 
     # Identification from the rendered experiment vs exact poses + the detector's pixel noise.
