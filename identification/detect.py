@@ -56,6 +56,7 @@ MARKER_TOL = 0.35  # [-] max |log(area / predicted area)| of any circle for an a
 MAX_EPIPOLAR_PX = 1.0  # [px] left/right detections disagreeing more than this are refused
 MAX_PNP_RMS_PX = 0.5  # [px] a target pose reprojecting worse (RMS) is refused (wrong intrinsics)
 MAX_FIT_RMS = 1.0e-3  # [m] a plate layout fitting its triangulated circles worse is refused (2x the paper's 0.5 mm)
+_AMBIGUOUS = "circle orderings fit equally"
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
 
 
@@ -407,8 +408,12 @@ def detect_plates(
                 if len(grp) > n and k >= 2:
                     groups.extend(_split(ideal, grp, k, n))
         groups = [list(t) for t in dict.fromkeys(tuple(sorted(g)) for g in groups)]  # no duplicates
+        # Notes per (plate, group): a group that turns out to be another plate is no news.
+        group_notes: dict[str, list[tuple[frozenset[int], str]]] = {d.name: [] for d in group_designs}
+        claimed: dict[frozenset[int], str] = {}
         for grp in groups:
             g = np.array(grp)
+            key = frozenset(grp)
             for d in group_designs:
                 if len(g) != d.n_circles:
                     continue
@@ -417,28 +422,36 @@ def detect_plates(
                 at = f"group of {len(g)} circles near ({uv[g, 0].mean():.0f}, {uv[g, 1].mean():.0f}) px"
                 if best is None:
                     if n_ok > 1:
-                        notes[d.name].append(f"{at}: {n_ok} circle orderings fit equally (marker circle not distinguishable)")
-                        ambiguous.add(d.name)
+                        group_notes[d.name].append((key, f"{at}: {n_ok} {_AMBIGUOUS} (marker circle not distinguishable)"))
                     elif why:
-                        notes[d.name].append(f"{at}: {why}")
+                        group_notes[d.name].append((key, f"{at}: {why}"))
                     elif fits:
-                        notes[d.name].append(f"{at}: circle sizes do not match the plate's marker (score {min(f[0] for f in fits):.2f})")
+                        group_notes[d.name].append((key, f"{at}: circle sizes do not match the plate's marker (score {min(f[0] for f in fits):.2f})"))
                     continue
                 score, perm, H, rms = best
                 idx = g[perm]
                 if border[idx].any():
-                    notes[d.name].append(f"{at}: a circle touches the image border")
+                    group_notes[d.name].append((key, f"{at}: a circle touches the image border"))
                     continue
+                claimed[key] = d.name
                 candidates[d.name].append((PlateMatch(d.name, uv[idx], ideal[idx], H, rms, score), score))
         sizes = [len(c) for c in clusters]
         for d in group_designs:
-            if not candidates[d.name]:
+            if candidates[d.name]:
+                continue
+            notes[d.name] += [t for k, t in group_notes[d.name] if not any(k & c for c in claimed)]
+            if any(_AMBIGUOUS in t for t in notes[d.name]):
+                ambiguous.add(d.name)
+            if not notes[d.name]:
                 partial = [s for s in sizes if 3 <= s < d.n_circles]
+                others = sorted(set(claimed.values()))
                 if partial:
                     notes[d.name].append(
                         f"found groups of {partial} circles, fewer than {d.n_circles} (plate partly outside the image or occluded?)"
                     )
-                elif not notes[d.name]:
+                elif others:
+                    notes[d.name].append(f"not in the image (the circles found are {', '.join(others)})")
+                else:
                     notes[d.name].append(f"no group of {d.n_circles} circles (groups found: {sizes or 'none'})")
     for d in designs:
         c = candidates[d.name]
