@@ -72,6 +72,8 @@ MAX_ITERATIONS = 60
 MAX_STEP = 0.5  # [rad] or [m]: the largest joint change of one Gauss-Newton step
 NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
 BACKTRACKS = 8  # step halvings allowed per iteration
+TABLE_TIE_WEIGHT = 1e-4  # [1/m]: use-table, least table motion vs the viewing distance
+RETRIES = 2  # further starts tried when the first one ends in a local minimum
 MIN_TARGET_DISTANCE = 1e-9  # [m]: a target this close to a camera centre cannot be pointed at
 STALL_RESIDUAL = 1e-12  # [-]: fixation alone stops when |r1|^2 above this falls < 5 % in 3 steps
 PHASE2_DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping factor (x |r1|^2) when solving fixation alone
@@ -354,9 +356,16 @@ class GazeSolver:
             mesh = np.zeros((1, 0))
         self._table_link = int(max(self._table)) + 1 if len(self._table) else 0
         origins, dirs, qs = [], [], []
-        for row in mesh:
+        e0, e1 = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
+        # version 0 first (the default starts), then turned eyes (retries near the neck limits)
+        versions = [0.0, -0.3, 0.3, -0.6, 0.6]
+        rows = [(row, v) for v in versions for row in mesh]
+        self._n_version0 = len(mesh)
+        for row, v in rows:
             q = self.home.copy()
             q[self._neck] = row
+            q[e0] = np.clip(self.home[e0] + v, self.lower[e0], self.upper[e0])
+            q[e1] = np.clip(self.home[e1] + self._version_sign * v, self.lower[e1], self.upper[e1])
             pin.framesForwardKinematics(self.model, self.data, q)
             T_world_table = self.data.oMi[self._table_link]
             o = [T_world_table.actInv(self.data.oMf[e.frame_id].translation) for e in self._eyes]
@@ -443,11 +452,11 @@ class GazeSolver:
             row[:] = (d / max(dist, 1e-12)) @ Jc
             rows.append(row)
             res.append(dist - self.viewing_distance)
-            for i in self._table:  # least table motion (weight: 1 m ~ 10 rad)
+            for i in self._table:  # then the least table motion: a tie-breaker, tiny weight
                 row = np.zeros(n)
-                row[i] = 0.1
+                row[i] = TABLE_TIE_WEIGHT
                 rows.append(row)
-                res.append(0.1 * float(q[i] - q_ref[i]))
+                res.append(TABLE_TIE_WEIGHT * float(q[i] - q_ref[i]))
         if policy == "min-motion":
             for i in self._free(policy):
                 row = np.zeros(n)
@@ -513,19 +522,23 @@ class GazeSolver:
         q = (self.home if qc is None else qc).copy()
         return self._guess(p, q)
 
-    def _guess(self, p: Array, q: Array) -> Array:
+    def _guess(self, p: Array, q: Array, rank: int = 0) -> Array:
+        """Start: ``rank`` 0 is the version-0 grid entry whose cyclopean ray best faces ``p``;
+        ``rank`` k >= 1 is the k-th best entry of the whole grid (eyes turned too)."""
         pin = self._pin
         if self._table_link:
             pin.forwardKinematics(self.model, self.data, q)
             p_t = self.data.oMi[self._table_link].actInv(p)
         else:
             p_t = p
-        v = p_t - self._guess_origin
-        cosang = np.einsum("ij,ij->i", v, self._guess_dir) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
-        best = self._guess_q[int(np.argmax(cosang))]
+        m = self._n_version0 if rank == 0 else len(self._guess_q)
+        v = p_t - self._guess_origin[:m]
+        cosang = np.einsum("ij,ij->i", v, self._guess_dir[:m]) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+        k = int(np.argmax(cosang)) if rank == 0 else int(np.argsort(-cosang)[rank - 1])
+        best = self._guess_q[k]
         out = q.copy()
         out[self._neck] = best[self._neck]
-        out[self._eyes_all] = self.home[self._eyes_all]
+        out[self._eyes_all] = best[self._eyes_all]
         return out
 
     def solve(
@@ -573,6 +586,22 @@ class GazeSolver:
             q0 = q_ref.copy()
         else:
             q0 = self._guess(p, q_ref)
+        q, it, st = self._solve_from(p, q0, q_ref, policy, free, max_iterations)
+        if float(st.r @ st.r) > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
+            # Local minimum against a limit (e.g. pan at 0 deg while the eyes would have to
+            # turn far): retry from the best grid starts with the eyes already turned.
+            for rank in range(1, RETRIES + 1):
+                q1, it1, st1 = self._solve_from(p, self._guess(p, q_ref, rank), q_ref, policy, free, max_iterations)
+                it += it1
+                if float(st1.r @ st1.r) < float(st.r @ st.r):
+                    q, st = q1, st1
+                if float(st.r @ st.r) <= FLOOR_RESIDUAL:
+                    break
+        return self._answer(p, q, it, policy, st)
+
+    def _solve_from(
+        self, p: Array, q0: Array, q_ref: Array, policy: str, free: Array, max_iterations: int
+    ) -> tuple[Array, int, _State]:
         if self.redundant or policy == "use-table":
             q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
         else:  # the policy has no freedom to choose with: see _fixation_is_redundant
@@ -583,7 +612,7 @@ class GazeSolver:
             # direction the policy was holding) or where a limit blocks the preferred one.
             q, it2, st = self._iterate(p, q, q_ref, policy, free, max_iterations - it, secondary=False)
             it += it2
-        return self._answer(p, q, it, policy, st)
+        return q, it, st
 
     def _iterate(
         self,
