@@ -189,7 +189,7 @@ def test_identify_cli_method_refined(tmp_path):
 
     truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)
     path = save_measurements(measured, tmp_path / "m.json", robot="iis_head")
-    assert main(["identify", str(path), "-o", str(tmp_path / "cf.json")]) == 0
+    assert main(["identify", str(path), "-o", str(tmp_path / "cf.json"), "--method", "closed-form"]) == 0
     assert main(["identify", str(path), "-o", str(tmp_path / "r.json"), "--method", "refined"]) == 0
     cf, ref = load_model(tmp_path / "cf.json"), load_model(tmp_path / "r.json")
     assert ref.metadata["provenance"]["method"] == "refined"
