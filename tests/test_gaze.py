@@ -29,7 +29,7 @@ from cpc2urdf.validation.gaze import POLICIES, GazeSolver
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 N_TARGETS = 10_000
 N_YOURDFPY = 300
-N_UNREACHABLE = 300
+N_UNREACHABLE = 150
 AHEAD = np.array([-0.6, -0.6, 0.7])
 
 
@@ -174,10 +174,10 @@ def test_limits_are_constraints_not_a_clamp(nominal, solver):
 def test_tracking_circle_1khz(nominal, solver):
     """A target circling at 1 kHz: never faster than the limit, locked on after the first samples."""
     dt = 1e-3
-    t = np.arange(2000) * dt
+    t = np.arange(1000) * dt
     centre = AHEAD + np.array([0.3, 0.0, 0.0])  # tilt ~21 deg: well inside the limits
     radius = 0.05
-    w = 2 * math.pi * 0.5  # [rad/s]: 0.5 turns per second
+    w = 2 * math.pi  # [rad/s]: one turn per second
     P = centre + radius * np.stack([np.cos(w * t), np.sin(w * t), np.zeros_like(t)], axis=1)
     vmax = np.array([0.1, 0.1, 1.0, 1.0, 2.0, 2.0])
     q_start = solver.solve(P[0]).q

@@ -162,10 +162,10 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
     table = [s.joint_index("table_x"), s.joint_index("table_y")]
     out_P: list[Array] = []
     out_Q: list[Array] = []
-    grid = np.linspace(lo[iR], hi[iR], 46)
+    grid = np.linspace(lo[iR], hi[iR], 19)
     coplanar = eyes_coplanar(model)
     while sum(len(p) for p in out_P) < n:
-        m = 4 * n
+        m = 2 * n
         Q = lo + (hi - lo) * rng.random((m, s.n_joints))
         Q[:, table] = home[table] if q_table is None else q_table
         # signed axis distance over the right eye's range, all samples at once
@@ -179,10 +179,11 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
             sign = np.sign(f)
             change = (sign[:, :-1] * sign[:, 1:] < 0) & (np.abs(f[:, :-1] - f[:, 1:]) < 0.05)
             has = change.any(axis=1)
+            Q, f, change = Q[has], f[has], change[has]
             k = np.argmax(change, axis=1)
             a, b = grid[k], grid[k + 1]
-            fa = f[np.arange(m), k]
-            for _ in range(60):  # vectorised bisection
+            fa = f[np.arange(len(Q)), k]
+            for _ in range(50):  # vectorised bisection: grid step / 2^50 < 1e-16 rad
                 c = 0.5 * (a + b)
                 Qc = Q.copy()
                 Qc[:, iR] = c
@@ -193,7 +194,6 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
                 b = np.where(left, b, c)
             Qs = Q.copy()
             Qs[:, iR] = 0.5 * (a + b)
-            Qs = Qs[has]
         mid, sl, sr = axis_meeting(model, Qs)
         ok = (sl > MIN_DISTANCE) & (sr > MIN_DISTANCE) & (sl < MAX_DISTANCE) & (sr < MAX_DISTANCE)
         ok &= np.abs(axis_distance(model, Qs)) < (1e-9 if coplanar else 1e-12)
