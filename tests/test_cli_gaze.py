@@ -72,3 +72,13 @@ def test_bad_urdf_exit_2(tmp_path, capsys):
     bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='continuous'>")
     assert main(["gaze", str(bad), "--target", "1", "2", "3"]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_bench_gaze_runs_tiny(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    assert main(["bench", "gaze", "--targets", "5", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    for head in ("nominal", "calibrated"):
+        assert res[head]["success"] == 1.0 and res[head]["reference_success"] == 1.0
+        assert res[head]["median_us"] > 0 and res[head]["ratio"] > 0
+    assert "ratio" in capsys.readouterr().out

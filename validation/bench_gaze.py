@@ -27,7 +27,6 @@ from the same geometric guess; the comparison is speed at equal success.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from typing import Any
@@ -362,6 +361,4 @@ def main(argv: list[str] | None = None) -> int:
         from cpc2urdf.fileio import write_json
 
         write_json(args.json, res)
-    else:
-        json.dumps(res)
     return 0
