@@ -195,7 +195,10 @@ def write_joints_csv(
 
 
 def find_image(folder: Path, record: str) -> Path | None:
-    """The image file ``folder/<record>.<ext>`` (first of :data:`IMAGE_EXTENSIONS`), or None."""
+    """The image file ``folder/<record>.<ext>`` (first of :data:`IMAGE_EXTENSIONS`), or None.
+    A record that already names a file with its extension is taken as is."""
+    if Path(record).suffix.lower() in IMAGE_EXTENSIONS and (folder / record).is_file():
+        return folder / record
     for ext in IMAGE_EXTENSIONS:
         for e in (ext, ext.upper()):
             p = folder / f"{record}{e}"
