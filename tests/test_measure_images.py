@@ -259,3 +259,20 @@ def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, ob
     model, results = calibrate_cameras(truth.without_frames(["camera"]), stage2_observations(res, cams), "tsai")
     for c, (dt, dr) in camera_errors(model, truth, list(cams)).items():
         assert dt < 0.5e-3 and np.degrees(dr) < 0.05, (c, dt, np.degrees(dr))
+
+
+def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, object], tmp_path: Path) -> None:
+    from cpc2urdf.identification.measure_images import measure_stereo_images
+
+    folder, exp = experiment
+    d = _small_copy(folder, tmp_path / "imgs", n=1)
+    grey = cv2.imread(str(d / "left" / "0000.png"), cv2.IMREAD_GRAYSCALE)
+    (d / "left" / "0000.png").unlink()
+    cv2.imwrite(str(d / "left" / "0000.tif"), (grey.astype(np.uint16) * 257))  # 16-bit TIFF
+    right = cv2.imread(str(d / "right" / "0000.png"), cv2.IMREAD_GRAYSCALE)
+    cv2.imwrite(str(d / "right" / "0000.png"), cv2.cvtColor(right, cv2.COLOR_GRAY2BGR))  # colour
+    res = measure_stereo_images(d, exp.rig, STRUCTURE)  # type: ignore[attr-defined]
+    ref = load_measurements(folder / "exact.json")
+    assert not res.problems
+    for f in ("plate_left", "plate_right"):
+        assert np.linalg.norm(res.measurements.poses[f][0, :3, 3] - ref.poses[f][0, :3, 3]) < 0.1e-3
