@@ -266,6 +266,8 @@ class GazeSolver:
         if not (np.all(np.isfinite(self.lower)) and np.all(np.isfinite(self.upper))):
             raise SpecError("every joint needs finite <limit lower/upper> for gaze control")
         self.home: Array = 0.5 * (self.lower + self.upper)
+        self._lower_list: list[float] = self.lower.tolist()
+        self._upper_list: list[float] = self.upper.tolist()
 
         # Joints on each camera's path: shared ones move the head, the others are the eyes.
         paths = []
@@ -648,6 +650,11 @@ class GazeSolver:
                 ]
             r1 = st.r
             rr = float(r1 @ r1)
+            if rr < FLOOR_RESIDUAL and (
+                not secondary
+                or (policy == "cyclopean" and abs(float(self._version_row @ (q - self.home))) < CONVERGED_STEP)
+            ):
+                break  # fixated, and the policy has nothing left to ask: skip the last step
             if held.any():
                 # release held joints whose gradient of |r1|^2 pulls them back inside
                 g = st.J.T @ r1
@@ -785,21 +792,22 @@ class GazeSolver:
         return step, primary
 
     def _answer(self, p: Array, q: Array, iterations: int, policy: str, st: _State) -> GazeSolution:
-        err = np.empty(2)
-        miss = np.empty(2)
-        for k in range(2):
-            x, y, z = st.p_cam[k]
+        errs, misses = [], []
+        for x, y, z in st.p_cam.tolist():
             lateral = math.hypot(x, y)
             # a target on the camera centre has no direction: count it as missed by pi
-            err[k] = math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi
-            miss[k] = lateral if z >= 0 else math.sqrt(x * x + y * y + z * z)
+            errs.append(math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi)
+            misses.append(lateral if z >= 0 else math.sqrt(x * x + y * y + z * z))
+        err, miss = np.array(errs), np.array(misses)
         fix = _closest_point(st.origins, st.axes)
-        zc = float(st.axes[0] @ st.axes[1])
-        vergence = math.acos(max(-1.0, min(1.0, zc)))
+        (a0, a1, a2), (b0, b1, b2) = st.axes.tolist()
+        vergence = math.acos(max(-1.0, min(1.0, a0 * b0 + a1 * b1 + a2 * b2)))
         tol = 1e-12
-        lim = (q <= self.lower + tol) | (q >= self.upper - tol)
-        at_limit = tuple(self.joint_names[i] for i in np.flatnonzero(lim))
-        reachable = bool(err[0] <= GAZE_POINTING_TOL and err[1] <= GAZE_POINTING_TOL)
+        at_limit = tuple(
+            n for n, v, lo, hi in zip(self.joint_names, q.tolist(), self._lower_list, self._upper_list, strict=True)
+            if v <= lo + tol or v >= hi - tol
+        )
+        reachable = errs[0] <= GAZE_POINTING_TOL and errs[1] <= GAZE_POINTING_TOL
         if reachable:
             status = STATUS_FIXATED
         elif np.any(st.p_cam[:, 2] <= 0):
@@ -906,16 +914,20 @@ class GazeSolver:
 
 def _closest_point(origins: Array, axes: Array) -> Array | None:
     """Midpoint of the closest points of two lines ``origins[k] + t axes[k]``; None if parallel."""
-    d0, d1 = axes
-    w = origins[0] - origins[1]
-    a, b, c = d0 @ d0, d0 @ d1, d1 @ d1
+    d0, d1 = axes.tolist()
+    o0, o1 = origins.tolist()
+    w = [o0[i] - o1[i] for i in range(3)]
+    a = d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]
+    b = d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2]
+    c = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
     den = a * c - b * b
     if den < 1e-14:
         return None
-    dd, e = d0 @ w, d1 @ w
+    dd = d0[0] * w[0] + d0[1] * w[1] + d0[2] * w[2]
+    e = d1[0] * w[0] + d1[1] * w[1] + d1[2] * w[2]
     s = (b * e - c * dd) / den
     t = (a * e - b * dd) / den
-    return 0.5 * (origins[0] + s * d0 + origins[1] + t * d1)
+    return np.array([0.5 * (o0[i] + s * d0[i] + o1[i] + t * d1[i]) for i in range(3)])
 
 
 def solver_for(name_or_path: str | Path, cameras: Sequence[str] = DEFAULT_CAMERAS, **kwargs: Any) -> GazeSolver:
