@@ -28,7 +28,8 @@ and, with the identified model, ``T_base_hand``: the input of ``cpc2urdf handeye
 
 A plate (or target) that cannot be measured is reported with the image, the plate and the reason;
 ``on_error="stop"`` raises at the first one, ``"skip"`` leaves that plate out of that record
-(and drops a record with nothing measured) and lists every problem.
+(and drops a record with nothing measured), ``"skip-record"`` drops the whole record; both skips
+list every problem.
 
 :func:`render_experiment` and :func:`render_head_experiment` write such folders from a simulated
 experiment (plus ``rig.yaml`` / camera files and the truth), so the whole pipeline can run from
@@ -73,7 +74,7 @@ Array = NDArray[np.float64]
 
 STEREO_FOLDERS = ("left", "right")
 IMAGE_EXTENSIONS = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".jpg", ".jpeg")
-ON_ERROR = ("skip", "stop")
+ON_ERROR = ("skip", "skip-record", "stop")
 _HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.-]*)\s*(?:\[\s*([A-Za-z]+)\s*\])?\s*$")
 
 
@@ -278,7 +279,7 @@ def measure_stereo_images(
         structure: The robot (joint names, plate frames and their layouts).
         joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
         designs: Plate designs (default :func:`~cpc2urdf.identification.render.robot_plate_designs`).
-        on_error: ``"skip"`` or ``"stop"`` (see the module docstring).
+        on_error: ``"skip"`` (the plate), ``"skip-record"`` or ``"stop"`` (module docstring).
         correct_bias: Remove the ellipse-centre offset (:mod:`~cpc2urdf.identification.detect`).
         robot_ref: Robot reference for the measurement file.
         show_progress: Progress bar on stderr.
@@ -336,10 +337,14 @@ def measure_stereo_images(
             continue
         result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
                                     correct_bias=correct_bias)
+        failed = [r for r in result.values() if isinstance(r, DetectionError)]
+        for r in failed:
+            _fail(r, on_error, problems)
+        if failed and on_error == "skip-record":
+            continue
         for n in names:
             r = result[n]
             if isinstance(r, DetectionError):
-                _fail(r, on_error, problems)
                 continue
             poses[n][i] = r.T_world_plate
             points[n][i] = r.p_world
@@ -429,7 +434,7 @@ def measure_head_images(
         structure: The robot (for the joint columns).
         joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
         design: The target (default :func:`~cpc2urdf.identification.render.target_design`).
-        on_error: ``"skip"`` or ``"stop"``.
+        on_error: ``"skip"``/``"skip-record"`` (the image) or ``"stop"``.
         correct_bias: Remove the ellipse-centre offset before the final solvePnP.
         show_progress: Progress bar on stderr.
 

@@ -159,6 +159,9 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, object], tmp_path: P
     assert ms.labels == [exp.measured.labels[0]]  # type: ignore[attr-defined]  # only record 0 left ...
     assert ms.has_pose("plate_left").all() and not ms.has_pose("plate_right").any()  # ... with one plate
     assert len(ms.metadata["provenance"]["skipped"]) == 5  # the blank image: both plates
+    # skip-record: record 0 lost plate_right, so it goes too -> nothing left.
+    assert main(args + ["--on-error", "skip-record"]) == 2
+    assert "no plate could be measured" in capsys.readouterr().err
     # Nothing measurable at all: a clear error, no file.
     for p in (d / "left").glob("*.png"):
         cv2.imwrite(str(p), np.zeros((1024, 1280), np.uint8))

@@ -3,7 +3,7 @@
 Stage 1 (stereo rig looking at the head's plates)::
 
     cpc2urdf measure IMAGES_DIR --rig rig.yaml [--joints joints.csv] [--robot iis_head] \\
-        -o measurements.json [--on-error skip|stop]
+        -o measurements.json [--on-error skip|skip-record|stop]
 
 Stage 2 (the head's cameras looking at the 25-disk target), hand poses from an identified model::
 
@@ -33,8 +33,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("-o", "--output", required=True,
                    help="measurement file to write (stage 1), or output folder (--stage2)")
     p.add_argument("--joints", help="joint readings CSV (default IMAGES_DIR/joints.csv)")
-    p.add_argument("--on-error", choices=("skip", "stop"), default="skip",
-                   help="a plate not found or ambiguous: skip it (default, listed on stderr) or stop")
+    p.add_argument("--on-error", choices=("skip", "skip-record", "stop"), default="skip",
+                   help="a plate not found or ambiguous: skip that plate (default), skip the whole "
+                   "record, or stop (exit 2); skips are listed on stderr and in the output")
     p.add_argument("--no-bias-correction", action="store_true",
                    help="do not remove the ellipse-centre offset of the circles' images")
     g1 = p.add_argument_group("stage 1 (stereo rig)")
