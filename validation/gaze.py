@@ -325,6 +325,7 @@ class GazeSolver:
         """
         q = self.home.copy()
         e0, e1 = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
+        self._converge_sign = 1.0
         for delta in (0.1, -0.1):
             q[e0] = np.clip(self.home[e0] - delta, self.lower[e0], self.upper[e0])
             q[e1] = np.clip(self.home[e1] + self._version_sign * delta, self.lower[e1], self.upper[e1])
@@ -338,6 +339,7 @@ class GazeSolver:
             free = self._free("cyclopean")
             J = st.J[:, free]
             if np.all((p - o[0]) @ z[0] > 0) and (p - o[1]) @ z[1] > 0:
+                self._converge_sign = 1.0 if delta > 0 else -1.0  # eyes converge for +delta
                 return bool(np.linalg.eigvalsh(J.T @ J)[0] <= NULL_EIGENVALUE)
         return False
 
@@ -350,7 +352,7 @@ class GazeSolver:
         pin = self._pin
         # interior grid points only: a start on a limit would hold that joint from the outset
         grids = [
-            np.linspace(self.lower[i], self.upper[i], (13 if k == 0 else 9) + 2)[1:-1] for k, i in enumerate(self._neck)
+            np.linspace(self.lower[i], self.upper[i], (37 if k == 0 else 13) + 2)[1:-1] for k, i in enumerate(self._neck)
         ]
         if grids:
             mesh = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, len(grids))
@@ -541,6 +543,13 @@ class GazeSolver:
         out = q.copy()
         out[self._neck] = best[self._neck]
         out[self._eyes_all] = best[self._eyes_all]
+        if rank == 0:
+            # converge the eyes symmetrically on the target's distance along the ray
+            dist = float(np.linalg.norm(v[k]))
+            h = math.asin(min(1.0, 0.5 * self.baseline / max(dist, 1e-9))) * self._converge_sign
+            e0, e1 = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
+            out[e0] = min(max(out[e0] - h, self.lower[e0]), self.upper[e0])
+            out[e1] = min(max(out[e1] + self._version_sign * h, self.lower[e1]), self.upper[e1])
         return out
 
     def solve(
