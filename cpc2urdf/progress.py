@@ -5,8 +5,9 @@ Usage::
     for item in progress(items, "fig11"):
         ...
 
-It redraws one line at most every 0.2 s and prints a final line with the elapsed time. With
-``CPC2URDF_PROGRESS=0`` in the environment it is silent (tests set this).
+On a terminal it redraws one line at most every 0.2 s; elsewhere (a log file) it prints only the
+final line with the elapsed time. With ``CPC2URDF_PROGRESS=0`` in the environment it is silent
+(tests set this).
 """
 
 from __future__ import annotations
@@ -25,12 +26,14 @@ def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterat
     if total is None and isinstance(items, Sized):
         total = len(items)
     quiet = os.environ.get("CPC2URDF_PROGRESS", "1") == "0"
+    # Redraw only on a terminal; in a log file (CI, `> out.txt`) print just the final line.
+    live = not quiet and sys.stderr.isatty()
     start = last = time.perf_counter()
     k = 0
     for k, item in enumerate(items, 1):
         yield item
         now = time.perf_counter()
-        if not quiet and (now - last > 0.2 or k == total):
+        if live and (now - last > 0.2 or k == total):
             last = now
             elapsed = now - start
             if total:

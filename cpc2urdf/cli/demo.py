@@ -31,6 +31,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     p.add_argument("-o", "--output", default="demo-out", help="output folder (default: demo-out)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random step (default 0)")
+    p.add_argument(
+        "--from-images",
+        action="store_true",
+        help="render the stereo-rig and head-camera images and measure them with the circle "
+        "detector (stages 2 and 5), instead of simulating poses (about a minute longer)",
+    )
     p.set_defaults(run=run)
 
 
@@ -58,6 +64,16 @@ def _cli(*argv: str) -> None:
         raise Cpc2UrdfError(f"demo stage 'cpc2urdf {' '.join(argv)}' ended with exit code {code}")
 
 
+def _camera_errors(model: object, truth: object) -> str:
+    from cpc2urdf.identification.stage2 import HAND_OF_CAMERA, camera_errors
+
+    errs = camera_errors(model, truth, tuple(HAND_OF_CAMERA))  # type: ignore[arg-type]
+    return "\n".join(
+        f"{c}: X = T_{HAND_OF_CAMERA[c]}_{c} error vs truth {t * 1e3:.3f} mm / {r * 57.29577951308232:.4f} deg"
+        for c, (t, r) in errs.items()
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -79,30 +95,53 @@ def run(args: argparse.Namespace) -> int:
     _cli("check", f"{d}/nominal.urdf", "--model", "iis_head")
     st.done()
 
-    st.start("simulate the stage-1 experiment: stereo rig measures both plates, one joint at a time")
-    _cli("simulate", "iis_head", "-o", f"{d}/sim", "--seed", seed)
-    # The simulated real head's camera mounts differ from the drawing by millimetres and degrees;
-    # stage 2 has to find them.
-    truth = perturb_cameras(load_model(f"{d}/sim/truth.json"), np.random.default_rng(args.seed))
-    save_model(truth, f"{d}/sim/truth.json")
+    if args.from_images:
+        st.start("render the stage-1 experiment as stereo images, then measure them (circle detector)")
+        from cpc2urdf.identification.measure_images import render_experiment
+
+        exp = render_experiment(out / "images", seed=args.seed, show_progress=True)
+        truth = perturb_cameras(exp.truth, np.random.default_rng(args.seed))
+        save_model(truth, f"{d}/images/truth.json")
+        _cli("measure", f"{d}/images", "--rig", f"{d}/images/rig.yaml", "-o", f"{d}/measurements.json")
+        measurements, heldout = f"{d}/measurements.json", f"{d}/images/heldout.json"
+    else:
+        st.start("simulate the stage-1 experiment: stereo rig measures both plates, one joint at a time")
+        _cli("simulate", "iis_head", "-o", f"{d}/sim", "--seed", seed)
+        # The simulated real head's camera mounts differ from the drawing by millimetres and
+        # degrees; stage 2 has to find them.
+        truth = perturb_cameras(load_model(f"{d}/sim/truth.json"), np.random.default_rng(args.seed))
+        save_model(truth, f"{d}/sim/truth.json")
+        measurements, heldout = f"{d}/sim/measurements.json", f"{d}/sim/heldout.json"
     st.done()
 
     st.start("identify (closed form + maximum likelihood) -> URDF -> cross-check")
-    _cli("identify", f"{d}/sim/measurements.json", "-o", f"{d}/stage1_model.json")
+    _cli("identify", measurements, "-o", f"{d}/stage1_model.json")
     _cli("export", f"{d}/stage1_model.json", "-o", f"{d}/stage1.urdf")
     _cli("check", f"{d}/stage1.urdf", "--model", f"{d}/stage1_model.json")
     st.done()
 
     st.start("held-out accuracy (Shih et al. Table 4)")
-    _cli("accuracy", f"{d}/stage1_model.json", f"{d}/sim/heldout.json")
+    _cli("accuracy", f"{d}/stage1_model.json", heldout)
     st.done()
 
-    st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, Tsai)")
-    result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed)
-    print(result.summary())
-    paths = write_pose_files(result, out)
-    save_model(result.model, f"{d}/model.json")
-    _cli("handeye", str(paths["camera_left_optical"]), "--method", "all")
+    if args.from_images:
+        st.start("stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye")
+        from cpc2urdf.identification.measure_images import render_head_experiment
+
+        render_head_experiment(out / "head", truth, seed=args.seed)
+        _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")
+        _cli("handeye", f"{d}/handeye/handeye_camera_left_optical.json", "--method", "tsai",
+             "--model", f"{d}/stage1_model.json", "-o", f"{d}/model.json")
+        _cli("handeye", f"{d}/handeye/handeye_camera_right_optical.json", "--method", "tsai",
+             "--model", f"{d}/model.json", "-o", f"{d}/model.json")
+        print(_camera_errors(load_model(f"{d}/model.json"), truth))
+    else:
+        st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, Tsai)")
+        result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed)
+        print(result.summary())
+        paths = write_pose_files(result, out)
+        save_model(result.model, f"{d}/model.json")
+        _cli("handeye", str(paths["camera_left_optical"]), "--method", "all")
     _cli("export", f"{d}/model.json", "-o", f"{d}/head.urdf")
     _cli("check", f"{d}/head.urdf", "--model", f"{d}/model.json")
     st.done()
