@@ -6,21 +6,31 @@ or calibrated head alike): it never assumes orthogonal axes or cameras on their 
 
 Method (one :meth:`GazeSolver.solve` call):
 
-1. **Initial guess.** The table (prismatic joints shared by both cameras) stays at its reading;
-   neck (revolute joints shared by both cameras) and eyes start from the entry of a small table,
-   computed once from the model, whose cyclopean ray passes closest to the target (or from
-   ``q_current`` when that is closer, e.g. when tracking).
+1. **Initial guess.** The table (prismatic joints shared by both cameras) stays at its reading.
+   Neck (revolute joints shared by both cameras) from a grid computed once from the model: the
+   entry whose cyclopean ray (midpoint of the camera centres, along the sum of the optical axes)
+   best faces the target; the eyes converge symmetrically by ``asin(baseline / 2 / distance)``.
+   ``min-motion`` and ``eyes-only`` start from ``q_current``; :meth:`GazeSolver.track` from the
+   previous solution.
 2. **Task-priority Gauss-Newton with joint limits as constraints.** Priority 1 is fixation: per
    eye the residual ``u - e_z`` with ``u`` the unit target direction in the camera frame (zero only
    when the camera looks *at*, not away from, the target; its norm is ``2 sin(err/2)``). Its
-   Jacobian comes from Pinocchio's LOCAL frame Jacobians: ``dp_cam = -v - w x p_cam``. Priority 2
-   is the redundancy policy (below), solved only in the null space of priority 1. A joint that
-   reaches a limit with the step pushing outwards is held there (active set) and the step is
-   re-solved over the others; it is released when the gradient pulls it back inside.
-3. **Answer.** ``reachable`` is True when both eyes point at the target to within
-   :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL`, in front of the cameras, inside the limits.
-   Otherwise the solver has converged to the in-limit configuration that minimises the sum of the
-   squared residuals of the two eyes, and says why (``status``).
+   Jacobian comes from Pinocchio's LOCAL frame Jacobians: ``dp_cam = -v - w x p_cam``. Steps are
+   Levenberg-Marquardt damped with ``mu = |r|^2`` and halved while they increase the residual.
+   Priority 2, the redundancy policy (below), moves only in the null space of priority 1.
+   Joint limits: a joint that a step would push past its limit is first kept still by trading
+   its motion for null-space motion; if fixation itself needs it beyond, it is held at the limit
+   (active set) and the step is re-solved over the others; it is released when the gradient pulls
+   it back inside.
+3. **Fixation alone.** If that does not fixate (the policy held a weak direction fixation
+   needed, or a limit blocked the preferred configuration), the same iteration runs on priority 1
+   alone, with a watchdog that accepts a long step followed by one correction when the pair
+   lowers the residual. If it ends in a local minimum, up to :data:`RETRIES` further starts with
+   the eyes already turned are tried, and the best result is kept.
+4. **Answer.** ``reachable`` is True when both eyes point at the target to within
+   :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL` (which implies in front of the cameras), inside
+   the limits. Otherwise the readings are the best in-limit configuration found (least sum of the
+   squared residuals of the two eyes), with the residuals, and ``status`` says why.
 
 Redundancy policies (the secondary task):
 
@@ -62,6 +72,7 @@ if TYPE_CHECKING:
     from cpc2urdf.model import CPCModel
 
 Array = NDArray[np.float64]
+Index = NDArray[np.intp]  # joint indices into q
 
 POLICIES: tuple[str, ...] = ("cyclopean", "min-motion", "eyes-only", "use-table")
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
@@ -270,14 +281,14 @@ class GazeSolver:
         self._upper_list: list[float] = self.upper.tolist()
 
         # Joints on each camera's path: shared ones move the head, the others are the eyes.
-        paths = []
+        paths: list[set[int]] = []
         for eye in eyes:
             jid = model.frames[eye.frame_id].parentJoint
-            path = set()
+            chain: set[int] = set()
             while jid > 0:
-                path.add(jid - 1)
+                chain.add(jid - 1)
                 jid = model.parents[jid]
-            paths.append(path)
+            paths.append(chain)
         shared = paths[0] & paths[1]
         self._table = np.array(sorted(i for i in shared if kinds[i] == "prismatic"), dtype=int)
         self._neck = np.array(sorted(i for i in shared if kinds[i] == "revolute"), dtype=int)
@@ -398,36 +409,44 @@ class GazeSolver:
             pin.updateFramePlacements(model, data)
         else:
             pin.framesForwardKinematics(model, data, q)
-        r = np.empty(6)
-        J = np.empty((6, self.n)) if jacobian else _EMPTY
-        origins = np.empty((2, 3))
-        axes = np.empty((2, 3))
-        p_cam = np.empty((2, 3))
-        for k, eye in enumerate(self._eyes):
+        res: list[float] = []
+        origins, axes, p_cam, blocks = [], [], [], []
+        for eye in self._eyes:
             T = data.oMf[eye.frame_id]
-            R = T.rotation
-            o = T.translation
-            pc = R.T @ (p - o)
-            x, y, z = pc.tolist()
+            x, y, z = T.actInv(p).tolist()  # the target in the camera frame: R^T (p - o)
             nrm = math.sqrt(x * x + y * y + z * z) or 1e-300  # target on a camera centre: see _answer
-            u = pc / nrm
-            r[3 * k : 3 * k + 3] = u
-            r[3 * k + 2] -= 1.0
-            origins[k] = o
-            axes[k] = R[:, 2]
-            p_cam[k] = pc
+            ux, uy, uz = x / nrm, y / nrm, z / nrm
+            res += (ux, uy, uz - 1.0)
+            origins.append(T.translation)
+            axes.append(T.rotation[:, 2])
+            p_cam.append((x, y, z))
             if jacobian:
-                Jl = pin.getFrameJacobian(model, data, eye.frame_id, pin.LOCAL)
-                # d p_cam = -v - w x p_cam = -v + [p_cam]x w  (v, w: LOCAL twist of the camera);
-                # d u = (I - u u^T) d p_cam / |p_cam|.
-                S = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-                dpc = S @ Jl[3:] - Jl[:3]
-                J[3 * k : 3 * k + 3] = (dpc - u[:, None] * (u @ dpc)) / nrm
-        return _State(r, J, origins, axes, p_cam)
+                # d p_cam = -v - w x p_cam = [-I | [p_cam]x] (v; w), the LOCAL twist of the camera;
+                # d u = (I - u u^T) d p_cam / |p_cam|: one (3, 6) matrix times the frame Jacobian.
+                P = [
+                    [(1.0 - ux * ux) / nrm, -ux * uy / nrm, -ux * uz / nrm],
+                    [-uy * ux / nrm, (1.0 - uy * uy) / nrm, -uy * uz / nrm],
+                    [-uz * ux / nrm, -uz * uy / nrm, (1.0 - uz * uz) / nrm],
+                ]
+                M = [
+                    [
+                        -P[i][0],
+                        -P[i][1],
+                        -P[i][2],
+                        P[i][1] * z - P[i][2] * y,
+                        P[i][2] * x - P[i][0] * z,
+                        P[i][0] * y - P[i][1] * x,
+                    ]
+                    for i in range(3)
+                ]
+                blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, eye.frame_id, pin.LOCAL))
+        r = np.array(res)
+        J = np.concatenate(blocks) if jacobian else _EMPTY
+        return _State(r, J, np.array(origins), np.array(axes), np.array(p_cam))
 
     # ---- policy (priority 2) --------------------------------------------------------------------
 
-    def _free(self, policy: str) -> Array:
+    def _free(self, policy: str) -> Index:
         if policy == "eyes-only":
             return self._eyes_all
         if policy == "use-table":
@@ -611,7 +630,7 @@ class GazeSolver:
         return self._answer(p, q, it, policy, st)
 
     def _solve_from(
-        self, p: Array, q0: Array, q_ref: Array, policy: str, free: Array, max_iterations: int
+        self, p: Array, q0: Array, q_ref: Array, policy: str, free: Index, max_iterations: int
     ) -> tuple[Array, int, _State]:
         if self.redundant or policy == "use-table":
             q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
@@ -631,7 +650,7 @@ class GazeSolver:
         q: Array,
         q_ref: Array,
         policy: str,
-        free: Array,
+        free: Index,
         max_iterations: int,
         *,
         secondary: bool,
@@ -743,7 +762,7 @@ class GazeSolver:
         return q, it, st
 
     def _step(
-        self, policy: str | None, q: Array, q_ref: Array, p: Array, st: _State, act: Array, block: Array | None = None
+        self, policy: str | None, q: Array, q_ref: Array, p: Array, st: _State, act: Index, block: Index | None = None
     ) -> tuple[Array, Array]:
         """One task-priority Gauss-Newton step over the joints ``act``, and its priority-1 part.
 
@@ -908,7 +927,7 @@ class GazeSolver:
             ok[k] = sol.reachable
             st = self._evaluate(q_cmd, P[k], jacobian=False)
             err[k] = [math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam]
-        return Trajectory(np.arange(T) * dt, Q, G, ok, err, locked, self.joint_names)
+        return Trajectory(np.arange(T, dtype=float) * float(dt), Q, G, ok, err, locked, self.joint_names)
 
     # ---- convenience --------------------------------------------------------------------------
 
