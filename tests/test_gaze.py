@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
+from cpc2urdf.errors import ConfigurationError, InputFileError, SpecError, UnknownNameError
 from cpc2urdf.model_file import load_model
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
@@ -215,6 +215,11 @@ def test_bad_input(solver, tmp_path):
         GazeSolver(path, ("nope", "camera_right_optical"))
     with pytest.raises(UnknownNameError):
         GazeSolver("<robot name='x'><link name='a'/></robot>")
+    with pytest.raises(InputFileError):
+        GazeSolver(str(tmp_path / "missing.xml"))
+    xml = tmp_path / "head.xml"  # any file name: a string not starting with '<' is a path
+    xml.write_text(path.read_text())
+    assert GazeSolver(str(xml)).solve(AHEAD).reachable
     continuous = (
         "<robot name='x'><link name='a'/><link name='camera_left_optical'/><link name='camera_right_optical'/>"
         "<joint name='j' type='continuous'><parent link='a'/><child link='camera_left_optical'/></joint>"

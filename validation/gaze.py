@@ -230,13 +230,16 @@ class GazeSolver:
 
         self._pin = pin
         text = str(urdf)
-        if isinstance(urdf, Path) or (not text.lstrip().startswith("<") and text.endswith(".urdf")):
+        if isinstance(urdf, Path) or not text.lstrip().startswith("<"):  # a path, not XML text
             from cpc2urdf.errors import InputFileError
 
             path = Path(text)
             if not path.is_file():
                 raise InputFileError(path, "no such URDF file")
-            text = path.read_text()
+            try:
+                text = path.read_text()
+            except (OSError, UnicodeDecodeError) as e:
+                raise InputFileError(path, f"cannot read the URDF: {e}") from e
         try:
             model = pin.buildModelFromXML(text)
         except Exception as e:  # Pinocchio raises ValueError/RuntimeError on bad XML
