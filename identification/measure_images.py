@@ -579,65 +579,21 @@ class RenderedExperiment:
 def clear_placement(spec: Any, rig: Any, q: Array, designs: Sequence[PlateDesign]) -> Any:
     """A ``world_to_base`` (CPC constants) that shows both cameras every circle of every plate.
 
-    Starts from the simulator's face-on placement (:func:`~cpc2urdf.identification.simulate.
-    place_in_front_of_rig`), which for the IIS-head lets one plate hide part of the other (the
-    plates sit ~0.13 m apart along their normals), and tries the image rolled by +-90 deg and the
-    head turned by up to 40 deg about the rig's axes through the plates' centre; returns the one
-    with the fewest hidden circles, then the most face-on.
+    The simulator's search (:func:`cpc2urdf.identification.simulate.clear_placement`) for the
+    nominal robot of ``spec`` over configurations ``q`` (N, n) with the plate outlines of
+    ``designs``; raises ``ConfigurationError`` when no candidate keeps every plate in view.
     """
-    from scipy.spatial.transform import Rotation
-
-    from cpc2urdf.identification.render import PinholeView, hidden_circles
-    from cpc2urdf.identification.simulate import check_view, place_in_front_of_rig
-    from cpc2urdf.model import CPCParams
-    from cpc2urdf.transforms import homogeneous
+    from cpc2urdf.identification.simulate import check_view
+    from cpc2urdf.identification.simulate import clear_placement as search
 
     nominal = spec.nominal_model()
     frames = [d.name for d in designs]
-    at = nominal.with_params(world_to_base=CPCParams())
-    fk = at.fk(q, frames)
-    n = np.concatenate([fk[f][:, :3, 2] for f in frames]).mean(axis=0)
-    n /= np.linalg.norm(n)
-    up0 = np.array([0.0, 0.0, 1.0])
-    revolute = [i for i, j in enumerate(nominal.structure.joints) if j.type == "revolute"]
-    if revolute:
-        up0 = at.joint_axes_world(q.mean(axis=0))[1][0, revolute[0]]
-    u = up0 - (up0 @ n) * n
-    ups: list[Array | None] = [None]
-    if np.linalg.norm(u) > 1e-6:
-        u /= np.linalg.norm(u)
-        ups += [np.cross(n, u), -np.cross(n, u)]
-    views = [PinholeView(rig.K1, rig.D1, rig.image_size, np.linalg.inv(rig.T_world_camera(w))) for w in STEREO_FOLDERS]
-    best: tuple[float, float, Any] | None = None
-    labels = [str(i) for i in range(len(q))]
-    for up in ups:
-        T0 = place_in_front_of_rig(nominal, rig, q, frames, up_base=up).matrix()
-        F = nominal.with_params(world_to_base=CPCParams.from_matrix(T0)).fk(q, frames)
-        c = np.concatenate([F[f][:, :3, 3] for f in frames])
-        fix = (c.min(axis=0) + c.max(axis=0)) / 2
-        for axis in ("x", "y"):
-            for ang in (0, -10, 10, -20, 20, -30, 30, -40, 40):
-                if ang == 0 and axis == "y":
-                    continue
-                R = Rotation.from_euler(axis, ang, degrees=True).as_matrix()
-                w2b = CPCParams.from_matrix(homogeneous(R, fix - R @ fix) @ T0)
-                m = nominal.with_params(world_to_base=w2b)
-                view = check_view(m, rig, q, frames, labels)
-                if not view.ok:
-                    continue
-                F = m.fk(q, frames)
-                bad = sum(
-                    sum(hidden_circles(v, [(d, F[d.name][i]) for d in designs], margin_px=5.0).values())
-                    for i in range(len(q)) for v in views
-                )
-                key = (float(bad), view.max_view_angle)
-                if best is None or key < best[:2]:
-                    best = (key[0], key[1], w2b)
-                if bad == 0 and ang == 0:
-                    return w2b
-    if best is None:
+    w2b = search(nominal, rig, q, frames, designs=designs)
+    view = check_view(nominal.with_params(world_to_base=w2b), rig, q, frames, [str(i) for i in range(len(q))],
+                      designs=designs)
+    if view.unseen:
         raise ConfigurationError("no placement of the robot lets both rig cameras see every plate")
-    return best[2]
+    return w2b
 
 
 def render_experiment(
@@ -674,8 +630,6 @@ def render_experiment(
     from cpc2urdf.identification.render import PinholeView, hidden_circles, render_view, write_image
     from cpc2urdf.identification.rig_file import save_rig
     from cpc2urdf.identification.simulate import (
-        calibration_ranges,
-        protocol_configurations,
         simulate_experiment,
     )
     from cpc2urdf.identification.stereo import StereoRig
@@ -689,10 +643,9 @@ def render_experiment(
     s = spec.structure
     rig = rig or StereoRig.verged()
     designs = robot_plate_designs(s.frames)
-    q_plan, _ = protocol_configurations(calibration_ranges(s), M, s.joint_names)
-    w2b = clear_placement(spec, rig, q_plan, designs)
+    # The simulator's default placement: no circle hidden over the protocol and the held-out box.
     truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
-                                                world_to_base=w2b, robot_ref=robot)
+                                                robot_ref=robot)
     for sub in STEREO_FOLDERS:
         (out / sub).mkdir(parents=True, exist_ok=True)
     views = [PinholeView(rig.K1, rig.D1, rig.image_size, np.linalg.inv(rig.T_world_camera(w))) for w in STEREO_FOLDERS]

@@ -444,6 +444,64 @@ def hidden_circles(
     return out
 
 
+def occluded_circles(
+    camera_centre: ArrayLike,
+    focal_px: float,
+    plates: Sequence[tuple[PlateDesign, ArrayLike]],
+    *,
+    margin_px: float = 0.0,
+) -> dict[str, NDArray[np.bool_]]:
+    """Which circles a camera cannot see because of the plates themselves, for N poses at once.
+
+    A 3-D ray test (vectorised over configurations, unlike :func:`hidden_circles`, which tests
+    one image against the renderer's depth order): circle ``k`` of plate ``a`` is hidden when
+    plate ``a`` shows the camera its back (the camera is not on its +z side), or when the ray
+    from the camera centre to the circle centre crosses another plate's plane between the two
+    inside that plate's outline grown by a clearance. The clearance is the circle's radius and
+    ``margin_px`` pixels, both scaled to the distance of the crossing, so a circle counts as
+    hidden when its image comes within ``margin_px`` of the occluding plate's image.
+
+    Args:
+        camera_centre: Optical centre of the camera in world [m], shape (3,).
+        focal_px: Focal length [px] (converts ``margin_px`` to metres at a distance).
+        plates: (design, ``T_world_plate`` of shape (N, 4, 4) or (4, 4)) pairs; all with the
+            same N.
+        margin_px: Clearance required between a circle's image and another plate's image [px].
+
+    Returns:
+        Plate name -> hidden mask of shape (N, K).
+    """
+    c = np.asarray(camera_centre, dtype=float).reshape(3)
+    items = [(d, np.asarray(T, dtype=float).reshape(-1, 4, 4)) for d, T in plates]
+    out: dict[str, NDArray[np.bool_]] = {}
+    for a, (d, T) in enumerate(items):
+        p = np.einsum("nij,kj->nki", T[:, :3, :3], d.layout) + T[:, None, :3, 3]  # (N, K, 3)
+        back = np.einsum("ni,ni->n", c - T[:, :3, 3], T[:, :3, 2]) <= 0
+        hidden = np.repeat(back[:, None], d.n_circles, axis=1)
+        ray = p - c  # camera -> circle centre, (N, K, 3)
+        length = np.linalg.norm(ray, axis=2)
+        for b, (db, Tb) in enumerate(items):
+            if b == a:
+                continue
+            n, o = Tb[:, :3, 2], Tb[:, :3, 3]
+            den = np.einsum("nki,ni->nk", ray, n)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.einsum("ni,ni->n", o - c, n)[:, None] / den  # crossing at c + s ray
+            crosses = np.isfinite(s) & (s > 0) & (s < 1)
+            s = np.where(crosses, s, 0.0)
+            x = c + s[..., None] * ray - o[:, None, :]
+            local = np.einsum("nji,nkj->nki", Tb[:, :3, :3], x)  # R^T (x - o): plate-b frame
+            clear = s * (d.radii[None, :] + margin_px * length / focal_px)
+            x0, x1, y0, y1 = db.outline
+            inside = (
+                (local[..., 0] > x0 - clear) & (local[..., 0] < x1 + clear)
+                & (local[..., 1] > y0 - clear) & (local[..., 1] < y1 + clear)
+            )
+            hidden |= crosses & inside
+        out[d.name] = hidden
+    return out
+
+
 def write_image(path: object, image: NDArray[np.uint8]) -> None:
     """Write an image losslessly (PNG) and atomically, raising ``OutputError`` on failure."""
     import os
@@ -471,6 +529,7 @@ __all__ = [
     "PlateDesign",
     "circle_centres_px",
     "hidden_circles",
+    "occluded_circles",
     "plate_design",
     "render_view",
     "robot_plate_designs",

@@ -2,7 +2,8 @@
 
 A "true" robot is the nominal model plus seeded random geometric errors (a real head is not its
 drawing). It is placed in front of a stereo rig (world = the rig's left camera frame) so that both
-plates stay in view over the calibration range, and measured with the one-joint-at-a-time
+cameras see every circle of both plates over the calibration range (no plate hiding another,
+:func:`clear_placement`), and measured with the one-joint-at-a-time
 protocol: one record at ``q0`` (the middle of every joint's calibration range), then, for each
 joint in turn, ``M`` values evenly spread over its calibration range with the other joints at
 ``q0`` (``n M + 1`` records; 6M+1 for the IIS-head). Every record measures every plate.
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -31,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.identification.noise import fig10_noise, random_rotations, stereo_noise
+from cpc2urdf.identification.render import PlateDesign, occluded_circles, robot_plate_designs
 from cpc2urdf.identification.stereo import StereoRig
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams, RobotStructure
@@ -51,6 +53,10 @@ DEFAULT_GEOMETRY_ERROR_R = math.radians(0.5)  # [rad], about a random axis
 DEFAULT_HELDOUT = 50
 VIEW_MARGIN_PX = 20.0  # [px]: circles must stay this far inside both images
 MAX_VIEW_ANGLE = math.radians(75.0)  # [rad]: plate normal vs line of sight to either camera
+OCCLUSION_MARGIN_PX = 3.0  # [px]: a circle's image must stay this far from any other plate's image
+# [px]: the placement search asks for more clearance on the nominal robot, so that the true robot
+# (nominal + ~1 mm / 0.5 deg errors, a few px at 1.5 m) still keeps OCCLUSION_MARGIN_PX.
+PLACEMENT_MARGIN_PX = 10.0
 
 
 class Experiment(NamedTuple):
@@ -185,24 +191,13 @@ def place_in_front_of_rig(
     at_base = model.with_params(world_to_base=CPCParams())
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     fk = at_base.fk(qq, frames)
-    pts, normals = [], []
-    for f in frames:
-        T = fk[f]
-        pts.append(np.einsum("nij,kj->nki", T[:, :3, :3], _frame_points(model.structure, f)) + T[:, None, :3, 3])
-        normals.append(T[:, :3, 2])
-    P = np.concatenate([p.reshape(-1, 3) for p in pts])
-    n_mean = np.concatenate(normals).mean(axis=0)
-    if np.linalg.norm(n_mean) < 1e-6:
-        n_mean = np.array([0.0, 0.0, 1.0])
-    view_b = -n_mean / np.linalg.norm(n_mean)  # rig looks against the plate normals
-    if up_base is None:
-        up = np.array([0.0, 0.0, 1.0])
-        s = model.structure
-        revolute = [i for i, j in enumerate(s.joints) if j.type == "revolute"]
-        if revolute:
-            _, axes = at_base.joint_axes_world(qq.mean(axis=0))
-            up = axes[0, revolute[0]]
-    else:
+    P = np.concatenate([
+        (np.einsum("nij,kj->nki", fk[f][:, :3, :3], _frame_points(model.structure, f)) + fk[f][:, None, :3, 3])
+        .reshape(-1, 3) for f in frames
+    ])
+    n_mean, up = _mean_normal_and_up(at_base, qq, frames)
+    view_b = -n_mean  # rig looks against the plate normals
+    if up_base is not None:
         up = np.asarray(up_base, dtype=float)
     down_b = -(up - (up @ view_b) * view_b)
     if np.linalg.norm(down_b) < 1e-6:  # looking straight along "up": any image orientation
@@ -224,6 +219,24 @@ def place_in_front_of_rig(
     return CPCParams.from_matrix(homogeneous(R_wb, t_wb))
 
 
+def _mean_normal_and_up(at_base: CPCModel, q: Array, frames: Sequence[str]) -> tuple[Array, Array]:
+    """Unit mean plate normal over ``q`` (N, n) and the robot's up direction, both in base.
+
+    Up is the axis of the first revolute joint at the middle configuration (the pan axis of a
+    head), else base z; ``at_base`` is the robot with ``world_to_base`` = identity.
+    """
+    fk = at_base.fk(q, frames)
+    n_mean = np.concatenate([fk[f][:, :3, 2] for f in frames]).mean(axis=0)
+    if np.linalg.norm(n_mean) < 1e-6:
+        n_mean = np.array([0.0, 0.0, 1.0])
+    up = np.array([0.0, 0.0, 1.0])
+    revolute = [i for i, j in enumerate(at_base.structure.joints) if j.type == "revolute"]
+    if revolute:
+        _, axes = at_base.joint_axes_world(q.mean(axis=0))
+        up = axes[0, revolute[0]]
+    return n_mean / np.linalg.norm(n_mean), up
+
+
 def _closest_point_of_two_lines(a: Array, u: Array, b: Array, v: Array) -> Array:
     # Midpoint of the common perpendicular of lines a + s u and b + t v.
     w = a - b
@@ -241,11 +254,18 @@ class ViewReport:
     """How well the rig sees the plates over a set of configurations.
 
     Attributes:
-        ok: Every circle of every plate seen by both cameras, face-on enough, in every config.
-        problems: One line per (configuration, plate) that fails, at most a few.
+        ok: Every circle of every plate seen by both cameras, face-on enough, hidden by no other
+            plate, in every config.
+        problems: One line per (configuration, plate) that fails: out of view or too oblique
+            first, then hidden circles.
         min_margin_px: Smallest distance of a circle centre from an image border [px].
         max_view_angle: Largest angle between a plate normal and a line of sight [rad].
         distance_range: Min and max distance of plate origins from the left camera [m].
+        unseen: Number of (configuration, plate) pairs outside an image or too oblique.
+        hidden: Number of (configuration, plate, camera, circle) sightings blocked by another
+            plate or by the plate's own back (:func:`~cpc2urdf.identification.render.
+            occluded_circles`).
+        hidden_per_config: Those sightings per configuration, shape (N,).
     """
 
     ok: bool
@@ -253,6 +273,9 @@ class ViewReport:
     min_margin_px: float
     max_view_angle: float
     distance_range: tuple[float, float]
+    unseen: int = 0
+    hidden: int = 0
+    hidden_per_config: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def check_view(
@@ -264,14 +287,46 @@ def check_view(
     *,
     margin_px: float = VIEW_MARGIN_PX,
     max_angle: float = MAX_VIEW_ANGLE,
+    occlusion_margin_px: float | None = OCCLUSION_MARGIN_PX,
+    designs: Sequence[PlateDesign] | None = None,
 ) -> ViewReport:
-    """Check that both rig cameras see every circle of every plate in every configuration."""
+    """Check that both rig cameras see every circle of every plate in every configuration.
+
+    A (configuration, plate) fails when a circle centre is less than ``margin_px`` inside an
+    image, when a line of sight is more than ``max_angle`` off the plate normal, or when a camera
+    cannot see a circle because another plate is in the way or the plate shows its back (a 3-D
+    ray test against the plate rectangles, with ``occlusion_margin_px`` of clearance).
+
+    Args:
+        model: The robot, placed in the rig's world.
+        rig: The measuring rig.
+        q: Configurations, shape (N, n).
+        frames: The plates.
+        labels: One label per configuration (for the problem lines).
+        margin_px: Required distance of circle centres from the image borders [px].
+        max_angle: Largest angle between plate normal and line of sight [rad].
+        occlusion_margin_px: Required clearance between a circle's image and any other plate's
+            image [px]; None skips the occlusion test.
+        designs: Plate outlines for the occlusion test (default: :func:`~cpc2urdf.
+            identification.render.robot_plate_designs`, the layout's bounding box + 10 mm).
+    """
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     fk = model.fk(qq, frames)
     w, h = rig.image_size
     problems: list[str] = []
+    hidden_problems: list[str] = []  # listed after the out-of-view ones
     min_margin, max_ang, dists = math.inf, 0.0, []
-    centres = [rig.T_world_camera("left")[:3, 3], rig.T_world_camera("right")[:3, 3]]
+    cameras = [("left", rig.T_world_camera("left")[:3, 3], float(rig.K1[0, 0])),
+               ("right", rig.T_world_camera("right")[:3, 3], float(rig.K2[0, 0]))]
+    occluded: dict[str, list[NDArray[np.bool_]]] = {}
+    if occlusion_margin_px is not None:
+        by_name = {d.name: d for d in (robot_plate_designs(model.structure.frames) if designs is None else designs)}
+        plates = [(by_name[f], fk[f]) for f in frames if f in by_name]
+        for _, centre, focal in cameras:
+            for f, mask in occluded_circles(centre, focal, plates, margin_px=occlusion_margin_px).items():
+                occluded.setdefault(f, []).append(mask)
+    unseen = 0
+    per_config = np.zeros(len(qq), dtype=np.int64)
     for f in frames:
         T = fk[f]
         pts = np.einsum("nij,kj->nki", T[:, :3, :3], _frame_points(model.structure, f)) + T[:, None, :3, 3]
@@ -281,21 +336,145 @@ def check_view(
             m = np.minimum.reduce([uv[..., 0], w - 1 - uv[..., 0], uv[..., 1], h - 1 - uv[..., 1]])
             min_margin = min(min_margin, float(np.nanmin(m)))
         ang = np.zeros(len(qq))
-        for c in centres:
+        for _, c, _ in cameras:
             los = c - T[:, :3, 3]
             los /= np.linalg.norm(los, axis=1, keepdims=True)
             ang = np.maximum(ang, np.arccos(np.clip(np.einsum("ni,ni->n", los, T[:, :3, 2]), -1, 1)))
         max_ang = max(max_ang, float(ang.max()))
         dists.append(np.linalg.norm(T[:, :3, 3], axis=1))
-        for i in np.flatnonzero(~seen.all(axis=1) | (ang > max_angle)):
-            why = (
-                f"{int((~seen[i]).sum())} of {seen.shape[1]} circles outside an image (margin {margin_px:g} px)"
-                if not seen[i].all()
-                else f"seen at {math.degrees(ang[i]):.0f} deg from face-on (limit {math.degrees(max_angle):.0f})"
-            )
+        blocked = occluded.get(f, [np.zeros(seen.shape, dtype=bool)] * 2)
+        per_config += blocked[0].sum(axis=1) + blocked[1].sum(axis=1)
+        bad_view = ~seen.all(axis=1) | (ang > max_angle)
+        unseen += int(bad_view.sum())
+        for i in np.flatnonzero(bad_view | blocked[0].any(axis=1) | blocked[1].any(axis=1)):
+            if not seen[i].all():
+                why = f"{int((~seen[i]).sum())} of {seen.shape[1]} circles outside an image (margin {margin_px:g} px)"
+            elif ang[i] > max_angle:
+                why = f"seen at {math.degrees(ang[i]):.0f} deg from face-on (limit {math.degrees(max_angle):.0f})"
+            else:
+                why = "; ".join(
+                    f"{int(b[i].sum())} of {b.shape[1]} circles hidden from the {cam} camera by another plate "
+                    f"or its own back (clearance {occlusion_margin_px:g} px)"
+                    for (cam, _, _), b in zip(cameras, blocked, strict=True) if b[i].any()
+                )
+                hidden_problems.append(f"{f} at {labels[int(i)]}: {why}")
+                continue
             problems.append(f"{f} at {labels[int(i)]}: {why}")
+    problems += hidden_problems
     d = np.concatenate(dists)
-    return ViewReport(not problems, problems, min_margin, max_ang, (float(d.min()), float(d.max())))
+    return ViewReport(not problems, problems, min_margin, max_ang, (float(d.min()), float(d.max())), unseen,
+                      int(per_config.sum()), per_config)
+
+
+def clear_placement(
+    model: CPCModel,
+    rig: StereoRig,
+    q: ArrayLike,
+    frames: Sequence[str],
+    *,
+    q_sample: ArrayLike | None = None,
+    designs: Sequence[PlateDesign] | None = None,
+    occlusion_margin_px: float = PLACEMENT_MARGIN_PX,
+) -> CPCParams:
+    """A ``world_to_base`` from which both cameras see every circle of every plate over ``q``.
+
+    Starts from the face-on placement of :func:`place_in_front_of_rig`, which for the IIS-head
+    lets one plate hide part of the other (the plates sit ~0.13 m apart along their normals),
+    then tries, in a fixed order, the image rolled by +-90 deg and the robot turned by up to
+    40 deg (steps of 10 deg) about the rig's x and y axes through the plates' centre. Only
+    placements that keep every circle of ``q`` and ``q_sample`` inside both images and at most
+    ``MAX_VIEW_ANGLE`` off face-on count; among them it returns the one with the fewest hidden
+    circles (:func:`check_view`) over ``q``, then over ``q_sample``, then the most face-on, and
+    stops at the first unturned one with none hidden. Deterministic: depends on the robot, the rig
+    and the configurations only.
+
+    Args:
+        model: The robot (its own ``world_to_base`` is ignored).
+        rig: The measuring rig.
+        q: Configurations in which every circle must be seen (the protocol), shape (N, n).
+        frames: The plates.
+        q_sample: Further configurations in which as few circles as possible should be hidden
+            (e.g. a sample of the calibration ranges), shape (M, n).
+        designs: Plate outlines for the occlusion test (default: the robot's plate designs).
+        occlusion_margin_px: Clearance between a circle's image and other plates' images [px].
+
+    Returns:
+        CPC constants of ``T_world_base``; if no candidate keeps the plates in view, the face-on
+        placement (so that :func:`check_view` can explain what is out of view).
+    """
+    from scipy.spatial.transform import Rotation
+
+    qq = np.atleast_2d(np.asarray(q, dtype=float))
+    n_q = len(qq)
+    if q_sample is not None:
+        qq = np.vstack([qq, np.atleast_2d(np.asarray(q_sample, dtype=float))])
+    n, up0 = _mean_normal_and_up(model.with_params(world_to_base=CPCParams()), qq, frames)
+    u = up0 - (up0 @ n) * n
+    ups: list[Array | None] = [None]
+    if np.linalg.norm(u) > 1e-6:
+        u /= np.linalg.norm(u)
+        ups += [np.cross(n, u), -np.cross(n, u)]  # image rolled by -+90 deg
+    labels = [str(i) for i in range(len(qq))]
+    face_on: CPCParams | None = None
+    best: tuple[tuple[int, int, float], CPCParams] | None = None
+    for up in ups:
+        T0 = place_in_front_of_rig(model, rig, qq, frames, up_base=up).matrix()
+        F = model.with_params(world_to_base=CPCParams.from_matrix(T0)).fk(qq, frames)
+        c = np.concatenate([F[f][:, :3, 3] for f in frames])
+        fix = (c.min(axis=0) + c.max(axis=0)) / 2
+        for axis in ("x", "y"):
+            for ang in (0, -10, 10, -20, 20, -30, 30, -40, 40):
+                if ang == 0 and axis == "y":
+                    continue
+                R = Rotation.from_euler(axis, ang, degrees=True).as_matrix()
+                w2b = CPCParams.from_matrix(homogeneous(R, fix - R @ fix) @ T0)
+                face_on = face_on or w2b
+                view = check_view(model.with_params(world_to_base=w2b), rig, qq, frames, labels,
+                                  occlusion_margin_px=occlusion_margin_px, designs=designs)
+                if view.unseen:
+                    continue
+                h = view.hidden_per_config
+                key = (int(h[:n_q].sum()), int(h[n_q:].sum()), view.max_view_angle)
+                if best is None or key < best[0]:
+                    best = (key, w2b)
+                if view.hidden == 0 and ang == 0:
+                    return w2b
+    assert face_on is not None
+    return face_on if best is None else best[1]
+
+
+def visible_heldout(
+    truth: CPCModel,
+    rig: StereoRig,
+    ranges: ArrayLike,
+    n: int,
+    frames: Sequence[str],
+    rng: np.random.Generator,
+    *,
+    max_rounds: int = 20,
+) -> tuple[Array, int]:
+    """``n`` random configurations in ``ranges`` (n_joints, 2) in which no circle is hidden.
+
+    Draws ``n`` configurations uniformly, then redraws (from ``rng``, in order) those in which
+    :func:`check_view` finds a circle hidden by a plate -- a real validation set holds only poses
+    the rig can measure -- for at most ``max_rounds`` rounds. Configurations that leave the
+    images are kept: :func:`check_view` reports them.
+
+    Returns:
+        ``(q, redrawn)``: configurations of shape (n, n_joints) and how many draws were replaced.
+    """
+    q = random_configurations(ranges, n, rng)
+    redrawn = 0
+    for _ in range(max_rounds):
+        if n == 0:
+            break
+        view = check_view(truth, rig, q, frames, [str(i) for i in range(n)])
+        bad = np.flatnonzero(view.hidden_per_config > 0)
+        if bad.size == 0:
+            break
+        q[bad] = random_configurations(ranges, bad.size, rng)
+        redrawn += int(bad.size)
+    return q, redrawn
 
 
 # ---- measuring ----------------------------------------------------------------------------------------
@@ -400,9 +579,11 @@ def simulate_experiment(
         n_heldout: Number of random held-out configurations (true poses, no noise).
         rig: The measuring rig (default :meth:`StereoRig.verged`: 600 mm baseline, 1.5 m).
         ranges: Calibration ranges per joint ``{name: (lo, hi)}`` [m]/[rad] overriding the spec.
-        world_to_base: Nominal placement in the rig's world (default: computed face-on,
-            :func:`place_in_front_of_rig`); the true placement is this plus geometric error.
-        require_view: Raise if a plate leaves the view of a camera (otherwise just record it).
+        world_to_base: Nominal placement in the rig's world (default: :func:`clear_placement`
+            over the protocol and a fixed sample of the calibration ranges, so that no plate
+            hides another's circles); the true placement is this plus geometric error.
+        require_view: Raise if a plate leaves the view of a camera or a circle is hidden
+            (otherwise just record it).
         robot_ref: Robot reference written into the measurement sets (default: ``robot`` if
             it is a name or path).
         show_progress: Draw a progress bar on stderr.
@@ -411,8 +592,8 @@ def simulate_experiment(
         ``Experiment(truth, measured, heldout)``.
 
     Raises:
-        ConfigurationError: A plate leaves the view of a camera in some configuration (the
-            message names the plate and configuration), or bad arguments.
+        ConfigurationError: A plate leaves the view of a camera, or a circle is hidden, in some
+            configuration (the message names the plate and configuration), or bad arguments.
         SpecError: The robot has no nominal geometry.
     """
     if noise not in NOISE_MODELS:
@@ -434,19 +615,19 @@ def simulate_experiment(
     r = calibration_ranges(s, ranges)
     q, labels = protocol_configurations(r, M, s.joint_names)
     rng_geometry, rng_noise, rng_heldout = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
-    q_held = random_configurations(r, n_heldout, rng_heldout)
 
-    # The placement depends on the robot and ranges only (a fixed sample), not on the seed.
-    q_place = np.vstack([q, random_configurations(r, 256, np.random.default_rng(0))])
-    w2b = world_to_base or place_in_front_of_rig(nominal, rig, q_place, frames)
+    # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
+    q_sample = random_configurations(r, 256, np.random.default_rng(0))
+    w2b = world_to_base or clear_placement(nominal, rig, q, frames, q_sample=q_sample)
     truth = perturbed_model(nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r)
+    q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
     view = check_view(truth, rig, np.vstack([q, q_held]), frames,
                       labels + [f"heldout {i}" for i in range(n_heldout)])
     if require_view and not view.ok:
         more = f" (and {len(view.problems) - 1} more)" if len(view.problems) > 1 else ""
         raise ConfigurationError(
-            f"the rig does not see {view.problems[0]}{more}; narrow the calibration ranges or "
-            "widen the rig's field of view"
+            f"the rig does not see {view.problems[0]}{more}; narrow the calibration ranges, "
+            "widen the rig's field of view or place the robot differently"
         )
 
     # Measure joint by joint so that a long run shows progress (the protocol's blocks).
@@ -471,7 +652,8 @@ def simulate_experiment(
         "geometry_error": {"sigma_t_m": geometry_error_t, "sigma_r_rad": geometry_error_r},
         "rig": rig.to_json(),
         "view": {"min_margin_px": view.min_margin_px, "max_view_angle_rad": view.max_view_angle,
-                 "distance_range_m": list(view.distance_range), "problems": view.problems[:10]},
+                 "distance_range_m": list(view.distance_range), "problems": view.problems[:10],
+                 "heldout_redrawn_for_occlusion": redrawn},
     }
     fit_rms = {}
     if points:

@@ -12,11 +12,14 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.identification.render import PinholeView, hidden_circles, robot_plate_designs
 from cpc2urdf.identification.simulate import (
+    OCCLUSION_MARGIN_PX,
     calibration_ranges,
     check_view,
     measured_frames,
     perturbed_model,
+    place_in_front_of_rig,
     protocol_configurations,
     simulate_experiment,
 )
@@ -40,7 +43,7 @@ def test_protocol_is_one_joint_at_a_time() -> None:
     for i in range(6):
         block = q[1 + 9 * i: 1 + 9 * (i + 1)]
         np.testing.assert_allclose(np.delete(block, i, axis=1), np.delete(np.tile(q0, (9, 1)), i, axis=1))
-        np.testing.assert_allclose(block[:, i], np.linspace(*r[i], 9))
+        np.testing.assert_allclose(block[:, i], np.linspace(r[i, 0], r[i, 1], 9))
     with pytest.raises(ConfigurationError, match="M must be at least 2"):
         protocol_configurations(r, 1, s.joint_names)
     with pytest.raises(ConfigurationError, match="must lie within the limits"):
@@ -76,6 +79,53 @@ def test_noise_free_measurements_are_the_truth_and_plates_stay_in_view() -> None
     view = check_view(truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.min_margin_px > 20
     assert 1.2 < view.distance_range[0] < view.distance_range[1] < 1.8  # ~1.5 m from the rig
+
+
+def _rig_views(rig: StereoRig) -> list[PinholeView]:
+    return [PinholeView(K, D, rig.image_size, np.linalg.inv(rig.T_world_camera(w)))
+            for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))]
+
+
+def _hidden_per_record(model: CPCModel, rig: StereoRig, q: np.ndarray, margin_px: float) -> np.ndarray:
+    """Hidden circles per (record, camera) by the renderer's image-space test (independent of the
+    simulator's 3-D ray test), shape (N, 2)."""
+    designs = robot_plate_designs(model.structure.frames)
+    fk = model.fk(q, [d.name for d in designs])
+    return np.array([[sum(hidden_circles(v, [(d, fk[d.name][i]) for d in designs], margin_px=margin_px).values())
+                      for v in _rig_views(rig)] for i in range(len(q))])
+
+
+def test_default_placement_hides_no_circle() -> None:
+    rig = StereoRig.verged()
+    truth, ms, held = simulate_experiment("iis_head", seed=5, noise="none")  # M = 9, 50 held out
+    assert ms.n_records == 55 and held.n_records == 50
+    assert not _hidden_per_record(truth, rig, np.vstack([ms.q, held.q]), margin_px=OCCLUSION_MARGIN_PX).any()
+    view = check_view(truth, rig, np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
+    assert view.ok and view.hidden == 0 and view.unseen == 0
+    assert 1.2 < view.distance_range[0] < view.distance_range[1] < 1.8
+    # The placement depends on the robot, rig and protocol, not on the seed.
+    t2, _, _ = simulate_experiment("iis_head", seed=6, n_heldout=2, noise="none")
+    assert t2.metadata["provenance"]["nominal_world_to_base"] == truth.metadata["provenance"]["nominal_world_to_base"]
+
+
+def test_occlusion_is_reported_by_the_view_check() -> None:
+    # The face-on placement lets plate_right hide circles of plate_left (docs/measurements.md).
+    spec = load_robot("iis_head")
+    nominal, s, rig = spec.nominal_model(), spec.structure, StereoRig.verged()
+    q, labels = protocol_configurations(calibration_ranges(s), 9, s.joint_names)
+    w2b = place_in_front_of_rig(nominal, rig, q, measured_frames(s))
+    model = nominal.with_params(world_to_base=w2b)
+    view = check_view(model, rig, q, measured_frames(s), labels)
+    assert not view.ok and view.unseen == 0 and view.hidden > 0
+    assert all("hidden from the" in p for p in view.problems)
+    # The same records as the renderer's image-space test finds, and about the same circles.
+    render_hidden = _hidden_per_record(model, rig, q, margin_px=OCCLUSION_MARGIN_PX)
+    flagged = {labels.index(p.split(" at ")[1].split(":")[0]) for p in view.problems}
+    assert flagged == set(np.flatnonzero(render_hidden.any(axis=1)))
+    assert len(flagged) > 40 and abs(view.hidden - render_hidden.sum()) <= 0.05 * render_hidden.sum()
+    assert check_view(model, rig, q, measured_frames(s), labels, occlusion_margin_px=None).ok
+    with pytest.raises(ConfigurationError, match=r"plate_left at q0: \d of 9 circles hidden from the right camera"):
+        simulate_experiment(spec, M=9, n_heldout=0, world_to_base=w2b, geometry_error_t=0, geometry_error_r=0)
 
 
 def test_noise_changes_measurements_not_the_truth() -> None:
