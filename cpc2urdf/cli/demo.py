@@ -8,8 +8,9 @@ its artefacts into the output folder, and the demo stops at the first stage that
    measured by a stereo rig, one joint at a time (sec. 4.1), plus held-out configurations;
 3. ``identify`` (closed form + maximum-likelihood refinement) -> ``export`` -> ``check``;
 4. ``accuracy``: the paper's Table 4 on the held-out configurations;
-5. stage 2: the head's cameras view a 5x5 disk target, solvePnP, hand-eye (Tsai, as the paper)
-   -> calibrated model with camera frames -> ``export`` -> ``check``;
+5. stage 2: the head's cameras view a 5x5 disk target, solvePnP, hand-eye (the joint nonlinear
+   refinement of AX = ZB; ``handeye --method all`` shows Tsai, the paper's choice, and the others
+   side by side) -> calibrated model with camera frames -> ``export`` -> ``check``;
 6. ``gaze``: fixate targets with the calibrated head (Pinocchio IK);
 7. ``view``: a self-contained meshcat page of the calibrated head fixating a target.
 """
@@ -154,14 +155,14 @@ def run(args: argparse.Namespace) -> int:
 
         render_head_experiment(out / "head", truth, seed=args.seed)
         _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")
-        _cli("handeye", f"{d}/handeye/handeye_camera_left_optical.json", "--method", "tsai",
+        _cli("handeye", f"{d}/handeye/handeye_camera_left_optical.json", "--method", "refined",
              "--model", f"{d}/stage1_model.json", "-o", f"{d}/model.json")
-        _cli("handeye", f"{d}/handeye/handeye_camera_right_optical.json", "--method", "tsai",
+        _cli("handeye", f"{d}/handeye/handeye_camera_right_optical.json", "--method", "refined",
              "--model", f"{d}/model.json", "-o", f"{d}/model.json")
         print(_camera_errors(load_model(f"{d}/model.json"), truth))
     else:
-        st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, Tsai)")
-        result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed)
+        st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, AX = ZB refined)")
+        result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed, method="refined")
         print(result.summary())
         paths = write_pose_files(result, out)
         save_model(result.model, f"{d}/model.json")
