@@ -194,13 +194,18 @@ class _Eye:
 
 @dataclass
 class _State:
-    """Per-configuration quantities of both eyes (computed by :meth:`GazeSolver._evaluate`)."""
+    """Per-configuration quantities of both eyes (computed by :meth:`GazeSolver._evaluate`).
+
+    The 3-vectors are plain float lists: the solver's hot path does its 3-vector algebra in
+    Python floats, which is several times cheaper than numpy calls on arrays this small.
+    """
 
     r: Array  # (6,) fixation residual, [u_L - e_z, u_R - e_z]
-    J: Array  # (6, n) its Jacobian
-    origins: Array  # (2, 3) camera centres (world) [m]
-    axes: Array  # (2, 3) optical axes (world)
-    p_cam: Array  # (2, 3) target in each camera frame [m]
+    rr: float  # |r|^2
+    J: Array  # (6, n) its Jacobian (empty when not asked for)
+    origins: list[list[float]]  # 2 x 3: camera centres (world) [m]
+    axes: list[list[float]]  # 2 x 3: optical axes (world)
+    p_cam: list[tuple[float, float, float]]  # 2 x 3: target in each camera frame [m]
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -255,6 +260,7 @@ class GazeSolver:
                 raise UnknownNameError("frame", name, known)
             eyes.append(_Eye(model.getFrameId(name), name))
         self._eyes = eyes
+        self._frame_ids = [e.frame_id for e in eyes]
         self.cameras: tuple[str, str] = (cameras[0], cameras[1])
 
         names: list[str] = []
@@ -307,6 +313,7 @@ class GazeSolver:
         self._version_row[self._eye_joints[1][0]] = self._version_sign
         self._build_guess_table()
         self.redundant = self._fixation_is_redundant()
+        self._free_joints = {policy: self._free(policy) for policy in POLICIES}
 
     # ---- construction helpers -------------------------------------------------------------------
 
@@ -346,7 +353,7 @@ class GazeSolver:
             self._pin.framesForwardKinematics(self.model, self.data, q)
             o = np.array([self.data.oMf[e.frame_id].translation for e in self._eyes])
             z = np.array([self.data.oMf[e.frame_id].rotation[:, 2] for e in self._eyes])
-            p = _closest_point(o, z)
+            p = _closest_point(o.tolist(), z.tolist())
             if p is None:
                 continue
             st = self._evaluate(q, p)
@@ -396,6 +403,18 @@ class GazeSolver:
         self._guess_origin = np.array(origins)
         self._guess_dir = np.array(dirs)
         self._guess_q = np.array(qs)
+        # per-grid constants of _guess
+        self._guess_od = np.einsum("ij,ij->i", self._guess_origin, self._guess_dir)
+        self._guess_oo = np.einsum("ij,ij->i", self._guess_origin, self._guess_origin)
+        self._guess_origin_list: list[list[float]] = self._guess_origin.tolist()
+        self._e0, self._e1 = e0, e1
+        self._table_key: bytes | None = None
+        chain, jid = [], self._table_link
+        while jid > 0:
+            chain.append(jid - 1)
+            jid = self.model.parents[jid]
+        self._table_chain = np.array(sorted(chain), dtype=int)
+        self._table_pose: Any = None
         q = self.home
         pin.framesForwardKinematics(self.model, self.data, q)
         o0 = self.data.oMf[self._eyes[0].frame_id].translation
@@ -408,20 +427,28 @@ class GazeSolver:
         pin = self._pin
         model, data = self.model, self.data
         if jacobian:
-            pin.computeJointJacobians(model, data, q)
+            pin.computeJointJacobians(model, data, q)  # also the joint placements
             pin.updateFramePlacements(model, data)
         else:
             pin.framesForwardKinematics(model, data, q)
+        px, py, pz = p.tolist()
+        oMf = data.oMf
         res: list[float] = []
         origins, axes, p_cam, blocks = [], [], [], []
-        for eye in self._eyes:
-            T = data.oMf[eye.frame_id]
-            x, y, z = T.actInv(p).tolist()  # the target in the camera frame: R^T (p - o)
+        rr = 0.0
+        for fid in self._frame_ids:
+            (r00, r01, r02, ox), (r10, r11, r12, oy), (r20, r21, r22, oz), _ = oMf[fid].homogeneous.tolist()
+            # the target in the camera frame: R^T (p - o)
+            dx, dy, dz = px - ox, py - oy, pz - oz
+            x = r00 * dx + r10 * dy + r20 * dz
+            y = r01 * dx + r11 * dy + r21 * dz
+            z = r02 * dx + r12 * dy + r22 * dz
             nrm = math.sqrt(x * x + y * y + z * z) or 1e-300  # target on a camera centre: see _answer
             ux, uy, uz = x / nrm, y / nrm, z / nrm
             res += (ux, uy, uz - 1.0)
-            origins.append(T.translation)
-            axes.append(T.rotation[:, 2])
+            rr += ux * ux + uy * uy + (uz - 1.0) * (uz - 1.0)
+            origins.append([ox, oy, oz])
+            axes.append([r02, r12, r22])
             p_cam.append((x, y, z))
             if jacobian:
                 # d p_cam = -v - w x p_cam = [-I | [p_cam]x] (v; w), the LOCAL twist of the camera;
@@ -433,19 +460,18 @@ class GazeSolver:
                 ]
                 M = [
                     [
-                        -P[i][0],
-                        -P[i][1],
-                        -P[i][2],
-                        P[i][1] * z - P[i][2] * y,
-                        P[i][2] * x - P[i][0] * z,
-                        P[i][0] * y - P[i][1] * x,
+                        -Pi[0],
+                        -Pi[1],
+                        -Pi[2],
+                        Pi[1] * z - Pi[2] * y,
+                        Pi[2] * x - Pi[0] * z,
+                        Pi[0] * y - Pi[1] * x,
                     ]
-                    for i in range(3)
+                    for Pi in P
                 ]
-                blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, eye.frame_id, pin.LOCAL))
-        r = np.array(res)
+                blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL))
         J = np.concatenate(blocks) if jacobian else _EMPTY
-        return _State(r, J, np.array(origins), np.array(axes), np.array(p_cam))
+        return _State(np.array(res), rr, J, origins, axes, p_cam)
 
     # ---- policy (priority 2) --------------------------------------------------------------------
 
@@ -470,7 +496,7 @@ class GazeSolver:
             res.append(float(row @ (q - self.home)))
         if policy == "use-table":
             # cyclopean point at the viewing distance: d|c - p|/dq through the table's translation
-            c = 0.5 * (st.origins[0] + st.origins[1])
+            c = 0.5 * (np.array(st.origins[0]) + np.array(st.origins[1]))
             d = c - p
             dist = float(np.linalg.norm(d))
             row = np.zeros(n)
@@ -551,15 +577,21 @@ class GazeSolver:
     def _guess(self, p: Array, q: Array, rank: int = 0) -> Array:
         """Start: ``rank`` 0 is the version-0 grid entry whose cyclopean ray best faces ``p``;
         ``rank`` k >= 1 is the k-th best entry of the whole grid (eyes turned too)."""
-        pin = self._pin
         if self._table_link:
-            pin.forwardKinematics(self.model, self.data, q)
-            p_t = self.data.oMi[self._table_link].actInv(p)
+            key = q[self._table_chain].tobytes()
+            if key != self._table_key:  # the table link pose depends only on the joints up to it
+                self._pin.forwardKinematics(self.model, self.data, q)
+                self._table_pose = self.data.oMi[self._table_link].copy()
+                self._table_key = key
+            p_t = self._table_pose.actInv(p)
         else:
             p_t = p
         m = self._n_version0 if rank == 0 else len(self._guess_q)
-        v = p_t - self._guess_origin[:m]
-        cosang = np.einsum("ij,ij->i", v, self._guess_dir[:m]) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+        # cos of the angle between each ray (origin o, unit direction d) and v = p_t - o, from
+        # per-grid constants: v.d = p_t.d - o.d and |v|^2 = |p_t|^2 - 2 o.p_t + |o|^2
+        vd = self._guess_dir[:m] @ p_t - self._guess_od[:m]
+        vv = self._guess_oo[:m] - 2.0 * (self._guess_origin[:m] @ p_t) + float(p_t @ p_t)
+        cosang = vd / np.sqrt(np.maximum(vv, 1e-24))
         k = int(np.argmax(cosang)) if rank == 0 else int(np.argsort(-cosang)[rank - 1])
         best = self._guess_q[k]
         out = q.copy()
@@ -567,11 +599,12 @@ class GazeSolver:
         out[self._eyes_all] = best[self._eyes_all]
         if rank == 0:
             # converge the eyes symmetrically on the target's distance along the ray
-            dist = float(np.linalg.norm(v[k]))
+            (ox, oy, oz), (px, py, pz) = self._guess_origin_list[k], p_t.tolist()
+            dist = math.sqrt((px - ox) ** 2 + (py - oy) ** 2 + (pz - oz) ** 2)
             h = math.asin(min(1.0, 0.5 * self.baseline / max(dist, 1e-9))) * self._converge_sign
-            e0, e1 = int(self._eye_joints[0][0]), int(self._eye_joints[1][0])
-            out[e0] = min(max(out[e0] - h, self.lower[e0]), self.upper[e0])
-            out[e1] = min(max(out[e1] + self._version_sign * h, self.lower[e1]), self.upper[e1])
+            e0, e1 = self._e0, self._e1
+            out[e0] = min(max(out[e0] - h, self._lower_list[e0]), self._upper_list[e0])
+            out[e1] = min(max(out[e1] + self._version_sign * h, self._lower_list[e1]), self._upper_list[e1])
         return out
 
     def solve(
@@ -608,7 +641,7 @@ class GazeSolver:
         p = self._check_target(p_world)
         qc = self._check_q(q_current)
         q_ref = self.home.copy() if qc is None else qc
-        free = self._free(policy)
+        free = self._free_joints[policy]
         if q_start is not None:
             q0 = np.clip(np.asarray(q_start, dtype=float).reshape(self.n), self.lower, self.upper)
             fixed = np.setdiff1d(np.arange(self.n), free)
@@ -620,15 +653,15 @@ class GazeSolver:
         else:
             q0 = self._guess(p, q_ref)
         q, it, st = self._solve_from(p, q0, q_ref, policy, free, max_iterations)
-        if float(st.r @ st.r) > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
+        if st.rr > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
             # Local minimum against a limit (e.g. pan at 0 deg while the eyes would have to
             # turn far): retry from the best grid starts with the eyes already turned.
             for rank in range(1, RETRIES + 1):
                 q1, it1, st1 = self._solve_from(p, self._guess(p, q_ref, rank), q_ref, policy, free, max_iterations)
                 it += it1
-                if float(st1.r @ st1.r) < float(st.r @ st.r):
+                if st1.rr < st.rr:
                     q, st = q1, st1
-                if float(st.r @ st.r) <= FLOOR_RESIDUAL:
+                if st.rr <= FLOOR_RESIDUAL:
                     break
         return self._answer(p, q, it, policy, st)
 
@@ -639,11 +672,11 @@ class GazeSolver:
             q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
         else:  # the policy has no freedom to choose with: see _fixation_is_redundant
             q, it, st = q0, 0, self._evaluate(q0, p)
-        if float(st.r @ st.r) > FLOOR_RESIDUAL and it < max_iterations:
+        if st.rr > FLOOR_RESIDUAL and it < max_iterations:
             # Phase 2: fixation alone. Reached when the policy's preferred configuration does
             # not fixate: on a calibrated head (fixation has no spare freedom, only a weak
             # direction the policy was holding) or where a limit blocks the preferred one.
-            q, it2, st = self._iterate(p, q, q_ref, policy, free, max_iterations - it, secondary=False)
+            q, it2, st = self._iterate(p, q, q_ref, policy, free, max_iterations - it, secondary=False, st=st)
             it += it2
         return q, it, st
 
@@ -657,21 +690,31 @@ class GazeSolver:
         max_iterations: int,
         *,
         secondary: bool,
+        st: _State | None = None,
     ) -> tuple[Array, int, _State]:
         """Task-priority Gauss-Newton with an active set of joints held at their limits.
 
         With ``secondary=False`` only fixation is solved (with light damping), and the loop
         runs until it converges or stalls; with ``secondary=True`` it also stops when the
         fixation residual stops falling (the policy then holds a direction fixation needs).
+        ``st`` is the state at ``q`` when the caller has it already.
+
+        The limit tests run on Python floats (``n`` is small): each numpy call on a 6-vector
+        costs about as much as the whole float loop.
         """
         slow = 0
         lo, hi = self.lower, self.upper
+        lo_l, hi_l = self._lower_list, self._upper_list
+        n = self.n
         q = q.copy()
-        held = np.zeros(self.n, dtype=bool)
+        held = np.zeros(n, dtype=bool)
+        any_held = False
         use_table = policy == "use-table"
+        sec_policy = policy if secondary else None
         prev = math.inf
         it = 0
-        st = self._evaluate(q, p)
+        if st is None:
+            st = self._evaluate(q, p)
         for it in range(1, max_iterations + 1):  # noqa: B007
             if use_table:
                 st.extra["Jo"] = [
@@ -679,29 +722,32 @@ class GazeSolver:
                     @ self._pin.getFrameJacobian(self.model, self.data, e.frame_id, self._pin.LOCAL)[:3]
                     for e in self._eyes
                 ]
-            r1 = st.r
-            rr = float(r1 @ r1)
+            rr = st.rr
             if rr < FLOOR_RESIDUAL and (
                 not secondary
                 or (policy == "cyclopean" and abs(float(self._version_row @ (q - self.home))) < CONVERGED_STEP)
             ):
                 break  # fixated, and the policy has nothing left to ask: skip the last step
-            if held.any():
+            q_l = q.tolist()
+            if any_held:
                 # release held joints whose gradient of |r1|^2 pulls them back inside
-                g = st.J.T @ r1
+                g = st.J.T @ st.r
                 held &= ((q <= lo) & (g > 0)) | ((q >= hi) & (g < 0))
-            act = free[~held[free]]
+                any_held = bool(held.any())
+            act = free[~held[free]] if any_held else free
             if act.size == 0:
                 break
-            block = np.flatnonzero(((q <= lo) | (q >= hi)) & ~held)
-            dq, d1 = self._step(policy if secondary else None, q, q_ref, p, st, act, block)
+            block_l = [i for i in range(n) if (q_l[i] <= lo_l[i] or q_l[i] >= hi_l[i]) and not held[i]]
+            block = np.array(block_l, dtype=int) if block_l else None
+            dq = self._step(sec_policy, q, q_ref, p, st, act, block)
             for _ in range(4):
-                nq = q + dq
-                out = (nq < lo) | (nq > hi)
-                if not out.any():
+                nq_l = (q + dq).tolist()
+                out_l = [i for i in range(n) if nq_l[i] < lo_l[i] or nq_l[i] > hi_l[i]]
+                if not out_l:
                     break
-                new_block = np.union1d(block, np.flatnonzero(out))
-                if new_block.size == block.size:
+                n_block = 0 if block is None else block.size
+                new_block = np.union1d(block if block is not None else _NONE_INT, out_l)
+                if new_block.size == n_block:
                     # The null space cannot keep them inside: fixation itself needs them
                     # beyond the limit. Hold those at a limit (active set); others get a
                     # shortened step below.
@@ -709,24 +755,28 @@ class GazeSolver:
                     if not push.any():
                         break
                     held |= push
-                    block = np.setdiff1d(block, np.flatnonzero(push))
+                    any_held = True
+                    block = np.setdiff1d(block if block is not None else _NONE_INT, np.flatnonzero(push))
                     act = free[~held[free]]
                     if act.size == 0:
-                        dq = np.zeros(self.n)
+                        dq = np.zeros(n)
                         break
                 else:
                     block = new_block
-                dq, d1 = self._step(policy if secondary else None, q, q_ref, p, st, act, block)
+                dq = self._step(sec_policy, q, q_ref, p, st, act, block)
             nq = q + dq
-            if ((nq < lo) | (nq > hi)).any():
+            dq_l, nq_l = dq.tolist(), nq.tolist()
+            if any(nq_l[i] < lo_l[i] or nq_l[i] > hi_l[i] for i in range(n)):
                 # shorten the step to the first limit it meets (projected steps would zig-zag)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    t = np.where(dq < 0, (lo - q) / dq, np.where(dq > 0, (hi - q) / dq, np.inf))
-                t = t[(q > lo) & (q < hi)]  # joints already at a limit are projected instead
-                if t.size:
-                    dq = dq * max(min(float(np.min(t)), 1.0), 0.0)
+                t = [
+                    (lo_l[i] - q_l[i]) / dq_l[i] if dq_l[i] < 0 else (hi_l[i] - q_l[i]) / dq_l[i]
+                    for i in range(n)
+                    if dq_l[i] != 0 and lo_l[i] < q_l[i] < hi_l[i]  # joints at a limit are projected instead
+                ]
+                if t:
+                    dq = dq * max(min(min(t), 1.0), 0.0)
                 nq = np.clip(q + dq, lo, hi)
-            step = float(np.max(np.abs(dq)))
+            step = max(map(abs, dq.tolist()))
             if rr < CONVERGED_RESIDUAL or (rr < FLOOR_RESIDUAL and step < CONVERGED_STEP):
                 break
             if rr >= prev * (1.0 - 1e-6) and step < 1e-8:
@@ -743,18 +793,18 @@ class GazeSolver:
                 slow = 0
             prev = rr
             new = self._evaluate(nq, p)
-            if not secondary and float(new.r @ new.r) > rr:
+            if not secondary and new.rr > rr:
                 # Watchdog: a long step along a weakly determined direction (the calibrated
                 # head's version) lands off the curved solution set; one corrective step from
                 # there usually ends below the start. Accept the pair if it does.
-                dq2, _ = self._step(None, nq, q_ref, p, new, act, None)
+                dq2 = self._step(None, nq, q_ref, p, new, act, None)
                 nq2 = np.clip(nq + dq2, lo, hi)
                 new2 = self._evaluate(nq2, p)
-                if float(new2.r @ new2.r) < rr:
+                if new2.rr < rr:
                     q, st = nq2, new2
                     continue
             for _ in range(BACKTRACKS):  # halve steps that increase the fixation residual
-                rn = float(new.r @ new.r)
+                rn = new.rr
                 if rn <= rr or rn < 1e-20:
                     break
                 dq *= 0.5
@@ -766,8 +816,8 @@ class GazeSolver:
 
     def _step(
         self, policy: str | None, q: Array, q_ref: Array, p: Array, st: _State, act: Index, block: Index | None = None
-    ) -> tuple[Array, Array]:
-        """One task-priority Gauss-Newton step over the joints ``act``, and its priority-1 part.
+    ) -> Array:
+        """One task-priority Gauss-Newton step over the joints ``act``, shape (n,).
 
         Priority 1 (fixation) takes the truncated pseudo-inverse step; priority 2 (policy) moves
         only in the exact null space of priority 1 (eigenvectors of ``J1^T J1`` with eigenvalue
@@ -778,60 +828,66 @@ class GazeSolver:
         # Levenberg-Marquardt damping mu = |r1|^2 (Yamashita-Fukushima: quadratic convergence on
         # consistent problems even where J1 is singular). Directions weaker than the damping
         # (or than NULL_EIGENVALUE) belong to the null space: fixation cannot use them now.
-        mu = float(st.r @ st.r) * (1.0 if policy is not None else PHASE2_DAMPING)
-        rng = lam > max(mu, NULL_EIGENVALUE)
-        Vr = V[:, rng]
-        d = d1 = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[rng] + mu))
-        if not rng.all():
+        mu = st.rr * (1.0 if policy is not None else PHASE2_DAMPING)
+        # eigh sorts lam ascending: the null space is the first k0 columns of V, the range the rest
+        lam_l = lam.tolist()
+        thr = max(mu, NULL_EIGENVALUE)
+        k0 = sum(1 for v in lam_l if v <= thr)
+        Vr = V[:, k0:]
+        d = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[k0:] + mu))
+        if k0:
             # Null space of fixation (at this damping), in coordinates y: motion V0 @ y.
-            V0 = V[:, ~rng]
-            exact = lam[~rng] <= NULL_EIGENVALUE
+            V0 = V[:, :k0]
+            ke = sum(1 for v in lam_l if v <= NULL_EIGENVALUE)  # the exact null space: V[:, :ke]
             b = np.flatnonzero(np.isin(act, block)) if block is not None and block.size else _NONE_INT
             if b.size:
                 # Blocked joints (at a limit) must not move: first trade the fixation step's
                 # motion of them for motion in the exact null space (fixation unchanged to
                 # first order) as far as possible, then keep the policy off them.
-                if exact.any():
-                    Ve = V0[:, exact]
+                if ke:
+                    Ve = V0[:, :ke]
                     y, *_ = np.linalg.lstsq(Ve[b], -d[b], rcond=1e-9)
                     d = d + Ve @ y
-                    d1 = d
                 _, sv, Wt = np.linalg.svd(V0[b], full_matrices=True)
                 k = int(np.sum(sv > 1e-9))
                 V0 = V0 @ Wt[k:].T  # null space directions that leave the blocked joints still
             if policy is not None and V0.shape[1]:
-                r2, J2full = self._secondary(policy, q, q_ref, p, st)
-                if r2.size:
-                    A2 = J2full[:, act] @ V0
-                    e2 = r2 + J2full[:, act] @ d
-                    if A2.shape[0] == 1 and A2.shape[1] == 1:
-                        a2 = float(A2[0, 0])
-                        y = np.array([-float(e2[0]) * a2 / (a2 * a2 + 1e-24)])
-                    else:
-                        M = A2.T @ A2
-                        M.flat[:: M.shape[0] + 1] += 1e-12
-                        y = -np.linalg.solve(M, A2.T @ e2)
-                    d = d + V0 @ y
+                if policy == "cyclopean":
+                    # one row (version): A2 = a^T (1, m); (a a^T + eps I)^-1 a = a / (|a|^2 + eps)
+                    row = self._version_row[act]
+                    a = row @ V0
+                    e2 = float(self._version_row @ (q - self.home)) + float(row @ d)
+                    d = d - V0 @ (a * (e2 / (float(a @ a) + (1e-24 if a.size == 1 else 1e-12))))
+                else:
+                    r2, J2full = self._secondary(policy, q, q_ref, p, st)
+                    if r2.size:
+                        A2 = J2full[:, act] @ V0
+                        e2v = r2 + J2full[:, act] @ d
+                        if A2.shape[0] == 1 and A2.shape[1] == 1:
+                            a2 = float(A2[0, 0])
+                            y = np.array([-float(e2v[0]) * a2 / (a2 * a2 + 1e-24)])
+                        else:
+                            M = A2.T @ A2
+                            M.flat[:: M.shape[0] + 1] += 1e-12
+                            y = -np.linalg.solve(M, A2.T @ e2v)
+                        d = d + V0 @ y
         step = np.zeros(self.n)
         step[act] = d
-        primary = np.zeros(self.n)
-        primary[act] = d1
-        m = float(np.max(np.abs(d)))
+        m = max(map(abs, d.tolist()))
         if m > MAX_STEP:
             step *= MAX_STEP / m
-            primary *= MAX_STEP / m
-        return step, primary
+        return step
 
     def _answer(self, p: Array, q: Array, iterations: int, policy: str, st: _State) -> GazeSolution:
         errs, misses = [], []
-        for x, y, z in st.p_cam.tolist():
+        for x, y, z in st.p_cam:
             lateral = math.hypot(x, y)
             # a target on the camera centre has no direction: count it as missed by pi
             errs.append(math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi)
             misses.append(lateral if z >= 0 else math.sqrt(x * x + y * y + z * z))
         err, miss = np.array(errs), np.array(misses)
         fix = _closest_point(st.origins, st.axes)
-        (a0, a1, a2), (b0, b1, b2) = st.axes.tolist()
+        (a0, a1, a2), (b0, b1, b2) = st.axes
         vergence = math.acos(max(-1.0, min(1.0, a0 * b0 + a1 * b1 + a2 * b2)))
         tol = 1e-12
         at_limit = tuple(
@@ -841,9 +897,9 @@ class GazeSolver:
         reachable = errs[0] <= GAZE_POINTING_TOL and errs[1] <= GAZE_POINTING_TOL
         if reachable:
             status = STATUS_FIXATED
-        elif np.any(st.p_cam[:, 2] <= 0):
+        elif any(z <= 0 for _, _, z in st.p_cam):
             status = STATUS_BEHIND
-        elif float(np.min(np.linalg.norm(st.p_cam, axis=1))) < self.baseline:
+        elif min(math.sqrt(x * x + y * y + z * z) for x, y, z in st.p_cam) < self.baseline:
             status = STATUS_TOO_CLOSE
         elif at_limit:
             status = STATUS_LIMITS
@@ -943,10 +999,13 @@ class GazeSolver:
         return tuple(self.data.oMf[e.frame_id].homogeneous.copy() for e in self._eyes)  # type: ignore[return-value]
 
 
-def _closest_point(origins: Array, axes: Array) -> Array | None:
-    """Midpoint of the closest points of two lines ``origins[k] + t axes[k]``; None if parallel."""
-    d0, d1 = axes.tolist()
-    o0, o1 = origins.tolist()
+def _closest_point(origins: Sequence[Sequence[float]], axes: Sequence[Sequence[float]]) -> Array | None:
+    """Midpoint of the closest points of two lines ``origins[k] + t axes[k]``; None if parallel.
+
+    ``origins`` and ``axes`` are 2 x 3 (float lists or an array's rows).
+    """
+    d0, d1 = axes
+    o0, o1 = origins
     w = [o0[i] - o1[i] for i in range(3)]
     a = d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]
     b = d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2]
