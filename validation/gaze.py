@@ -234,6 +234,9 @@ class GazeSolver:
         import pinocchio as pin
 
         self._pin = pin
+        from scipy.linalg.lapack import dsyevd
+
+        self._syevd = dsyevd
         text = str(urdf)
         if isinstance(urdf, Path) or not text.lstrip().startswith("<"):  # a path, not XML text
             from cpc2urdf.errors import InputFileError
@@ -287,6 +290,7 @@ class GazeSolver:
             raise SpecError("every joint needs finite <limit lower/upper> for gaze control")
         self.home: Array = 0.5 * (self.lower + self.upper)
         self._lower_list: list[float] = self.lower.tolist()
+        self._home_list: list[float] = self.home.tolist()
         self._upper_list: list[float] = self.upper.tolist()
 
         # Joints on each camera's path: shared ones move the head, the others are the eyes.
@@ -725,7 +729,7 @@ class GazeSolver:
             rr = st.rr
             if rr < FLOOR_RESIDUAL and (
                 not secondary
-                or (policy == "cyclopean" and abs(float(self._version_row @ (q - self.home))) < CONVERGED_STEP)
+                or (policy == "cyclopean" and abs(self._version(q)) < CONVERGED_STEP)
             ):
                 break  # fixated, and the policy has nothing left to ask: skip the last step
             q_l = q.tolist()
@@ -814,6 +818,22 @@ class GazeSolver:
             st = new
         return q, it, st
 
+    def _version(self, q: Array) -> float:
+        """Version [rad]: ``(eye_L - home_L) + s (eye_R - home_R)``, first eye joint of each side."""
+        e0, e1 = self._e0, self._e1
+        return (float(q[e0]) - self._home_list[e0]) + self._version_sign * (float(q[e1]) - self._home_list[e1])
+
+    def _eigh(self, A: Array) -> tuple[Array, Array]:
+        """Eigenvalues (ascending) and eigenvectors of the small symmetric ``A``.
+
+        LAPACK's ``syevd`` (the routine ``np.linalg.eigh`` uses, lower triangle too) called
+        through scipy: a third of the call overhead of ``np.linalg.eigh`` at this size.
+        """
+        lam, V, info = self._syevd(A, compute_v=1, lower=1)
+        if info != 0:
+            return np.linalg.eigh(A)  # type: ignore[no-any-return]
+        return lam, V
+
     def _step(
         self, policy: str | None, q: Array, q_ref: Array, p: Array, st: _State, act: Index, block: Index | None = None
     ) -> Array:
@@ -824,7 +844,7 @@ class GazeSolver:
         below :data:`NULL_EIGENVALUE`), and not the joints in ``block`` (held by their limits).
         """
         J1 = st.J[:, act]
-        lam, V = np.linalg.eigh(J1.T @ J1)
+        lam, V = self._eigh(J1.T @ J1)
         # Levenberg-Marquardt damping mu = |r1|^2 (Yamashita-Fukushima: quadratic convergence on
         # consistent problems even where J1 is singular). Directions weaker than the damping
         # (or than NULL_EIGENVALUE) belong to the null space: fixation cannot use them now.
@@ -856,7 +876,7 @@ class GazeSolver:
                     # one row (version): A2 = a^T (1, m); (a a^T + eps I)^-1 a = a / (|a|^2 + eps)
                     row = self._version_row[act]
                     a = row @ V0
-                    e2 = float(self._version_row @ (q - self.home)) + float(row @ d)
+                    e2 = self._version(q) + float(row @ d)
                     d = d - V0 @ (a * (e2 / (float(a @ a) + (1e-24 if a.size == 1 else 1e-12))))
                 else:
                     r2, J2full = self._secondary(policy, q, q_ref, p, st)
