@@ -119,22 +119,29 @@ def parse_placement(obj: Any, units: Units, where: str) -> CPCParams:
     return CPCParams.from_matrix(pose_from_json(m, units, where))
 
 
-def _parse_joint(obj: Any, units: Units, i: int) -> tuple[Joint, Any]:
-    where = f"joints[{i}]"
+def _named_entry(obj: Any, kind: str, i: int, keys: set[str]) -> tuple[Mapping[str, Any], str, str, str]:
+    """Common checks of a ``joints[i]`` / ``frames[i]`` entry: an object with a non-empty name,
+    known keys only, a parent name. Returns ``(entry, name, where, parent)``."""
+    where = f"{kind}s[{i}]"
     m = _mapping(obj, where)
     name = m.get("name")
     if not isinstance(name, str) or not name:
         raise ValueError(f"{where}.name must be a non-empty string")
-    where = f"joint {name!r}"
-    unknown = set(m) - _JOINT_KEYS
+    where = f"{kind} {name!r}"
+    unknown = set(m) - keys
     if unknown:
-        raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected some of {sorted(_JOINT_KEYS)}")
-    jtype = m.get("type")
-    if jtype not in ("revolute", "prismatic"):
-        raise ValueError(f"{where}.type must be 'revolute' or 'prismatic', got {jtype!r}")
+        raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected some of {sorted(keys)}")
     parent = m.get("parent", BASE)
     if not isinstance(parent, str):
         raise ValueError(f"{where}.parent must be a joint name or 'base', got {parent!r}")
+    return m, name, where, parent
+
+
+def _parse_joint(obj: Any, units: Units, i: int) -> tuple[Joint, Any]:
+    m, name, where, parent = _named_entry(obj, "joint", i, _JOINT_KEYS)
+    jtype = m.get("type")
+    if jtype not in ("revolute", "prismatic"):
+        raise ValueError(f"{where}.type must be 'revolute' or 'prismatic', got {jtype!r}")
     s = units.joint_scale(jtype)
     for k in ("lower", "upper"):
         if k not in m:
@@ -161,18 +168,7 @@ def _parse_joint(obj: Any, units: Units, i: int) -> tuple[Joint, Any]:
 
 
 def _parse_frame(obj: Any, units: Units, i: int) -> tuple[Frame, Any]:
-    where = f"frames[{i}]"
-    m = _mapping(obj, where)
-    name = m.get("name")
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"{where}.name must be a non-empty string")
-    where = f"frame {name!r}"
-    unknown = set(m) - _FRAME_KEYS
-    if unknown:
-        raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected some of {sorted(_FRAME_KEYS)}")
-    parent = m.get("parent", BASE)
-    if not isinstance(parent, str):
-        raise ValueError(f"{where}.parent must be a joint name or 'base', got {parent!r}")
+    m, name, where, parent = _named_entry(obj, "frame", i, _FRAME_KEYS)
     kind = m.get("kind", "frame")
     layout = None
     if "layout" in m:
