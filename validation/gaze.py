@@ -84,6 +84,7 @@ MAX_STEP = 0.5  # [rad] or [m]: the largest joint change of one Gauss-Newton ste
 NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
 BACKTRACKS = 8  # step halvings allowed per iteration
 TABLE_TIE_WEIGHT = 1e-4  # [1/m]: use-table, least table motion vs the viewing distance
+GUESS_MAX_CORRECTION = 0.2  # [rad]: largest first-order correction of the grid's neck readings
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
 MIN_TARGET_DISTANCE = 1e-9  # [m]: a target this close to a camera centre cannot be pointed at
 STALL_RESIDUAL = 1e-12  # [-]: fixation alone stops when |r1|^2 above this falls < 5 % in 3 steps
@@ -395,15 +396,28 @@ class GazeSolver:
             q[self._neck] = row
             q[e0] = np.clip(self.home[e0] + v, self.lower[e0], self.upper[e0])
             q[e1] = np.clip(self.home[e1] + self._version_sign * v, self.lower[e1], self.upper[e1])
-            pin.framesForwardKinematics(self.model, self.data, q)
-            T_world_table = self.data.oMi[self._table_link]
-            o = [T_world_table.actInv(self.data.oMf[e.frame_id].translation) for e in self._eyes]
-            z = [T_world_table.rotation.T @ self.data.oMf[e.frame_id].rotation[:, 2] for e in self._eyes]
-            c = 0.5 * (o[0] + o[1])
-            d = z[0] + z[1]
+            c, d = self._cyclopean_ray(q)
             origins.append(c)
-            dirs.append(d / np.linalg.norm(d))
+            dirs.append(d)
             qs.append(q)
+        # Derivatives of the version-0 rays by the neck readings (central differences), for the
+        # first-order refinement of the best grid entry in _guess: columns per neck joint.
+        h = 1e-6
+        dc_rows, dd_rows = [], []
+        for q in qs[: self._n_version0]:
+            dc, dd = [], []
+            for i in self._neck:
+                qp, qm = q.copy(), q.copy()
+                qp[i] += h
+                qm[i] -= h
+                (cp, dp), (cm, dm) = self._cyclopean_ray(qp), self._cyclopean_ray(qm)
+                dc.append(((cp - cm) / (2 * h)).tolist())
+                dd.append(((dp - dm) / (2 * h)).tolist())
+            dc_rows.append(dc)
+            dd_rows.append(dd)
+        self._guess_dc: list[list[list[float]]] = dc_rows
+        self._guess_dd: list[list[list[float]]] = dd_rows
+        self._guess_dir_list: list[list[float]] = [d.tolist() for d in dirs]
         self._guess_origin = np.array(origins)
         self._guess_dir = np.array(dirs)
         self._guess_q = np.array(qs)
@@ -424,6 +438,16 @@ class GazeSolver:
         o0 = self.data.oMf[self._eyes[0].frame_id].translation
         o1 = self.data.oMf[self._eyes[1].frame_id].translation
         self.baseline = float(np.linalg.norm(o0 - o1))
+
+    def _cyclopean_ray(self, q: Array) -> tuple[Array, Array]:
+        """Cyclopean point (midpoint of the camera centres) and unit direction (sum of the optical
+        axes) at readings ``q``, in the frame of the last table link, each (3,)."""
+        self._pin.framesForwardKinematics(self.model, self.data, q)
+        T_world_table = self.data.oMi[self._table_link]
+        o = [T_world_table.actInv(self.data.oMf[e.frame_id].translation) for e in self._eyes]
+        z = [T_world_table.rotation.T @ self.data.oMf[e.frame_id].rotation[:, 2] for e in self._eyes]
+        d = z[0] + z[1]
+        return 0.5 * (o[0] + o[1]), d / np.linalg.norm(d)
 
     # ---- evaluation ---------------------------------------------------------------------------
 
@@ -571,16 +595,19 @@ class GazeSolver:
         """The geometric starting point of :meth:`solve` (table from ``q_current`` or home).
 
         The neck readings of the precomputed grid whose cyclopean ray passes closest to the
-        target (angle seen from the cyclopean point), eyes at home.
+        target (angle seen from the cyclopean point), refined to first order, and the eyes
+        converged symmetrically on the target's distance (the default policy's start).
         """
         p = self._check_target(p_world)
         qc = self._check_q(q_current)
         q = (self.home if qc is None else qc).copy()
         return self._guess(p, q)
 
-    def _guess(self, p: Array, q: Array, rank: int = 0) -> Array:
-        """Start: ``rank`` 0 is the version-0 grid entry whose cyclopean ray best faces ``p``;
-        ``rank`` k >= 1 is the k-th best entry of the whole grid (eyes turned too)."""
+    def _guess(self, p: Array, q: Array, rank: int = 0, *, refine: bool = True) -> Array:
+        """Start: ``rank`` 0 is the version-0 grid entry whose cyclopean ray best faces ``p``,
+        its neck readings refined to first order (``refine``, two neck joints) and the eyes
+        converged on the target; ``rank`` k >= 1 is the k-th best entry of the whole grid (eyes
+        turned too)."""
         if self._table_link:
             key = q[self._table_chain].tobytes()
             if key != self._table_key:  # the table link pose depends only on the joints up to it
@@ -602,9 +629,50 @@ class GazeSolver:
         out[self._neck] = best[self._neck]
         out[self._eyes_all] = best[self._eyes_all]
         if rank == 0:
-            # converge the eyes symmetrically on the target's distance along the ray
             (ox, oy, oz), (px, py, pz) = self._guess_origin_list[k], p_t.tolist()
-            dist = math.sqrt((px - ox) ** 2 + (py - oy) ** 2 + (pz - oz) ** 2)
+            vx, vy, vz = px - ox, py - oy, pz - oz
+            dist = math.sqrt(vx * vx + vy * vy + vz * vz)
+            if refine and len(self._neck) == 2 and dist > 1e-9:
+                # First-order refinement of the grid's neck readings: turn the ray (origin c,
+                # direction d, both moving with the neck) onto the target direction t. With
+                # t' = -(I - t t^T) c' / dist, solve (d' - t') delta = t - d in least squares
+                # (2 x 2 normal equations; d - t is nearly perpendicular to d, so 2 conditions).
+                tx, ty, tz = vx / dist, vy / dist, vz / dist
+                dx, dy, dz = self._guess_dir_list[k]
+                cols = []
+                for (cx, cy, cz), (ax, ay, az) in zip(self._guess_dc[k], self._guess_dd[k], strict=True):
+                    tc = tx * cx + ty * cy + tz * cz
+                    cols.append(
+                        (ax + (cx - tc * tx) / dist, ay + (cy - tc * ty) / dist, az + (cz - tc * tz) / dist)
+                    )
+                (a0, a1, a2), (b0, b1, b2) = cols
+                ex, ey, ez = tx - dx, ty - dy, tz - dz
+                m00 = a0 * a0 + a1 * a1 + a2 * a2
+                m01 = a0 * b0 + a1 * b1 + a2 * b2
+                m11 = b0 * b0 + b1 * b1 + b2 * b2
+                g0 = a0 * ex + a1 * ey + a2 * ez
+                g1 = b0 * ex + b1 * ey + b2 * ez
+                det = m00 * m11 - m01 * m01
+                if det > 1e-12 * m00 * m11:
+                    d0 = (m11 * g0 - m01 * g1) / det
+                    d1 = (m00 * g1 - m01 * g0) / det
+                    i0, i1 = int(self._neck[0]), int(self._neck[1])
+                    n0, n1 = float(out[i0]) + d0, float(out[i1]) + d1
+                    # only a small correction, strictly inside the limits (a start on a limit
+                    # would hold that joint from the outset); else keep the grid entry
+                    if (
+                        abs(d0) < GUESS_MAX_CORRECTION
+                        and abs(d1) < GUESS_MAX_CORRECTION
+                        and self._lower_list[i0] < n0 < self._upper_list[i0]
+                        and self._lower_list[i1] < n1 < self._upper_list[i1]
+                    ):
+                        out[i0], out[i1] = n0, n1
+                        (c0x, c0y, c0z), (c1x, c1y, c1z) = self._guess_dc[k]
+                        vx -= c0x * d0 + c1x * d1
+                        vy -= c0y * d0 + c1y * d1
+                        vz -= c0z * d0 + c1z * d1
+                        dist = math.sqrt(vx * vx + vy * vy + vz * vz)
+            # converge the eyes symmetrically on the target's distance along the ray
             h = math.asin(min(1.0, 0.5 * self.baseline / max(dist, 1e-9))) * self._converge_sign
             e0, e1 = self._e0, self._e1
             out[e0] = min(max(out[e0] - h, self._lower_list[e0]), self._upper_list[e0])
@@ -655,7 +723,10 @@ class GazeSolver:
         elif policy == "min-motion" and qc is not None:
             q0 = q_ref.copy()
         else:
-            q0 = self._guess(p, q_ref)
+            # The refined start saves about one iteration. Only for the cyclopean policy: the
+            # use-table and min-motion policies stop once fixation stalls, and they need the
+            # iterations of a coarser start to move the table or the neck where they want.
+            q0 = self._guess(p, q_ref, refine=policy == "cyclopean")
         q, it, st = self._solve_from(p, q0, q_ref, policy, free, max_iterations)
         if st.rr > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
             # Local minimum against a limit (e.g. pan at 0 deg while the eyes would have to
