@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -193,7 +193,7 @@ class _Eye:
     name: str
 
 
-@dataclass
+@dataclass(slots=True)
 class _State:
     """Per-configuration quantities of both eyes (computed by :meth:`GazeSolver._evaluate`).
 
@@ -207,7 +207,7 @@ class _State:
     origins: list[list[float]]  # 2 x 3: camera centres (world) [m]
     axes: list[list[float]]  # 2 x 3: optical axes (world)
     p_cam: list[tuple[float, float, float]]  # 2 x 3: target in each camera frame [m]
-    extra: dict[str, Any] = field(default_factory=dict)
+    Jo: list[Array] | None = None  # use-table: the (3, n) world Jacobians of the camera centres
 
 
 class GazeSolver:
@@ -316,6 +316,7 @@ class GazeSolver:
         self._version_row = np.zeros(self.n)
         self._version_row[self._eye_joints[0][0]] = 1.0
         self._version_row[self._eye_joints[1][0]] = self._version_sign
+        self._version_row_list: list[float] = self._version_row.tolist()
         self._build_guess_table()
         self.redundant = self._fixation_is_redundant()
         self._free_joints = {policy: self._free(policy) for policy in POLICIES}
@@ -472,7 +473,8 @@ class GazeSolver:
             y = r01 * dx + r11 * dy + r21 * dz
             z = r02 * dx + r12 * dy + r22 * dz
             nrm = math.sqrt(x * x + y * y + z * z) or 1e-300  # target on a camera centre: see _answer
-            ux, uy, uz = x / nrm, y / nrm, z / nrm
+            inv = 1.0 / nrm
+            ux, uy, uz = x * inv, y * inv, z * inv
             res += (ux, uy, uz - 1.0)
             rr += ux * ux + uy * uy + (uz - 1.0) * (uz - 1.0)
             origins.append([ox, oy, oz])
@@ -480,22 +482,13 @@ class GazeSolver:
             p_cam.append((x, y, z))
             if jacobian:
                 # d p_cam = -v - w x p_cam = [-I | [p_cam]x] (v; w), the LOCAL twist of the camera;
-                # d u = (I - u u^T) d p_cam / |p_cam|: one (3, 6) matrix times the frame Jacobian.
-                P = [
-                    [(1.0 - ux * ux) / nrm, -ux * uy / nrm, -ux * uz / nrm],
-                    [-uy * ux / nrm, (1.0 - uy * uy) / nrm, -uy * uz / nrm],
-                    [-uz * ux / nrm, -uz * uy / nrm, (1.0 - uz * uz) / nrm],
-                ]
+                # d u = P d p_cam with P = (I - u u^T) / |p_cam|: one (3, 6) matrix times the frame
+                # Jacobian, [-P | P [p_cam]x], where P [p_cam]x = [u]x (as u^T [u]x = 0).
+                wx, wy, wz = ux * inv, uy * inv, uz * inv
                 M = [
-                    [
-                        -Pi[0],
-                        -Pi[1],
-                        -Pi[2],
-                        Pi[1] * z - Pi[2] * y,
-                        Pi[2] * x - Pi[0] * z,
-                        Pi[0] * y - Pi[1] * x,
-                    ]
-                    for Pi in P
+                    [ux * wx - inv, ux * wy, ux * wz, 0.0, -uz, uy],
+                    [uy * wx, uy * wy - inv, uy * wz, uz, 0.0, -ux],
+                    [uz * wx, uz * wy, uz * wz - inv, -uy, ux, 0.0],
                 ]
                 blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL))
         J = np.concatenate(blocks) if jacobian else _EMPTY
@@ -528,7 +521,8 @@ class GazeSolver:
             d = c - p
             dist = float(np.linalg.norm(d))
             row = np.zeros(n)
-            Jc = 0.5 * (st.extra["Jo"][0] + st.extra["Jo"][1])
+            assert st.Jo is not None  # set by _iterate for this policy
+            Jc = 0.5 * (st.Jo[0] + st.Jo[1])
             row[:] = (d / max(dist, 1e-12)) @ Jc
             rows.append(row)
             res.append(dist - self.viewing_distance)
@@ -795,7 +789,7 @@ class GazeSolver:
             st = self._evaluate(q, p)
         for it in range(1, max_iterations + 1):  # noqa: B007
             if use_table:
-                st.extra["Jo"] = [
+                st.Jo = [
                     self.data.oMf[e.frame_id].rotation
                     @ self._pin.getFrameJacobian(self.model, self.data, e.frame_id, self._pin.LOCAL)[:3]
                     for e in self._eyes
@@ -927,13 +921,34 @@ class GazeSolver:
         lam_l = lam.tolist()
         thr = max(mu, NULL_EIGENVALUE)
         k0 = sum(1 for v in lam_l if v <= thr)
-        Vr = V[:, k0:]
-        d = -Vr @ ((Vr.T @ (J1.T @ st.r)) / (lam[k0:] + mu))
-        if k0:
+        # d = -V diag(1 / (lam + mu), range only) V^T J1^T r; coefficients as floats (tiny)
+        c = (st.r @ J1 @ V).tolist()
+        coef = [0.0] * k0 + [-c[j] / (lam_l[j] + mu) for j in range(k0, len(lam_l))]
+        d_arr = V @ np.array(coef)
+        dl = d_arr.tolist()
+        m = len(dl)
+        has_block = block is not None and block.size > 0
+        if k0 and policy == "cyclopean" and not has_block:
+            # Null space of fixation V0 = V[:, :k0]; the policy is one row (version), so
+            # A2 = a^T (1, k0) and (a a^T + eps I)^-1 a = a / (|a|^2 + eps).
+            act_l = act.tolist()
+            i0, i1 = act_l.index(self._e0), act_l.index(self._e1)  # the version row's entries
+            vs = self._version_sign
+            Vl = V.tolist()
+            a = [Vl[i0][j] + vs * Vl[i1][j] for j in range(k0)]
+            e2 = self._version(q) + (dl[i0] + vs * dl[i1])
+            f = e2 / (sum(x * x for x in a) + (1e-24 if k0 == 1 else 1e-12))
+            if k0 == 1:
+                fa = f * a[0]
+                dl = [dl[i] - fa * Vl[i][0] for i in range(m)]
+            else:
+                dl = (d_arr - V[:, :k0] @ (f * np.array(a))).tolist()
+        elif k0:
             # Null space of fixation (at this damping), in coordinates y: motion V0 @ y.
+            d = d_arr
             V0 = V[:, :k0]
             ke = sum(1 for v in lam_l if v <= NULL_EIGENVALUE)  # the exact null space: V[:, :ke]
-            b = np.flatnonzero(np.isin(act, block)) if block is not None and block.size else _NONE_INT
+            b = np.flatnonzero(np.isin(act, block)) if block is not None and has_block else _NONE_INT
             if b.size:
                 # Blocked joints (at a limit) must not move: first trade the fixation step's
                 # motion of them for motion in the exact null space (fixation unchanged to
@@ -946,31 +961,27 @@ class GazeSolver:
                 k = int(np.sum(sv > 1e-9))
                 V0 = V0 @ Wt[k:].T  # null space directions that leave the blocked joints still
             if policy is not None and V0.shape[1]:
-                if policy == "cyclopean":
-                    # one row (version): A2 = a^T (1, m); (a a^T + eps I)^-1 a = a / (|a|^2 + eps)
-                    row = self._version_row[act]
-                    a = row @ V0
-                    e2 = self._version(q) + float(row @ d)
-                    d = d - V0 @ (a * (e2 / (float(a @ a) + (1e-24 if a.size == 1 else 1e-12))))
-                else:
-                    r2, J2full = self._secondary(policy, q, q_ref, p, st)
-                    if r2.size:
-                        A2 = J2full[:, act] @ V0
-                        e2v = r2 + J2full[:, act] @ d
-                        if A2.shape[0] == 1 and A2.shape[1] == 1:
-                            a2 = float(A2[0, 0])
-                            y = np.array([-float(e2v[0]) * a2 / (a2 * a2 + 1e-24)])
-                        else:
-                            M = A2.T @ A2
-                            M.flat[:: M.shape[0] + 1] += 1e-12
-                            y = -np.linalg.solve(M, A2.T @ e2v)
-                        d = d + V0 @ y
-        step = np.zeros(self.n)
-        step[act] = d
-        m = max(map(abs, d.tolist()))
-        if m > MAX_STEP:
-            step *= MAX_STEP / m
-        return step
+                r2, J2full = self._secondary(policy, q, q_ref, p, st)
+                if r2.size:
+                    A2 = J2full[:, act] @ V0
+                    e2v = r2 + J2full[:, act] @ d
+                    if A2.shape[0] == 1 and A2.shape[1] == 1:
+                        a2 = float(A2[0, 0])
+                        y = np.array([-float(e2v[0]) * a2 / (a2 * a2 + 1e-24)])
+                    else:
+                        M = A2.T @ A2
+                        M.flat[:: M.shape[0] + 1] += 1e-12
+                        y = -np.linalg.solve(M, A2.T @ e2v)
+                    d = d + V0 @ y
+            dl = d.tolist()
+        out = [0.0] * self.n
+        for i, v in zip(act.tolist(), dl, strict=True):
+            out[i] = v
+        big = max(map(abs, dl))
+        if big > MAX_STEP:
+            s = MAX_STEP / big
+            out = [v * s for v in out]
+        return np.array(out)
 
     def _answer(self, p: Array, q: Array, iterations: int, policy: str, st: _State) -> GazeSolution:
         errs, misses = [], []
