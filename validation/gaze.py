@@ -426,6 +426,13 @@ class GazeSolver:
         self._guess_od = np.einsum("ij,ij->i", self._guess_origin, self._guess_dir)
         self._guess_oo = np.einsum("ij,ij->i", self._guess_origin, self._guess_origin)
         self._guess_origin_list: list[list[float]] = self._guess_origin.tolist()
+        m = self._n_version0
+        self._guess_affine = np.ascontiguousarray(
+            np.vstack([
+                np.hstack([self._guess_dir[:m], -self._guess_od[:m, None]]),  # v.d
+                np.hstack([-2.0 * self._guess_origin[:m], self._guess_oo[:m, None]]),  # |v|^2 - |p_t|^2
+            ])
+        )
         self._e0, self._e1 = e0, e1
         self._table_key: bytes | None = None
         chain, jid = [], self._table_link
@@ -611,19 +618,27 @@ class GazeSolver:
             p_t = self._table_pose.actInv(p)
         else:
             p_t = p
-        m = self._n_version0 if rank == 0 else len(self._guess_q)
         # cos of the angle between each ray (origin o, unit direction d) and v = p_t - o, from
         # per-grid constants: v.d = p_t.d - o.d and |v|^2 = |p_t|^2 - 2 o.p_t + |o|^2
-        vd = self._guess_dir[:m] @ p_t - self._guess_od[:m]
-        vv = self._guess_oo[:m] - 2.0 * (self._guess_origin[:m] @ p_t) + float(p_t @ p_t)
-        cosang = vd / np.sqrt(np.maximum(vv, 1e-24))
-        k = int(np.argmax(cosang)) if rank == 0 else int(np.argsort(-cosang)[rank - 1])
+        px, py, pz = p_t.tolist()
+        pp = px * px + py * py + pz * pz
+        if rank == 0:
+            # one matrix-vector product gives v.d and |v|^2 - |p_t|^2 for every version-0 entry;
+            # the best ray has the largest cos|cos| = (v.d)|v.d| / |v|^2
+            y = self._guess_affine @ np.array([px, py, pz, 1.0])
+            m = self._n_version0
+            vd = y[:m]
+            k = int(np.argmax(vd * np.abs(vd) / np.maximum(y[m:] + pp, 1e-24)))
+        else:
+            vd = self._guess_dir @ p_t - self._guess_od
+            vv = self._guess_oo - 2.0 * (self._guess_origin @ p_t) + pp
+            k = int(np.argsort(-(vd / np.sqrt(np.maximum(vv, 1e-24))))[rank - 1])
         best = self._guess_q[k]
         out = q.copy()
         out[self._neck] = best[self._neck]
         out[self._eyes_all] = best[self._eyes_all]
         if rank == 0:
-            (ox, oy, oz), (px, py, pz) = self._guess_origin_list[k], p_t.tolist()
+            ox, oy, oz = self._guess_origin_list[k]
             vx, vy, vz = px - ox, py - oy, pz - oz
             dist = math.sqrt(vx * vx + vy * vy + vz * vz)
             if refine and len(self._neck) == 2 and dist > 1e-9:
