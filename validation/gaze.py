@@ -602,7 +602,7 @@ class GazeSolver:
         p = self._check_target(p_world)
         qc = self._check_q(q_current)
         q = (self.home if qc is None else qc).copy()
-        return self._guess(p, q)
+        return self._guess(p, q, refine=self.redundant)
 
     def _guess(self, p: Array, q: Array, rank: int = 0, *, refine: bool = True) -> Array:
         """Start: ``rank`` 0 is the version-0 grid entry whose cyclopean ray best faces ``p``,
@@ -827,10 +827,12 @@ class GazeSolver:
             block_l = [i for i in range(n) if (q_l[i] <= lo_l[i] or q_l[i] >= hi_l[i]) and not held[i]]
             block = np.array(block_l, dtype=int) if block_l else None
             dq = self._step(sec_policy, q, q_ref, p, st, act, block)
+            inside = False  # whether q + dq is known to be inside the limits
             for _ in range(4):
                 nq_l = (q + dq).tolist()
                 out_l = [i for i in range(n) if nq_l[i] < lo_l[i] or nq_l[i] > hi_l[i]]
                 if not out_l:
+                    inside = True
                     break
                 n_block = 0 if block is None else block.size
                 new_block = np.union1d(block if block is not None else _NONE_INT, out_l)
@@ -852,8 +854,11 @@ class GazeSolver:
                     block = new_block
                 dq = self._step(sec_policy, q, q_ref, p, st, act, block)
             nq = q + dq
-            dq_l, nq_l = dq.tolist(), nq.tolist()
-            if any(nq_l[i] < lo_l[i] or nq_l[i] > hi_l[i] for i in range(n)):
+            dq_l = dq.tolist()
+            if not inside:
+                nq_l = nq.tolist()
+                inside = not any(nq_l[i] < lo_l[i] or nq_l[i] > hi_l[i] for i in range(n))
+            if not inside:
                 # shorten the step to the first limit it meets (projected steps would zig-zag)
                 t = [
                     (lo_l[i] - q_l[i]) / dq_l[i] if dq_l[i] < 0 else (hi_l[i] - q_l[i]) / dq_l[i]
