@@ -92,7 +92,6 @@ PHASE2_DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping factor (x |r1|^2) when
 CONVERGED_RESIDUAL = 1e-30  # [-]: |u_L - e_z|^2 + |u_R - e_z|^2 below which fixation is exact
 FLOOR_RESIDUAL = 1e-22  # [-]: ... or below this once steps stop (pointing error ~1e-11 rad)
 CONVERGED_STEP = 1e-11  # [rad] or [m]: ... and the policy step is this small
-_EMPTY = np.empty((0, 0))
 _NONE = np.empty(0)
 _NONE_INT = np.empty(0, dtype=int)
 _PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")
@@ -198,16 +197,28 @@ class _State:
     """Per-configuration quantities of both eyes (computed by :meth:`GazeSolver._evaluate`).
 
     The 3-vectors are plain float lists: the solver's hot path does its 3-vector algebra in
-    Python floats, which is several times cheaper than numpy calls on arrays this small.
+    Python floats, which is several times cheaper than numpy calls on arrays this small. The
+    Jacobian is computed when first asked for: the last configuration of a solve (and every
+    backtracking trial) only needs the residual.
     """
 
+    solver: GazeSolver
+    q: Array  # (n,) the readings [rad]/[m]
     r: Array  # (6,) fixation residual, [u_L - e_z, u_R - e_z]
     rr: float  # |r|^2
-    J: Array  # (6, n) its Jacobian (empty when not asked for)
     origins: list[list[float]]  # 2 x 3: camera centres (world) [m]
     axes: list[list[float]]  # 2 x 3: optical axes (world)
     p_cam: list[tuple[float, float, float]]  # 2 x 3: target in each camera frame [m]
+    u: list[tuple[float, float, float, float]]  # 2 x 4: unit target direction (camera) and 1 / |p_cam|
+    jacobian: Array | None = None
     Jo: list[Array] | None = None  # use-table: the (3, n) world Jacobians of the camera centres
+
+    @property
+    def J(self) -> Array:
+        """(6, n) Jacobian of ``r`` by the readings."""
+        if self.jacobian is None:
+            self.jacobian = self.solver._jacobian(self)
+        return self.jacobian
 
 
 class GazeSolver:
@@ -460,17 +471,12 @@ class GazeSolver:
     # ---- evaluation ---------------------------------------------------------------------------
 
     def _evaluate(self, q: Array, p: Array, jacobian: bool = True) -> _State:
-        pin = self._pin
-        model, data = self.model, self.data
-        if jacobian:
-            pin.computeJointJacobians(model, data, q)  # also the joint placements
-            pin.updateFramePlacements(model, data)
-        else:
-            pin.framesForwardKinematics(model, data, q)
+        """Residual state at readings ``q`` for target ``p``; its Jacobian now or when first used."""
+        self._pin.framesForwardKinematics(self.model, self.data, q)
         px, py, pz = p.tolist()
-        oMf = data.oMf
+        oMf = self.data.oMf
         res: list[float] = []
-        origins, axes, p_cam, blocks = [], [], [], []
+        origins, axes, p_cam, us = [], [], [], []
         rr = 0.0
         for fid in self._frame_ids:
             (r00, r01, r02, ox), (r10, r11, r12, oy), (r20, r21, r22, oz), _ = oMf[fid].homogeneous.tolist()
@@ -487,19 +493,31 @@ class GazeSolver:
             origins.append([ox, oy, oz])
             axes.append([r02, r12, r22])
             p_cam.append((x, y, z))
-            if jacobian:
-                # d p_cam = -v - w x p_cam = [-I | [p_cam]x] (v; w), the LOCAL twist of the camera;
-                # d u = P d p_cam with P = (I - u u^T) / |p_cam|: one (3, 6) matrix times the frame
-                # Jacobian, [-P | P [p_cam]x], where P [p_cam]x = [u]x (as u^T [u]x = 0).
-                wx, wy, wz = ux * inv, uy * inv, uz * inv
-                M = [
-                    [ux * wx - inv, ux * wy, ux * wz, 0.0, -uz, uy],
-                    [uy * wx, uy * wy - inv, uy * wz, uz, 0.0, -ux],
-                    [uz * wx, uz * wy, uz * wz - inv, -uy, ux, 0.0],
-                ]
-                blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL))
-        J = np.concatenate(blocks) if jacobian else _EMPTY
-        return _State(np.array(res), rr, J, origins, axes, p_cam)
+            us.append((ux, uy, uz, inv))
+        st = _State(self, q.copy(), np.array(res), rr, origins, axes, p_cam, us)
+        if jacobian:
+            st.J  # noqa: B018 (computed now, while q is the caller's)
+        return st
+
+    def _jacobian(self, st: _State) -> Array:
+        """(6, n) Jacobian of the fixation residual at ``st.q``, from Pinocchio's LOCAL frame Jacobians."""
+        pin = self._pin
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, st.q)
+        pin.updateFramePlacements(model, data)
+        blocks = []
+        for fid, (ux, uy, uz, inv) in zip(self._frame_ids, st.u, strict=True):
+            # d p_cam = -v - w x p_cam = [-I | [p_cam]x] (v; w), the LOCAL twist of the camera;
+            # d u = P d p_cam with P = (I - u u^T) / |p_cam|: one (3, 6) matrix times the frame
+            # Jacobian, [-P | P [p_cam]x], where P [p_cam]x = [u]x (as u^T [u]x = 0).
+            wx, wy, wz = ux * inv, uy * inv, uz * inv
+            M = [
+                [ux * wx - inv, ux * wy, ux * wz, 0.0, -uz, uy],
+                [uy * wx, uy * wy - inv, uy * wz, uz, 0.0, -ux],
+                [uz * wx, uz * wy, uz * wz - inv, -uy, ux, 0.0],
+            ]
+            blocks.append(np.array(M) @ pin.getFrameJacobian(model, data, fid, pin.LOCAL))
+        return np.concatenate(blocks)
 
     # ---- policy (priority 2) --------------------------------------------------------------------
 
@@ -758,7 +776,7 @@ class GazeSolver:
         if self.redundant or policy == "use-table":
             q, it, st = self._iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
         else:  # the policy has no freedom to choose with: see _fixation_is_redundant
-            q, it, st = q0, 0, self._evaluate(q0, p)
+            q, it, st = q0, 0, self._evaluate(q0, p, jacobian=False)
         if st.rr > FLOOR_RESIDUAL and it < max_iterations:
             # Phase 2: fixation alone. Reached when the policy's preferred configuration does
             # not fixate: on a calibrated head (fixation has no spare freedom, only a weak
@@ -801,9 +819,12 @@ class GazeSolver:
         prev = math.inf
         it = 0
         if st is None:
-            st = self._evaluate(q, p)
+            st = self._evaluate(q, p, jacobian=False)
         for it in range(1, max_iterations + 1):  # noqa: B007
             if use_table:
+                # world Jacobians of the camera centres at q (data may hold another configuration)
+                self._pin.computeJointJacobians(self.model, self.data, q)
+                self._pin.updateFramePlacements(self.model, self.data)
                 st.Jo = [
                     self.data.oMf[e.frame_id].rotation
                     @ self._pin.getFrameJacobian(self.model, self.data, e.frame_id, self._pin.LOCAL)[:3]
@@ -884,14 +905,14 @@ class GazeSolver:
             else:
                 slow = 0
             prev = rr
-            new = self._evaluate(nq, p)
+            new = self._evaluate(nq, p, jacobian=False)
             if not secondary and new.rr > rr:
                 # Watchdog: a long step along a weakly determined direction (the calibrated
                 # head's version) lands off the curved solution set; one corrective step from
                 # there usually ends below the start. Accept the pair if it does.
                 dq2 = self._step(None, nq, q_ref, p, new, act, None)
                 nq2 = np.clip(nq + dq2, lo, hi)
-                new2 = self._evaluate(nq2, p)
+                new2 = self._evaluate(nq2, p, jacobian=False)
                 if new2.rr < rr:
                     q, st = nq2, new2
                     continue
@@ -901,7 +922,7 @@ class GazeSolver:
                     break
                 dq *= 0.5
                 nq = np.clip(q + dq, lo, hi)
-                new = self._evaluate(nq, p)
+                new = self._evaluate(nq, p, jacobian=False)
             q = nq
             st = new
         return q, it, st
