@@ -331,6 +331,7 @@ class GazeSolver:
         self._build_guess_table()
         self.redundant = self._fixation_is_redundant()
         self._free_joints = {policy: self._free(policy) for policy in POLICIES}
+        self._fixed_joints = {policy: np.setdiff1d(np.arange(self.n), free) for policy, free in self._free_joints.items()}
 
     # ---- construction helpers -------------------------------------------------------------------
 
@@ -739,11 +740,17 @@ class GazeSolver:
             raise ConfigurationError(f"unknown gaze policy {policy!r}; expected one of {', '.join(POLICIES)}")
         p = self._check_target(p_world)
         qc = self._check_q(q_current)
+        return self._solve(p, qc, policy, q_start, max_iterations)
+
+    def _solve(
+        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
+    ) -> GazeSolution:
+        """:meth:`solve` on a checked target ``p`` and checked in-limit readings ``qc`` (or None)."""
         q_ref = self.home.copy() if qc is None else qc
         free = self._free_joints[policy]
         if q_start is not None:
             q0 = np.clip(np.asarray(q_start, dtype=float).reshape(self.n), self.lower, self.upper)
-            fixed = np.setdiff1d(np.arange(self.n), free)
+            fixed = self._fixed_joints[policy]
             q0[fixed] = q_ref[fixed]
         elif policy == "eyes-only":
             q0 = q_ref.copy()
@@ -1094,6 +1101,8 @@ class GazeSolver:
         Returns:
             A :class:`Trajectory`.
         """
+        if policy not in POLICIES:
+            raise ConfigurationError(f"unknown gaze policy {policy!r}; expected one of {', '.join(POLICIES)}")
         P = np.asarray(targets, dtype=float)
         if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] == 0:
             raise ConfigurationError(f"targets must have shape (T, 3) [m], got shape {P.shape}")
@@ -1117,8 +1126,8 @@ class GazeSolver:
         q_cmd = qc
         goal: Array | None = None
         for k in range(T):
-            ref = q_cmd if q_cmd is not None else None
-            sol = self.solve(P[k], ref, policy, q_start=goal)
+            # targets and readings are checked above; q_cmd stays between in-limit readings
+            sol = self._solve(P[k], None if q_cmd is None else q_cmd.copy(), policy, goal, MAX_ITERATIONS)
             goal = sol.q
             if q_cmd is None:
                 q_cmd = goal.copy()
