@@ -9,13 +9,16 @@ Method (one :meth:`GazeSolver.solve` call):
 1. **Initial guess.** The table (prismatic joints shared by both cameras) stays at its reading.
    Neck (revolute joints shared by both cameras) from a grid computed once from the model: the
    entry whose cyclopean ray (midpoint of the camera centres, along the sum of the optical axes)
-   best faces the target; the eyes converge symmetrically by ``asin(baseline / 2 / distance)``.
+   best faces the target, refined to first order in pan and tilt (2 x 2 normal equations on
+   precomputed ray derivatives; cyclopean policy on a redundant head only); the eyes converge
+   symmetrically by ``asin(baseline / 2 / distance)``.
    ``min-motion`` and ``eyes-only`` start from ``q_current``; :meth:`GazeSolver.track` from the
    previous solution.
 2. **Task-priority Gauss-Newton with joint limits as constraints.** Priority 1 is fixation: per
    eye the residual ``u - e_z`` with ``u`` the unit target direction in the camera frame (zero only
    when the camera looks *at*, not away from, the target; its norm is ``2 sin(err/2)``). Its
-   Jacobian comes from Pinocchio's LOCAL frame Jacobians: ``dp_cam = -v - w x p_cam``. Steps are
+   Jacobian comes from Pinocchio's LOCAL frame Jacobians: ``dp_cam = -v - w x p_cam`` (computed
+   only for configurations a step starts from). Steps are
    Levenberg-Marquardt damped with ``mu = |r|^2`` and halved while they increase the residual.
    Priority 2, the redundancy policy (below), moves only in the null space of priority 1.
    Joint limits: a joint that a step would push past its limit is first kept still by trading
