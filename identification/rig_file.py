@@ -28,14 +28,15 @@ problem raises :class:`cpc2urdf.errors.InputFileError` naming the file and the k
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError, OutputError
+from cpc2urdf.fileio import write_atomic
 from cpc2urdf.identification.stereo import StereoRig
 from cpc2urdf.units import LENGTH_UNITS
 
@@ -233,30 +234,29 @@ def save_rig(rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m") 
     """
     if units not in LENGTH_UNITS:
         raise ValueError(f"units must be one of {sorted(LENGTH_UNITS)}, got {units!r}")
-    p = Path(path)
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=".yaml", dir=folder)
-    os.close(fd)
+    return _write_filestorage(path, [
+        ("K1", np.asarray(rig.K1, dtype=np.float64)),
+        ("D1", np.asarray(rig.D1, dtype=np.float64).reshape(1, -1)),
+        ("K2", np.asarray(rig.K2, dtype=np.float64)),
+        ("D2", np.asarray(rig.D2, dtype=np.float64).reshape(1, -1)),
+        ("R", np.asarray(rig.R, dtype=np.float64)),
+        ("T", (np.asarray(rig.T, dtype=np.float64) / LENGTH_UNITS[units]).reshape(3, 1)),
+        ("image_size", np.array([[rig.image_size[0], rig.image_size[1]]], dtype=np.int32)),
+        ("units", units),
+    ])
+
+
+def _write_filestorage(path: str | os.PathLike[str], entries: list[tuple[str, Any]]) -> Path:
+    """Write ``entries`` (name, matrix or string) as OpenCV FileStorage YAML, atomically: the
+    text is made in memory and written by :func:`cpc2urdf.fileio.write_atomic`."""
     try:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        fs.write("K1", np.asarray(rig.K1, dtype=np.float64))
-        fs.write("D1", np.asarray(rig.D1, dtype=np.float64).reshape(1, -1))
-        fs.write("K2", np.asarray(rig.K2, dtype=np.float64))
-        fs.write("D2", np.asarray(rig.D2, dtype=np.float64).reshape(1, -1))
-        fs.write("R", np.asarray(rig.R, dtype=np.float64))
-        fs.write("T", (np.asarray(rig.T, dtype=np.float64) / LENGTH_UNITS[units]).reshape(3, 1))
-        fs.write("image_size", np.array([[rig.image_size[0], rig.image_size[1]]], dtype=np.int32))
-        fs.write("units", units)
-        fs.release()
-        os.replace(tmp, p)
-    except (OSError, cv2.error) as e:
-        raise OutputError(f"{p}: cannot write ({e})") from e
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return p
+        fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+        for name, value in entries:
+            fs.write(name, value)
+        text = fs.releaseAndGetString()
+    except cv2.error as e:
+        raise OutputError(f"{path}: cannot write ({e})") from e
+    return write_atomic(path, text)
 
 
 # ---- single cameras (stage 2: the head's cameras) ----------------------------------------------------
@@ -309,25 +309,11 @@ def load_camera(path: str | os.PathLike[str]) -> tuple[Array, Array, tuple[int, 
 
 def save_camera(K: Array, D: Array, image_size: tuple[int, int], path: str | os.PathLike[str]) -> Path:
     """Write one camera's intrinsics (``K``, ``D``, ``image_size``) as FileStorage YAML, atomically."""
-    p = Path(path)
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=".yaml", dir=folder)
-    os.close(fd)
-    try:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        fs.write("K", np.asarray(K, dtype=np.float64))
-        fs.write("D", np.asarray(D, dtype=np.float64).reshape(1, -1))
-        fs.write("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32))
-        fs.release()
-        os.replace(tmp, p)
-    except (OSError, cv2.error) as e:
-        raise OutputError(f"{p}: cannot write ({e})") from e
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return p
+    return _write_filestorage(path, [
+        ("K", np.asarray(K, dtype=np.float64)),
+        ("D", np.asarray(D, dtype=np.float64).reshape(1, -1)),
+        ("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32)),
+    ])
 
 
 __all__ = ["ALIASES", "CAMERA_ALIASES", "load_camera", "load_rig", "save_camera", "save_rig"]
