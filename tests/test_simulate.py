@@ -78,7 +78,8 @@ def test_noise_free_measurements_are_the_truth_and_plates_stay_in_view() -> None
     assert truth.joints["tilt"] != nominal.joints["tilt"]
     view = check_view(truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.min_margin_px > 20
-    assert 1.2 < view.distance_range[0] < view.distance_range[1] < 1.8  # ~1.5 m from the rig
+    lo, hi = view.distance_range
+    assert 1.2 < lo < hi < 1.8  # ~1.5 m from the rig
 
 
 def _rig_views(rig: StereoRig) -> list[PinholeView]:
@@ -102,7 +103,8 @@ def test_default_placement_hides_no_circle() -> None:
     assert not _hidden_per_record(truth, rig, np.vstack([ms.q, held.q]), margin_px=OCCLUSION_MARGIN_PX).any()
     view = check_view(truth, rig, np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.hidden == 0 and view.unseen == 0
-    assert 1.2 < view.distance_range[0] < view.distance_range[1] < 1.8
+    lo, hi = view.distance_range
+    assert 1.2 < lo < hi < 1.8
     # The placement depends on the robot, rig and protocol, not on the seed.
     t2, _, _ = simulate_experiment("iis_head", seed=6, n_heldout=2, noise="none")
     assert t2.metadata["provenance"]["nominal_world_to_base"] == truth.metadata["provenance"]["nominal_world_to_base"]
