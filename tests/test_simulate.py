@@ -79,7 +79,7 @@ def test_noise_free_measurements_are_the_truth_and_plates_stay_in_view() -> None
     view = check_view(truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.min_margin_px > 20
     lo, hi = view.distance_range
-    assert 1.2 < lo < hi < 1.8  # ~1.5 m from the rig
+    assert lo > 1.2 and hi < 1.8 and lo < hi  # ~1.5 m from the rig
 
 
 def _rig_views(rig: StereoRig) -> list[PinholeView]:
@@ -104,7 +104,7 @@ def test_default_placement_hides_no_circle() -> None:
     view = check_view(truth, rig, np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.hidden == 0 and view.unseen == 0
     lo, hi = view.distance_range
-    assert 1.2 < lo < hi < 1.8
+    assert lo > 1.2 and hi < 1.8 and lo < hi
     # The placement depends on the robot, rig and protocol, not on the seed.
     t2, _, _ = simulate_experiment("iis_head", seed=6, n_heldout=2, noise="none")
     assert t2.metadata["provenance"]["nominal_world_to_base"] == truth.metadata["provenance"]["nominal_world_to_base"]
