@@ -266,6 +266,7 @@ class ViewReport:
             plate or by the plate's own back (:func:`~cpc2urdf.identification.render.
             occluded_circles`).
         hidden_per_config: Those sightings per configuration, shape (N,).
+        unseen_per_config: Plates outside an image or too oblique, per configuration, shape (N,).
     """
 
     ok: bool
@@ -276,6 +277,7 @@ class ViewReport:
     unseen: int = 0
     hidden: int = 0
     hidden_per_config: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    unseen_per_config: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def check_view(
@@ -327,6 +329,7 @@ def check_view(
                 occluded.setdefault(f, []).append(mask)
     unseen = 0
     per_config = np.zeros(len(qq), dtype=np.int64)
+    unseen_per_config = np.zeros(len(qq), dtype=np.int64)
     for f in frames:
         T = fk[f]
         pts = np.einsum("nij,kj->nki", T[:, :3, :3], _frame_points(model.structure, f)) + T[:, None, :3, 3]
@@ -346,6 +349,7 @@ def check_view(
         per_config += blocked[0].sum(axis=1) + blocked[1].sum(axis=1)
         bad_view = ~seen.all(axis=1) | (ang > max_angle)
         unseen += int(bad_view.sum())
+        unseen_per_config += bad_view
         for i in np.flatnonzero(bad_view | blocked[0].any(axis=1) | blocked[1].any(axis=1)):
             if not seen[i].all():
                 why = f"{int((~seen[i]).sum())} of {seen.shape[1]} circles outside an image (margin {margin_px:g} px)"
@@ -363,7 +367,7 @@ def check_view(
     problems += hidden_problems
     d = np.concatenate(dists)
     return ViewReport(not problems, problems, min_margin, max_ang, (float(d.min()), float(d.max())), unseen,
-                      int(per_config.sum()), per_config)
+                      int(per_config.sum()), per_config, unseen_per_config)
 
 
 _PLACEMENTS: dict[bytes, CPCParams] = {}
@@ -473,12 +477,12 @@ def visible_heldout(
     *,
     max_rounds: int = 20,
 ) -> tuple[Array, int]:
-    """``n`` random configurations in ``ranges`` (n_joints, 2) in which no circle is hidden.
+    """``n`` random configurations in ``ranges`` (n_joints, 2) in which the rig sees every circle.
 
     Draws ``n`` configurations uniformly, then redraws (from ``rng``, in order) those in which
-    :func:`check_view` finds a circle hidden by a plate -- a real validation set holds only poses
-    the rig can measure -- for at most ``max_rounds`` rounds. Configurations that leave the
-    images are kept: :func:`check_view` reports them.
+    :func:`check_view` finds a circle hidden by a plate, outside an image or seen too obliquely --
+    a real validation set holds only poses the rig can measure -- for at most ``max_rounds``
+    rounds; whatever is still unmeasurable then is left for :func:`check_view` to report.
 
     Returns:
         ``(q, redrawn)``: configurations of shape (n, n_joints) and how many draws were replaced.
@@ -489,7 +493,7 @@ def visible_heldout(
         if n == 0:
             break
         view = check_view(truth, rig, q, frames, [str(i) for i in range(n)])
-        bad = np.flatnonzero(view.hidden_per_config > 0)
+        bad = np.flatnonzero((view.hidden_per_config > 0) | (view.unseen_per_config > 0))
         if bad.size == 0:
             break
         q[bad] = random_configurations(ranges, bad.size, rng)
@@ -673,7 +677,7 @@ def simulate_experiment(
         "rig": rig.to_json(),
         "view": {"min_margin_px": view.min_margin_px, "max_view_angle_rad": view.max_view_angle,
                  "distance_range_m": list(view.distance_range), "problems": view.problems[:10],
-                 "heldout_redrawn_for_occlusion": redrawn},
+                 "heldout_redrawn_unmeasurable": redrawn},
     }
     fit_rms = {}
     if points:
