@@ -87,4 +87,19 @@ def test_bench_fk_small(capsys):
 def test_demo_runs(tmp_path, capsys):
     code, out, _ = run(["demo", "-o", str(tmp_path / "demo")], capsys)
     assert code == 0, out
-    assert (tmp_path / "demo" / "nominal.urdf").is_file()
+    d = tmp_path / "demo"
+    for name in ("nominal.urdf", "stage1_model.json", "model.json", "head.urdf", "view.html"):
+        assert (d / name).is_file(), name
+    assert out.count("result: all parsers agree with the CPC model") == 3
+    assert "predicted rms" in out and "policy cyclopean:" in out
+    model = load_model(d / "model.json")
+    assert "handeye" in model.metadata and "uncertainty" in model.metadata
+
+
+def test_demo_from_images_runs(tmp_path, capsys):
+    code, out, _ = run(["demo", "-o", str(tmp_path / "demo"), "--from-images"], capsys)
+    assert code == 0, out
+    d = tmp_path / "demo"
+    assert len(list((d / "images" / "left").glob("*.png"))) == 55
+    assert (d / "measurements.json").is_file() and (d / "handeye" / "handeye_camera_left_optical.json").is_file()
+    assert out.count("result: all parsers agree with the CPC model") == 3

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.model import CPCModel, CPCParams
 
 Array = NDArray[np.float64]
@@ -138,7 +139,9 @@ def eyes_coplanar(model: CPCModel, tol: float = 1e-8) -> bool:
     return bool(np.max(np.abs(axis_distance(model, Q))) < tol)
 
 
-def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array | None = None) -> tuple[Array, Array]:
+def reachable_targets(
+    model: CPCModel, n: int, seed: int = 0, *, q_table: Array | None = None, max_rounds: int = 200
+) -> tuple[Array, Array]:
     """``n`` targets that ``model`` fixates exactly, and the readings that do it.
 
     See the module docstring for the construction. Only the CPC model's forward kinematics is
@@ -149,9 +152,14 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
         n: Number of targets.
         seed: Seed of the sampled readings.
         q_table: Table readings [m], shape (2,); None: the middle of the limits.
+        max_rounds: Rounds of sampled readings before giving up.
 
     Returns:
         ``(P, Q)``: targets (world) [m], shape (n, 3); readings, shape (n, 6).
+
+    Raises:
+        DegenerateDataError: Fewer than ``n`` targets after ``max_rounds`` rounds: this head's
+            two optical axes (almost) never meet in front of the cameras within its limits.
     """
     s = model.structure
     rng = np.random.default_rng(seed)
@@ -163,8 +171,10 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
     out_Q: list[Array] = []
     grid = np.linspace(lo[iR], hi[iR], 19)
     coplanar = eyes_coplanar(model)
-    while sum(len(p) for p in out_P) < n:
-        m = 2 * n
+    for _round in range(max_rounds):
+        if sum(len(p) for p in out_P) >= n:
+            break
+        m = max(2 * n, 64)
         Q = lo + (hi - lo) * rng.random((m, s.n_joints))
         Q[:, table] = home[table] if q_table is None else q_table
         # signed axis distance over the right eye's range, all samples at once
@@ -198,6 +208,13 @@ def reachable_targets(model: CPCModel, n: int, seed: int = 0, *, q_table: Array 
         ok &= np.abs(axis_distance(model, Qs)) < (1e-9 if coplanar else 1e-12)
         out_P.append(mid[ok])
         out_Q.append(Qs[ok])
+    found = sum(len(p) for p in out_P)
+    if found < n:
+        raise DegenerateDataError(
+            f"{model.structure.name}: only {found} of {n} targets found where both optical axes meet "
+            f"{MIN_DISTANCE:g}-{MAX_DISTANCE:g} m in front of the cameras, in {max_rounds} rounds of "
+            f"{max(2 * n, 64)} sampled readings within the limits (table fixed)"
+        )
     return np.concatenate(out_P)[:n], np.concatenate(out_Q)[:n]
 
 

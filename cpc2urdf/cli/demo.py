@@ -70,23 +70,17 @@ def _cli(*argv: str, ok: tuple[int, ...] = (0,)) -> None:
         raise Cpc2UrdfError(f"demo stage 'cpc2urdf {' '.join(argv)}' ended with exit code {code}")
 
 
-def _targets_in_front(model: CPCModel, distances: tuple[float, ...] = (0.6, 1.0)) -> tuple[Array, list[Array]]:
-    """The middle of the calibration ranges, and points straight ahead of the cameras there and
-    a little to the side [m], in world."""
+def _target_ahead(model: CPCModel, distance: float = 0.6) -> tuple[Array, Array]:
+    """The middle of the calibration ranges, and the point ``distance`` [m] straight ahead of the
+    cameras there (world)."""
     import numpy as np
 
     s = model.structure
     q = np.array([np.mean(j.calibration_range) if j.calibration_range else (j.lower + j.upper) / 2 for j in s.joints])
     fk = model.fk(q, ["camera_left_optical", "camera_right_optical"])
     L, R = fk["camera_left_optical"], fk["camera_right_optical"]
-    centre = (L[:3, 3] + R[:3, 3]) / 2
     ahead = L[:3, 2] + R[:3, 2]
-    ahead /= np.linalg.norm(ahead)
-    side = L[:3, 0] + R[:3, 0]  # REP-103 x: to the right
-    side -= ahead * (side @ ahead)
-    side /= np.linalg.norm(side)
-    targets = [centre + distances[0] * ahead, centre + distances[1] * ahead + 0.15 * side]
-    return q, targets
+    return q, (L[:3, 3] + R[:3, 3]) / 2 + distance * ahead / np.linalg.norm(ahead)
 
 
 def _camera_errors(model: CPCModel, truth: CPCModel) -> str:
@@ -172,16 +166,27 @@ def run(args: argparse.Namespace) -> int:
     st.done()
 
     st.start("gaze: fixate targets in front of the calibrated head (Pinocchio IK, joint limits as constraints)")
+    from cpc2urdf.errors import DegenerateDataError
+    from cpc2urdf.validation.bench_gaze import reachable_targets
+
     model = load_model(f"{d}/model.json")
-    q_home, targets = _targets_in_front(model)
-    home = " ".join(repr(float(v)) for v in q_home)
-    for p in targets:
-        _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in p), "--q-current", *home.split(),
+    q_home, ahead = _target_ahead(model)
+    home = [repr(float(v)) for v in q_home]
+    try:
+        reachable = reachable_targets(model, 1, seed=args.seed)[0][0]
+    except DegenerateDataError as e:
+        print(f"   no target found where this head's two optical axes meet exactly: {e}")
+        reachable = ahead
+    else:
+        print("   a target where this calibrated head's two optical axes can meet (found from its FK):")
+        _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in reachable), "--q-current", *home,
              ok=(0, 1))
+    print("   a target 0.6 m straight ahead of the cameras:")
+    _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in ahead), "--q-current", *home, ok=(0, 1))
     print(
-        "   (a calibrated head whose two eyes do not sweep exactly one plane cannot make both optical\n"
-        "    axes pass through a point: the solver then returns the in-limit readings with the least\n"
-        "    pointing error and says so; docs/gaze.md)"
+        "   (a calibrated head whose two eyes do not sweep exactly one plane can make both optical\n"
+        "    axes meet only on a thin set of targets; elsewhere the solver returns the in-limit\n"
+        "    readings with the least pointing error and says so; docs/gaze.md)"
     )
     st.done()
 
@@ -189,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.view import find_chromium, screenshot_html, write_view_html
 
     truth_path = f"{d}/images/truth.json" if args.from_images else f"{d}/sim/truth.json"
-    summary = write_view_html(out / "view.html", model, target=targets[0], q=q_home, ghost=truth_path)
+    summary = write_view_html(out / "view.html", model, target=reachable, q=q_home, ghost=truth_path)
     print(summary.format())
     print(f"   wrote {out / 'view.html'} (open it in a browser)")
     if find_chromium():
