@@ -52,6 +52,7 @@ DEFAULT_GEOMETRY_ERROR_T = 1e-3  # [m], per CPC offset component
 DEFAULT_GEOMETRY_ERROR_R = math.radians(0.5)  # [rad], about a random axis
 DEFAULT_HELDOUT = 50
 VIEW_MARGIN_PX = 20.0  # [px]: circles must stay this far inside both images
+OCCLUDED_VIEWS_MAX = 0.05  # [-]: share of (configuration, plate) views with a hidden circle tolerated
 MAX_VIEW_ANGLE = math.radians(75.0)  # [rad]: plate normal vs line of sight to either camera
 OCCLUSION_MARGIN_PX = 3.0  # [px]: a circle's image must stay this far from any other plate's image
 # [px]: the placement search asks for more clearance on the nominal robot, so that the true robot
@@ -647,10 +648,19 @@ def simulate_experiment(
     q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
     view = check_view(truth, rig, np.vstack([q, q_held]), frames,
                       labels + [f"heldout {i}" for i in range(n_heldout)])
-    if require_view and not view.ok:
-        more = f" (and {len(view.problems) - 1} more)" if len(view.problems) > 1 else ""
+    # A plate outside an image or seen edge-on cannot be measured: refuse. A circle hidden by the
+    # other plate in an occasional view of this particular true robot (the placement was searched
+    # clear on the nominal one) leaves that plate measurable from its other circles: recorded in
+    # the provenance. Plates hiding each other in more than OCCLUDED_VIEWS_MAX of the views is a
+    # bad experiment design: refused too.
+    unmeasurable = view.problems[: view.unseen]
+    occluded = view.problems[view.unseen:]
+    if len(occluded) > OCCLUDED_VIEWS_MAX * (len(q) + n_heldout) * len(frames):
+        unmeasurable += occluded
+    if require_view and unmeasurable:
+        more = f" (and {len(unmeasurable) - 1} more)" if len(unmeasurable) > 1 else ""
         raise ConfigurationError(
-            f"the rig does not see {view.problems[0]}{more}; narrow the calibration ranges, "
+            f"the rig does not see {unmeasurable[0]}{more}; narrow the calibration ranges, "
             "widen the rig's field of view or place the robot differently"
         )
 
@@ -677,6 +687,7 @@ def simulate_experiment(
         "rig": rig.to_json(),
         "view": {"min_margin_px": view.min_margin_px, "max_view_angle_rad": view.max_view_angle,
                  "distance_range_m": list(view.distance_range), "problems": view.problems[:10],
+                 "hidden_circle_sightings": view.hidden,
                  "heldout_redrawn_unmeasurable": redrawn},
     }
     fit_rms = {}
