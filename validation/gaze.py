@@ -222,6 +222,20 @@ class _State:
         return self.jacobian
 
 
+def target_point(p_world: ArrayLike) -> Array:
+    """A gaze target as a finite point of shape (3,) [m], or :class:`ConfigurationError` saying
+    what is wrong (the solver and the view check targets the same way)."""
+    try:
+        p = np.asarray(p_world, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ConfigurationError(f"target must be three numbers x y z [m], got {p_world!r}") from e
+    if p.shape != (3,):
+        raise ConfigurationError(f"target must be three numbers x y z [m], got shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ConfigurationError(f"target must be finite, got {p.tolist()}")
+    return p
+
+
 class GazeSolver:
     """Gaze inverse kinematics on the Pinocchio model of a URDF.
 
@@ -571,15 +585,7 @@ class GazeSolver:
     # ---- the solve ----------------------------------------------------------------------------
 
     def _check_target(self, p_world: ArrayLike) -> Array:
-        try:
-            p = np.asarray(p_world, dtype=float)
-        except (TypeError, ValueError) as e:
-            raise ConfigurationError(f"target must be 3 numbers [m], got {p_world!r}") from e
-        if p.shape != (3,):
-            raise ConfigurationError(f"target must have shape (3,) [m], got shape {p.shape}")
-        if not np.all(np.isfinite(p)):
-            raise ConfigurationError(f"target must be finite, got {p.tolist()}")
-        return p
+        return target_point(p_world)
 
     def _check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
         if q is None:

@@ -50,6 +50,7 @@ from cpc2urdf.errors import ConfigurationError, InputFileError, OutputError, Unk
 from cpc2urdf.fileio import write_atomic
 from cpc2urdf.transforms import Array, cpc_rotation
 from cpc2urdf.urdf import HEAD_RGBA, urdf_from_model
+from cpc2urdf.validation.gaze import target_point
 
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
 TARGET_RGBA = (0.95, 0.1, 0.75, 1.0)  # magenta: no other part of the scene has this hue
@@ -514,17 +515,7 @@ class ViewSummary:
 
 
 def _parse_target(target: ArrayLike | None) -> Array | None:
-    if target is None:
-        return None
-    try:
-        p = np.asarray(target, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise ConfigurationError(f"target must be three numbers x y z [m], got {target!r}") from e
-    if p.shape != (3,):
-        raise ConfigurationError(f"target must be three numbers x y z [m], got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ConfigurationError(f"target must be finite, got {p.tolist()}")
-    return p
+    return None if target is None else target_point(target)
 
 
 def build_view(
