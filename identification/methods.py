@@ -72,7 +72,6 @@ def residuals(model: CPCModel, ms: MeasurementSet) -> dict[str, Any]:
     per_record: list[dict[str, Any]] = [{"label": lb} for lb in ms.labels]
     for f in frames:
         ok = ms.has_pose(f)
-        T[f] = np.broadcast_to(T[f], (ms.n_records, 4, 4))  # a frame on the base: one pose for all q
         dt = np.linalg.norm(T[f][ok, :3, 3] - ms.poses[f][ok, :3, 3], axis=1)
         dr = rotation_error(T[f][ok, :3, :3], ms.poses[f][ok, :3, :3])
         per_frame[f] = {

@@ -74,7 +74,7 @@ def position_errors(model: CPCModel, ms: MeasurementSet, frame: str) -> tuple[Ar
     """Per record that measured ``frame``: ``e = p_model - p_measured`` [m], shape (K, 3), and the
     rotation error [rad], shape (K,)."""
     ok = ms.has_pose(frame)
-    T = np.broadcast_to(model.fk(ms.q[ok], [frame])[frame], (int(ok.sum()), 4, 4))  # frames on the base too
+    T = model.fk(ms.q[ok], [frame])[frame]
     e = T[:, :3, 3] - ms.poses[frame][ok, :3, 3]
     return e, rotation_error(T[:, :3, :3], ms.poses[frame][ok, :3, :3])
 
