@@ -52,6 +52,16 @@ def require_format(doc: Any, expected: str, path: object) -> Mapping[str, Any]:
     return doc
 
 
+def make_folder(path: str | os.PathLike[str]) -> Path:
+    """Create the output folder ``path`` (and its parents) if missing, or :class:`OutputError`."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"{p}: cannot create folder ({e.strerror})") from e
+    return p
+
+
 def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` to ``path`` atomically (temp file in the same folder, then rename).
 

@@ -337,7 +337,7 @@ def plot(trials: list[dict[str, Any]], s: dict[str, Any], path: Path, setting: s
 def main(argv: list[str]) -> int:
     """``cpc2urdf study crb [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import write_atomic, write_json
+    from cpc2urdf.fileio import make_folder, write_atomic, write_json
 
     p = argparse.ArgumentParser(prog="cpc2urdf study crb", description=__doc__.split("\n\n")[0])
     p.add_argument("--trials", type=int, default=50, help="seeded trials (default 50)")
@@ -356,8 +356,7 @@ def main(argv: list[str]) -> int:
     if not 0.0 <= args.outliers < 0.5:
         raise Cpc2UrdfError(f"--outliers must be in [0, 0.5), got {args.outliers}")
     sigma_t, sigma_r = args.sigma_mm * 1e-3, math.radians(args.sigma_deg)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(args.out)
     trials = [
         run_trial(args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers)
         for k in progress(range(args.trials), "crb")

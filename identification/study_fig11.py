@@ -198,7 +198,7 @@ def _ints(text: str) -> tuple[int, ...]:
 def main(argv: list[str]) -> int:
     """``cpc2urdf study fig11 [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import write_atomic, write_json
+    from cpc2urdf.fileio import make_folder, write_atomic, write_json
 
     p = argparse.ArgumentParser(prog="cpc2urdf study fig11", description=__doc__.split("\n\n")[0])
     p.add_argument("--M", default="2:15", help="measurements per joint: LO:HI or a,b,c (default 2:15)")
@@ -216,8 +216,7 @@ def main(argv: list[str]) -> int:
         raise Cpc2UrdfError(f"--M/--sigmas: {e}") from e
     if min(M_values) < 2 or args.trials < 1 or args.heldout < 1 or min(sigmas) < 0:
         raise Cpc2UrdfError("need M >= 2, --trials >= 1, --heldout >= 1 and sigmas >= 0")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(args.out)
     result = run_study(M_values=M_values, sigmas_mm=sigmas, trials=args.trials, seed=args.seed,
                        n_heldout=args.heldout, robot=args.robot)
     table = format_table(result)

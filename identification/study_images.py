@@ -215,8 +215,8 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study images [--poses N] [--M M] [--seed S] [--out DIR]``."""
-    from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import write_atomic
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import make_folder, write_atomic
 
     parser = argparse.ArgumentParser(prog="cpc2urdf study images", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -228,10 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.poses < 1 or args.M < 3:
         raise ConfigurationError("--poses must be >= 1 and --M >= 3")
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create folder ({e.strerror})") from e
+    make_folder(out)
     result = run_study(poses=args.poses, M=args.M, seed=args.seed)
     path = write_atomic(out / "images.md", result["md"])
     print(result["md"])

@@ -270,8 +270,8 @@ def plot(result: dict[str, Any], folder: Path) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study li2010 [--repeats N] [--seed S] [--max-poses M] [--out DIR]``."""
-    from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import write_atomic
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import make_folder, write_atomic
 
     parser = argparse.ArgumentParser(prog="cpc2urdf study li2010", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -285,10 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_poses < 3:
         raise ConfigurationError(f"--max-poses must be >= 3, got {args.max_poses}")
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create folder ({e.strerror})") from e
+    make_folder(out)
     counts = tuple(n for n in POSE_COUNTS if n <= args.max_poses) or (3,)
     ratio_counts = tuple(n for n in RATIO_POSE_COUNTS if n <= args.max_poses) or (args.max_poses,)
     result = run_study(repeats=args.repeats, seed=args.seed, pose_counts=counts, ratio_counts=ratio_counts)

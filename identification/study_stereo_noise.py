@@ -181,8 +181,8 @@ def plot(result: dict[str, Any], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study stereo [--samples N] [--seed S] [--out DIR]``."""
-    from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import write_atomic
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import make_folder, write_atomic
 
     parser = argparse.ArgumentParser(prog="cpc2urdf study stereo", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -193,10 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.samples < 1:
         raise ConfigurationError(f"--samples must be >= 1, got {args.samples}")
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create folder ({e.strerror})") from e
+    make_folder(out)
     result = run_study(samples=args.samples, seed=args.seed)
     table = format_table(result)
     print(table, end="")

@@ -96,15 +96,12 @@ def _camera_errors(model: CPCModel, truth: CPCModel) -> str:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from cpc2urdf.errors import OutputError
+    from cpc2urdf.fileio import make_folder
     from cpc2urdf.identification.stage2 import perturb_cameras, run_stage2, write_pose_files
     from cpc2urdf.model_file import load_model, save_model
 
     out = Path(args.output)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create output folder ({e.strerror})") from e
+    make_folder(out)
     d = str(out)
     seed = str(args.seed)
     st = _Stages()

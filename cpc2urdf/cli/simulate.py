@@ -75,7 +75,7 @@ def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float,
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import dumps, write_atomic
+    from cpc2urdf.fileio import dumps, make_folder, write_atomic
     from cpc2urdf.identification.simulate import simulate_experiment
     from cpc2urdf.identification.stereo import StereoRig
     from cpc2urdf.measurements import measurements_to_json
@@ -121,10 +121,7 @@ def run(args: argparse.Namespace) -> int:
         "truth.json": dumps(model_to_json(exp.truth)),
         "heldout.json": dumps(measurements_to_json(exp.heldout)),
     }
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create folder ({e.strerror})") from e
+    make_folder(out)
     for name, t in texts.items():
         write_atomic(out / name, t)
     view = exp.measured.metadata["provenance"]["view"]
