@@ -17,17 +17,35 @@ from typing import Any
 from cpc2urdf.errors import InputFileError, OutputError
 
 
-def read_json(path: str | os.PathLike[str]) -> Any:
-    """Load a JSON file, raising :class:`InputFileError` naming the file and the problem."""
+def read_text_file(path: str | os.PathLike[str], expected: str, encoding: str = "utf-8") -> str:
+    """The text of a user's input file, or one :class:`InputFileError` naming the file and why:
+    missing, a folder, binary (undecodable or with NUL bytes), unreadable.
+
+    Args:
+        path: The file.
+        expected: What it should be, for the message (e.g. ``"a JSON file"``).
+        encoding: Text encoding (``"utf-8-sig"`` accepts a byte-order mark).
+    """
     p = Path(path)
     if not p.exists():
         raise InputFileError(p, "no such file")
     if p.is_dir():
-        raise InputFileError(p, "is a folder, expected a JSON file")
+        raise InputFileError(p, f"is a folder, expected {expected}")
     try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputFileError(p, f"cannot read: {e}") from e
+        text = p.read_text(encoding=encoding)
+    except UnicodeDecodeError:
+        raise InputFileError(p, f"is a binary file, expected {expected}") from None
+    except OSError as e:
+        raise InputFileError(p, f"cannot read ({e.strerror})") from None
+    if "\x00" in text:
+        raise InputFileError(p, f"is a binary file, expected {expected}")
+    return text
+
+
+def read_json(path: str | os.PathLike[str]) -> Any:
+    """Load a JSON file, raising :class:`InputFileError` naming the file and the problem."""
+    p = Path(path)
+    text = read_text_file(p, "a JSON file")
     try:
         return json.loads(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as e:

@@ -58,6 +58,7 @@ from cpc2urdf.errors import (
     InputFileError,
     OutputError,
 )
+from cpc2urdf.fileio import read_text_file
 from cpc2urdf.identification.detect import (
     DetectionError,
     StereoPlatePose,
@@ -104,12 +105,7 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
             columns, a unit that does not fit the joint, a non-number, a duplicate record.
     """
     p = Path(path)
-    if not p.is_file():
-        raise InputFileError(p, "no such file" if not p.exists() else "is a folder, expected a CSV file")
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputFileError(p, f"cannot read as text ({e})") from None
+    text = read_text_file(p, "a CSV file", encoding="utf-8-sig")
     rows = [r for r in csv.reader(io.StringIO(text)) if r and not (len(r) == 1 and not r[0].strip())]
     rows = [r for r in rows if not r[0].lstrip().startswith("#")]
     if not rows:

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError, OutputError
-from cpc2urdf.fileio import write_atomic
+from cpc2urdf.fileio import read_text_file, write_atomic
 from cpc2urdf.identification.stereo import StereoRig
 from cpc2urdf.units import LENGTH_UNITS
 
@@ -55,18 +55,7 @@ RIG_ROTATION_TOL = 1e-5  # [-]: max |R^T R - I| entry accepted for R in a rig fi
 
 
 def _open(path: Path) -> cv2.FileStorage:
-    if not path.exists():
-        raise InputFileError(path, "no such file")
-    if path.is_dir():
-        raise InputFileError(path, "is a folder, expected an OpenCV FileStorage YAML rig file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise InputFileError(path, "is a binary file, expected an OpenCV FileStorage YAML rig file") from None
-    except OSError as e:
-        raise InputFileError(path, f"cannot read ({e.strerror})") from None
-    if "\x00" in text:
-        raise InputFileError(path, "is a binary file, expected an OpenCV FileStorage YAML rig file")
+    text = read_text_file(path, "an OpenCV FileStorage YAML rig file")
     # OpenCV's YAML parser insists on the "%YAML:1.0" header; hand-written files often lack it.
     if path.suffix.lower() in (".yaml", ".yml") and not text.lstrip().startswith("%YAML"):
         text = "%YAML:1.0\n---\n" + text

@@ -266,15 +266,9 @@ class GazeSolver:
         self._syevd = dsyevd
         text = str(urdf)
         if isinstance(urdf, Path) or not text.lstrip().startswith("<"):  # a path, not XML text
-            from cpc2urdf.errors import InputFileError
+            from cpc2urdf.fileio import read_text_file
 
-            path = Path(text)
-            if not path.is_file():
-                raise InputFileError(path, "no such URDF file")
-            try:
-                text = path.read_text()
-            except (OSError, UnicodeDecodeError) as e:
-                raise InputFileError(path, f"cannot read the URDF: {e}") from e
+            text = read_text_file(Path(text), "a URDF file")
         try:
             model = pin.buildModelFromXML(text)
         except Exception as e:  # Pinocchio raises ValueError/RuntimeError on bad XML

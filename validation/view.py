@@ -47,7 +47,7 @@ from meshcat.servers.tree import SceneTree, find_node, walk
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, OutputError, UnknownNameError
-from cpc2urdf.fileio import write_atomic
+from cpc2urdf.fileio import read_text_file, write_atomic
 from cpc2urdf.transforms import Array, cpc_rotation
 from cpc2urdf.urdf import HEAD_RGBA, urdf_from_model
 from cpc2urdf.validation.gaze import target_point
@@ -210,12 +210,7 @@ def load_view_robot(source: str | os.PathLike[str] | Any) -> ViewRobot:
     elif str(source).lower().endswith(".urdf"):
         p = Path(source)
         label = str(p)
-        if not p.is_file():
-            raise InputFileError(p, "no such file" if not p.exists() else "is not a file")
-        try:
-            text = p.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
-            raise InputFileError(p, f"cannot read: {e}") from e
+        text = read_text_file(p, "a URDF file")
     else:
         from cpc2urdf.model_file import load_model
 
