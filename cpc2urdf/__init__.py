@@ -10,7 +10,8 @@ Sub-packages: ``cpc2urdf.identification`` (measurements to parameters), ``cpc2ur
 
 from cpc2urdf.errors import Cpc2UrdfError
 from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
-from cpc2urdf.model_file import load_model, load_robot, save_model
+from cpc2urdf.model_file import save_model
+from cpc2urdf.robot_ref import load_model, load_robot
 
 __version__ = "0.1.0"
 

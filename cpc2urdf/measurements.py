@@ -37,6 +37,8 @@ from cpc2urdf.errors import Cpc2UrdfError, InputFileError, UnknownNameError
 from cpc2urdf.fileio import finite_float, read_json, require_format, write_json
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.poses import pose_from_json, pose_to_json
+from cpc2urdf.registration import plate_pose_from_points, registration_rms
+from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.spec import RobotSpec
 from cpc2urdf.units import Units
 
@@ -64,6 +66,8 @@ class MeasurementSet:
         fit_rms: Plate name -> RMS distance [m] between the measured points and the layout
             placed at the record's pose, shape (N,) (NaN where the record has no points).
         metadata: Free-form file sections (``description``, ``noise``, ``provenance``, ``notes``).
+        spec: The robot the file refers to, as resolved when it was read (its nominal geometry
+            is what identification starts from and keeps unmeasured frames with), or None.
     """
 
     structure: RobotStructure
@@ -75,6 +79,7 @@ class MeasurementSet:
     points: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     fit_rms: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     metadata: dict[str, Any] = field(default_factory=dict)
+    spec: RobotSpec | None = None
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -133,6 +138,7 @@ class MeasurementSet:
             {k: v[idx] for k, v in self.points.items()},
             {k: v[idx] for k, v in self.fit_rms.items()},
             dict(self.metadata),
+            self.spec,
         )
 
     @classmethod
@@ -163,23 +169,9 @@ class MeasurementSet:
 
 
 def _resolve_robot(ref: Any, base_dir: Path | None) -> RobotSpec:
-    from cpc2urdf.model_file import load_robot
-
     if not isinstance(ref, str) or not ref:
         raise ValueError(f"'robot' must be a shipped robot name or a robot file path, got {ref!r}")
-    looks_like_path = "/" in ref or os.sep in ref or ref.endswith(".json")
-    if looks_like_path and base_dir is not None and not os.path.isabs(ref):
-        candidate = base_dir / ref
-        if candidate.exists():  # relative paths are relative to the measurement file first
-            return load_robot(candidate)
-    if not looks_like_path and not os.path.exists(ref):
-        from cpc2urdf.robots import available, spec_path
-
-        if spec_path(ref) is None:
-            raise ValueError(
-                f"robot {ref!r} is neither a shipped robot ({', '.join(available())}) nor a file"
-            )
-    return load_robot(ref)
+    return load_robot(ref, relative_to=base_dir)
 
 
 def measurements_from_json(
@@ -220,7 +212,9 @@ def measurements_from_json(
         records = d.get("records")
         if not isinstance(records, list) or not records:
             raise ValueError("'records' must be a non-empty list of records")
-        return _parse_records(records, robot.structure, units, source, ref, d)
+        ms = _parse_records(records, robot.structure, units, source, ref, d)
+        ms.spec = robot
+        return ms
     except InputFileError as e:
         if e.path == str(source):
             raise
@@ -238,7 +232,6 @@ def _parse_records(
     robot_ref: str | None,
     doc: Mapping[str, Any],
 ) -> MeasurementSet:
-    from cpc2urdf.identification.registration import plate_pose_from_points, registration_rms
 
     N, n = len(records), s.n_joints
     q = np.empty((N, n))

@@ -21,20 +21,16 @@ Files are written in SI units with full float precision; they may be read in mm/
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError
-from cpc2urdf.fileio import read_json, require_format, write_json
+from cpc2urdf.fileio import require_format, write_json
 from cpc2urdf.model import BASE, CPCModel
 from cpc2urdf.spec import (
-    ROBOT_FORMAT,
-    RobotSpec,
     cpc_to_json,
     parse_placement,
     parse_tree,
-    spec_from_json,
 )
 from cpc2urdf.units import Units
 
@@ -117,43 +113,4 @@ def save_model(model: CPCModel, path: str | Path) -> Path:
     return write_json(path, model_to_json(model))
 
 
-def _shipped_spec_path(name: str) -> Path | None:
-    from cpc2urdf.robots import spec_path  # data package; resolves shipped robot names
-
-    return spec_path(name)
-
-
-def load_robot(name_or_path: str | Path) -> RobotSpec:
-    """A shipped robot by name (e.g. ``"iis_head"``), or a robot spec / model file by path.
-
-    A model file yields a spec whose nominal model is the file's model.
-    """
-    text = str(name_or_path)
-    shipped = _shipped_spec_path(text) if "/" not in text and not text.endswith(".json") else None
-    if shipped is not None:
-        return spec_from_json(read_json(shipped), text)
-    if not Path(text).exists():
-        from cpc2urdf.robots import available
-
-        raise InputFileError(text, f"no such file, and not a shipped robot name ({', '.join(available())})")
-    doc = read_json(text)
-    if isinstance(doc, Mapping) and doc.get("format") == MODEL_FORMAT:
-        model = model_from_json(doc, text)
-        return RobotSpec(model.structure, model, text)
-    if isinstance(doc, Mapping) and doc.get("format") == ROBOT_FORMAT:
-        return spec_from_json(doc, text)
-    from cpc2urdf.robots import available
-
-    raise InputFileError(
-        text,
-        f"format is {doc.get('format') if isinstance(doc, Mapping) else None!r}, expected "
-        f"{MODEL_FORMAT!r} or {ROBOT_FORMAT!r} (or a shipped robot name: {', '.join(available())})",
-    )
-
-
-def load_model(name_or_path: str | Path) -> CPCModel:
-    """A model: a model file, or the nominal model of a robot spec or shipped robot name."""
-    return load_robot(name_or_path).nominal_model()
-
-
-__all__ = ["BASE", "MODEL_FORMAT", "load_model", "load_robot", "model_from_json", "model_to_json", "save_model"]
+__all__ = ["BASE", "MODEL_FORMAT", "model_from_json", "model_to_json", "save_model"]

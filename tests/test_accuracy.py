@@ -11,8 +11,9 @@ from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.measurements import MeasurementSet, save_measurements
 from cpc2urdf.model import CPCParams
-from cpc2urdf.model_file import load_robot, save_model
+from cpc2urdf.model_file import save_model
 from cpc2urdf.random_models import random_model
+from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import homogeneous
 from cpc2urdf.validation.accuracy import accuracy, format_table
 
@@ -69,8 +70,8 @@ def test_cli_prints_table_and_json(tmp_path, capsys) -> None:  # type: ignore[no
 def test_refined_model_shows_predicted_next_to_observed() -> None:
     """A refined model carries a covariance: accuracy puts its predicted RMS beside the observed
     one; the closed form has none. Averaged over seeds the two agree (here within a factor 1.5)."""
-    from cpc2urdf.identification.methods import identify
-    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.kinematics.methods import identify
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
 
     ratios = []
     for seed in range(4):

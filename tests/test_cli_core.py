@@ -7,7 +7,8 @@ import sys
 import pytest
 
 from cpc2urdf.cli import main
-from cpc2urdf.model_file import load_model, model_to_json
+from cpc2urdf.model_file import model_to_json
+from cpc2urdf.robot_ref import load_model
 
 
 def run(argv, capsys):

@@ -9,7 +9,7 @@ import pytest
 
 from cpc2urdf.cli import gaze as cli_gaze
 from cpc2urdf.cli import main
-from cpc2urdf.model_file import load_model
+from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation import gaze

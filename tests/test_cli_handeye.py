@@ -12,13 +12,13 @@ from test_handeye import EXACT, make_data
 
 from cpc2urdf.cli import COMMANDS, main
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.identification.handeye_file import (
+from cpc2urdf.identification.handeye.axzb import ALL_METHODS
+from cpc2urdf.identification.handeye.pose_file import (
     HANDEYE_POSES_FORMAT,
     handeye_poses_to_json,
     load_handeye_poses,
     save_handeye_poses,
 )
-from cpc2urdf.identification.robot_world import ALL_METHODS
 from cpc2urdf.transforms import inverse
 from cpc2urdf.units import Units
 
@@ -136,7 +136,7 @@ def test_cli_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 
 
 def test_file_errors_name_the_field() -> None:
-    from cpc2urdf.identification.handeye_file import handeye_poses_from_json
+    from cpc2urdf.identification.handeye.pose_file import handeye_poses_from_json
 
     with pytest.raises(InputFileError, match=r"records\[0\] lacks 'T_camera_target'"):
         handeye_poses_from_json({"format": HANDEYE_POSES_FORMAT, "records": [{"T_base_hand": {"matrix": np.eye(4).tolist()}}]}, "f.json")
@@ -145,8 +145,9 @@ def test_file_errors_name_the_field() -> None:
 
 
 def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from cpc2urdf.identification import stage2 as s2
-    from cpc2urdf.model_file import load_model, save_model
+    from cpc2urdf.identification.handeye import stage2 as s2
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.robot_ref import load_model
 
     nominal = load_model("iis_head")
     truth = s2.perturb_cameras(nominal, np.random.default_rng(2))

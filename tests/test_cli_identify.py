@@ -15,8 +15,8 @@ from cpc2urdf.cli import main
 from cpc2urdf.fileio import write_json
 from cpc2urdf.measurements import MeasurementSet, measurements_to_json
 from cpc2urdf.model import CPCModel
-from cpc2urdf.model_file import load_model
 from cpc2urdf.random_models import protocol_q, random_model
+from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.identification.closed_form import count_parameters, identify_closed_form
+from cpc2urdf.identification.kinematics.closed_form import count_parameters, identify_closed_form
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.model_file import load_robot
 from cpc2urdf.random_models import protocol_q, random_model
+from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import homogeneous
 
@@ -199,7 +199,7 @@ def test_noisy_head_is_accurate_to_a_millimetre() -> None:
 def test_paper_eq15_model_has_one_tilt_frame_per_branch_and_is_exact_too() -> None:
     """The paper's 34-parameter variant (l_3L, l_3R) also fits noise-free data exactly; its two
     branch models differ only in the tilt joint's offset (by noise only)."""
-    from cpc2urdf.identification.closed_form import identify_paper_branches
+    from cpc2urdf.identification.kinematics.closed_form import identify_paper_branches
 
     rng = np.random.default_rng(4)
     nominal = load_robot("iis_head").nominal_model()

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.identification.detect import (
+from cpc2urdf.identification.simulation.noise import stereo_noise
+from cpc2urdf.identification.vision.detect import (
     InconsistentDetectionError,
     PlateAmbiguousError,
     PlateNotFoundError,
@@ -26,8 +27,7 @@ from cpc2urdf.identification.detect import (
     target_pose,
     undistort_to_pixels,
 )
-from cpc2urdf.identification.noise import stereo_noise
-from cpc2urdf.identification.render import (
+from cpc2urdf.identification.vision.render import (
     PinholeView,
     circle_centres_px,
     plate_design,
@@ -35,8 +35,8 @@ from cpc2urdf.identification.render import (
     robot_plate_designs,
     target_design,
 )
-from cpc2urdf.identification.stereo import StereoRig
-from cpc2urdf.model_file import load_robot
+from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import rotation_error
 
 RIG = StereoRig.verged()  # the paper's rig: 600 mm baseline, verged at 1.5 m, 1280 x 1024, f = 1600 px
@@ -199,7 +199,7 @@ def test_wrong_rig_is_refused() -> None:
 
 
 def test_stage2_target_pose_by_solvepnp() -> None:
-    from cpc2urdf.identification.stage2 import DEFAULT_INTRINSICS as I
+    from cpc2urdf.identification.handeye.stage2 import DEFAULT_INTRINSICS as I
 
     design = target_design()
     view_K, view_D = I.K, I.D

@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, SpecError, UnknownNameError
-from cpc2urdf.model_file import load_model
-from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.urdf import write_urdf
-from cpc2urdf.validation.bench_gaze import (
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.studies.bench_gaze import (
     calibrated_iis_head,
     reachable_targets,
     too_close_targets,
     unreachable_targets,
 )
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.gaze import POLICIES, GazeSolver
 
 CAMERAS = ("camera_left_optical", "camera_right_optical")

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye import (
+from cpc2urdf.identification.handeye.axxb import (
     HAND_EYE_METHODS,
     calibrate_hand_eye,
     relative_motions,

@@ -18,23 +18,23 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.identification.closed_form import identify_closed_form
-from cpc2urdf.identification.handeye_file import load_handeye_poses
-from cpc2urdf.identification.measure_images import (
+from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
+from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+from cpc2urdf.identification.simulation.noise import stereo_noise
+from cpc2urdf.identification.vision.measure_images import (
     read_joints_csv,
     render_experiment,
     render_head_experiment,
     write_joints_csv,
 )
-from cpc2urdf.identification.noise import stereo_noise
-from cpc2urdf.identification.render import (
+from cpc2urdf.identification.vision.render import (
     PinholeView,
     circle_centres_px,
     render_view,
     robot_plate_designs,
 )
 from cpc2urdf.measurements import MeasurementSet, load_measurements
-from cpc2urdf.model_file import load_model, load_robot
+from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.transforms import inverse, rotation_error
 from cpc2urdf.validation.accuracy import accuracy
 
@@ -95,7 +95,7 @@ def test_identification_from_images_matches_exact_poses_with_the_same_noise(
     errs = []
     for i in range(0, ms.n_records, 3):
         img = [cv2.imread(str(folder / s / f"{i:04d}.png"), cv2.IMREAD_GRAYSCALE) for s in ("left", "right")]
-        from cpc2urdf.identification.detect import stereo_plate_poses
+        from cpc2urdf.identification.vision.detect import stereo_plate_poses
 
         res = stereo_plate_poses(img[0], img[1], rig, designs)
         for d in designs:
@@ -247,13 +247,13 @@ def test_stage2_from_head_camera_images(experiment: tuple[Path, object], head: P
 
 
 def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, object], head: Path) -> None:
-    from cpc2urdf.identification.measure_images import (
+    from cpc2urdf.identification.handeye.stage2 import calibrate_cameras, camera_errors
+    from cpc2urdf.identification.vision.measure_images import (
         HeadCamera,
         measure_head_images,
         stage2_observations,
     )
-    from cpc2urdf.identification.rig_file import load_camera
-    from cpc2urdf.identification.stage2 import calibrate_cameras, camera_errors
+    from cpc2urdf.identification.vision.rig_file import load_camera
 
     folder, _ = experiment
     truth = load_model(folder / "truth.json")
@@ -265,7 +265,7 @@ def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, ob
 
 
 def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, object], tmp_path: Path) -> None:
-    from cpc2urdf.identification.measure_images import measure_stereo_images
+    from cpc2urdf.identification.vision.measure_images import measure_stereo_images
 
     folder, exp = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=1)

@@ -17,7 +17,7 @@ from cpc2urdf.measurements import (
     measurements_from_json,
     save_measurements,
 )
-from cpc2urdf.model_file import load_robot
+from cpc2urdf.robot_ref import load_robot
 
 EXAMPLE: dict[str, Any] = {
     "format": "cpc2urdf/measurements@1",

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.model_file import load_model, load_robot, model_to_json, save_model
+from cpc2urdf.model_file import model_to_json, save_model
+from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.robots import available, spec_path
 from cpc2urdf.spec import load_spec
 from random_trees import random_tree

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.protocol import find_reference, recognise_protocol
+from cpc2urdf.identification.kinematics.protocol import find_reference, recognise_protocol
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.random_models import protocol_q, random_model
 

@@ -9,10 +9,10 @@ import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.parametrization import Parametrization
-from cpc2urdf.identification.refine import _Problem, refine
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.refine import _Problem, refine
 from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.model_file import load_model
+from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 
 PLATES = ("plate_left", "plate_right")
@@ -84,9 +84,9 @@ def test_refined_beats_the_closed_form_on_seeded_trials():
     """From the closed form: the weighted cost never rises (it is what is minimised), the
     parameter error relative to the bound drops in every trial (100/100 in the crb study), and the
     held-out error drops on average (per trial it is one noisy draw: 88/100 in the study)."""
-    from cpc2urdf.identification.closed_form import identify_closed_form
-    from cpc2urdf.identification.simulate import simulate_experiment
-    from cpc2urdf.identification.study_crb import _bound
+    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.studies.crb import _bound
 
     e_cf, e_ref = [], []
     for seed in range(4):
@@ -183,8 +183,8 @@ def test_bad_input(head):
 
 def test_identify_cli_method_refined(tmp_path):
     from cpc2urdf.cli import main
-    from cpc2urdf.identification.simulate import simulate_experiment
-    from cpc2urdf.identification.uncertainty import predicted_position_std
+    from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
     from cpc2urdf.measurements import save_measurements
 
     truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)

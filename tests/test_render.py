@@ -13,8 +13,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.identification.detect import ellipse_centre_offset
-from cpc2urdf.identification.render import (
+from cpc2urdf.identification.vision.detect import ellipse_centre_offset
+from cpc2urdf.identification.vision.render import (
     BACKGROUND_LEVEL,
     PLATE_BACK_LEVEL,
     PinholeView,

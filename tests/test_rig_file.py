@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError, OutputError
-from cpc2urdf.identification.rig_file import load_rig, save_rig
-from cpc2urdf.identification.stereo import StereoRig
+from cpc2urdf.identification.vision.rig_file import load_rig, save_rig
+from cpc2urdf.identification.vision.stereo import StereoRig
 
 
 def _write(path: Path, **entries: object) -> Path:

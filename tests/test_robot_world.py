@@ -14,7 +14,7 @@ from test_handeye import EXACT, add_noise, make_data, random_pose
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.robot_world import (
+from cpc2urdf.identification.handeye.axzb import (
     ALL_METHODS,
     ROBOT_WORLD_METHODS,
     calibrate,
@@ -172,7 +172,7 @@ def test_tsai_and_park_martin_survive_motions_near_180_deg() -> None:
 
 
 def test_li2010_study_runs_tiny(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from cpc2urdf.identification import study_li2010 as st
+    from cpc2urdf.studies import li2010 as st
 
     res = st.run_study(repeats=1, pose_counts=(3, 5), ratio_counts=(4,))
     assert {r["method"] for r in res["rows"]} == set(st.PAPER_METHODS + st.EXTRA_METHODS)

@@ -12,8 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.identification.render import PinholeView, hidden_circles, robot_plate_designs
-from cpc2urdf.identification.simulate import (
+from cpc2urdf.identification.simulation.simulate import (
     OCCLUSION_MARGIN_PX,
     calibration_ranges,
     check_view,
@@ -23,10 +22,12 @@ from cpc2urdf.identification.simulate import (
     protocol_configurations,
     simulate_experiment,
 )
-from cpc2urdf.identification.stereo import StereoRig
+from cpc2urdf.identification.vision.render import PinholeView, hidden_circles, robot_plate_designs
+from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.measurements import load_measurements
 from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
-from cpc2urdf.model_file import load_model, load_robot, save_model
+from cpc2urdf.model_file import save_model
+from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.robots import spec_path
 
 PLATE = tuple((x, y, 0.0) for x in (-0.025, 0.0, 0.025) for y in (-0.025, 0.0, 0.025))
@@ -234,7 +235,7 @@ def test_heldout_holds_only_measurable_configurations():
     """Held-out draws the rig cannot measure (hidden, outside an image, too oblique) are redrawn:
     100 configurations per seed, as the crb study uses, all pass the view check. Seed 13's first
     draw has a plate seen more obliquely than the 75 deg limit (found by replaying the stream)."""
-    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
 
     for seed in (0, 13):
         exp = simulate_experiment("iis_head", seed=seed, M=9, n_heldout=100)
@@ -246,7 +247,7 @@ def test_an_occasional_hidden_circle_is_recorded_not_fatal():
     """Seed 78's true robot hides one circle in one protocol view (the placement was searched
     clear on the nominal robot): the plate stays measurable from its other circles, so the
     experiment runs and the provenance counts the hidden sighting."""
-    from cpc2urdf.identification.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
 
     exp = simulate_experiment("iis_head", seed=78, M=9, n_heldout=100)
     view = exp.measured.metadata["provenance"]["view"]

@@ -10,8 +10,9 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification import stage2 as s2
-from cpc2urdf.model_file import load_model, model_to_json, save_model
+from cpc2urdf.identification.handeye import stage2 as s2
+from cpc2urdf.model_file import model_to_json, save_model
+from cpc2urdf.robot_ref import load_model
 from cpc2urdf.transforms import inverse
 from cpc2urdf.urdf import urdf_from_model
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpc2urdf.identification.stereo import StereoRig
+from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.transforms import inverse
 
 
@@ -75,7 +75,7 @@ def test_json_round_trip_and_errors() -> None:
 
 def test_stereo_study_runs_small_and_matches_first_order_depth(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from cpc2urdf.cli import main
-    from cpc2urdf.identification.study_stereo_noise import run_study
+    from cpc2urdf.studies.stereo_noise import run_study
 
     result = run_study(samples=300, pixel_sigmas=(0.1, 0.5))
     for row in result["rows"]:

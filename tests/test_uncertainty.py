@@ -6,16 +6,17 @@ import numpy as np
 import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
-from cpc2urdf.identification.parametrization import Parametrization
-from cpc2urdf.identification.refine import _Problem, refine
-from cpc2urdf.identification.uncertainty import (
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.refine import _Problem, refine
+from cpc2urdf.identification.kinematics.uncertainty import (
     Covariance,
     NoUncertaintyError,
     covariance_of_model,
     position_covariance,
     predicted_position_std,
 )
-from cpc2urdf.model_file import load_model, save_model
+from cpc2urdf.model_file import save_model
+from cpc2urdf.robot_ref import load_model
 
 PLATES = ("plate_left", "plate_right")
 SIGMA_T, SIGMA_R = 0.5e-3, np.radians(0.5)

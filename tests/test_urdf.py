@@ -10,7 +10,7 @@ import yourdfpy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cpc2urdf.model_file import load_model
+from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.urdf import link_name, urdf_from_model, write_urdf
 from random_trees import random_tree

@@ -16,6 +16,7 @@ import os
 import sys
 from collections.abc import Sequence
 
+from cpc2urdf.argparsing import OneLineParser, exit_code
 from cpc2urdf.errors import Cpc2UrdfError
 
 # Sub-command modules, in the order `--help` lists them.
@@ -35,21 +36,15 @@ COMMANDS = (
 )
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        # One line, exit code 2 (argparse's own default prints usage too).
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     from cpc2urdf import __version__
 
-    parser = _Parser(
+    parser = OneLineParser(
         prog="cpc2urdf",
         description="Calibrate active robot heads (CPC identification, hand-eye) and export a URDF.",
     )
     parser.add_argument("--version", action="version", version=f"cpc2urdf {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
     for name in COMMANDS:
         importlib.import_module(f"cpc2urdf.cli.{name}").add_parser(sub)
@@ -62,9 +57,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:  # --help, --version, or a usage error
-        return int(e.code) if isinstance(e.code, int) else 2
+        return exit_code(e)
     try:
         return int(args.run(args))
+    except SystemExit as e:  # a study's or benchmark's own parser (--help, a usage error)
+        return exit_code(e)
     except Cpc2UrdfError as e:
         print(f"cpc2urdf {args.command}: error: {e}", file=sys.stderr)
         return 2

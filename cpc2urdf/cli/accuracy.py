@@ -22,12 +22,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from cpc2urdf.cli.identify import load_with_spec
-    from cpc2urdf.model_file import load_model
+    from cpc2urdf.measurements import load_measurements
+    from cpc2urdf.robot_ref import load_model
     from cpc2urdf.validation.accuracy import accuracy, format_table
 
     model = load_model(args.model)
-    ms, _ = load_with_spec(args.heldout)
+    ms = load_measurements(args.heldout)
     report = accuracy(model, ms)
     if args.json:
         print(json.dumps({f: b.to_json() for f, b in report.items()}, indent=2))

@@ -28,7 +28,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.model_file import load_model
+    from cpc2urdf.robot_ref import load_model
     from cpc2urdf.validation.crosscheck import cross_check
 
     if args.configurations < 1:

@@ -84,7 +84,7 @@ def _target_ahead(model: CPCModel, distance: float = 0.6) -> tuple[Array, Array]
 
 
 def _camera_errors(model: CPCModel, truth: CPCModel) -> str:
-    from cpc2urdf.identification.stage2 import HAND_OF_CAMERA, camera_errors
+    from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA, camera_errors
 
     errs = camera_errors(model, truth, tuple(HAND_OF_CAMERA))
     return "\n".join(
@@ -97,8 +97,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cpc2urdf.fileio import make_folder
-    from cpc2urdf.identification.stage2 import perturb_cameras, run_stage2, write_pose_files
-    from cpc2urdf.model_file import load_model, save_model
+    from cpc2urdf.identification.handeye.stage2 import perturb_cameras, run_stage2, write_pose_files
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.robot_ref import load_model
 
     out = Path(args.output)
     make_folder(out)
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("render the stage-1 experiment as stereo images, then measure them (circle detector)")
-        from cpc2urdf.identification.measure_images import render_experiment
+        from cpc2urdf.identification.vision.measure_images import render_experiment
 
         exp = render_experiment(out / "images", seed=args.seed, show_progress=True)
         truth = perturb_cameras(exp.truth, np.random.default_rng(args.seed))
@@ -142,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye")
-        from cpc2urdf.identification.measure_images import render_head_experiment
+        from cpc2urdf.identification.vision.measure_images import render_head_experiment
 
         render_head_experiment(out / "head", truth, seed=args.seed)
         _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")
@@ -164,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
 
     st.start("gaze: fixate targets in front of the calibrated head (Pinocchio IK, joint limits as constraints)")
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.validation.bench_gaze import reachable_targets
+    from cpc2urdf.studies.bench_gaze import reachable_targets
 
     model = load_model(f"{d}/model.json")
     q_home, ahead = _target_ahead(model)

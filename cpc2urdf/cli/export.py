@@ -18,7 +18,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.model_file import load_model
+    from cpc2urdf.robot_ref import load_model
     from cpc2urdf.urdf import write_urdf
 
     model = load_model(args.model)

@@ -21,7 +21,7 @@ Z_DIRECTION = "Z = T_base_target: target pose in the robot base frame (maps targ
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from cpc2urdf.identification.robot_world import ALL_METHODS
+    from cpc2urdf.identification.handeye.axzb import ALL_METHODS
 
     p = subparsers.add_parser(
         "handeye",
@@ -64,7 +64,7 @@ def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
     if not camera or not hand:
         raise ConfigurationError(
             f"{args.poses}: give the camera and hand frame names (--camera/--hand, or 'camera'/'hand' in the pose file)")
-    from cpc2urdf.model_file import load_model
+    from cpc2urdf.robot_ref import load_model
 
     model = load_model(args.model)
     try:
@@ -78,8 +78,8 @@ def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.identification.handeye_file import load_handeye_poses
-    from cpc2urdf.identification.robot_world import ALL_METHODS, calibrate
+    from cpc2urdf.identification.handeye.axzb import ALL_METHODS, calibrate
+    from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 
     data = load_handeye_poses(args.poses)
     model = _check_model_args(args, data)
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if not results:  # every solver refused: the data is the problem, say it once
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
     if model is not None:
-        from cpc2urdf.identification.stage2 import with_camera_frame
+        from cpc2urdf.identification.handeye.stage2 import with_camera_frame
         from cpc2urdf.model_file import save_model
 
         camera, hand = args.camera or data.camera, args.hand or data.hand

@@ -3,20 +3,17 @@
 Reads stage-1 measurements (``cpc2urdf/measurements@1``), runs an identification method
 (``--method``, default ``refined``: the closed form of Shih et al. sec. 4.2, then maximum-likelihood
 refinement of every record, which reaches the Cramér-Rao bound (docs/refinement.md); the registry is
-:data:`cpc2urdf.identification.methods.METHODS`) and writes a model file with the sections
+:data:`cpc2urdf.identification.kinematics.methods.METHODS`) and writes a model file with the sections
 ``provenance`` (method, data used), ``residuals`` (per record and per branch) and ``notes``.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-from pathlib import Path
-from typing import Any
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from cpc2urdf.identification.methods import METHODS
+    from cpc2urdf.identification.kinematics.methods import METHODS
 
     p = subparsers.add_parser(
         "identify",
@@ -35,43 +32,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run)
 
 
-def load_with_spec(path: str, robot: str | None = None) -> tuple[Any, Any]:
-    """The measurements and the robot spec they refer to (for its nominal geometry).
-
-    The spec is resolved like the measurement loader does (a relative path is tried against the
-    measurement file's folder first); if it cannot be, the loader reports the problem.
-    """
-    from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import read_json
-    from cpc2urdf.measurements import measurements_from_json
-    from cpc2urdf.model_file import load_robot
-
-    doc = read_json(path)
-    spec = None
-    if robot is not None:
-        spec = load_robot(robot)
-    elif isinstance(doc, dict) and isinstance(doc.get("robot"), str):
-        ref = doc["robot"]
-        candidate = Path(path).parent / ref
-        if ("/" in ref or ref.endswith(".json")) and not os.path.isabs(ref) and candidate.exists():
-            ref = str(candidate)
-        try:
-            spec = load_robot(ref)
-        except Cpc2UrdfError:
-            spec = None  # the measurement loader names the problem with the file's context
-    return measurements_from_json(doc, path, robot=spec), spec
-
-
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from cpc2urdf.identification.methods import identify
+    from cpc2urdf.identification.kinematics.methods import identify
+    from cpc2urdf.measurements import load_measurements
     from cpc2urdf.model_file import save_model
+    from cpc2urdf.robot_ref import load_robot
 
-    ms, spec = load_with_spec(args.measurements, args.robot)
-    nominal = spec.nominal if spec is not None else None
+    ms = load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
     start = time.perf_counter()
-    model = identify(ms, args.method, nominal)
+    model = identify(ms, args.method)
     elapsed = time.perf_counter() - start
     meta = dict(model.metadata)
     meta["provenance"] = {**meta.get("provenance", {}), "measurements": args.measurements,

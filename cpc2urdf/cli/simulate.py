@@ -76,10 +76,11 @@ def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float,
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
     from cpc2urdf.fileio import dumps, make_folder, write_atomic
-    from cpc2urdf.identification.simulate import simulate_experiment
-    from cpc2urdf.identification.stereo import StereoRig
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.vision.stereo import StereoRig
     from cpc2urdf.measurements import measurements_to_json
-    from cpc2urdf.model_file import load_robot, model_to_json
+    from cpc2urdf.model_file import model_to_json
+    from cpc2urdf.robot_ref import load_robot
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():

@@ -1,0 +1,523 @@
+"""Hand-eye calibration ``A X = X B`` (Tsai-Lenz, Park-Martin, Daniilidis) and what all solvers share.
+
+Conventions (every solver here and in :mod:`cpc2urdf.identification.handeye.axzb`):
+
+- Input: absolute poses per robot configuration k,
+  ``T_base_hand[k]`` (hand = the end effector carrying the camera, from the robot kinematics) and
+  ``T_camera_target[k]`` (pose of the calibration target in the camera frame: what
+  ``cv2.solvePnP`` returns as ``rvec, tvec``). Shape (N, 4, 4), metres.
+- Unknowns: ``X = T_hand_camera`` (camera pose in the hand frame) and
+  ``Z = T_base_target`` (target pose in the robot base frame). Closing the loop gives
+  ``T_base_target = T_base_hand[k] @ X @ T_camera_target[k]`` for every k.
+- ``A X = Z B`` (Li et al. 2010) with ``A_k = T_base_hand[k]``, ``B_k = T_target_camera[k]``
+  ``= inv(T_camera_target[k])``.
+- ``A X = X B`` (Tsai-Lenz, Shih et al. eqs. (69)-(71)) with relative motions over every pair
+  ``i < j``: ``A_ij = inv(T_base_hand[j]) @ T_base_hand[i]`` (hand i in hand j) and
+  ``B_ij = T_camera_target[j] @ inv(T_camera_target[i])`` (camera i in camera j); these are the
+  pairs ``cv2.calibrateHandEye`` uses. ``Z`` is then the chordal mean of
+  ``T_base_hand[k] @ X @ T_camera_target[k]``.
+
+Degenerate data is refused with :class:`~cpc2urdf.errors.DegenerateDataError` naming the reason
+(fewer than 3 poses; rotations too small or all about parallel axes; hand and camera motions
+whose rotation angles only agree if one pose list is inverted), and weak data is reported in
+:attr:`HandEyeResult.warnings`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.transforms import Array, homogeneous, inverse, project_to_rotation, rotation_error
+
+MIN_POSES = 3
+# RMS rotation [rad] (over pose pairs) about the best / second-best excited direction below which
+# the data cannot determine the rotation of X (refused) or determines it poorly (a warning).
+DEGENERATE_ROTATION = math.radians(0.1)
+WEAK_ROTATION = math.radians(5.0)
+# A pose whose residual exceeds this many times the median (and 1 mm / 0.1 deg) is flagged.
+OUTLIER_FACTOR = 5.0
+
+HAND_EYE_METHODS = ("tsai", "park_martin", "daniilidis")
+
+
+# ---- input checks ------------------------------------------------------------------------------
+
+
+def as_pose_stack(poses: ArrayLike | Sequence[ArrayLike], name: str) -> Array:
+    """Validate a list of rigid transforms into shape (N, 4, 4).
+
+    Raises:
+        ValueError: Wrong shape, NaN, or a rotation part that is not a rotation (max entry of
+            ``|R^T R - I|`` above 1e-6 or det < 0), naming ``name[k]``.
+    """
+    T = np.asarray(poses, dtype=float)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise ValueError(f"{name} must be a list of 4x4 transforms, got shape {T.shape}")
+    for k, Tk in enumerate(T):
+        if not np.all(np.isfinite(Tk)):
+            raise ValueError(f"{name}[{k}] contains NaN or inf")
+        R = Tk[:3, :3]
+        if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+            raise ValueError(f"{name}[{k}] rotation part is not a rotation matrix")
+        if np.max(np.abs(Tk[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-12:
+            raise ValueError(f"{name}[{k}] last row must be [0, 0, 0, 1]")
+    return T
+
+
+def _pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Index arrays of every pair i < j of n poses."""
+    i, j = np.triu_indices(n, k=1)
+    return i, j
+
+
+def rotation_spread(T_base_hand: Array) -> tuple[Array, Array]:
+    """How well the hand rotations excite the rotation of X: principal RMS rotations.
+
+    The rotation vectors ``r_ij = log(R_i R_j^T)`` of every pair of hand poses (base frame) form
+    ``M = sum r r^T / n_pairs``. X's rotation is determined iff two directions are excited, i.e.
+    the second singular value is non-zero (Tsai-Lenz: two motions with non-parallel axes).
+
+    Returns:
+        ``(rms, axes)``: RMS rotation [rad] about each principal direction, shape (3,),
+        decreasing; ``axes`` the directions (columns) in the base frame, shape (3, 3).
+    """
+    i, j = _pairs(len(T_base_hand))
+    R = T_base_hand[:, :3, :3]
+    r = Rotation.from_matrix(R[i] @ np.swapaxes(R[j], -1, -2)).as_rotvec()
+    M = r.T @ r / max(len(r), 1)
+    w, V = np.linalg.eigh(M)
+    order = np.argsort(w)[::-1]
+    return np.sqrt(np.clip(w[order], 0.0, None)), V[:, order]
+
+
+def _fit_cost(T_base_hand: Array, T_camera_target: Array) -> float:
+    """Residual level of a quick Park-Martin fit, in units of 1 mm / 0.1 deg (the larger)."""
+    A, B = relative_motions(T_base_hand, T_camera_target)
+    X = solve_park_martin(A, B)
+    dt, dr = residuals(T_base_hand, T_camera_target, X, target_from_x(T_base_hand, T_camera_target, X))
+    return max(float(np.sqrt(np.mean(dt**2))) / 1e-3, float(np.sqrt(np.mean(dr**2))) / math.radians(0.1))
+
+
+def check_directions(T_base_hand: Array, T_camera_target: Array) -> list[str]:
+    """Detect a pose list given in the wrong direction from the residuals of a quick fit.
+
+    The screw invariants of the motions cannot tell (inverting every pose keeps the angle and
+    pitch of ``T_j^-1 T_i``, which is conjugate to the inverse of ``T_j T_i^-1``), but the loop
+    ``T_base_hand[k] X T_camera_target[k] = Z`` only closes for the right directions. A quick
+    Park-Martin fit is tried as given and with ``T_camera_target`` inverted; if as given the
+    residuals are above 1 mm / 0.1 deg and the inversion shrinks them tenfold, the data is refused.
+
+    Limits: inverting one list fits exactly as well as inverting the other (inverting *both* lists
+    is an exact symmetry of ``A X = Z B``: it swaps X with ``inv(Z)``), so the message names both
+    possibilities, and both lists inverted at once cannot be detected from the data at all.
+
+    Returns:
+        A warning if the residuals are large (over 10 mm or 1 deg RMS) and inversion does not help.
+
+    Raises:
+        DegenerateDataError: One of the lists is evidently inverted.
+    """
+    given = _fit_cost(T_base_hand, T_camera_target)
+    if given <= 1.0:
+        return []
+    inverted = _fit_cost(T_base_hand, inverse(T_camera_target))
+    if inverted < 0.1 * given:
+        raise DegenerateDataError(
+            f"inconsistent directions: a quick fit leaves residuals of {given:.3g} units "
+            f"(1 mm / 0.1 deg RMS) as given but {inverted:.3g} with one list inverted: pass "
+            "T_camera_target (target pose in the camera frame, solvePnP's rvec/tvec), not "
+            "T_target_camera, and T_base_hand (hand pose in the base frame), not T_hand_base "
+            "(an eye-to-hand setup, camera fixed and target on the hand, also looks like this)"
+        )
+    if given > 10.0:
+        return [
+            f"large residuals ({given:.3g} x 1 mm / 0.1 deg RMS in a quick fit) that no inversion "
+            "explains: poses out of sync, mixed units, outliers or a wrong kinematic model?"
+        ]
+    return []
+
+
+def diagnose(T_base_hand: Array, T_camera_target: Array) -> list[str]:
+    """Refuse data that cannot determine X and Z; return warnings for weak data.
+
+    Raises:
+        DegenerateDataError: Fewer than 3 poses, different list lengths, rotations too small,
+            rotations about parallel axes only, or pose lists in the wrong direction.
+    """
+    n, m = len(T_base_hand), len(T_camera_target)
+    if n != m:
+        raise DegenerateDataError(f"{n} hand poses but {m} camera poses; they must pair up")
+    if n < MIN_POSES:
+        raise DegenerateDataError(
+            f"{n} poses; hand-eye calibration needs at least {MIN_POSES} (two motions about "
+            "non-parallel axes)"
+        )
+    rms, axes = rotation_spread(T_base_hand)
+    if rms[0] < DEGENERATE_ROTATION:
+        raise DegenerateDataError(
+            f"tiny rotations: the hand rotates by {math.degrees(rms[0]):.3g} deg RMS between poses "
+            f"(< {math.degrees(DEGENERATE_ROTATION):g} deg); the rotation of X is undetermined"
+        )
+    if rms[1] < DEGENERATE_ROTATION:
+        ax = np.round(axes[:, 0], 3).tolist()
+        raise DegenerateDataError(
+            f"rotations about parallel axes only (all about {ax} in the base frame, "
+            f"{math.degrees(rms[1]):.3g} deg RMS about any other direction): X's rotation about "
+            "that axis is undetermined; move a second joint with a non-parallel axis"
+        )
+    warnings = check_directions(T_base_hand, T_camera_target)
+    if rms[1] < WEAK_ROTATION:
+        warnings.append(
+            f"weak data: the hand rotations excite a second axis by only {math.degrees(rms[1]):.3g} "
+            f"deg RMS (< {math.degrees(WEAK_ROTATION):g} deg); expect noise to be amplified"
+        )
+    return warnings
+
+
+# ---- the result --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class HandEyeResult:
+    """A hand-eye / robot-world solution with its residuals.
+
+    Attributes:
+        method: Solver name.
+        X: ``T_hand_camera``, the camera pose in the hand frame, shape (4, 4) [m].
+        Z: ``T_base_target``, the target pose in the robot base frame, shape (4, 4) [m].
+        residual_translation: Per pose k, ``|p(A_k X) - p(Z B_k)|``: distance [m] between the
+            camera position predicted by the hand pose and by the target observation (base
+            frame), shape (N,).
+        residual_rotation: Per pose k, angle [rad] of ``(A_k X)^-1 Z B_k``, shape (N,).
+        warnings: Weak or suspicious data, in words.
+    """
+
+    method: str
+    X: Array
+    Z: Array
+    residual_translation: Array
+    residual_rotation: Array
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def T_hand_camera(self) -> Array:
+        return self.X
+
+    @property
+    def T_base_target(self) -> Array:
+        return self.Z
+
+    def rms_translation(self) -> float:
+        """RMS of the per-pose translation residuals [m]."""
+        return float(np.sqrt(np.mean(self.residual_translation**2)))
+
+    def rms_rotation(self) -> float:
+        """RMS of the per-pose rotation residuals [rad]."""
+        return float(np.sqrt(np.mean(self.residual_rotation**2)))
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain JSON (metres, radians, plus mm/deg residuals for reading)."""
+        return {
+            "method": self.method,
+            "X": {"direction": "T_hand_camera (camera pose in the hand frame)",
+                  "matrix": self.X.tolist()},
+            "Z": {"direction": "T_base_target (target pose in the robot base frame)",
+                  "matrix": self.Z.tolist()},
+            "residual_translation_mm": (self.residual_translation * 1e3).tolist(),
+            "residual_rotation_deg": np.degrees(self.residual_rotation).tolist(),
+            "rms_translation_mm": self.rms_translation() * 1e3,
+            "rms_rotation_deg": math.degrees(self.rms_rotation()),
+            "warnings": list(self.warnings),
+        }
+
+
+def residuals(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> tuple[Array, Array]:
+    """Per-pose residuals of ``A_k X = Z B_k``: (translation [m], rotation [rad]), each (N,)."""
+    AX = T_base_hand @ X
+    ZB = Z @ inverse(T_camera_target)
+    dt = np.linalg.norm(AX[:, :3, 3] - ZB[:, :3, 3], axis=-1)
+    dr = rotation_error(AX[:, :3, :3], ZB[:, :3, :3])
+    return dt, dr
+
+
+def outlier_warnings(dt: Array, dr: Array) -> list[str]:
+    """Name poses whose residual is far above the median (a bad detection, a desync)."""
+    out = []
+    mt, mr = float(np.median(dt)), float(np.median(dr))
+    for k in range(len(dt)):
+        if (dt[k] > OUTLIER_FACTOR * mt and dt[k] > 1e-3) or (
+            dr[k] > OUTLIER_FACTOR * mr and dr[k] > math.radians(0.1)
+        ):
+            out.append(
+                f"pose {k} is an outlier: residual {dt[k] * 1e3:.3g} mm, {math.degrees(dr[k]):.3g} deg "
+                f"(median {mt * 1e3:.3g} mm, {math.degrees(mr):.3g} deg)"
+            )
+    return out
+
+
+def make_result(
+    method: str, T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array, warnings: list[str]
+) -> HandEyeResult:
+    """Assemble a :class:`HandEyeResult` with residuals and outlier warnings."""
+    dt, dr = residuals(T_base_hand, T_camera_target, X, Z)
+    return HandEyeResult(method, X, Z, dt, dr, tuple(warnings + outlier_warnings(dt, dr)))
+
+
+def mean_pose(T: Array) -> Array:
+    """Chordal mean of rigid transforms (N, 4, 4): polar-projected mean rotation, mean translation."""
+    return homogeneous(project_to_rotation(T[:, :3, :3].mean(axis=0)), T[:, :3, 3].mean(axis=0))
+
+
+def target_from_x(T_base_hand: Array, T_camera_target: Array, X: Array) -> Array:
+    """``Z = T_base_target`` given X: the chordal mean of ``T_base_hand[k] X T_camera_target[k]``."""
+    return mean_pose(T_base_hand @ X @ T_camera_target)
+
+
+# ---- AX = XB ----------------------------------------------------------------------------------
+
+
+def relative_motions(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
+    """All-pairs relative motions ``(A_ij, B_ij)`` with ``A_ij X = X B_ij`` (Shih et al. eq. (71)),
+    each of shape (N(N-1)/2, 4, 4)."""
+    i, j = _pairs(len(T_base_hand))
+    A = inverse(T_base_hand[j]) @ T_base_hand[i]
+    B = T_camera_target[j] @ inverse(T_camera_target[i])
+    return A, B
+
+
+def _skew(v: Array) -> Array:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _translation_given_rotation(A: Array, B: Array, R_X: Array) -> Array:
+    """Least squares for ``(R_A - I) t_X = R_X t_B - t_A`` over all motions (Tsai-Lenz step 2)."""
+    M = (A[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+    rhs = (np.einsum("ij,kj->ki", R_X, B[:, :3, 3]) - A[:, :3, 3]).reshape(-1)
+    return np.linalg.lstsq(M, rhs, rcond=None)[0]
+
+
+# Relative rotations closer than this to 180 deg have an ambiguous axis sign (R(n, pi) = R(-n, pi)):
+# noise can flip it between a hand motion and its camera motion. They are left out of a first
+# estimate and then sign-aligned with it (below).
+AMBIGUOUS_AXIS_ANGLE = math.radians(170.0)
+
+
+def _align_axis_signs(VA: Array, VB: Array, solve: Any) -> Array:
+    """Solve a rotation from axis vectors ``VA ~ R_X VB`` (N, 3) robustly near 180 deg.
+
+    First ``solve`` on the motions whose angle is below :data:`AMBIGUOUS_AXIS_ANGLE` (if two
+    or more), then flip the ``VB`` whose direction disagrees with that estimate, and solve again
+    on all motions. Returns the rotation (3, 3).
+    """
+    th = np.linalg.norm(VA, axis=-1)
+    ok = th < 2.0 * math.sin(AMBIGUOUS_AXIS_ANGLE / 2.0) if solve is _tsai_rotation else th < AMBIGUOUS_AXIS_ANGLE
+    if ok.all() or ok.sum() < 2:
+        return solve(VA, VB)
+    R1 = solve(VA[ok], VB[ok])
+    VB = np.where((np.einsum("ki,ki->k", VB @ R1.T, VA) < 0)[:, None], -VB, VB)
+    return solve(VA, VB)
+
+
+def _modified_rodrigues(R: Array) -> Array:
+    """Tsai-Lenz's ``P = 2 sin(theta/2) n`` of rotations (N, 3, 3) -> (N, 3)."""
+    r = Rotation.from_matrix(R).as_rotvec()
+    th = np.linalg.norm(r, axis=-1, keepdims=True)
+    safe = np.where(th > 1e-300, th, 1.0)
+    return np.where(th > 1e-300, 2.0 * np.sin(th / 2.0) * r / safe, r)
+
+
+def _tsai_rotation(PA: Array, PB: Array) -> Array:
+    """Tsai-Lenz rotation step (``P_A = R_X P_B``): ``skew(P_A + P_B) P'_X = P_B - P_A``, then
+    ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)`` and ``R_X`` from ``P_X``."""
+    M = np.concatenate([_skew(a + b) for a, b in zip(PA, PB, strict=True)])
+    Pp = np.linalg.lstsq(M, (PB - PA).reshape(-1), rcond=None)[0]
+    P = 2.0 * Pp / math.sqrt(1.0 + Pp @ Pp)
+    n2 = float(P @ P)
+    R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * _skew(P))
+    return project_to_rotation(R)
+
+
+def solve_tsai(A: Array, B: Array) -> Array:
+    """Tsai & Lenz (1989) for ``A_i X = X B_i`` from relative motions (N, 4, 4) each.
+
+    Rotation from the modified Rodrigues vectors ``P = 2 sin(theta/2) n`` (:func:`_tsai_rotation`),
+    with axis signs of near-180-deg motions aligned (:func:`_align_axis_signs`); then the
+    translation by least squares. Returns X, shape (4, 4).
+    """
+    R = _align_axis_signs(_modified_rodrigues(A[:, :3, :3]), _modified_rodrigues(B[:, :3, :3]), _tsai_rotation)
+    return homogeneous(R, _translation_given_rotation(A, B, R))
+
+
+def _park_martin_rotation(alpha: Array, beta: Array) -> Array:
+    return project_to_rotation((beta.T @ alpha).T)
+
+
+def solve_park_martin(A: Array, B: Array) -> Array:
+    """Park & Martin (1994): ``R_X = (M^T M)^(-1/2) M^T`` with ``M = sum beta_i alpha_i^T``,
+    ``alpha = log R_A``, ``beta = log R_B`` (the polar factor of ``M^T``, computed by SVD), axis
+    signs of near-180-deg motions aligned; then the translation by least squares. Relative
+    motions (N, 4, 4) each; returns X, shape (4, 4)."""
+    alpha = Rotation.from_matrix(A[:, :3, :3]).as_rotvec()
+    beta = Rotation.from_matrix(B[:, :3, :3]).as_rotvec()
+    R = _align_axis_signs(alpha, beta, _park_martin_rotation)
+    return homogeneous(R, _translation_given_rotation(A, B, R))
+
+
+# ---- quaternion helpers shared with robot_world ------------------------------------------------
+
+
+def quat_wxyz(R: Array) -> Array:
+    """Unit quaternions ``[w, x, y, z]`` of rotations (..., 3, 3) with ``w >= 0``."""
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    q = np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def quat_left(q: Array) -> Array:
+    """Matrix of ``p -> q p`` (Li et al.'s ``a~``), shape (4, 4)."""
+    w, v = q[0], q[1:]
+    M = np.empty((4, 4))
+    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
+    M[1:, 1:] = w * np.eye(3) + _skew(v)
+    return M
+
+
+def quat_right(q: Array) -> Array:
+    """Matrix of ``p -> p q`` (Li et al.'s ``b~``), shape (4, 4)."""
+    w, v = q[0], q[1:]
+    M = np.empty((4, 4))
+    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
+    M[1:, 1:] = w * np.eye(3) - _skew(v)
+    return M
+
+
+def quat_mul(p: Array, q: Array) -> Array:
+    return quat_left(p) @ q
+
+
+def dual_quat(T: Array) -> tuple[Array, Array]:
+    """Unit dual quaternion ``q + eps q'`` of a transform: ``q' = 1/2 (0, t) q``."""
+    q = quat_wxyz(T[:3, :3])
+    return q, 0.5 * quat_mul(np.concatenate([[0.0], T[:3, 3]]), q)
+
+
+def transform_from_dual_quat(q: Array, qd: Array) -> Array:
+    """Inverse of :func:`dual_quat` (``t = 2 q' q*``); ``q`` normalised first."""
+    n = float(np.linalg.norm(q))
+    q, qd = q / n, qd / n
+    qd = qd - (q @ qd) * q  # unit dual quaternion: q . q' = 0
+    R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+    t = 2.0 * quat_mul(qd, np.array([q[0], -q[1], -q[2], -q[3]]))[1:]
+    return homogeneous(R, t)
+
+
+def align_quaternion_signs(qa: Array, qb: Array) -> tuple[Array, Array]:
+    """Choose signs so that ``a_i x = z b_i`` holds with one sign for all poses.
+
+    Scalar parts of ``a_i a_j^*`` and ``b_i b_j^*`` are equal (conjugate rotations), i.e.
+    ``a_i . a_j = b_i . b_j``; each pose is aligned against the already aligned pose with the
+    largest ``|a_i . a_j|`` (avoids pairs 180 deg apart). Shapes (N, 4) each.
+    """
+    qa, qb = qa.copy(), qb.copy()
+    done = [0]
+    todo = list(range(1, len(qa)))
+    while todo:
+        dots = np.abs(qa[todo] @ qa[done].T)
+        t, d = np.unravel_index(np.argmax(dots), dots.shape)
+        i, j = todo.pop(int(t)), done[int(d)]
+        if qa[i] @ qa[j] < 0:
+            qa[i] = -qa[i]
+        if qb[i] @ qb[j] < 0:
+            qb[i] = -qb[i]
+        done.append(i)
+    return qa, qb
+
+
+def solve_daniilidis(A: Array, B: Array) -> Array:
+    """Daniilidis (1999): ``a x = x b`` in dual quaternions, from relative motions (N, 4, 4).
+
+    Per motion, ``[L(a) - R(b), 0; L(a') - R(b'), L(a) - R(b)] [x; x'] = 0``; the null space
+    of the stacked matrix is two-dimensional, ``x = l1 u1 + l2 u2`` with ``|x| = 1`` and
+    ``x . x' = 0``. Signs of a and b are matched by their scalar parts (equal screw angles).
+    """
+    rows = []
+    for Ai, Bi in zip(A, B, strict=True):
+        a, ad = dual_quat(Ai)
+        b, bd = dual_quat(Bi)
+        if a[0] * b[0] < 0:  # equal rotation angles: scalar parts agree in sign
+            b, bd = -b, -bd
+        S = np.zeros((8, 8))
+        S[:4, :4] = quat_left(a) - quat_right(b)
+        S[4:, :4] = quat_left(ad) - quat_right(bd)
+        S[4:, 4:] = quat_left(a) - quat_right(b)
+        rows.append(S)
+    _, _, Vt = np.linalg.svd(np.concatenate(rows))
+    v1, v2 = Vt[-1], Vt[-2]
+    lam = null_space_combination([(v1[:4], v2[:4], v1[4:], v2[4:])])
+    v = lam[0] * v1 + lam[1] * v2
+    return transform_from_dual_quat(v[:4], v[4:])
+
+
+def null_space_combination(blocks: list[tuple[Array, Array, Array, Array]]) -> Array:
+    """``(l1, l2)`` so that ``v = l1 v1 + l2 v2`` has unit real parts orthogonal to their duals.
+
+    ``blocks`` lists ``(real1, real2, dual1, dual2)`` per unknown dual quaternion. The constraint
+    ``sum real . dual = 0`` is a quadratic form ``Q`` in ``(l1, l2)``; of its two isotropic
+    directions one has zero real part (the ``eps`` multiple of the solution), so the one with the
+    larger real norm is taken (Daniilidis 1999; Li et al. eqs. (14a)-(14d)).
+    """
+    Q = np.zeros((2, 2))
+    N = np.zeros((2, 2))
+    for r1, r2, d1, d2 in blocks:
+        R_, D_ = (r1, r2), (d1, d2)
+        for p in range(2):
+            for q in range(2):
+                Q[p, q] += 0.5 * (R_[p] @ D_[q] + R_[q] @ D_[p])
+                N[p, q] += R_[p] @ R_[q]
+    e, V = np.linalg.eigh(Q)
+    if e[0] * e[1] < 0:
+        cands = [V @ np.array([math.sqrt(abs(e[1])), s * math.sqrt(abs(e[0]))]) for s in (1.0, -1.0)]
+    else:  # noise made Q definite: the direction of least violation
+        cands = [V[:, int(np.argmin(np.abs(e)))]]
+    u = max(cands, key=lambda c: float(c @ N @ c))
+    return u * math.sqrt(len(blocks) / float(u @ N @ u))
+
+
+# ---- entry point -------------------------------------------------------------------------------
+
+_AXXB_SOLVERS = {"tsai": solve_tsai, "park_martin": solve_park_martin, "daniilidis": solve_daniilidis}
+
+
+def calibrate_hand_eye(
+    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str = "tsai"
+) -> HandEyeResult:
+    """Solve ``A X = X B`` for ``X = T_hand_camera`` (and ``Z = T_base_target`` afterwards).
+
+    Args:
+        T_base_hand: Hand poses in the robot base frame, shape (N, 4, 4) [m].
+        T_camera_target: Target poses in the camera frame (solvePnP), shape (N, 4, 4) [m].
+        method: One of :data:`HAND_EYE_METHODS`.
+
+    Returns:
+        The solution with per-pose residuals and warnings.
+
+    Raises:
+        DegenerateDataError: See :func:`diagnose`.
+        ValueError: Malformed poses or an unknown method.
+    """
+    if method not in _AXXB_SOLVERS:
+        raise ValueError(f"unknown AX=XB method {method!r}; known: {', '.join(HAND_EYE_METHODS)}")
+    H = as_pose_stack(T_base_hand, "T_base_hand")
+    C = as_pose_stack(T_camera_target, "T_camera_target")
+    warnings = diagnose(H, C)
+    A, B = relative_motions(H, C)
+    X = _AXXB_SOLVERS[method](A, B)
+    return make_result(method, H, C, X, target_from_x(H, C, X), warnings)

@@ -1,0 +1,538 @@
+"""Synthetic camera images of calibration plates, so the detector runs on real pixels.
+
+The renderer draws planar targets -- the stage-1 end-effector plates (dark circles on a light
+plate, Shih et al. sec. 3.2, Fig. 7) and the stage-2 disk target (light disks on a black plate,
+sec. 5, Fig. 9) -- into a grey-level image of a pinhole camera with OpenCV's lens distortion
+model. It works backwards from pixels to the plate plane: every pixel (or sub-pixel sample) is
+undistorted (``cv2.undistortPointsIter``), cast as a ray, intersected with the plate plane and
+classified (outside the plate, on the plate, inside a circle). Pixels whose footprint touches an
+edge (circle or plate outline) are supersampled ``supersample x supersample`` times, so the grey
+level is the area coverage of the projected shape (anti-aliasing), and the intensity centroid of
+a rendered circle is the centroid of its true image ellipse to a few thousandths of a pixel
+(``tests/test_render.py`` measures it). Optional Gaussian blur (optics), Gaussian grey-level noise
+(sensor) and 8-bit quantisation follow.
+
+Plates are opaque and one-sided: the circles are printed on the face whose normal is the plate's
++z axis; a plate seen from behind is drawn as a blank grey back. Plates occlude each other in
+depth order (painter's algorithm by the depth of their origins).
+
+The default designs (``docs/images.md``): the IIS-head plates are light grey
+(level 0.9), with the robot's nine-circle layout (25 mm pitch) as dark circles (level 0.08) of
+radius 5 mm; one circle per plate is a 6.5 mm *marker* that makes the pattern's orientation and the
+plate's identity unambiguous (plate_left: a corner circle, plate_right: an edge circle); the plates are 70 mm x 70 mm. The
+stage-2 target is black (0.08) with light disks (0.9) and one larger marker disk.
+
+Frames: ``T_camera_world`` maps world points into the camera's REP-103 optical frame (z forward,
+x right, y down), as OpenCV's ``rvec, tvec``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+BACKGROUND_LEVEL = 0.25  # [-] grey level of the scene behind the plates (0 black .. 1 white)
+PLATE_BACK_LEVEL = 0.5  # [-] grey level of a plate seen from behind
+NEAR_CLIP = 0.02  # [m] plates closer to (or behind) a camera than this are not drawn
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+
+
+@dataclass(frozen=True)
+class PinholeView:
+    """One camera: intrinsics, distortion, image size and pose.
+
+    Attributes:
+        K: Camera matrix [px], shape (3, 3).
+        D: OpenCV distortion coefficients (k1, k2, p1, p2[, k3, ...]), shape (n,); may be empty.
+        image_size: (width, height) [px].
+        T_camera_world: World -> camera optical frame, shape (4, 4).
+    """
+
+    K: Array
+    D: Array
+    image_size: tuple[int, int]
+    T_camera_world: Array = field(default_factory=lambda: np.eye(4))
+
+    def project(self, p_world: ArrayLike) -> Array:
+        """Pixel coordinates (with distortion) of world points, shape (N, 2); points [m] (N, 3)."""
+        p = np.asarray(p_world, dtype=float).reshape(-1, 3)
+        R = self.T_camera_world[:3, :3]
+        t = self.T_camera_world[:3, 3]
+        rvec, _ = cv2.Rodrigues(R)
+        uv, _ = cv2.projectPoints(p, rvec, t, self.K, _dist(self.D))
+        return np.asarray(uv, dtype=float).reshape(-1, 2)
+
+    def undistort_pixels(self, uv: ArrayLike) -> Array:
+        """Normalised image coordinates (x/z, y/z) of distorted pixels, shape (N, 2)."""
+        pts = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2))
+        if pts.shape[0] == 0:
+            return np.zeros((0, 2))
+        if not np.any(self.D):
+            K = self.K
+            x = (pts[:, 0, 0] - K[0, 2] - K[0, 1] * (pts[:, 0, 1] - K[1, 2]) / K[1, 1]) / K[0, 0]
+            y = (pts[:, 0, 1] - K[1, 2]) / K[1, 1]
+            return np.stack([x, y], axis=1)
+        out = cv2.undistortPointsIter(pts, self.K, _dist(self.D), None, None, _UNDISTORT_CRITERIA)  # type: ignore[call-overload]
+        return np.asarray(out, dtype=float).reshape(-1, 2)
+
+
+def _dist(D: Array) -> Array:
+    d = np.asarray(D, dtype=float).ravel()
+    return d if d.size else np.zeros(4)
+
+
+@dataclass(frozen=True)
+class PlateDesign:
+    """A planar target: circles of known radius on a rectangular plate.
+
+    Attributes:
+        name: Frame name of the plate (``plate_left``, ``target``, ...).
+        layout: Circle centres in the plate frame [m], shape (K, 3), z = 0.
+        radii: Circle radii [m], shape (K,).
+        outline: Plate rectangle ``(x_min, x_max, y_min, y_max)`` in the plate frame [m].
+        plate_level: Grey level of the plate face (0 black .. 1 white).
+        dot_level: Grey level of the circles.
+        marker_index: Index of the enlarged marker circle (breaks the layout's symmetry), or None.
+    """
+
+    name: str
+    layout: Array
+    radii: Array
+    outline: tuple[float, float, float, float]
+    plate_level: float = 0.9
+    dot_level: float = 0.08
+    marker_index: int | None = None
+
+    def __post_init__(self) -> None:
+        layout = np.asarray(self.layout, dtype=float)
+        radii = np.broadcast_to(np.asarray(self.radii, dtype=float), (layout.shape[0],)).copy()
+        if layout.ndim != 2 or layout.shape[1] != 3 or layout.shape[0] < 4:
+            raise ValueError(f"{self.name}: layout must have shape (K >= 4, 3), got {layout.shape}")
+        if np.max(np.abs(layout[:, 2])) > 1e-9:
+            raise ValueError(f"{self.name}: circle centres must lie in the plate plane z = 0")
+        if np.any(radii <= 0):
+            raise ValueError(f"{self.name}: circle radii must be positive")
+        object.__setattr__(self, "layout", layout)
+        object.__setattr__(self, "radii", radii)
+
+    @property
+    def n_circles(self) -> int:
+        return int(self.layout.shape[0])
+
+    @property
+    def dark_dots(self) -> bool:
+        """True when the circles are darker than the plate."""
+        return self.dot_level < self.plate_level
+
+    def outline_corners(self) -> Array:
+        """The plate's four corners in the plate frame [m], shape (4, 3)."""
+        x0, x1, y0, y1 = self.outline
+        return np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
+
+
+# Default designs (docs/images.md).
+PLATE_CIRCLE_RADIUS = 0.005  # [m] the circles of the stage-1 plates
+PLATE_MARKER_RADIUS = 0.0065  # [m] the marker circle of a stage-1 plate
+PLATE_MARGIN = 0.01  # [m] plate edge beyond the outermost circle centres
+
+
+def plate_design(
+    name: str,
+    layout: ArrayLike,
+    *,
+    marker_index: int | None,
+    radius: float = PLATE_CIRCLE_RADIUS,
+    marker_radius: float = PLATE_MARKER_RADIUS,
+    margin: float = PLATE_MARGIN,
+    plate_level: float = 0.9,
+    dot_level: float = 0.08,
+) -> PlateDesign:
+    """A plate with dark circles of ``radius`` on a light rectangle ``margin`` beyond the layout.
+
+    Args:
+        name: Frame name.
+        layout: Circle centres in the plate frame [m], shape (K, 3).
+        marker_index: Which circle is the enlarged marker (None: all equal).
+        radius: Circle radius [m].
+        marker_radius: Radius of the marker circle [m].
+        margin: Distance from the outermost circle centres to the plate edge [m].
+        plate_level: Grey level of the plate.
+        dot_level: Grey level of the circles.
+    """
+    lay = np.asarray(layout, dtype=float)
+    radii = np.full(lay.shape[0], radius)
+    if marker_index is not None:
+        radii[marker_index] = marker_radius
+    lo = lay[:, :2].min(axis=0) - margin
+    hi = lay[:, :2].max(axis=0) + margin
+    return PlateDesign(
+        name, lay, radii, (lo[0], hi[0], lo[1], hi[1]), plate_level, dot_level, marker_index
+    )
+
+
+def robot_plate_designs(frames: Sequence[object]) -> list[PlateDesign]:
+    """Default designs of a robot's plates (``Frame`` objects with ``kind == "plate"``).
+
+    The k-th plate's marker is circle ``k + 1`` of its layout: on the IIS-head's 3x3 layout,
+    circle 1 is a corner (plate_left) and circle 2 an edge middle (plate_right), which no
+    rotation maps onto each other, so the detector can tell the plates apart.
+    """
+    out = []
+    k = 0
+    for f in frames:
+        if getattr(f, "kind", None) != "plate" or getattr(f, "layout", None) is None:
+            continue
+        lay = np.array(f.layout, dtype=np.float64)  # type: ignore[attr-defined]
+        out.append(plate_design(f.name, lay, marker_index=(k + 1) % len(lay)))  # type: ignore[attr-defined]
+        k += 1
+    return out
+
+
+def target_design(
+    layout: ArrayLike | None = None,
+    *,
+    name: str = "target",
+    radius: float | None = None,
+    marker_index: int | None = None,
+    marker_radius: float | None = None,
+    size: tuple[float, float] | None = None,
+) -> PlateDesign:
+    """The stage-2 target: light disks on a black plate (Shih et al. Fig. 9).
+
+    Every argument defaults to the target of :mod:`cpc2urdf.identification.handeye.stage2` (5 x 5 disks,
+    40 mm pitch, 10 mm disks, a 14 mm marker disk at index 0, a 240 mm square plate).
+
+    Args:
+        layout: Disk centres in the target frame [m], shape (K, 3).
+        name: Frame name.
+        radius: Disk radius [m].
+        marker_index: The enlarged disk (breaks the grid's 4-fold symmetry, so
+            ``T_camera_target`` has a unique orientation).
+        marker_radius: Its radius [m].
+        size: Plate outline (x, y) [m], centred on the layout's bounding box.
+    """
+    from cpc2urdf.identification.handeye import stage2
+
+    lay = stage2.TARGET_LAYOUT if layout is None else np.asarray(layout, dtype=float)
+    r = stage2.TARGET_DISK_RADIUS if radius is None else radius
+    mi = stage2.TARGET_MARKER_INDEX if marker_index is None else marker_index
+    mr = stage2.TARGET_MARKER_RADIUS if marker_radius is None else marker_radius
+    sx, sy = stage2.TARGET_SIZE if size is None else size
+    radii = np.full(len(lay), r)
+    radii[mi] = mr
+    cx, cy = (lay[:, :2].min(axis=0) + lay[:, :2].max(axis=0)) / 2
+    outline = (cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2)
+    return PlateDesign(name, lay, radii, outline, plate_level=0.08, dot_level=0.9, marker_index=mi)
+
+
+# ---- rendering ----------------------------------------------------------------------------------
+
+
+def _plane_coords(view: PinholeView, T_camera_plate: Array, uv: Array) -> tuple[Array, NDArray[np.bool_]]:
+    """Plate-frame (x, y) [m] of the points seen at pixels ``uv`` (N, 2), and a validity mask."""
+    xn = view.undistort_pixels(uv)
+    d = np.concatenate([xn, np.ones((xn.shape[0], 1))], axis=1)  # rays in camera frame
+    R = T_camera_plate[:3, :3]
+    t = T_camera_plate[:3, 3]
+    n = R[:, 2]
+    denom = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (n @ t) / denom
+    ok = np.isfinite(lam) & (lam > 0)
+    P = d * np.where(ok, lam, 0.0)[:, None]
+    xy = (P - t) @ R[:, :2]  # R^T (P - t), first two components
+    return xy, ok
+
+
+def _circle_distances(design: PlateDesign, xy: Array) -> tuple[Array, NDArray[np.intp]]:
+    """Per point (N, 2): signed distance [m] to the nearest circle edge (< 0 inside) and that
+    circle's index. Circles are smaller than half their spacing, so the nearest edge is the
+    nearest (radius-corrected) circle's."""
+    dist = np.empty(xy.shape[0])
+    idx = np.empty(xy.shape[0], dtype=np.intp)
+    c = design.layout[:, :2]
+    for s0 in range(0, xy.shape[0], 32768):  # chunks keep the (n, K) temporaries small
+        p = xy[s0 : s0 + 32768]
+        d = np.sqrt((p[:, 0:1] - c[:, 0]) ** 2 + (p[:, 1:2] - c[:, 1]) ** 2) - design.radii
+        k = np.argmin(np.abs(d), axis=1)
+        idx[s0 : s0 + 32768] = k
+        dist[s0 : s0 + 32768] = d[np.arange(len(k)), k]
+    return dist, idx
+
+
+def _outline_distance(design: PlateDesign, xy: Array) -> tuple[NDArray[np.bool_], Array]:
+    """Per point (N, 2): inside the plate outline (bool) and distance [m] to its nearest edge
+    (exact near the edges, a lower bound elsewhere)."""
+    x0, x1, y0, y1 = design.outline
+    x, y = xy[:, 0], xy[:, 1]
+    inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+    dx = np.minimum(np.abs(x - x0), np.abs(x - x1))
+    dy = np.minimum(np.abs(y - y0), np.abs(y - y1))
+    dist = np.minimum(
+        np.where((y >= y0) & (y <= y1), dx, np.hypot(dx, dy)),
+        np.where((x >= x0) & (x <= x1), dy, np.hypot(dx, dy)),
+    )
+    return inside, dist
+
+
+def _draw_plate(
+    img: Array, view: PinholeView, design: PlateDesign, T_world_plate: Array, supersample: int
+) -> None:
+    """Composite one plate into ``img`` (float, shape (h, w)) in place."""
+    w, h = view.image_size
+    T_cp = view.T_camera_world @ T_world_plate
+    corners_c = design.outline_corners() @ T_cp[:3, :3].T + T_cp[:3, 3]
+    if np.any(corners_c[:, 2] < NEAR_CLIP):
+        return  # (partly) behind the camera: a real camera would not see it whole either
+    front = bool(-T_cp[:3, 3] @ T_cp[:3, 2] > 0)  # camera on the +z side of the plate
+    # Bounding box of the projected outline (densely sampled edges, for distortion), padded.
+    s = np.linspace(0.0, 1.0, 33)[:, None]
+    edges = np.concatenate(
+        [corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0
+    )
+    uv_edges = PinholeView(view.K, view.D, view.image_size).project(edges)
+    u0 = int(np.floor(uv_edges[:, 0].min())) - 3
+    u1 = int(np.ceil(uv_edges[:, 0].max())) + 3
+    v0 = int(np.floor(uv_edges[:, 1].min())) - 3
+    v1 = int(np.ceil(uv_edges[:, 1].max())) + 3
+    u0, v0 = max(u0, 0), max(v0, 0)
+    u1, v1 = min(u1, w - 1), min(v1, h - 1)
+    if u1 < u0 or v1 < v0:
+        return
+    us, vs = np.meshgrid(np.arange(u0, u1 + 1, dtype=float), np.arange(v0, v1 + 1, dtype=float))
+    uv = np.stack([us.ravel(), vs.ravel()], axis=1)
+    xy, ok = _plane_coords(view, T_cp, uv)
+    xy = np.where(ok[:, None], xy, 1e3)  # rays that miss the plane: far outside the plate
+    inside, d_outline = _outline_distance(design, xy)
+    if front:
+        d_circle, nearest = _circle_distances(design, xy)
+        level = np.where(d_circle <= 0, design.dot_level, design.plate_level)
+    else:
+        d_circle, nearest = np.full(len(xy), np.inf), np.zeros(len(xy), dtype=np.intp)
+        level = np.full(len(xy), PLATE_BACK_LEVEL)
+    alpha = inside.astype(float)
+    premult = alpha * level
+    # Plate-plane size of a pixel: d(x, y)/d(u, v) by central differences.
+    gx = np.stack(list(np.gradient(xy[:, 0].reshape(us.shape))), axis=-1).reshape(-1, 2)
+    gy = np.stack(list(np.gradient(xy[:, 1].reshape(us.shape))), axis=-1).reshape(-1, 2)
+    J = np.stack([gx[:, ::-1], gy[:, ::-1]], axis=1)  # rows: x, y; columns: d/du, d/dv
+    scale = np.sqrt(np.sum(J**2, axis=(1, 2)))  # Frobenius >= the larger singular value
+    near = ok & (np.minimum(d_outline, np.abs(d_circle)) <= scale)
+    if supersample > 1 and np.any(near):
+        offs = (np.arange(supersample) + 0.5) / supersample - 0.5
+        ou, ov = np.meshgrid(offs, offs)
+        duv = np.stack([ou.ravel(), ov.ravel()], axis=1)  # (S, 2) sub-pixel offsets
+        # Sub-samples from the pixel centre and the local Jacobian: the plane coordinates are a
+        # smooth function of (u, v), so the 2nd-order error over half a pixel is ~1e-6 px.
+        sxy = xy[near][:, None, :] + np.einsum("nij,sj->nsi", J[near], duv)  # (n, S, 2)
+        s_in = _outline_distance(design, sxy.reshape(-1, 2))[0].reshape(sxy.shape[:2])
+        if front:
+            c = design.layout[nearest[near], :2]
+            r = design.radii[nearest[near]]
+            s_dot = np.sum((sxy - c[:, None, :]) ** 2, axis=2) <= (r * r)[:, None]
+            s_level = np.where(s_dot, design.dot_level, design.plate_level)
+        else:
+            s_level = np.full(s_in.shape, PLATE_BACK_LEVEL)
+        alpha[near] = s_in.mean(axis=1)
+        premult[near] = (s_in * s_level).mean(axis=1)
+    region = img[v0 : v1 + 1, u0 : u1 + 1]
+    region *= 1.0 - alpha.reshape(us.shape)
+    region += premult.reshape(us.shape)
+
+
+def render_view(
+    view: PinholeView,
+    plates: Sequence[tuple[PlateDesign, ArrayLike]],
+    *,
+    background: float = BACKGROUND_LEVEL,
+    supersample: int = 8,
+    blur_sigma: float = 0.0,
+    noise_sigma: float = 0.0,
+    rng: np.random.Generator | None = None,
+) -> NDArray[np.uint8]:
+    """Render plates seen by one camera as an 8-bit grey image.
+
+    Args:
+        view: The camera.
+        plates: (design, ``T_world_plate`` of shape (4, 4)) pairs.
+        background: Grey level behind the plates (0..1).
+        supersample: Sub-samples per axis at edge pixels (anti-aliasing; 8 gives 64 samples).
+        blur_sigma: Gaussian blur [px] (0: none).
+        noise_sigma: Standard deviation of additive Gaussian noise [grey levels of 255].
+        rng: Random generator for the noise (required when ``noise_sigma > 0``).
+
+    Returns:
+        Image, shape (height, width), dtype uint8.
+    """
+    w, h = view.image_size
+    img = np.full((h, w), float(background))
+    order = sorted(
+        plates,
+        key=lambda p: -float((view.T_camera_world @ np.asarray(p[1], dtype=float))[2, 3]),
+    )
+    for design, T in order:
+        _draw_plate(img, view, design, np.asarray(T, dtype=float), supersample)
+    img *= 255.0
+    if blur_sigma > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
+    if noise_sigma > 0:
+        if rng is None:
+            raise ValueError("render_view: noise_sigma > 0 needs a seeded rng")
+        img = img + rng.normal(0.0, noise_sigma, img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def circle_centres_px(view: PinholeView, design: PlateDesign, T_world_plate: ArrayLike) -> Array:
+    """True projected circle centres (with distortion) [px], shape (K, 2): the detector's truth."""
+    T = np.asarray(T_world_plate, dtype=float)
+    p_world = design.layout @ T[:3, :3].T + T[:3, 3]
+    return view.project(p_world)
+
+
+def hidden_circles(
+    view: PinholeView, plates: Sequence[tuple[PlateDesign, ArrayLike]], *, margin_px: float = 3.0
+) -> dict[str, int]:
+    """How many circles of each plate the camera cannot measure cleanly.
+
+    A circle counts as hidden when it is behind the camera, within ``margin_px`` plus its radius
+    of the image border, or within that distance of the outline of a plate drawn in front of it
+    (the renderer's depth order), or when its plate shows the camera its back.
+
+    Args:
+        view: The camera.
+        plates: (design, ``T_world_plate``) pairs.
+        margin_px: Clearance required [px].
+
+    Returns:
+        Plate name -> number of hidden circles (0 .. K).
+    """
+    w, h = view.image_size
+    items = [(d, np.asarray(T, dtype=float)) for d, T in plates]
+    depth = [float((view.T_camera_world @ T)[2, 3]) for _, T in items]
+    polys = []
+    for d, T in items:
+        T_cp = view.T_camera_world @ T
+        c = d.outline_corners() @ T_cp[:3, :3].T + T_cp[:3, 3]
+        s = np.linspace(0.0, 1.0, 17)[:, None]
+        edge = np.concatenate([c[i] * (1 - s) + c[(i + 1) % 4] * s for i in range(4)])
+        ok = bool(np.all(edge[:, 2] > NEAR_CLIP))
+        polys.append(PinholeView(view.K, view.D, view.image_size).project(edge).astype(np.float32) if ok else None)
+    out: dict[str, int] = {}
+    for a, (d, T) in enumerate(items):
+        T_cp = view.T_camera_world @ T
+        pc = d.layout @ T_cp[:3, :3].T + T_cp[:3, 3]
+        if np.any(pc[:, 2] < NEAR_CLIP) or -T_cp[:3, 3] @ T_cp[:3, 2] <= 0:
+            out[d.name] = d.n_circles
+            continue
+        uv = view.project(d.layout @ T[:3, :3].T + T[:3, 3])
+        r_px = d.radii * view.K[0, 0] / pc[:, 2]
+        clear = r_px + margin_px
+        hidden = (uv[:, 0] < clear) | (uv[:, 0] > w - 1 - clear) | (uv[:, 1] < clear) | (uv[:, 1] > h - 1 - clear)
+        for b, poly in enumerate(polys):
+            if b == a or poly is None or depth[b] >= depth[a]:
+                continue
+            for i in range(d.n_circles):
+                dist = cv2.pointPolygonTest(poly, (float(uv[i, 0]), float(uv[i, 1])), True)
+                hidden[i] |= dist > -clear[i]
+        out[d.name] = int(hidden.sum())
+    return out
+
+
+def occluded_circles(
+    camera_centre: ArrayLike,
+    focal_px: float,
+    plates: Sequence[tuple[PlateDesign, ArrayLike]],
+    *,
+    margin_px: float = 0.0,
+) -> dict[str, NDArray[np.bool_]]:
+    """Which circles a camera cannot see because of the plates themselves, for N poses at once.
+
+    A 3-D ray test (vectorised over configurations, unlike :func:`hidden_circles`, which tests
+    one image against the renderer's depth order): circle ``k`` of plate ``a`` is hidden when
+    plate ``a`` shows the camera its back (the camera is not on its +z side), or when the ray
+    from the camera centre to the circle centre crosses another plate's plane between the two
+    inside that plate's outline grown by a clearance. The clearance is the circle's radius and
+    ``margin_px`` pixels, both scaled to the distance of the crossing, so a circle counts as
+    hidden when its image comes within ``margin_px`` of the occluding plate's image.
+
+    Args:
+        camera_centre: Optical centre of the camera in world [m], shape (3,).
+        focal_px: Focal length [px] (converts ``margin_px`` to metres at a distance).
+        plates: (design, ``T_world_plate`` of shape (N, 4, 4) or (4, 4)) pairs; all with the
+            same N.
+        margin_px: Clearance required between a circle's image and another plate's image [px].
+
+    Returns:
+        Plate name -> hidden mask of shape (N, K).
+    """
+    c = np.asarray(camera_centre, dtype=float).reshape(3)
+    items = [(d, np.asarray(T, dtype=float).reshape(-1, 4, 4)) for d, T in plates]
+    out: dict[str, NDArray[np.bool_]] = {}
+    for a, (d, T) in enumerate(items):
+        p = np.einsum("nij,kj->nki", T[:, :3, :3], d.layout) + T[:, None, :3, 3]  # (N, K, 3)
+        back = np.einsum("ni,ni->n", c - T[:, :3, 3], T[:, :3, 2]) <= 0
+        hidden = np.repeat(back[:, None], d.n_circles, axis=1)
+        ray = p - c  # camera -> circle centre, (N, K, 3)
+        length = np.linalg.norm(ray, axis=2)
+        for b, (db, Tb) in enumerate(items):
+            if b == a:
+                continue
+            n, o = Tb[:, :3, 2], Tb[:, :3, 3]
+            den = np.einsum("nki,ni->nk", ray, n)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.einsum("ni,ni->n", o - c, n)[:, None] / den  # crossing at c + s ray
+            crosses = np.isfinite(s) & (s > 0) & (s < 1)
+            s = np.where(crosses, s, 0.0)
+            x = c + s[..., None] * ray - o[:, None, :]
+            local = np.einsum("nji,nkj->nki", Tb[:, :3, :3], x)  # R^T (x - o): plate-b frame
+            clear = s * (d.radii[None, :] + margin_px * length / focal_px)
+            x0, x1, y0, y1 = db.outline
+            inside = (
+                (local[..., 0] > x0 - clear) & (local[..., 0] < x1 + clear)
+                & (local[..., 1] > y0 - clear) & (local[..., 1] < y1 + clear)
+            )
+            hidden |= crosses & inside
+        out[d.name] = hidden
+    return out
+
+
+def write_image(path: object, image: NDArray[np.uint8]) -> None:
+    """Write an image losslessly (PNG) and atomically, raising ``OutputError`` on failure."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from cpc2urdf.errors import OutputError
+
+    p = Path(str(path))
+    if not p.parent.is_dir():
+        raise OutputError(f"{p}: cannot write, folder {p.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix or ".png", dir=p.parent)
+    os.close(fd)
+    try:
+        if not cv2.imwrite(tmp, image):
+            raise OutputError(f"{p}: OpenCV could not write the image")
+        os.replace(tmp, p)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+__all__ = [
+    "PinholeView",
+    "PlateDesign",
+    "circle_centres_px",
+    "hidden_circles",
+    "occluded_circles",
+    "plate_design",
+    "render_view",
+    "robot_plate_designs",
+    "target_design",
+    "write_image",
+]

@@ -1,0 +1,95 @@
+"""One resolver for "which robot": a shipped name, a robot spec, a model file (later: a URDF).
+
+Every command and API function that accepts a robot goes through :func:`load_robot`, so a name or
+path means the same thing everywhere: a measurement file's ``"robot"``, ``--robot``, ``export``,
+``check``, ``gaze``, ``view``, ``simulate``. A relative path inside a file is tried against that
+file's folder first (``relative_to``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+from cpc2urdf.errors import InputFileError
+from cpc2urdf.fileio import read_json
+from cpc2urdf.model import CPCModel
+from cpc2urdf.model_file import MODEL_FORMAT, model_from_json
+from cpc2urdf.spec import ROBOT_FORMAT, RobotSpec, spec_from_json
+
+RobotRef = str | os.PathLike[str] | RobotSpec
+
+
+def shipped_robots() -> list[str]:
+    """Names of the robots installed with the package (``iis_head``, ...)."""
+    from cpc2urdf.robots import available
+
+    return available()
+
+
+def looks_like_path(ref: str) -> bool:
+    """True if ``ref`` is written as a file path rather than a shipped robot name."""
+    return "/" in ref or os.sep in ref or Path(ref).suffix != ""
+
+
+def is_urdf_ref(ref: str | os.PathLike[str]) -> bool:
+    """True if ``ref`` names a URDF file (``.urdf`` suffix, any case)."""
+    return Path(os.fspath(ref)).suffix.lower() == ".urdf"
+
+
+def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = None) -> RobotSpec:
+    """The robot ``ref`` refers to.
+
+    Args:
+        ref: A :class:`~cpc2urdf.spec.RobotSpec` (returned as is), a shipped robot name (e.g.
+            ``"iis_head"``), or the path of a robot spec (``cpc2urdf/robot@1``) or model file
+            (``cpc2urdf/model@1``; its model becomes the spec's nominal model).
+        relative_to: Folder against which a relative path is tried first (the folder of the file
+            that named the robot).
+
+    Raises:
+        InputFileError: Naming the reference: not a shipped name and no such file, or a file of
+            another format, or a file that does not parse.
+    """
+    if isinstance(ref, RobotSpec):
+        return ref
+    text = os.fspath(ref)
+    if not text:
+        raise InputFileError("<robot>", "empty robot reference; expected a shipped robot name or a file path")
+    if not looks_like_path(text) and not os.path.exists(text):
+        from cpc2urdf.robots import spec_path
+
+        shipped = spec_path(text)
+        if shipped is None:
+            raise InputFileError(
+                text, f"no such file, and not a shipped robot name ({', '.join(shipped_robots())})"
+            )
+        return spec_from_json(read_json(shipped), text)
+    path = Path(text)
+    if relative_to is not None and not path.is_absolute() and (Path(relative_to) / path).exists():
+        path = Path(relative_to) / path
+    if not path.exists():
+        raise InputFileError(
+            text, f"no such file, and not a shipped robot name ({', '.join(shipped_robots())})"
+        )
+    doc = read_json(path)
+    fmt = doc.get("format") if isinstance(doc, Mapping) else None
+    if fmt == MODEL_FORMAT:
+        model = model_from_json(doc, str(path))
+        return RobotSpec(model.structure, model, str(path))
+    if fmt == ROBOT_FORMAT:
+        return spec_from_json(doc, str(path))
+    raise InputFileError(
+        str(path),
+        f"format is {fmt!r}, expected {MODEL_FORMAT!r} or {ROBOT_FORMAT!r} "
+        f"(or a shipped robot name: {', '.join(shipped_robots())})",
+    )
+
+
+def load_model(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = None) -> CPCModel:
+    """A model: a model file, or the nominal model of a robot spec or shipped robot."""
+    return load_robot(ref, relative_to=relative_to).nominal_model()
+
+
+__all__ = ["RobotRef", "is_urdf_ref", "load_model", "load_robot", "looks_like_path", "shipped_robots"]
