@@ -10,7 +10,8 @@ from refine_sim import measure, perturbed, protocol_q, random_q
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.kinematics.refine import _Problem, refine
+from cpc2urdf.identification.kinematics.problem import IdentificationProblem
+from cpc2urdf.identification.kinematics.refine import refine
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
@@ -36,7 +37,7 @@ def test_residual_jacobian_matches_finite_differences(head):
     q = protocol_q(truth, 4)
     ms = measure(truth, q, rng, SIGMA_T, SIGMA_R)
     chart = Parametrization(perturbed(truth, rng, 2e-3, 0.01), PLATES)
-    prob = _Problem(chart, q, ms.poses, {f: ms.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
+    prob = IdentificationProblem(chart, q, ms.poses, {f: ms.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
     x = rng.normal(0.0, 0.01, chart.n_params)
     J = prob.jacobian(x)
     eps = 1e-7
@@ -85,8 +86,8 @@ def test_refined_beats_the_closed_form_on_seeded_trials():
     parameter error relative to the bound drops in every trial (100/100 in the crb study), and the
     held-out error drops on average (per trial it is one noisy draw: 88/100 in the study)."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+    from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
-    from cpc2urdf.studies.crb import _bound
 
     e_cf, e_ref = [], []
     for seed in range(4):
@@ -95,9 +96,9 @@ def test_refined_beats_the_closed_form_on_seeded_trials():
         res = refine(cf, ms, SIGMA_T, SIGMA_R)
         chart = Parametrization(cf, PLATES)
         use = {f: ms.has_pose(f) for f in PLATES}
-        prob = _Problem(chart, ms.q, ms.poses, use, SIGMA_T, SIGMA_R)
+        prob = IdentificationProblem(chart, ms.q, ms.poses, use, SIGMA_T, SIGMA_R)
         assert res.cost <= 0.5 * float(np.sum(prob.residuals(np.zeros(32)) ** 2))
-        tchart, C = _bound(truth, ms.q, list(PLATES), SIGMA_T, SIGMA_R)
+        tchart, C = cramer_rao_covariance(truth, ms.q, list(PLATES), SIGMA_T, SIGMA_R)
         F = np.linalg.inv(C)
         d_cf, d_ref = tchart.vector_from_model(cf), tchart.vector_from_model(res.model)
         assert d_ref @ F @ d_ref < d_cf @ F @ d_cf
@@ -197,7 +198,7 @@ def test_identify_cli_method_refined(tmp_path):
     # What the refinement promises per data set is a weighted fit no worse than its start (one
     # trial's held-out error is a noisy draw; the averages are tested above).
     chart = Parametrization(cf, PLATES)
-    prob = _Problem(chart, measured.q, measured.poses, {f: measured.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
+    prob = IdentificationProblem(chart, measured.q, measured.poses, {f: measured.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
     cost_cf = float(np.sum(prob.residuals(np.zeros(chart.n_params)) ** 2))
     cost_ref = float(np.sum(prob.residuals(chart.vector_from_model(ref)) ** 2))
     assert cost_ref <= cost_cf

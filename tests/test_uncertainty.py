@@ -7,7 +7,8 @@ import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.kinematics.refine import _Problem, refine
+from cpc2urdf.identification.kinematics.problem import IdentificationProblem
+from cpc2urdf.identification.kinematics.refine import refine
 from cpc2urdf.identification.kinematics.uncertainty import (
     Covariance,
     NoUncertaintyError,
@@ -41,7 +42,8 @@ def test_known_sigma_covariance_is_the_inverse_normal_matrix(data):
     _, ms, res = data
     # J at the optimum, rebuilt independently of covariance_from_jacobian (plain inverse here).
     use = {f: ms.has_pose(f) for f in PLATES}
-    J = _Problem(Parametrization(res.model, PLATES), ms.q, ms.poses, use, SIGMA_T, SIGMA_R).jacobian(np.zeros(32))
+    chart = Parametrization(res.model, PLATES)
+    J = IdentificationProblem(chart, ms.q, ms.poses, use, SIGMA_T, SIGMA_R).jacobian(np.zeros(32))
     np.testing.assert_allclose(res.covariance.matrix, np.linalg.inv(J.T @ J), rtol=1e-6, atol=1e-18)
     assert res.covariance.scale == "known" and 0.7 < res.covariance.variance_factor < 1.3
 

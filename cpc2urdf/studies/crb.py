@@ -40,27 +40,20 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.progress import progress
 
+if TYPE_CHECKING:  # the library is imported inside the functions (fast `cpc2urdf --help`)
+    from cpc2urdf.identification.kinematics.refine import RefinementResult
+    from cpc2urdf.measurements import MeasurementSet
+    from cpc2urdf.model import CPCModel
+
 ESTIMATORS = ("closed-form", "refined", "refined (rotation / sigma_r per axis)")
 AT_BOUND = 1.10  # the issue's "within ~10 %"
-
-
-def _bound(truth: Any, q: np.ndarray, frames: list[str], sigma_t: float, sigma_r: float) -> tuple[Any, np.ndarray]:
-    """Chart at the truth and the Cramér-Rao covariance of its parameters, (P, P)."""
-    from cpc2urdf.identification.kinematics.parametrization import Parametrization
-    from cpc2urdf.identification.kinematics.refine import _Problem
-
-    chart = Parametrization(truth, frames)
-    poses = truth.fk(q, frames)
-    use = {f: np.ones(len(q), dtype=bool) for f in frames}
-    J = _Problem(chart, q, poses, use, sigma_t, sigma_r).jacobian(np.zeros(chart.n_params))
-    return chart, np.linalg.inv(J.T @ J)
 
 
 def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int, robot: str = "iis_head",
@@ -69,13 +62,14 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.kinematics.parametrization import Parametrization
     from cpc2urdf.identification.kinematics.refine import refine
+    from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
 
     truth, measured, heldout = simulate_experiment(
         robot, seed=seed, M=M, noise="fig10", sigma_t=sigma_t, sigma_r=sigma_r, n_heldout=n_heldout
     )
     frames = measured.frames
-    chart, C = _bound(truth, measured.q, frames, sigma_t, sigma_r)
+    chart, C = cramer_rao_covariance(truth, measured.q, frames, sigma_t, sigma_r)
     F = np.linalg.inv(C)
     P = chart.n_params
     angle = np.array([u == "rad" for u in chart.units])
@@ -122,8 +116,8 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     return out
 
 
-def corrupt(measured: Any, fraction: float, rng: np.random.Generator, shift: float = 10e-3,
-            angle: float = math.radians(5.0)) -> tuple[Any, list[tuple[int, str]]]:
+def corrupt(measured: MeasurementSet, fraction: float, rng: np.random.Generator, shift: float = 10e-3,
+            angle: float = math.radians(5.0)) -> tuple[MeasurementSet, list[tuple[int, str]]]:
     """Mis-detected plates: ``shift`` [m] in a random direction and ``angle`` [rad] about a random
     axis on one random plate of ``round(fraction * N)`` random records (at least one)."""
     from scipy.spatial.transform import Rotation
@@ -144,15 +138,16 @@ def corrupt(measured: Any, fraction: float, rng: np.random.Generator, shift: flo
     return MeasurementSet(measured.structure, measured.q, poses, labels=list(measured.labels)), hit
 
 
-def _outlier_trial(measured: Any, cf: Any, clean: Any, heldout: Any, T_true: dict[str, np.ndarray],
-                   frames: list[str], sigma_t: float, sigma_r: float, fraction: float, seed: int) -> dict[str, Any]:
+def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, heldout: MeasurementSet,
+                   T_true: dict[str, np.ndarray], frames: list[str], sigma_t: float, sigma_r: float,
+                   fraction: float, seed: int) -> dict[str, Any]:
     """Corrupt ``fraction`` of the records; robust refinement vs the clean refinement."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.kinematics.refine import refine
 
     dirty, hit = corrupt(measured, fraction, np.random.default_rng([seed, 7]))
 
-    def held_rms(model: Any) -> float:
+    def held_rms(model: CPCModel) -> float:
         T = model.fk(heldout.q, frames)
         return float(np.sqrt(np.mean(np.concatenate(
             [np.sum((T[f][:, :3, 3] - T_true[f][:, :3, 3]) ** 2, axis=1) for f in frames]))))
@@ -181,7 +176,7 @@ def _outlier_trial(measured: Any, cf: Any, clean: Any, heldout: Any, T_true: dic
     }
 
 
-def _own_prediction(res: Any, q: np.ndarray, frame: str) -> float:
+def _own_prediction(res: RefinementResult, q: np.ndarray, frame: str) -> float:
     """Mean predicted squared error from the refinement's own (estimated) covariance."""
     from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
 

@@ -54,31 +54,25 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.protocol import Protocol, recognise_protocol
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
-from cpc2urdf.transforms import cpc_rotation, homogeneous, inverse, project_to_rotation, rotation_z
+from cpc2urdf.transforms import (
+    Array,
+    cpc_rotation,
+    homogeneous,
+    inverse,
+    project_to_rotation,
+    rot_z,
+    rotation_z,
+)
 
-Array = NDArray[np.float64]
 METHOD = "closed-form"
 # Below this, a singular value of a stacked system counts as zero (entries are O(1): rotation
 # matrix entries, and lengths of order 1 m).
 RANK_TOL = 1e-9
-
-
-def _rz(angles: Array) -> Array:
-    """Stack of 3x3 ``Rot(z, a)``, shape (N, 3, 3)."""
-    c, s = np.cos(angles), np.sin(angles)
-    R = np.zeros((len(angles), 3, 3))
-    R[:, 0, 0] = c
-    R[:, 0, 1] = -s
-    R[:, 1, 0] = s
-    R[:, 1, 1] = c
-    R[:, 2, 2] = 1.0
-    return R
 
 
 def _vee(S: Array) -> Array:
@@ -162,7 +156,7 @@ class _Solver:
             return {e.name: self.R_meas[e.name]}
         W = self.W_link[e.name]
         if self.s.joint(e.name).type == "revolute":
-            Rz_t = _t(_rz(self.q[:, self.s.joint_index(e.name)]))
+            Rz_t = _t(rot_z(self.q[:, self.s.joint_index(e.name)])[:, :3, :3])
             return {f: w @ Rz_t for f, w in W.items()}  # axis frame = link frame @ Rot(z, -q)
         return W
 
@@ -293,7 +287,7 @@ class _Solver:
         for i, j in enumerate(self.s.joints):
             A = link[j.parent] @ self.rot_in_parent[j.name]
             axis[j.name] = A
-            link[j.name] = A @ _rz(self.q[:, i]) if j.type == "revolute" else A
+            link[j.name] = A @ rot_z(self.q[:, i])[:, :3, :3] if j.type == "revolute" else A
         frames = {f: link[self.s.frame(f).parent] @ self.rot_in_parent[f] for f in self.p.frames}
         return axis, frames
 

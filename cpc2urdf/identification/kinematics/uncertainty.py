@@ -18,6 +18,10 @@ covariance is ``G C G^T`` and its standard deviation ``sqrt(trace(G C G^T))`` [m
 Euclidean position error). If ``G`` sees an undetermined direction the prediction is
 undetermined (``inf``).
 
+Cramér-Rao bound (:func:`cramer_rao_covariance`): ``C = (J^T J)^-1`` with ``J`` the same weighted
+Jacobian evaluated at the *true* robot on noise-free poses, in the true robot's own chart; what an
+efficient estimator (the refinement) reaches, used by ``cpc2urdf study crb`` and the tests.
+
 Model files store this under the ``"uncertainty"`` section (SI units, parameters named), so that
 :func:`predicted_position_std` works on any loaded model that carries it.
 """
@@ -34,6 +38,7 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import Cpc2UrdfError
 from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.problem import IdentificationProblem
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 
@@ -187,6 +192,37 @@ def covariance_from_jacobian(
     )
 
 
+def cramer_rao_covariance(
+    truth: CPCModel, q: ArrayLike, frames: Sequence[str], sigma_t: float, sigma_r: float
+) -> tuple[Parametrization, Array]:
+    """Cramér-Rao covariance of the parameters of ``truth`` measured at configurations ``q``.
+
+    ``C = (J^T J)^-1`` with ``J`` the weighted Jacobian of eq. (23) (:class:`IdentificationProblem`,
+    Fig. 10 noise of ``sigma_t`` per translation entry and rotation angle ``sigma_r``, i.e.
+    ``sigma_r / sqrt(3)`` per rotation-vector axis) at the true robot, every pose of every frame
+    measured. It is the covariance of an efficient estimator under Gaussian noise of those second
+    moments: the reference the refinement is compared with. ``J^T J`` must be invertible (the
+    data determine every parameter of the chart).
+
+    Args:
+        truth: The true robot; the bound is about its own chart (gauge-aligned coordinates).
+        q: Configurations [rad]/[m], shape (N, n) in ``structure.joint_names`` order.
+        frames: Measured frames.
+        sigma_t: Standard deviation of each measured translation entry [m].
+        sigma_r: Standard deviation of the measured rotation error's angle [rad].
+
+    Returns:
+        ``(chart, C)``: the :class:`Parametrization` centred on ``truth`` (names, units) and the
+        covariance of its P parameters, shape (P, P) [m^2, m rad, rad^2].
+    """
+    chart = Parametrization(truth, frames)
+    q_arr = np.asarray(q, dtype=float)
+    poses = truth.fk(q_arr, frames)
+    use = {f: np.ones(len(q_arr), dtype=bool) for f in frames}
+    J = IdentificationProblem(chart, q_arr, poses, use, sigma_t, sigma_r).jacobian(np.zeros(chart.n_params))
+    return chart, np.linalg.inv(J.T @ J)
+
+
 def with_uncertainty(model: CPCModel, cov: Covariance) -> CPCModel:
     """A copy of ``model`` whose metadata carries ``cov`` as its ``"uncertainty"`` section."""
     return model.with_params(metadata={**model.metadata, "uncertainty": cov.to_json()})
@@ -282,6 +318,7 @@ __all__ = [
     "NoUncertaintyError",
     "covariance_from_jacobian",
     "covariance_of_model",
+    "cramer_rao_covariance",
     "position_covariance",
     "predicted_position_std",
     "with_uncertainty",
