@@ -9,10 +9,10 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.measurements import MeasurementSet, save_measurements
 from cpc2urdf.model import CPCParams
 from cpc2urdf.model_file import save_model
-from cpc2urdf.random_models import random_model
 from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import homogeneous
 from cpc2urdf.validation.accuracy import accuracy, format_table

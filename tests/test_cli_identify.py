@@ -13,9 +13,10 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.fileio import write_json
+from cpc2urdf.identification.simulation.design import protocol_q
+from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.measurements import MeasurementSet, measurements_to_json
 from cpc2urdf.model import CPCModel
-from cpc2urdf.random_models import protocol_q, random_model
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 

@@ -9,9 +9,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.identification.kinematics.closed_form import count_parameters, identify_closed_form
+from cpc2urdf.identification.simulation.design import protocol_q
+from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.random_models import protocol_q, random_model
 from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import homogeneous
@@ -113,8 +114,8 @@ def test_random_trees_exact() -> None:
 
 
 def test_plate_on_the_base_and_several_root_joints() -> None:
+    from cpc2urdf.identification.simulation.random_robots import random_params
     from cpc2urdf.model import Frame
-    from cpc2urdf.random_models import random_params
 
     for seed in range(5):
         rng = np.random.default_rng(seed)

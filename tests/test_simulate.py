@@ -1,4 +1,5 @@
-"""The stage-1 simulator: protocol, truth, view, noise-free exactness, reproducible files, CLI errors."""
+"""The stage-1 simulator: experiment design (calibration ranges, protocol), truth, random robots,
+view, noise-free exactness, reproducible files, CLI errors."""
 
 from __future__ import annotations
 
@@ -12,16 +13,18 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.identification.simulation.simulate import (
-    OCCLUSION_MARGIN_PX,
+from cpc2urdf.identification.simulation.design import (
     calibration_ranges,
-    check_view,
     measured_frames,
-    perturbed_model,
-    place_in_front_of_rig,
     protocol_configurations,
-    simulate_experiment,
+    protocol_q,
 )
+from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.placement import place_in_front_of_rig
+from cpc2urdf.identification.simulation.random_robots import random_model
+from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.truth import perturb_params, perturbed_model
+from cpc2urdf.identification.simulation.visibility import OCCLUSION_MARGIN_PX, check_view
 from cpc2urdf.identification.vision.render import PinholeView, hidden_circles, robot_plate_designs
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.measurements import load_measurements
@@ -49,6 +52,48 @@ def test_protocol_is_one_joint_at_a_time() -> None:
         protocol_configurations(r, 1, s.joint_names)
     with pytest.raises(ConfigurationError, match="must lie within the limits"):
         calibration_ranges(s, {"pan": (-1.0, 1.0)})
+
+
+def test_calibration_range_rule_and_jittered_protocol() -> None:
+    """Without a spec calibration_range a joint uses the middle half of its limits; the jittered
+    protocol keeps q0 and one joint moving per record, moves values by at most 20 % of the
+    spacing and stays inside the limits."""
+    joints = [Joint("a", "revolute", "base", -1.0, 3.0),
+              Joint("b", "prismatic", "a", 0.0, 0.2, calibration_range=(0.0, 0.2))]
+    s = RobotStructure("two", joints, [Frame("plate", "b", "plate", PLATE)])
+    r = calibration_ranges(s)
+    np.testing.assert_array_equal(r, [[0.0, 2.0], [0.0, 0.2]])
+    even = protocol_q(s, 5)
+    np.testing.assert_array_equal(even, protocol_configurations(r, 5, s.joint_names)[0])
+    q = protocol_q(s, 5, np.random.default_rng(0))
+    np.testing.assert_array_equal(q[0], r.mean(axis=1))
+    assert np.all(np.count_nonzero(q[1:] != q[0], axis=1) <= 1)
+    assert np.all(np.abs(q - even) <= 0.2 * (r[:, 1] - r[:, 0]) / 5 + 1e-15)
+    assert not np.array_equal(q, even) and np.all((q >= s.lower) & (q <= s.upper))
+    assert q[6:, 1].max() == 0.2  # b's range is its limits: its last value, moved up, is clipped
+
+
+def test_true_geometry_follows_the_fig10_convention() -> None:
+    """The true robot's error of a placement is Fig. 10 noise on (R, l) of eq. (3), same draws."""
+    p = load_robot("iis_head").nominal_model().joints["tilt"]
+    moved = perturb_params(p, np.random.default_rng(4), 1e-3, 0.01)
+    T = fig10_noise(np.block([[p.rotation(), np.reshape(p.l, (3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]),
+                    1e-3, 0.01, np.random.default_rng(4))
+    np.testing.assert_allclose(moved.rotation(), T[:3, :3], atol=1e-15)
+    np.testing.assert_allclose(moved.l, T[:3, 3], atol=1e-15)
+
+
+def test_random_robots_have_leaf_plates_and_calibration_ranges() -> None:
+    for seed in range(10):
+        m = random_model(np.random.default_rng(seed), 6, extra_plates=1, cameras=1)
+        s = m.structure
+        parents = {j.parent for j in s.joints}
+        plated = {f.parent for f in s.frames if f.kind == "plate"}
+        assert {j.name for j in s.joints if j.name not in parents} <= plated
+        r = calibration_ranges(s)
+        assert all(j.calibration_range is not None for j in s.joints)
+        assert np.all((r[:, 0] >= s.lower) & (r[:, 0] < r[:, 1]) & (r[:, 1] <= s.upper))
+        assert [f.kind for f in s.frames].count("camera") == 1
 
 
 def test_truth_has_the_requested_geometric_error() -> None:
@@ -235,8 +280,6 @@ def test_heldout_holds_only_measurable_configurations():
     """Held-out draws the rig cannot measure (hidden, outside an image, too oblique) are redrawn:
     100 configurations per seed, as the crb study uses, all pass the view check. Seed 13's first
     draw has a plate seen more obliquely than the 75 deg limit (found by replaying the stream)."""
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
-
     for seed in (0, 13):
         exp = simulate_experiment("iis_head", seed=seed, M=9, n_heldout=100)
         assert exp.heldout.n_records == 100
@@ -247,8 +290,6 @@ def test_an_occasional_hidden_circle_is_recorded_not_fatal():
     """Seed 78's true robot hides one circle in one protocol view (the placement was searched
     clear on the nominal robot): the plate stays measurable from its other circles, so the
     experiment runs and the provenance counts the hidden sighting."""
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
-
     exp = simulate_experiment("iis_head", seed=78, M=9, n_heldout=100)
     view = exp.measured.metadata["provenance"]["view"]
     assert view["hidden_circle_sightings"] == 1

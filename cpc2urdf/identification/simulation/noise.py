@@ -4,11 +4,17 @@ Two models of the error of a measured plate pose ``T_world_plate``:
 
 - **Fig. 10** (:func:`fig10_noise`): add N(0, sigma_t) to each entry of the translation, and
   pre-multiply the rotation by a rotation about a uniformly random axis through an angle drawn
-  from N(0, sigma_r): ``R_meas = Rot(u, phi) R``. (The paper's σ_O is in mm and degrees.)
+  from N(0, sigma_r): ``R_meas = Rot(u, phi) R``. (The paper's σ_O is in mm and degrees.) This
+  is the package's one pose-perturbation convention: the simulated true robot's geometric errors
+  (:mod:`~cpc2urdf.identification.simulation.truth`) follow it too.
 - **Stereo** (:func:`stereo_noise`): what the paper's rig actually does. Project the plate's
   circle centres into both cameras, add N(0, sigma_px) to every pixel coordinate, triangulate
   (``cv2.triangulatePoints``), and register the plate layout to the triangulated points (Arun,
   sec. 3.3). Its pose error follows from the rig geometry; ``cpc2urdf study stereo`` measures it.
+
+Both are models of a *simulated* measurement (the real one is :mod:`~cpc2urdf.identification.
+vision`), hence they live with the simulator, which applies them per record
+(:func:`~cpc2urdf.identification.simulation.measure.measure_poses`).
 """
 
 from __future__ import annotations
@@ -112,3 +118,6 @@ def stereo_noise(
                 except DegenerateDataError:
                     pass
     return T_meas, p_meas
+
+
+__all__ = ["fig10_noise", "random_rotations", "stereo_noise"]

@@ -7,11 +7,16 @@ including anti-parallel to the parent's), one measured plate on every leaf link 
 moves some plate and the tree is identifiable from plate poses), optional extra plates on inner
 links and optional unmeasured camera frames.
 
+Every joint gets a calibration range inside its limits, so the experiment design of
+:mod:`~cpc2urdf.identification.simulation.design` applies unchanged. This is the package's one
+random-robot generator (``tests/random_trees.py`` draws through it).
+
 Example::
 
     rng = np.random.default_rng(0)
     model = random_model(rng, 5, serial=False)
     T = model.fk(model.structure.lower)   # {frame: T_world_frame}
+    q = protocol_q(model, 4, rng)         # design.protocol_q: the sec. 4.1 protocol, jittered
 """
 
 from __future__ import annotations
@@ -103,26 +108,4 @@ def random_model(
     )
 
 
-def protocol_q(model: CPCModel, M: int, rng: np.random.Generator | None = None) -> np.ndarray:
-    """One-joint-at-a-time configurations (sec. 4.1): ``q0`` then M readings per joint.
-
-    ``q0`` is the middle of each joint's calibration range (or limits); joint i's M readings
-    are spread over the range (randomly jittered if ``rng`` is given). Shape (n M + 1, n).
-    """
-    s = model.structure
-    ranges = np.array([j.calibration_range or (j.lower, j.upper) for j in s.joints], dtype=float)
-    q0 = ranges.mean(axis=1)
-    rows = [q0]
-    for i in range(s.n_joints):
-        values = np.linspace(ranges[i, 0], ranges[i, 1], M)
-        if rng is not None:
-            values = values + rng.uniform(-0.2, 0.2, M) * (ranges[i, 1] - ranges[i, 0]) / max(M, 2)
-            values = np.clip(values, s.joints[i].lower, s.joints[i].upper)
-        for v in values:
-            q = q0.copy()
-            q[i] = v
-            rows.append(q)
-    return np.array(rows)
-
-
-__all__ = ["random_model", "random_params", "random_unit", "protocol_q"]
+__all__ = ["PRISMATIC_LIMITS", "REVOLUTE_LIMITS", "random_model", "random_params", "random_unit"]
