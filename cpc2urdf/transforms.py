@@ -205,3 +205,102 @@ def rotation_defect(R: ArrayLike) -> float:
     """Largest entry of ``|R^T R - I|`` plus ``|det R - 1|``: 0 for an exact rotation."""
     R = np.asarray(R, dtype=float)
     return float(np.max(np.abs(R.T @ R - np.eye(3))) + abs(np.linalg.det(R) - 1.0))
+
+
+# ---- quaternions and dual quaternions -------------------------------------------------------------
+# Scalar-first unit quaternions ``[w, x, y, z]`` (Hamilton product), as in Li et al. 2010 and
+# Daniilidis 1999; scipy's ``Rotation.as_quat`` is scalar-last.
+
+
+def skew(v: ArrayLike) -> Array:
+    """The cross-product matrix ``[v]_x`` of a 3-vector: ``skew(v) @ u == cross(v, u)``, shape (3, 3)."""
+    v = np.asarray(v, dtype=float)
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def quat_wxyz_from_matrix(R: ArrayLike) -> Array:
+    """Unit quaternions ``[w, x, y, z]`` of rotations (..., 3, 3) with ``w >= 0``, shape (..., 4)."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    q = np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def quat_left_matrix(q: ArrayLike) -> Array:
+    """Matrix of ``p -> q p`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``a~``), shape (4, 4)."""
+    q = np.asarray(q, dtype=float)
+    w, v = q[0], q[1:]
+    M = np.empty((4, 4))
+    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
+    M[1:, 1:] = w * np.eye(3) + skew(v)
+    return M
+
+
+def quat_right_matrix(q: ArrayLike) -> Array:
+    """Matrix of ``p -> p q`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``b~``), shape (4, 4)."""
+    q = np.asarray(q, dtype=float)
+    w, v = q[0], q[1:]
+    M = np.empty((4, 4))
+    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
+    M[1:, 1:] = w * np.eye(3) - skew(v)
+    return M
+
+
+def quat_multiply(p: ArrayLike, q: ArrayLike) -> Array:
+    """Hamilton product ``p q`` of quaternions ``[w, x, y, z]``, shape (4,)."""
+    return quat_left_matrix(p) @ np.asarray(q, dtype=float)
+
+
+def dual_quat_from_transform(T: ArrayLike) -> tuple[Array, Array]:
+    """Unit dual quaternion ``q + eps q'`` of a rigid transform (4, 4): ``q' = 1/2 (0, t) q``.
+
+    Returns:
+        ``(q, q')``, each ``[w, x, y, z]`` of shape (4,), with ``w >= 0``; ``t`` in [m].
+    """
+    T = np.asarray(T, dtype=float)
+    q = quat_wxyz_from_matrix(T[:3, :3])
+    return q, 0.5 * quat_multiply(np.concatenate([[0.0], T[:3, 3]]), q)
+
+
+def transform_from_dual_quat(q: ArrayLike, qd: ArrayLike) -> Array:
+    """Inverse of :func:`dual_quat_from_transform` (``t = 2 q' q*``); ``q`` normalised first.
+
+    The dual part is made orthogonal to the real part (a unit dual quaternion has
+    ``q . q' = 0``) before the translation is read off. Returns shape (4, 4).
+    """
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    n = float(np.linalg.norm(q))
+    q, qd = q / n, qd / n
+    qd = qd - (q @ qd) * q  # unit dual quaternion: q . q' = 0
+    R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+    t = 2.0 * quat_multiply(qd, np.array([q[0], -q[1], -q[2], -q[3]]))[1:]
+    return homogeneous(R, t)
+
+
+__all__ = [
+    "Array",
+    "cpc_rotation",
+    "dual_quat_from_transform",
+    "homogeneous",
+    "inverse",
+    "matrix_from_rpy",
+    "project_to_rotation",
+    "quat_left_matrix",
+    "quat_multiply",
+    "quat_right_matrix",
+    "quat_wxyz_from_matrix",
+    "rot_x",
+    "rot_z",
+    "rotation_defect",
+    "rotation_error",
+    "rotation_z",
+    "rpy_from_matrix",
+    "skew",
+    "trans",
+    "trans_z",
+    "transform_from_dual_quat",
+]

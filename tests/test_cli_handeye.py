@@ -12,13 +12,13 @@ from test_handeye import EXACT, make_data
 
 from cpc2urdf.cli import COMMANDS, main
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.identification.handeye.axzb import ALL_METHODS
 from cpc2urdf.identification.handeye.pose_file import (
     HANDEYE_POSES_FORMAT,
     handeye_poses_to_json,
     load_handeye_poses,
     save_handeye_poses,
 )
+from cpc2urdf.identification.handeye.solvers import ALL_METHODS
 from cpc2urdf.transforms import inverse
 from cpc2urdf.units import Units
 

@@ -20,22 +20,18 @@ from cpc2urdf.identification.vision.detect import (
     InconsistentDetectionError,
     PlateAmbiguousError,
     PlateNotFoundError,
-    StereoPlatePose,
     detect_plates,
+    undistort_to_pixels,
+)
+from cpc2urdf.identification.vision.plate_poses import (
+    StereoPlatePose,
     ellipse_centre_offset,
     stereo_plate_poses,
     target_pose,
-    undistort_to_pixels,
 )
-from cpc2urdf.identification.vision.render import (
-    PinholeView,
-    circle_centres_px,
-    plate_design,
-    render_view,
-    robot_plate_designs,
-    target_design,
-)
+from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
 from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import plate_design, robot_plate_designs, target_design
 from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import rotation_error
 

@@ -10,12 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axxb import (
-    HAND_EYE_METHODS,
-    calibrate_hand_eye,
-    relative_motions,
-    rotation_spread,
-)
+from cpc2urdf.identification.handeye.axxb import relative_motions, rotation_spread
+from cpc2urdf.identification.handeye.solvers import HAND_EYE_METHODS, calibrate_hand_eye
 from cpc2urdf.transforms import homogeneous, inverse, rotation_error
 
 EXACT = 1e-9  # [m] and [-]: noise-free recovery

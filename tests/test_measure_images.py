@@ -20,19 +20,15 @@ from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-from cpc2urdf.identification.simulation.noise import stereo_noise
-from cpc2urdf.identification.vision.measure_images import (
-    read_joints_csv,
+from cpc2urdf.identification.simulation.images import (
+    RenderedExperiment,
     render_experiment,
     render_head_experiment,
-    write_joints_csv,
 )
-from cpc2urdf.identification.vision.render import (
-    PinholeView,
-    circle_centres_px,
-    render_view,
-    robot_plate_designs,
-)
+from cpc2urdf.identification.simulation.noise import stereo_noise
+from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
+from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
+from cpc2urdf.identification.vision.targets import robot_plate_designs
 from cpc2urdf.measurements import MeasurementSet, load_measurements
 from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.transforms import inverse, rotation_error
@@ -42,32 +38,32 @@ STRUCTURE = load_robot("iis_head").structure
 
 
 @pytest.fixture(scope="module")
-def experiment(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+def experiment(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, RenderedExperiment]:
     folder = tmp_path_factory.mktemp("exp") / "images"
     exp = render_experiment(folder, M=3, n_heldout=20, seed=1)
     return folder, exp
 
 
 @pytest.fixture(scope="module")
-def measured(experiment: tuple[Path, object], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def measured(experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder, _ = experiment
     out = tmp_path_factory.mktemp("out") / "measurements.json"
     assert main(["measure", str(folder), "--rig", str(folder / "rig.yaml"), "-o", str(out)]) == 0
     return out
 
 
-def test_rendered_folder_layout(experiment: tuple[Path, object]) -> None:
+def test_rendered_folder_layout(experiment: tuple[Path, RenderedExperiment]) -> None:
     folder, exp = experiment
-    n = exp.measured.n_records  # type: ignore[attr-defined]
+    n = exp.measured.n_records
     assert n == 6 * 3 + 1
     assert len(list((folder / "left").glob("*.png"))) == n == len(list((folder / "right").glob("*.png")))
     table = read_joints_csv(folder / "joints.csv", STRUCTURE)
-    np.testing.assert_allclose(table.q, exp.measured.q, atol=1e-12)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(table.q, exp.measured.q, atol=1e-12)
     assert (folder / "rig.yaml").read_text().startswith("%YAML")
-    assert sum(exp.hidden) == 0  # type: ignore[attr-defined]  # every circle visible in both cameras
+    assert sum(exp.hidden) == 0  # every circle visible in both cameras
 
 
-def test_measured_poses_match_the_truth(experiment: tuple[Path, object], measured: Path) -> None:
+def test_measured_poses_match_the_truth(experiment: tuple[Path, RenderedExperiment], measured: Path) -> None:
     folder, exp = experiment
     ms = load_measurements(measured)
     exact = load_measurements(folder / "exact.json")
@@ -82,20 +78,20 @@ def test_measured_poses_match_the_truth(experiment: tuple[Path, object], measure
 
 
 def test_identification_from_images_matches_exact_poses_with_the_same_noise(
-    experiment: tuple[Path, object], measured: Path
+    experiment: tuple[Path, RenderedExperiment], measured: Path
 ) -> None:
     folder, exp = experiment
     ms = load_measurements(measured)
     exact = load_measurements(folder / "exact.json")
     heldout = load_measurements(folder / "heldout.json")
-    rig = exp.rig  # type: ignore[attr-defined]
+    rig = exp.rig
     designs = robot_plate_designs(STRUCTURE.frames)
     # The detector's pixel error, measured against the truth on these very images.
     views = [PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w))) for w in ("left", "right")]
     errs = []
     for i in range(0, ms.n_records, 3):
         img = [cv2.imread(str(folder / s / f"{i:04d}.png"), cv2.IMREAD_GRAYSCALE) for s in ("left", "right")]
-        from cpc2urdf.identification.vision.detect import stereo_plate_poses
+        from cpc2urdf.identification.vision.plate_poses import stereo_plate_poses
 
         res = stereo_plate_poses(img[0], img[1], rig, designs)
         for d in designs:
@@ -131,16 +127,16 @@ def _small_copy(folder: Path, dst: Path, n: int = 3) -> Path:
     return dst
 
 
-def test_broken_images_skip_or_stop(experiment: tuple[Path, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_broken_images_skip_or_stop(experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder, exp = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=4)
     (d / "right" / "0001.png").write_bytes(b"\x89PNG\r\n\x1a\nthis is not an image")  # corrupt
     (d / "left" / "0002.png").unlink()  # missing
     cv2.imwrite(str(d / "left" / "0003.png"), np.zeros((1024, 1280), np.uint8))  # blank
-    rig = exp.rig  # type: ignore[attr-defined]
+    rig = exp.rig
     view = PinholeView(rig.K1, rig.D1, rig.image_size)
     designs = robot_plate_designs(STRUCTURE.frames)
-    only_left = render_view(view, [(designs[0], exp.measured.poses["plate_left"][0])], noise_sigma=2.0,  # type: ignore[attr-defined]
+    only_left = render_view(view, [(designs[0], exp.measured.poses["plate_left"][0])], noise_sigma=2.0,
                             rng=np.random.default_rng(0))
     cv2.imwrite(str(d / "left" / "0000.png"), only_left)  # plate_right missing
     out = tmp_path / "m.json"
@@ -156,7 +152,7 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, object], tmp_path: P
                    "left/0002.*", "no image file", "left/0003.png", "blank image"):
         assert needle in cap.err, needle
     ms = load_measurements(out)
-    assert ms.labels == [exp.measured.labels[0]]  # type: ignore[attr-defined]  # only record 0 left ...
+    assert ms.labels == [exp.measured.labels[0]]  # only record 0 left ...
     assert ms.has_pose("plate_left").all() and not ms.has_pose("plate_right").any()  # ... with one plate
     assert len(ms.metadata["provenance"]["skipped"]) == 5  # the blank image: both plates
     # skip-record: record 0 lost plate_right, so it goes too -> nothing left.
@@ -171,7 +167,7 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, object], tmp_path: P
     assert not out.exists()
 
 
-def test_bad_rig_joints_and_folders(experiment: tuple[Path, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_rig_joints_and_folders(experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder, _ = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=2)
     out = tmp_path / "m.json"
@@ -220,14 +216,14 @@ def test_joints_csv_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def head(experiment: tuple[Path, object], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def head(experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder, _ = experiment
     out = tmp_path_factory.mktemp("head") / "head"
     render_head_experiment(out, load_model(folder / "truth.json"), n_poses=5, seed=3)
     return out
 
 
-def test_stage2_from_head_camera_images(experiment: tuple[Path, object], head: Path, tmp_path: Path) -> None:
+def test_stage2_from_head_camera_images(experiment: tuple[Path, RenderedExperiment], head: Path, tmp_path: Path) -> None:
     folder, exp = experiment
     truth = load_model(folder / "truth.json")
     out = tmp_path / "poses"
@@ -246,13 +242,10 @@ def test_stage2_from_head_camera_images(experiment: tuple[Path, object], head: P
         np.testing.assert_allclose(poses.T_base_hand, T_bh, atol=1e-9)
 
 
-def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, object], head: Path) -> None:
+def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, RenderedExperiment], head: Path) -> None:
+    from cpc2urdf.identification.handeye.head_images import stage2_observations
     from cpc2urdf.identification.handeye.stage2 import calibrate_cameras, camera_errors
-    from cpc2urdf.identification.vision.measure_images import (
-        HeadCamera,
-        measure_head_images,
-        stage2_observations,
-    )
+    from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.identification.vision.rig_file import load_camera
 
     folder, _ = experiment
@@ -264,8 +257,8 @@ def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, ob
         assert dt < 0.5e-3 and np.degrees(dr) < 0.05, (c, dt, np.degrees(dr))
 
 
-def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, object], tmp_path: Path) -> None:
-    from cpc2urdf.identification.vision.measure_images import measure_stereo_images
+def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, RenderedExperiment], tmp_path: Path) -> None:
+    from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
 
     folder, exp = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=1)
@@ -274,7 +267,7 @@ def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, ob
     cv2.imwrite(str(d / "left" / "0000.tif"), (grey.astype(np.uint16) * 257))  # 16-bit TIFF
     right = cv2.imread(str(d / "right" / "0000.png"), cv2.IMREAD_GRAYSCALE)
     cv2.imwrite(str(d / "right" / "0000.png"), cv2.cvtColor(right, cv2.COLOR_GRAY2BGR))  # colour
-    res = measure_stereo_images(d, exp.rig, STRUCTURE)  # type: ignore[attr-defined]
+    res = measure_stereo_images(d, exp.rig, STRUCTURE)
     ref = load_measurements(folder / "exact.json")
     assert not res.problems
     for f in ("plate_left", "plate_right"):

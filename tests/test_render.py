@@ -13,15 +13,14 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.identification.vision.detect import ellipse_centre_offset
+from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset
 from cpc2urdf.identification.vision.render import (
     BACKGROUND_LEVEL,
     PLATE_BACK_LEVEL,
     PinholeView,
-    plate_design,
     render_view,
-    target_design,
 )
+from cpc2urdf.identification.vision.targets import plate_design, target_design
 
 GRID3 = np.array([[0, 0, 0], [-25, -25, 0], [0, -25, 0], [25, -25, 0], [-25, 0, 0], [25, 0, 0],
                   [-25, 25, 0], [0, 25, 0], [25, 25, 0]], dtype=float) * 1e-3

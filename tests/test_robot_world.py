@@ -14,13 +14,12 @@ from test_handeye import EXACT, add_noise, make_data, random_pose
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axzb import (
+from cpc2urdf.identification.handeye.axzb import refine, solve_kronecker
+from cpc2urdf.identification.handeye.solvers import (
     ALL_METHODS,
     ROBOT_WORLD_METHODS,
     calibrate,
     calibrate_robot_world,
-    refine,
-    solve_kronecker,
 )
 from cpc2urdf.transforms import homogeneous, inverse, rotation_error
 

@@ -25,8 +25,9 @@ from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.identification.simulation.simulate import simulate_experiment
 from cpc2urdf.identification.simulation.truth import perturb_params, perturbed_model
 from cpc2urdf.identification.simulation.visibility import OCCLUSION_MARGIN_PX, check_view
-from cpc2urdf.identification.vision.render import PinholeView, hidden_circles, robot_plate_designs
+from cpc2urdf.identification.vision.render import PinholeView, hidden_circles
 from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import robot_plate_designs
 from cpc2urdf.measurements import load_measurements
 from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
 from cpc2urdf.model_file import save_model

@@ -1,4 +1,4 @@
-"""Stage-2 pipeline (identification/stage2.py): simulated cameras, solvePnP, hand-eye, model."""
+"""Stage-2 pipeline (identification/handeye/stage2.py): simulated cameras, solvePnP, hand-eye, model."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye import stage2 as s2
+from cpc2urdf.identification.vision import targets
 from cpc2urdf.model_file import model_to_json, save_model
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.transforms import inverse
@@ -27,11 +28,11 @@ def nominal_and_truth() -> tuple[object, object]:
 
 
 def test_target_definition() -> None:
-    L = s2.TARGET_LAYOUT
+    L = targets.TARGET_LAYOUT
     assert L.shape == (25, 3) and np.allclose(L[:, 2], 0.0)
     assert np.allclose(L.mean(axis=0), 0.0)
-    assert np.allclose(L[1] - L[0], [s2.TARGET_PITCH, 0, 0]) and np.allclose(L[5] - L[0], [0, s2.TARGET_PITCH, 0])
-    assert np.all(np.abs(L[:, :2]) + s2.TARGET_MARKER_RADIUS < np.array(s2.TARGET_SIZE) / 2)
+    assert np.allclose(L[1] - L[0], [targets.TARGET_PITCH, 0, 0]) and np.allclose(L[5] - L[0], [0, targets.TARGET_PITCH, 0])
+    assert np.all(np.abs(L[:, :2]) + targets.TARGET_MARKER_RADIUS < np.array(targets.TARGET_SIZE) / 2)
     K = s2.DEFAULT_INTRINSICS.K
     assert K.shape == (3, 3) and s2.DEFAULT_INTRINSICS.D.shape == (5,)
 

@@ -21,7 +21,7 @@ Z_DIRECTION = "Z = T_base_target: target pose in the robot base frame (maps targ
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from cpc2urdf.identification.handeye.axzb import ALL_METHODS
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS
 
     p = subparsers.add_parser(
         "handeye",
@@ -78,8 +78,8 @@ def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.identification.handeye.axzb import ALL_METHODS, calibrate
     from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS, calibrate
 
     data = load_handeye_poses(args.poses)
     model = _check_model_args(args, data)

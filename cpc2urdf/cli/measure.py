@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if args.stage2:
         return _run_stage2(args)
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.identification.vision.measure_images import measure_stereo_images
+    from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.identification.vision.rig_file import load_rig
     from cpc2urdf.measurements import save_measurements
     from cpc2urdf.robot_ref import load_robot
@@ -89,12 +89,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_stage2(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
+    from cpc2urdf.identification.handeye.head_images import write_handeye_files
     from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA
-    from cpc2urdf.identification.vision.measure_images import (
-        HeadCamera,
-        measure_head_images,
-        write_handeye_files,
-    )
+    from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.identification.vision.rig_file import load_camera
     from cpc2urdf.robot_ref import load_model
 

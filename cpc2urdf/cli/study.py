@@ -8,7 +8,7 @@ from cpc2urdf.cli._registry import add_group
 
 STUDIES: dict[str, tuple[str, str]] = {
     "stereo": ("cpc2urdf.studies.stereo_noise", "plate pose error of the stereo rig vs pixel noise"),
-    "stage2": ("cpc2urdf.identification.handeye.stage2", "stage-2 camera frame error vs pixel noise, per hand-eye solver"),
+    "stage2": ("cpc2urdf.studies.stage2", "stage-2 camera frame error vs pixel noise, per hand-eye solver"),
     "li2010": ("cpc2urdf.studies.li2010", "Li et al. 2010 Fig. 1: AX=ZB errors vs number of poses"),
     "fig11": ("cpc2urdf.studies.fig11", "Shih et al. Fig. 11: positioning error vs M and noise"),
     "crb": ("cpc2urdf.studies.crb", "closed form and refinement vs the Cramér-Rao bound (M = 9, 0.5 mm)"),

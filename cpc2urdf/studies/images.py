@@ -1,8 +1,9 @@
 """Study: the image pipeline at the paper's geometry (600 mm baseline, ~1.5 m; Shih et al. sec. 6).
 
 Renders the IIS-head's plates (:mod:`~cpc2urdf.identification.vision.render`) as the default rig sees
-them at held-out configurations of a simulated experiment, runs the detector
-(:mod:`~cpc2urdf.identification.vision.detect`) and reports, per image noise level:
+them at held-out configurations of a simulated experiment, runs the detector and the pose
+estimation (:mod:`~cpc2urdf.identification.vision.detect`,
+:mod:`~cpc2urdf.identification.vision.plate_poses`) and reports, per image noise level:
 
 - the detected circle centres against the true projected centres [px] (the issue asks for
   0.1 px), before and after removing the ellipse-centre offset;
@@ -47,18 +48,12 @@ def _pct(x: np.ndarray) -> str:
 def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     """Run the study; returns the numbers (px, mm, deg) and a markdown report under ``"md"``."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+    from cpc2urdf.identification.simulation.images import render_experiment
     from cpc2urdf.identification.simulation.noise import stereo_noise
-    from cpc2urdf.identification.vision.detect import ellipse_centre_offset, stereo_plate_poses
-    from cpc2urdf.identification.vision.measure_images import (
-        measure_stereo_images,
-        render_experiment,
-    )
-    from cpc2urdf.identification.vision.render import (
-        PinholeView,
-        circle_centres_px,
-        render_view,
-        robot_plate_designs,
-    )
+    from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
+    from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset, stereo_plate_poses
+    from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
+    from cpc2urdf.identification.vision.targets import robot_plate_designs
     from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.transforms import inverse, rotation_error
     from cpc2urdf.validation.accuracy import accuracy
@@ -238,3 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     print(result["md"])
     print(f"wrote {path}")
     return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
+__all__ = ["main", "run_study"]

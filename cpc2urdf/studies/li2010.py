@@ -38,6 +38,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.argparsing import OneLineParser
+from cpc2urdf.identification.handeye.axxb import HandEyeResult
 from cpc2urdf.progress import progress
 from cpc2urdf.transforms import Array, homogeneous, inverse, matrix_from_rpy
 
@@ -121,7 +122,8 @@ def run_study(
         mean errors over ``repeats`` (refused runs excluded and counted).
     """
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.identification.handeye.axzb import calibrate, solve_kronecker
+    from cpc2urdf.identification.handeye.axzb import solve_kronecker
+    from cpc2urdf.identification.handeye.solvers import calibrate
 
     rng = np.random.default_rng(seed)
     rows: list[dict[str, Any]] = []
@@ -169,7 +171,7 @@ def run_study(
     return {"rows": rows, "ratios": ratios, "repeats": repeats, "seed": seed, "methods": list(methods)}
 
 
-def _xz(r: Any) -> tuple[Array, Array]:
+def _xz(r: HandEyeResult) -> tuple[Array, Array]:
     return r.X, r.Z
 
 
@@ -300,3 +302,6 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+__all__ = ["format_report", "main", "plot", "pose_errors", "ranking_verdict", "run_study", "simulate"]

@@ -48,13 +48,13 @@ def run_study(
     Returns:
         ``{"rows": [...], "rig": {...}, "fit": {...}}``; errors in mm and deg.
     """
-    from cpc2urdf.identification.simulation.noise import stereo_noise
-    from cpc2urdf.identification.simulation.simulate import (
+    from cpc2urdf.identification.simulation.design import (
         calibration_ranges,
         measured_frames,
-        place_in_front_of_rig,
         random_configurations,
     )
+    from cpc2urdf.identification.simulation.noise import stereo_noise
+    from cpc2urdf.identification.simulation.placement import place_in_front_of_rig
     from cpc2urdf.identification.vision.stereo import StereoRig
     from cpc2urdf.robot_ref import load_robot
     from cpc2urdf.transforms import rotation_error

@@ -1,6 +1,7 @@
 """Hand-eye calibration ``A X = X B`` (Tsai-Lenz, Park-Martin, Daniilidis) and what all solvers share.
 
-Conventions (every solver here and in :mod:`cpc2urdf.identification.handeye.axzb`):
+Conventions (every solver here and in :mod:`cpc2urdf.identification.handeye.axzb`; run any of
+them by name with :func:`cpc2urdf.identification.handeye.solvers.calibrate`):
 
 - Input: absolute poses per robot configuration k,
   ``T_base_hand[k]`` (hand = the end effector carrying the camera, from the robot kinematics) and
@@ -26,7 +27,7 @@ whose rotation angles only agree if one pose list is inverted), and weak data is
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +36,18 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.transforms import Array, homogeneous, inverse, project_to_rotation, rotation_error
+from cpc2urdf.transforms import (
+    Array,
+    dual_quat_from_transform,
+    homogeneous,
+    inverse,
+    project_to_rotation,
+    quat_left_matrix,
+    quat_right_matrix,
+    rotation_error,
+    skew,
+    transform_from_dual_quat,
+)
 
 MIN_POSES = 3
 # RMS rotation [rad] (over pose pairs) about the best / second-best excited direction below which
@@ -44,8 +56,6 @@ DEGENERATE_ROTATION = math.radians(0.1)
 WEAK_ROTATION = math.radians(5.0)
 # A pose whose residual exceeds this many times the median (and 1 mm / 0.1 deg) is flagged.
 OUTLIER_FACTOR = 5.0
-
-HAND_EYE_METHODS = ("tsai", "park_martin", "daniilidis")
 
 
 # ---- input checks ------------------------------------------------------------------------------
@@ -293,10 +303,6 @@ def relative_motions(T_base_hand: Array, T_camera_target: Array) -> tuple[Array,
     return A, B
 
 
-def _skew(v: Array) -> Array:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def _translation_given_rotation(A: Array, B: Array, R_X: Array) -> Array:
     """Least squares for ``(R_A - I) t_X = R_X t_B - t_A`` over all motions (Tsai-Lenz step 2)."""
     M = (A[:, :3, :3] - np.eye(3)).reshape(-1, 3)
@@ -310,7 +316,7 @@ def _translation_given_rotation(A: Array, B: Array, R_X: Array) -> Array:
 AMBIGUOUS_AXIS_ANGLE = math.radians(170.0)
 
 
-def _align_axis_signs(VA: Array, VB: Array, solve: Any) -> Array:
+def _align_axis_signs(VA: Array, VB: Array, solve: Callable[[Array, Array], Array]) -> Array:
     """Solve a rotation from axis vectors ``VA ~ R_X VB`` (N, 3) robustly near 180 deg.
 
     First ``solve`` on the motions whose angle is below :data:`AMBIGUOUS_AXIS_ANGLE` (if two
@@ -337,11 +343,11 @@ def _modified_rodrigues(R: Array) -> Array:
 def _tsai_rotation(PA: Array, PB: Array) -> Array:
     """Tsai-Lenz rotation step (``P_A = R_X P_B``): ``skew(P_A + P_B) P'_X = P_B - P_A``, then
     ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)`` and ``R_X`` from ``P_X``."""
-    M = np.concatenate([_skew(a + b) for a, b in zip(PA, PB, strict=True)])
+    M = np.concatenate([skew(a + b) for a, b in zip(PA, PB, strict=True)])
     Pp = np.linalg.lstsq(M, (PB - PA).reshape(-1), rcond=None)[0]
     P = 2.0 * Pp / math.sqrt(1.0 + Pp @ Pp)
     n2 = float(P @ P)
-    R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * _skew(P))
+    R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * skew(P))
     return project_to_rotation(R)
 
 
@@ -371,74 +377,7 @@ def solve_park_martin(A: Array, B: Array) -> Array:
     return homogeneous(R, _translation_given_rotation(A, B, R))
 
 
-# ---- quaternion helpers shared with robot_world ------------------------------------------------
-
-
-def quat_wxyz(R: Array) -> Array:
-    """Unit quaternions ``[w, x, y, z]`` of rotations (..., 3, 3) with ``w >= 0``."""
-    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-    q = np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
-    return np.where(q[..., :1] < 0, -q, q)
-
-
-def quat_left(q: Array) -> Array:
-    """Matrix of ``p -> q p`` (Li et al.'s ``a~``), shape (4, 4)."""
-    w, v = q[0], q[1:]
-    M = np.empty((4, 4))
-    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
-    M[1:, 1:] = w * np.eye(3) + _skew(v)
-    return M
-
-
-def quat_right(q: Array) -> Array:
-    """Matrix of ``p -> p q`` (Li et al.'s ``b~``), shape (4, 4)."""
-    w, v = q[0], q[1:]
-    M = np.empty((4, 4))
-    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
-    M[1:, 1:] = w * np.eye(3) - _skew(v)
-    return M
-
-
-def quat_mul(p: Array, q: Array) -> Array:
-    return quat_left(p) @ q
-
-
-def dual_quat(T: Array) -> tuple[Array, Array]:
-    """Unit dual quaternion ``q + eps q'`` of a transform: ``q' = 1/2 (0, t) q``."""
-    q = quat_wxyz(T[:3, :3])
-    return q, 0.5 * quat_mul(np.concatenate([[0.0], T[:3, 3]]), q)
-
-
-def transform_from_dual_quat(q: Array, qd: Array) -> Array:
-    """Inverse of :func:`dual_quat` (``t = 2 q' q*``); ``q`` normalised first."""
-    n = float(np.linalg.norm(q))
-    q, qd = q / n, qd / n
-    qd = qd - (q @ qd) * q  # unit dual quaternion: q . q' = 0
-    R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
-    t = 2.0 * quat_mul(qd, np.array([q[0], -q[1], -q[2], -q[3]]))[1:]
-    return homogeneous(R, t)
-
-
-def align_quaternion_signs(qa: Array, qb: Array) -> tuple[Array, Array]:
-    """Choose signs so that ``a_i x = z b_i`` holds with one sign for all poses.
-
-    Scalar parts of ``a_i a_j^*`` and ``b_i b_j^*`` are equal (conjugate rotations), i.e.
-    ``a_i . a_j = b_i . b_j``; each pose is aligned against the already aligned pose with the
-    largest ``|a_i . a_j|`` (avoids pairs 180 deg apart). Shapes (N, 4) each.
-    """
-    qa, qb = qa.copy(), qb.copy()
-    done = [0]
-    todo = list(range(1, len(qa)))
-    while todo:
-        dots = np.abs(qa[todo] @ qa[done].T)
-        t, d = np.unravel_index(np.argmax(dots), dots.shape)
-        i, j = todo.pop(int(t)), done[int(d)]
-        if qa[i] @ qa[j] < 0:
-            qa[i] = -qa[i]
-        if qb[i] @ qb[j] < 0:
-            qb[i] = -qb[i]
-        done.append(i)
-    return qa, qb
+# ---- Daniilidis: dual quaternions -------------------------------------------------------------
 
 
 def solve_daniilidis(A: Array, B: Array) -> Array:
@@ -450,14 +389,14 @@ def solve_daniilidis(A: Array, B: Array) -> Array:
     """
     rows = []
     for Ai, Bi in zip(A, B, strict=True):
-        a, ad = dual_quat(Ai)
-        b, bd = dual_quat(Bi)
+        a, ad = dual_quat_from_transform(Ai)
+        b, bd = dual_quat_from_transform(Bi)
         if a[0] * b[0] < 0:  # equal rotation angles: scalar parts agree in sign
             b, bd = -b, -bd
         S = np.zeros((8, 8))
-        S[:4, :4] = quat_left(a) - quat_right(b)
-        S[4:, :4] = quat_left(ad) - quat_right(bd)
-        S[4:, 4:] = quat_left(a) - quat_right(b)
+        S[:4, :4] = quat_left_matrix(a) - quat_right_matrix(b)
+        S[4:, :4] = quat_left_matrix(ad) - quat_right_matrix(bd)
+        S[4:, 4:] = quat_left_matrix(a) - quat_right_matrix(b)
         rows.append(S)
     _, _, Vt = np.linalg.svd(np.concatenate(rows))
     v1, v2 = Vt[-1], Vt[-2]
@@ -491,33 +430,25 @@ def null_space_combination(blocks: list[tuple[Array, Array, Array, Array]]) -> A
     return u * math.sqrt(len(blocks) / float(u @ N @ u))
 
 
-# ---- entry point -------------------------------------------------------------------------------
-
-_AXXB_SOLVERS = {"tsai": solve_tsai, "park_martin": solve_park_martin, "daniilidis": solve_daniilidis}
-
-
-def calibrate_hand_eye(
-    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str = "tsai"
-) -> HandEyeResult:
-    """Solve ``A X = X B`` for ``X = T_hand_camera`` (and ``Z = T_base_target`` afterwards).
-
-    Args:
-        T_base_hand: Hand poses in the robot base frame, shape (N, 4, 4) [m].
-        T_camera_target: Target poses in the camera frame (solvePnP), shape (N, 4, 4) [m].
-        method: One of :data:`HAND_EYE_METHODS`.
-
-    Returns:
-        The solution with per-pose residuals and warnings.
-
-    Raises:
-        DegenerateDataError: See :func:`diagnose`.
-        ValueError: Malformed poses or an unknown method.
-    """
-    if method not in _AXXB_SOLVERS:
-        raise ValueError(f"unknown AX=XB method {method!r}; known: {', '.join(HAND_EYE_METHODS)}")
-    H = as_pose_stack(T_base_hand, "T_base_hand")
-    C = as_pose_stack(T_camera_target, "T_camera_target")
-    warnings = diagnose(H, C)
-    A, B = relative_motions(H, C)
-    X = _AXXB_SOLVERS[method](A, B)
-    return make_result(method, H, C, X, target_from_x(H, C, X), warnings)
+__all__ = [
+    "AMBIGUOUS_AXIS_ANGLE",
+    "DEGENERATE_ROTATION",
+    "MIN_POSES",
+    "OUTLIER_FACTOR",
+    "WEAK_ROTATION",
+    "HandEyeResult",
+    "as_pose_stack",
+    "check_directions",
+    "diagnose",
+    "make_result",
+    "mean_pose",
+    "null_space_combination",
+    "outlier_warnings",
+    "relative_motions",
+    "residuals",
+    "rotation_spread",
+    "solve_daniilidis",
+    "solve_park_martin",
+    "solve_tsai",
+    "target_from_x",
+]

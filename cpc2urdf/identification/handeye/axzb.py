@@ -19,7 +19,7 @@ Solvers:
   ``+b~``; the signs must be minus as in eq. (11)). Its null space is two-dimensional (the solution
   and its ``eps`` multiple ``(0, x, 0, z)``); eq. (14b) must read ``= 0`` (unit dual quaternion:
   ``x . x' = 0``), as (14d) does. The quaternion signs of A and B must agree across poses, which
-  the paper does not discuss; see :func:`~cpc2urdf.identification.handeye.axxb.align_quaternion_signs`.
+  the paper does not discuss; see :func:`align_quaternion_signs`.
 - ``zhuang``: the two-stage quaternion method of Zhuang, Roth & Sudhakar (1994) as Li et al.
   describe it: rotations first from ``a x = z b``, eliminating ``x_0`` with the scalar equation
   (which divides by ``a_0``: the rotation angle of every A must stay away from 180 deg), solved
@@ -34,30 +34,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axxb import (
-    HAND_EYE_METHODS,
-    HandEyeResult,
-    align_quaternion_signs,
-    as_pose_stack,
-    calibrate_hand_eye,
-    diagnose,
-    dual_quat,
-    make_result,
-    null_space_combination,
-    quat_left,
-    quat_right,
-    quat_wxyz,
+from cpc2urdf.identification.handeye.axxb import null_space_combination
+from cpc2urdf.transforms import (
+    Array,
+    dual_quat_from_transform,
+    homogeneous,
+    inverse,
+    project_to_rotation,
+    quat_left_matrix,
+    quat_right_matrix,
+    quat_wxyz_from_matrix,
     transform_from_dual_quat,
 )
-from cpc2urdf.transforms import Array, homogeneous, inverse, project_to_rotation
 
-ROBOT_WORLD_METHODS = ("kronecker", "dual_quaternion", "zhuang", "refined")
-ALL_METHODS = HAND_EYE_METHODS + ROBOT_WORLD_METHODS
 # Zhuang's elimination divides by a_0 = cos(theta_A / 2): refuse A rotations closer than this to
 # 180 deg, warn within NEAR_180_WARN.
 NEAR_180_REFUSE = math.radians(1.0)
@@ -101,10 +94,32 @@ def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array
     return homogeneous(R_X, w[18:21]), homogeneous(R_Z, w[21:24])
 
 
+def align_quaternion_signs(qa: Array, qb: Array) -> tuple[Array, Array]:
+    """Choose signs so that ``a_i x = z b_i`` holds with one sign for all poses.
+
+    Scalar parts of ``a_i a_j^*`` and ``b_i b_j^*`` are equal (conjugate rotations), i.e.
+    ``a_i . a_j = b_i . b_j``; each pose is aligned against the already aligned pose with the
+    largest ``|a_i . a_j|`` (avoids pairs 180 deg apart). Shapes (N, 4) each.
+    """
+    qa, qb = qa.copy(), qb.copy()
+    done = [0]
+    todo = list(range(1, len(qa)))
+    while todo:
+        dots = np.abs(qa[todo] @ qa[done].T)
+        t, d = np.unravel_index(np.argmax(dots), dots.shape)
+        i, j = todo.pop(int(t)), done[int(d)]
+        if qa[i] @ qa[j] < 0:
+            qa[i] = -qa[i]
+        if qb[i] @ qb[j] < 0:
+            qb[i] = -qb[i]
+        done.append(i)
+    return qa, qb
+
+
 def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
     """Li et al. eqs. (9)-(14): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4)."""
-    dq_a = [dual_quat(T) for T in A]
-    dq_b = [dual_quat(T) for T in B]
+    dq_a = [dual_quat_from_transform(T) for T in A]
+    dq_b = [dual_quat_from_transform(T) for T in B]
     qa, qb = align_quaternion_signs(np.array([d[0] for d in dq_a]), np.array([d[0] for d in dq_b]))
     rows = []
     for k in range(len(A)):
@@ -113,12 +128,12 @@ def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
         a, ad = sa * dq_a[k][0], sa * dq_a[k][1]
         b, bd = sb * dq_b[k][0], sb * dq_b[k][1]
         S = np.zeros((8, 16))  # eq. (12) with the signs of eq. (11)
-        S[:4, 0:4] = quat_left(a)
-        S[:4, 8:12] = -quat_right(b)
-        S[4:, 0:4] = quat_left(ad)
-        S[4:, 4:8] = quat_left(a)
-        S[4:, 8:12] = -quat_right(bd)
-        S[4:, 12:16] = -quat_right(b)
+        S[:4, 0:4] = quat_left_matrix(a)
+        S[:4, 8:12] = -quat_right_matrix(b)
+        S[4:, 0:4] = quat_left_matrix(ad)
+        S[4:, 4:8] = quat_left_matrix(a)
+        S[4:, 8:12] = -quat_right_matrix(bd)
+        S[4:, 12:16] = -quat_right_matrix(b)
         rows.append(S)
     _, _, Vt = np.linalg.svd(np.concatenate(rows))
     v1, v2 = Vt[-1], Vt[-2]  # eq. (13): the two right singular vectors of (near) zero
@@ -131,7 +146,7 @@ def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
 
 def zhuang_a0_check(A: Array) -> list[str]:
     """Refuse or warn about hand rotations near 180 deg (Zhuang's method divides by ``a_0``)."""
-    ang = 2.0 * np.arccos(np.clip(quat_wxyz(A[:, :3, :3])[:, 0], -1.0, 1.0))
+    ang = 2.0 * np.arccos(np.clip(quat_wxyz_from_matrix(A[:, :3, :3])[:, 0], -1.0, 1.0))
     bad = np.flatnonzero(ang > math.pi - NEAR_180_REFUSE)
     if bad.size:
         raise DegenerateDataError(
@@ -150,10 +165,10 @@ def zhuang_a0_check(A: Array) -> list[str]:
 
 def solve_zhuang(A: Array, B: Array) -> tuple[Array, Array]:
     """Zhuang et al.'s two-stage quaternion method: returns ``(X, Z)``; shape (N, 4, 4) each."""
-    qa, qb = align_quaternion_signs(quat_wxyz(A[:, :3, :3]), quat_wxyz(B[:, :3, :3]))
+    qa, qb = align_quaternion_signs(quat_wxyz_from_matrix(A[:, :3, :3]), quat_wxyz_from_matrix(B[:, :3, :3]))
     G, r0s, a0s = [], [], []
     for a, b in zip(qa, qb, strict=True):
-        M = np.hstack([quat_left(a), -quat_right(b)])  # a x - z b = 0, unknowns [x0..3, z0..3]
+        M = np.hstack([quat_left_matrix(a), -quat_right_matrix(b)])  # a x - z b = 0, unknowns [x0..3, z0..3]
         others = M[:, 1:]  # [x1..3, z0..3]
         # scalar row: a0 x0 + others[0] u = 0  ->  x0 = -others[0] u / a0, into the vector rows
         G.append(others[1:] - np.outer(M[1:, 0], others[0]) / a[0])
@@ -205,49 +220,22 @@ def refine(
     return unpack(sol.x)
 
 
-def _refined(A: Array, B: Array) -> tuple[Array, Array]:
+def solve_refined(A: Array, B: Array) -> tuple[Array, Array]:
+    """Kronecker start (:func:`solve_kronecker`), then :func:`refine`: returns ``(X, Z)``; A, B
+    absolute, shape (N, 4, 4)."""
     X0, Z0 = solve_kronecker(A, B)
     return refine(A, B, X0, Z0)
 
 
-_AXZB_SOLVERS = {
-    "kronecker": solve_kronecker,
-    "dual_quaternion": solve_dual_quaternion,
-    "zhuang": solve_zhuang,
-    "refined": _refined,
-}
-
-
-def calibrate_robot_world(
-    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str = "kronecker"
-) -> HandEyeResult:
-    """Solve ``A X = Z B`` for ``X = T_hand_camera`` and ``Z = T_base_target``.
-
-    Args:
-        T_base_hand: Hand poses in the robot base frame, shape (N, 4, 4) [m].
-        T_camera_target: Target poses in the camera frame (solvePnP), shape (N, 4, 4) [m].
-        method: One of :data:`ROBOT_WORLD_METHODS`.
-
-    Raises:
-        DegenerateDataError: See :func:`~cpc2urdf.identification.handeye.axxb.diagnose`, and hand
-            rotations near 180 deg for ``zhuang``.
-        ValueError: Malformed poses or an unknown method.
-    """
-    if method not in _AXZB_SOLVERS:
-        raise ValueError(f"unknown AX=ZB method {method!r}; known: {', '.join(ROBOT_WORLD_METHODS)}")
-    H = as_pose_stack(T_base_hand, "T_base_hand")
-    C = as_pose_stack(T_camera_target, "T_camera_target")
-    warnings = diagnose(H, C)
-    if method == "zhuang":
-        warnings += zhuang_a0_check(H)
-    X, Z = _AXZB_SOLVERS[method](H, inverse(C))
-    return make_result(method, H, C, X, Z, warnings)
-
-
-def calibrate(T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str) -> HandEyeResult:
-    """Any solver of :data:`ALL_METHODS` (AX = XB or AX = ZB) on the same absolute poses."""
-    if method in HAND_EYE_METHODS:
-        return calibrate_hand_eye(T_base_hand, T_camera_target, method)
-    if method in ROBOT_WORLD_METHODS:
-        return calibrate_robot_world(T_base_hand, T_camera_target, method)
-    raise ValueError(f"unknown method {method!r}; known: {', '.join(ALL_METHODS)}")
+__all__ = [
+    "NEAR_180_REFUSE",
+    "NEAR_180_WARN",
+    "ROTATION_SCALE",
+    "align_quaternion_signs",
+    "refine",
+    "solve_dual_quaternion",
+    "solve_kronecker",
+    "solve_refined",
+    "solve_zhuang",
+    "zhuang_a0_check",
+]

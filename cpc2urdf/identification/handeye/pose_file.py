@@ -138,7 +138,28 @@ def handeye_poses_to_json(
     return doc
 
 
-def save_handeye_poses(path: str | os.PathLike[str], T_base_hand: ArrayLike, T_camera_target: ArrayLike,
-                       **kwargs: Any) -> Path:
+def save_handeye_poses(
+    path: str | os.PathLike[str],
+    T_base_hand: ArrayLike,
+    T_camera_target: ArrayLike,
+    *,
+    labels: Sequence[str] | None = None,
+    camera: str = "",
+    hand: str = "",
+    units: Units | None = None,
+    description: str = "",
+) -> Path:
     """Write a pose file atomically; keyword arguments as :func:`handeye_poses_to_json`."""
-    return write_json(path, handeye_poses_to_json(T_base_hand, T_camera_target, **kwargs))
+    return write_json(path, handeye_poses_to_json(
+        T_base_hand, T_camera_target, labels=labels, camera=camera, hand=hand, units=units, description=description
+    ))
+
+
+__all__ = [
+    "HANDEYE_POSES_FORMAT",
+    "HandEyePoses",
+    "handeye_poses_from_json",
+    "handeye_poses_to_json",
+    "load_handeye_poses",
+    "save_handeye_poses",
+]

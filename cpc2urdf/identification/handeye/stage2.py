@@ -8,15 +8,11 @@ the paper's frames 5L / 5R), ``T_base_hand``. Solving ``A X = X B`` (Tsai-Lenz, 
 ``A X = Z B`` gives ``X = T_plate_camera`` (the paper's ``5L T CL``, eq. (70)); the camera frame
 then hangs on the vergence link at ``T_link_plate @ X``.
 
-Module-level definitions other code (the image renderer, issue 9) can use:
+Module-level definitions other code can use:
 
-- The target: :data:`TARGET_LAYOUT` (25 disk centres [m] in the target frame), pitch
-  :data:`TARGET_PITCH`, disk radius :data:`TARGET_DISK_RADIUS`, the larger orientation marker
-  disk :data:`TARGET_MARKER_INDEX` / :data:`TARGET_MARKER_RADIUS`, plate size
-  :data:`TARGET_SIZE`. Target frame: origin at the centre disk, x along a row (increasing
-  column), y along a column (increasing row), z the normal of the printed face (the disks face
-  +z, so a camera sees them when the target's z axis points towards it). Disk ``k`` is at row
-  ``k // 5``, column ``k % 5``: ``((col - 2) p, (row - 2) p, 0)``.
+- The target: ``TARGET_*`` of :mod:`cpc2urdf.identification.vision.targets` (25 disk centres
+  :data:`~cpc2urdf.identification.vision.targets.TARGET_LAYOUT` [m] in the target frame, pitch,
+  disk and marker radii, plate size, and the target frame's definition).
 - The cameras: :data:`DEFAULT_INTRINSICS` (640 x 480 px, f = 500 px: 65 x 51 deg field of view, no distortion; OpenCV
   camera matrix ``K`` and distortion ``D``), REP-103 optical frames.
 - The placement: :func:`default_target_placement` puts the target 0.4 m in front of the cameras
@@ -36,24 +32,11 @@ import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.axxb import HandEyeResult
-from cpc2urdf.identification.handeye.axzb import calibrate
 from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
+from cpc2urdf.identification.handeye.solvers import calibrate
+from cpc2urdf.identification.vision.targets import TARGET_LAYOUT
 from cpc2urdf.model import CPCModel, CPCParams, Frame
 from cpc2urdf.transforms import Array, homogeneous, inverse, rotation_error
-
-# ---- the 5 x 5 disk target ---------------------------------------------------------------------
-
-TARGET_ROWS = 5
-TARGET_COLS = 5
-TARGET_PITCH = 0.040  # [m] between neighbouring disk centres
-TARGET_DISK_RADIUS = 0.010  # [m]
-TARGET_MARKER_INDEX = 0  # the corner disk at row 0, column 0 is the larger orientation marker
-TARGET_MARKER_RADIUS = 0.014  # [m]
-TARGET_SIZE = (0.240, 0.240)  # [m] plate outline (x, y), centred on the target origin
-TARGET_LAYOUT: Array = np.array(
-    [((c - (TARGET_COLS - 1) / 2) * TARGET_PITCH, (r - (TARGET_ROWS - 1) / 2) * TARGET_PITCH, 0.0)
-     for r in range(TARGET_ROWS) for c in range(TARGET_COLS)]
-)  # (25, 3) [m], disk k at row k // 5, column k % 5
 
 # ---- cameras -----------------------------------------------------------------------------------
 
@@ -262,7 +245,7 @@ def calibrate_cameras(
     Args:
         model: The identified kinematic model (gives ``T_base_hand``).
         obs: Joint readings and PnP target poses.
-        method: Any solver of :data:`cpc2urdf.identification.handeye.axzb.ALL_METHODS`.
+        method: Any solver of :data:`cpc2urdf.identification.handeye.solvers.ALL_METHODS`.
 
     Returns:
         The model with ``camera_*_optical`` frames on the vergence links at ``T_link_plate @ X``
@@ -447,70 +430,19 @@ __all__ = [
     "HAND_OF_CAMERA",
     "Stage2Observations",
     "Stage2Result",
-    "TARGET_DISK_RADIUS",
-    "TARGET_LAYOUT",
-    "TARGET_MARKER_INDEX",
-    "TARGET_MARKER_RADIUS",
-    "TARGET_PITCH",
-    "TARGET_SIZE",
+    "DEFAULT_TARGET_DISTANCE",
+    "IMAGE_MARGIN",
     "calibrate_cameras",
     "camera_errors",
-    "with_camera_frame",
     "default_target_placement",
+    "hand_poses",
+    "home_configuration",
     "perturb_cameras",
     "pose_from_image_points",
     "project_target",
     "run_stage2",
     "sample_configurations",
     "simulate_observations",
+    "with_camera_frame",
     "write_pose_files",
 ]
-
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``cpc2urdf study stage2``: camera-frame error of stage 2 vs pixel noise, per solver.
-
-    The IIS-head nominal model with its camera mounts perturbed (3 deg, 5 mm) is the truth; the
-    identified model equals the truth apart from the cameras (stage 1 perfect), so the numbers
-    isolate stage 2: pixel noise -> solvePnP -> hand-eye.
-    """
-    import argparse
-
-    from cpc2urdf.argparsing import OneLineParser
-    from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.progress import progress
-    from cpc2urdf.robot_ref import load_model
-
-    parser = OneLineParser(prog="cpc2urdf study stage2", description=main.__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--poses", type=int, default=20, help="head configurations per run (default 20)")
-    parser.add_argument("--seeds", type=int, default=10, help="runs per noise level (default 10)")
-    parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.05, 0.1, 0.2, 0.5],
-                        help="pixel noise levels [px] (default 0 0.05 0.1 0.2 0.5)")
-    parser.add_argument("--methods", nargs="+", default=["tsai", "park_martin", "kronecker", "refined"],
-                        help="hand-eye solvers (default tsai park_martin kronecker refined)")
-    args = parser.parse_args(argv)
-    if args.poses < 3 or args.seeds < 1:
-        raise ConfigurationError("--poses must be >= 3 and --seeds >= 1")
-    nominal = load_model("iis_head")
-    truth = perturb_cameras(nominal, np.random.default_rng(1))
-    identified = truth.without_frames(["camera"])
-    print(f"stage 2 on iis_head: {args.poses} configurations, {args.seeds} seeds, target "
-          f"{TARGET_ROWS}x{TARGET_COLS} disks at {TARGET_PITCH * 1e3:.0f} mm pitch, "
-          f"{DEFAULT_TARGET_DISTANCE:.1f} m ahead; f = {DEFAULT_INTRINSICS.fx:.0f} px")
-    print("median over seeds and both cameras of the T_link_camera error: translation [mm] / rotation [deg]")
-    print(f"{'noise [px]':>10s} " + " ".join(f"{m:>20s}" for m in args.methods))
-    jobs = [(s, m) for s in args.noise for m in args.methods]
-    cells: dict[tuple[float, str], str] = {}
-    for sigma, m in progress(jobs, "stage2"):
-        et, er = [], []
-        for seed in range(args.seeds):
-            r = run_stage2(identified, truth, n_poses=args.poses, pixel_noise=sigma, method=m, seed=seed)
-            for t, a in r.errors.values():
-                et.append(t)
-                er.append(a)
-        cells[(sigma, m)] = f"{np.median(et) * 1e3:9.4f} / {math.degrees(float(np.median(er))):7.4f}"
-    for sigma in args.noise:
-        print(f"{sigma:10.2f} " + " ".join(f"{cells[(sigma, m)]:>20s}" for m in args.methods))
-    return 0

@@ -31,44 +31,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.model import CPCModel, RobotStructure
+from cpc2urdf.model import DEFAULT_RANGE_SHARE, CPCModel, RobotStructure
 
 Array = NDArray[np.float64]
 
 DEFAULT_M = 9  # sec. 6: "we choose to use nine measurements for each joint"
-DEFAULT_RANGE_SHARE = 0.5  # [-]: share of the joint limits used when the spec gives no calibration_range
 PROTOCOL_JITTER = 0.2  # [-]: largest random shift of a protocol value, as a share of the value spacing
 
 
 def calibration_ranges(
     structure: RobotStructure, overrides: Mapping[str, tuple[float, float]] | None = None
 ) -> Array:
-    """Per joint ``[lo, hi]`` [m]/[rad], shape (n, 2): ``overrides``, else the spec's
-    ``calibration_range``, else the middle half of the joint limits (the module's rule).
-
-    Raises:
-        UnknownNameError: ``overrides`` names a joint the robot does not have.
-        ConfigurationError: An override does not lie within its joint's limits.
-    """
-    out = np.empty((structure.n_joints, 2))
-    overrides = dict(overrides or {})
-    for name in overrides:
-        structure.joint(name)
-    for i, j in enumerate(structure.joints):
-        if j.name in overrides:
-            lo, hi = (float(v) for v in overrides[j.name])
-            if not (j.lower - 1e-12 <= lo <= hi <= j.upper + 1e-12):
-                raise ConfigurationError(
-                    f"joint {j.name!r}: calibration range [{lo:.6g}, {hi:.6g}] must lie within the "
-                    f"limits [{j.lower:.6g}, {j.upper:.6g}]"
-                )
-            out[i] = lo, hi
-        elif j.calibration_range is not None:
-            out[i] = j.calibration_range
-        else:
-            mid, half = (j.lower + j.upper) / 2, DEFAULT_RANGE_SHARE * (j.upper - j.lower) / 2
-            out[i] = mid - half, mid + half
-    return out
+    """Per joint ``[lo, hi]`` [m]/[rad], shape (n, 2): the robot's one calibration-range rule,
+    :meth:`cpc2urdf.model.RobotStructure.calibration_ranges` (overrides, else the spec's
+    ``calibration_range``, else the middle half of the limits)."""
+    return structure.calibration_ranges(overrides)
 
 
 def protocol_configurations(

@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.simulation.visibility import check_view, frame_points
-from cpc2urdf.identification.vision.render import PlateDesign
 from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import PlateDesign
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.transforms import homogeneous
 

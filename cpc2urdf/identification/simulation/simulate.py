@@ -45,11 +45,7 @@ from cpc2urdf.identification.simulation.measure import (
     NOISE_MODELS,
     measure_poses,
 )
-from cpc2urdf.identification.simulation.placement import (
-    cached_clear_placement,
-    clear_placement,  # noqa: F401  (moved; simulation.images still imports it from here)
-    place_in_front_of_rig,  # noqa: F401  (moved; studies.stereo_noise still imports it from here)
-)
+from cpc2urdf.identification.simulation.placement import cached_clear_placement
 from cpc2urdf.identification.simulation.truth import (
     DEFAULT_GEOMETRY_ERROR_R,
     DEFAULT_GEOMETRY_ERROR_T,

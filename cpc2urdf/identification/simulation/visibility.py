@@ -24,8 +24,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.simulation.design import random_configurations
-from cpc2urdf.identification.vision.render import PlateDesign, occluded_circles, robot_plate_designs
+from cpc2urdf.identification.vision.render import occluded_circles
 from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs
 from cpc2urdf.model import CPCModel, RobotStructure
 
 Array = NDArray[np.float64]

@@ -16,11 +16,9 @@ Plates are opaque and one-sided: the circles are printed on the face whose norma
 +z axis; a plate seen from behind is drawn as a blank grey back. Plates occlude each other in
 depth order (painter's algorithm by the depth of their origins).
 
-The default designs (``docs/images.md``): the IIS-head plates are light grey
-(level 0.9), with the robot's nine-circle layout (25 mm pitch) as dark circles (level 0.08) of
-radius 5 mm; one circle per plate is a 6.5 mm *marker* that makes the pattern's orientation and the
-plate's identity unambiguous (plate_left: a corner circle, plate_right: an edge circle); the plates are 70 mm x 70 mm. The
-stage-2 target is black (0.08) with light disks (0.9) and one larger marker disk.
+The targets themselves (:class:`~cpc2urdf.identification.vision.targets.PlateDesign`, the
+IIS-head plates and the stage-2 disk target) are defined in
+:mod:`cpc2urdf.identification.vision.targets`.
 
 Frames: ``T_camera_world`` maps world points into the camera's REP-103 optical frame (z forward,
 x right, y down), as OpenCV's ``rvec, tvec``.
@@ -34,6 +32,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from cpc2urdf.identification.vision.targets import PlateDesign
 
 Array = NDArray[np.float64]
 
@@ -85,150 +85,6 @@ class PinholeView:
 def _dist(D: Array) -> Array:
     d = np.asarray(D, dtype=float).ravel()
     return d if d.size else np.zeros(4)
-
-
-@dataclass(frozen=True)
-class PlateDesign:
-    """A planar target: circles of known radius on a rectangular plate.
-
-    Attributes:
-        name: Frame name of the plate (``plate_left``, ``target``, ...).
-        layout: Circle centres in the plate frame [m], shape (K, 3), z = 0.
-        radii: Circle radii [m], shape (K,).
-        outline: Plate rectangle ``(x_min, x_max, y_min, y_max)`` in the plate frame [m].
-        plate_level: Grey level of the plate face (0 black .. 1 white).
-        dot_level: Grey level of the circles.
-        marker_index: Index of the enlarged marker circle (breaks the layout's symmetry), or None.
-    """
-
-    name: str
-    layout: Array
-    radii: Array
-    outline: tuple[float, float, float, float]
-    plate_level: float = 0.9
-    dot_level: float = 0.08
-    marker_index: int | None = None
-
-    def __post_init__(self) -> None:
-        layout = np.asarray(self.layout, dtype=float)
-        radii = np.broadcast_to(np.asarray(self.radii, dtype=float), (layout.shape[0],)).copy()
-        if layout.ndim != 2 or layout.shape[1] != 3 or layout.shape[0] < 4:
-            raise ValueError(f"{self.name}: layout must have shape (K >= 4, 3), got {layout.shape}")
-        if np.max(np.abs(layout[:, 2])) > 1e-9:
-            raise ValueError(f"{self.name}: circle centres must lie in the plate plane z = 0")
-        if np.any(radii <= 0):
-            raise ValueError(f"{self.name}: circle radii must be positive")
-        object.__setattr__(self, "layout", layout)
-        object.__setattr__(self, "radii", radii)
-
-    @property
-    def n_circles(self) -> int:
-        return int(self.layout.shape[0])
-
-    @property
-    def dark_dots(self) -> bool:
-        """True when the circles are darker than the plate."""
-        return self.dot_level < self.plate_level
-
-    def outline_corners(self) -> Array:
-        """The plate's four corners in the plate frame [m], shape (4, 3)."""
-        x0, x1, y0, y1 = self.outline
-        return np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
-
-
-# Default designs (docs/images.md).
-PLATE_CIRCLE_RADIUS = 0.005  # [m] the circles of the stage-1 plates
-PLATE_MARKER_RADIUS = 0.0065  # [m] the marker circle of a stage-1 plate
-PLATE_MARGIN = 0.01  # [m] plate edge beyond the outermost circle centres
-
-
-def plate_design(
-    name: str,
-    layout: ArrayLike,
-    *,
-    marker_index: int | None,
-    radius: float = PLATE_CIRCLE_RADIUS,
-    marker_radius: float = PLATE_MARKER_RADIUS,
-    margin: float = PLATE_MARGIN,
-    plate_level: float = 0.9,
-    dot_level: float = 0.08,
-) -> PlateDesign:
-    """A plate with dark circles of ``radius`` on a light rectangle ``margin`` beyond the layout.
-
-    Args:
-        name: Frame name.
-        layout: Circle centres in the plate frame [m], shape (K, 3).
-        marker_index: Which circle is the enlarged marker (None: all equal).
-        radius: Circle radius [m].
-        marker_radius: Radius of the marker circle [m].
-        margin: Distance from the outermost circle centres to the plate edge [m].
-        plate_level: Grey level of the plate.
-        dot_level: Grey level of the circles.
-    """
-    lay = np.asarray(layout, dtype=float)
-    radii = np.full(lay.shape[0], radius)
-    if marker_index is not None:
-        radii[marker_index] = marker_radius
-    lo = lay[:, :2].min(axis=0) - margin
-    hi = lay[:, :2].max(axis=0) + margin
-    return PlateDesign(
-        name, lay, radii, (lo[0], hi[0], lo[1], hi[1]), plate_level, dot_level, marker_index
-    )
-
-
-def robot_plate_designs(frames: Sequence[object]) -> list[PlateDesign]:
-    """Default designs of a robot's plates (``Frame`` objects with ``kind == "plate"``).
-
-    The k-th plate's marker is circle ``k + 1`` of its layout: on the IIS-head's 3x3 layout,
-    circle 1 is a corner (plate_left) and circle 2 an edge middle (plate_right), which no
-    rotation maps onto each other, so the detector can tell the plates apart.
-    """
-    out = []
-    k = 0
-    for f in frames:
-        if getattr(f, "kind", None) != "plate" or getattr(f, "layout", None) is None:
-            continue
-        lay = np.array(f.layout, dtype=np.float64)  # type: ignore[attr-defined]
-        out.append(plate_design(f.name, lay, marker_index=(k + 1) % len(lay)))  # type: ignore[attr-defined]
-        k += 1
-    return out
-
-
-def target_design(
-    layout: ArrayLike | None = None,
-    *,
-    name: str = "target",
-    radius: float | None = None,
-    marker_index: int | None = None,
-    marker_radius: float | None = None,
-    size: tuple[float, float] | None = None,
-) -> PlateDesign:
-    """The stage-2 target: light disks on a black plate (Shih et al. Fig. 9).
-
-    Every argument defaults to the target of :mod:`cpc2urdf.identification.handeye.stage2` (5 x 5 disks,
-    40 mm pitch, 10 mm disks, a 14 mm marker disk at index 0, a 240 mm square plate).
-
-    Args:
-        layout: Disk centres in the target frame [m], shape (K, 3).
-        name: Frame name.
-        radius: Disk radius [m].
-        marker_index: The enlarged disk (breaks the grid's 4-fold symmetry, so
-            ``T_camera_target`` has a unique orientation).
-        marker_radius: Its radius [m].
-        size: Plate outline (x, y) [m], centred on the layout's bounding box.
-    """
-    from cpc2urdf.identification.handeye import stage2
-
-    lay = stage2.TARGET_LAYOUT if layout is None else np.asarray(layout, dtype=float)
-    r = stage2.TARGET_DISK_RADIUS if radius is None else radius
-    mi = stage2.TARGET_MARKER_INDEX if marker_index is None else marker_index
-    mr = stage2.TARGET_MARKER_RADIUS if marker_radius is None else marker_radius
-    sx, sy = stage2.TARGET_SIZE if size is None else size
-    radii = np.full(len(lay), r)
-    radii[mi] = mr
-    cx, cy = (lay[:, :2].min(axis=0) + lay[:, :2].max(axis=0)) / 2
-    outline = (cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2)
-    return PlateDesign(name, lay, radii, outline, plate_level=0.08, dot_level=0.9, marker_index=mi)
 
 
 # ---- rendering ----------------------------------------------------------------------------------
@@ -502,37 +358,13 @@ def occluded_circles(
     return out
 
 
-def write_image(path: object, image: NDArray[np.uint8]) -> None:
-    """Write an image losslessly (PNG) and atomically, raising ``OutputError`` on failure."""
-    import os
-    import tempfile
-    from pathlib import Path
-
-    from cpc2urdf.errors import OutputError
-
-    p = Path(str(path))
-    if not p.parent.is_dir():
-        raise OutputError(f"{p}: cannot write, folder {p.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=p.suffix or ".png", dir=p.parent)
-    os.close(fd)
-    try:
-        if not cv2.imwrite(tmp, image):
-            raise OutputError(f"{p}: OpenCV could not write the image")
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 __all__ = [
+    "BACKGROUND_LEVEL",
+    "NEAR_CLIP",
+    "PLATE_BACK_LEVEL",
     "PinholeView",
-    "PlateDesign",
     "circle_centres_px",
     "hidden_circles",
     "occluded_circles",
-    "plate_design",
     "render_view",
-    "robot_plate_designs",
-    "target_design",
-    "write_image",
 ]

@@ -251,3 +251,6 @@ class StereoRig:
             np.array(float_list(obj.get("T"), 3, f"{where}.T")),
             (int(size[0]), int(size[1])),
         )
+
+
+__all__ = ["StereoRig"]

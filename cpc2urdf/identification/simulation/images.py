@@ -1,0 +1,200 @@
+"""Whole experiments as images: simulate, render, and write the folders ``cpc2urdf measure`` reads.
+
+:func:`render_experiment` simulates a stage-1 experiment
+(:func:`~cpc2urdf.identification.simulation.simulate.simulate_experiment`, exact poses) and
+renders what the stereo rig sees at every record (:mod:`~cpc2urdf.identification.vision.render`):
+``left/``, ``right/``, ``joints.csv``, ``rig.yaml``, plus the truth for scoring.
+:func:`render_head_experiment` does the same for stage 2: the head's cameras photograph the
+25-disk target (``<camera>/``, ``joints.csv``, ``<camera>.yaml``, ``target_truth.json``). So the
+whole pipeline -- detection, measurement, identification, hand-eye -- can run from rendered
+pixels (``docs/images.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cpc2urdf.errors import ConfigurationError, OutputError
+from cpc2urdf.fileio import write_json
+from cpc2urdf.identification.handeye import stage2
+from cpc2urdf.identification.handeye.stage2 import CameraIntrinsics
+from cpc2urdf.identification.simulation.placement import clear_placement
+from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.visibility import check_view
+from cpc2urdf.identification.vision.image_folders import write_image
+from cpc2urdf.identification.vision.joints_csv import write_joints_csv
+from cpc2urdf.identification.vision.measure_stereo import STEREO_FOLDERS
+from cpc2urdf.identification.vision.render import PinholeView, hidden_circles, render_view
+from cpc2urdf.identification.vision.rig_file import save_camera, save_rig
+from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs, target_design
+from cpc2urdf.measurements import MeasurementSet, save_measurements
+from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.model_file import save_model
+from cpc2urdf.progress import progress
+from cpc2urdf.robot_ref import load_robot
+from cpc2urdf.spec import RobotSpec
+from cpc2urdf.transforms import inverse
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class RenderedExperiment:
+    """What :func:`render_experiment` wrote and simulated.
+
+    Attributes:
+        folder: The images folder.
+        truth: The true robot (placed in the rig's world).
+        measured: The exact (noise-free) plate poses of the rendered records.
+        heldout: Held-out configurations with true poses.
+        rig: The rig.
+        paths: Written files by role (``rig``, ``joints``, ``truth``, ``heldout``, ``exact``).
+        hidden: Per record, the number of circles hidden (occluded/at the border) in either image.
+    """
+
+    folder: Path
+    truth: CPCModel
+    measured: MeasurementSet
+    heldout: MeasurementSet
+    rig: StereoRig
+    paths: dict[str, Path]
+    hidden: list[int]
+
+
+def clear_image_placement(spec: RobotSpec, rig: StereoRig, q: Array, designs: Sequence[PlateDesign]) -> CPCParams:
+    """A ``world_to_base`` (CPC constants) that shows both cameras every circle of every plate.
+
+    The simulator's search (:func:`cpc2urdf.identification.simulation.placement.clear_placement`) for the
+    nominal robot of ``spec`` over configurations ``q`` (N, n) with the plate outlines of
+    ``designs``; raises ``ConfigurationError`` when no candidate keeps every plate in view.
+    """
+    nominal = spec.nominal_model()
+    frames = [d.name for d in designs]
+    w2b = clear_placement(nominal, rig, q, frames, designs=designs)
+    view = check_view(nominal.with_params(world_to_base=w2b), rig, q, frames, [str(i) for i in range(len(q))],
+                      designs=designs)
+    if view.unseen:
+        raise ConfigurationError("no placement of the robot lets both rig cameras see every plate")
+    return w2b
+
+
+def render_experiment(
+    folder: str | Path,
+    robot: str = "iis_head",
+    *,
+    seed: int = 0,
+    M: int = 9,
+    n_heldout: int = 50,
+    rig: StereoRig | None = None,
+    blur_sigma: float = 0.7,
+    noise_sigma: float = 2.0,
+    supersample: int = 8,
+    show_progress: bool = False,
+) -> RenderedExperiment:
+    """Simulate a stage-1 experiment and write it as images (the input of ``cpc2urdf measure``).
+
+    Writes ``folder/left/<record>.png``, ``folder/right/<record>.png``, ``folder/joints.csv``
+    (mm/deg), ``folder/rig.yaml`` (mm), and for scoring ``folder/truth.json`` (the true model),
+    ``folder/heldout.json`` and ``folder/exact.json`` (the true poses of the rendered records).
+
+    Args:
+        folder: Output folder (created if missing; its parent must exist).
+        robot: Shipped robot name or spec path.
+        seed: Seed of the true robot's geometric errors and of the image noise.
+        M: Values per joint (one-joint-at-a-time protocol, n M + 1 records).
+        n_heldout: Held-out configurations (true poses, not rendered).
+        rig: The stereo rig (default the paper's: 600 mm baseline, 1.5 m).
+        blur_sigma: Optical blur [px].
+        noise_sigma: Grey-level noise [of 255].
+        supersample: Anti-aliasing sub-samples per axis.
+        show_progress: Progress bar on stderr.
+    """
+    out = Path(folder)
+    if not out.parent.is_dir():
+        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    spec = load_robot(robot)
+    s = spec.structure
+    rig = rig or StereoRig.verged()
+    designs = robot_plate_designs(s.frames)
+    # The simulator's default placement: no circle hidden over the protocol and the held-out box.
+    truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
+                                                robot_ref=robot)
+    for sub in STEREO_FOLDERS:
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    views = [PinholeView(rig.K1, rig.D1, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
+             for w in STEREO_FOLDERS]
+    fk = truth.fk(exact.q, [d.name for d in designs])
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
+    records = [f"{i:04d}" for i in range(exact.n_records)]
+    hidden = []
+    items = progress(range(exact.n_records), "render") if show_progress else range(exact.n_records)
+    for i in items:
+        plates = [(d, fk[d.name][i]) for d in designs]
+        hidden.append(sum(sum(hidden_circles(v, plates).values()) for v in views))
+        for sub, v in zip(STEREO_FOLDERS, views, strict=True):
+            img = render_view(v, plates, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
+            write_image(out / sub / f"{records[i]}.png", img)
+    paths = {
+        "joints": write_joints_csv(out / "joints.csv", s, records, exact.q, exact.labels),
+        "rig": save_rig(rig, out / "rig.yaml", units="mm"),
+        "truth": save_model(truth, out / "truth.json"),
+        "heldout": save_measurements(heldout, out / "heldout.json"),
+        "exact": save_measurements(exact, out / "exact.json"),
+    }
+    return RenderedExperiment(out, truth, exact, heldout, rig, paths, hidden)
+
+
+def render_head_experiment(
+    folder: str | Path,
+    truth: CPCModel,
+    *,
+    n_poses: int = 12,
+    seed: int = 0,
+    intrinsics: CameraIntrinsics | None = None,
+    blur_sigma: float = 0.7,
+    noise_sigma: float = 2.0,
+) -> dict[str, Path]:
+    """Simulate stage 2 and write it as images: the head's cameras (their frames in ``truth``)
+    photograph the 25-disk target from ``n_poses`` random configurations.
+
+    Writes ``folder/<camera>/<record>.png`` for both camera frames, ``folder/joints.csv``,
+    ``folder/<camera>.yaml`` (intrinsics, OpenCV FileStorage) and ``folder/target_truth.json``
+    (the true ``T_base_target``).
+
+    Returns:
+        Written files by role.
+    """
+    out = Path(folder)
+    if not out.parent.is_dir():
+        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    intr = intrinsics or stage2.DEFAULT_INTRINSICS
+    cameras = list(stage2.HAND_OF_CAMERA)
+    rng = np.random.default_rng(seed)
+    T_base_target = stage2.default_target_placement(truth, cameras)
+    q = stage2.sample_configurations(truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intr)
+    design = target_design()
+    T_world_target = truth.T_world_base() @ T_base_target
+    records = [f"{i:04d}" for i in range(len(q))]
+    paths: dict[str, Path] = {}
+    for c in cameras:
+        (out / c).mkdir(parents=True, exist_ok=True)
+        paths[c] = save_camera(intr.K, intr.D, (intr.width, intr.height), out / f"{c}.yaml")
+        T_world_cam = truth.fk_frame(c, q)
+        for i, rec in enumerate(records):
+            view = PinholeView(intr.K, intr.D, (intr.width, intr.height), inverse(T_world_cam[i]))
+            img = render_view(view, [(design, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+            write_image(out / c / f"{rec}.png", img)
+    paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, q)
+    paths["target_truth"] = write_json(out / "target_truth.json", {
+        "description": "true pose of the stage-2 target in the robot base frame (for scoring)",
+        "T_base_target": T_base_target.tolist(), "units": {"length": "m"}})
+    return paths
+
+
+__all__ = ["RenderedExperiment", "clear_image_placement", "render_experiment", "render_head_experiment"]

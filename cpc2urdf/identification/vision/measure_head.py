@@ -1,0 +1,163 @@
+"""Stage-2 measurements from images: the head cameras' images of the target -> target poses.
+
+The head's own cameras photograph the 25-disk target (Shih et al. sec. 5). The folder layout
+(``docs/images.md``)::
+
+    IMAGES_DIR/
+      camera_left_optical/<record>.png
+      camera_right_optical/<record>.png
+      joints.csv
+
+:func:`measure_head_images` gives ``T_camera_target`` per camera and record by ``cv2.solvePnP``
+(:func:`~cpc2urdf.identification.vision.plate_poses.target_pose`), with the joint readings of the
+records. With an identified model these become hand-eye poses
+(:mod:`cpc2urdf.identification.handeye.head_images`), the input of ``cpc2urdf handeye``. An image
+that cannot be measured is handled by the ``on_error`` policy of
+:mod:`~cpc2urdf.identification.vision.image_folders`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
+from cpc2urdf.identification.vision.detect import DetectionError
+from cpc2urdf.identification.vision.image_folders import (
+    RecordError,
+    check_on_error,
+    find_image,
+    read_grey,
+    report_problem,
+)
+from cpc2urdf.identification.vision.joints_csv import read_joints_csv
+from cpc2urdf.identification.vision.plate_poses import target_pose
+from cpc2urdf.identification.vision.targets import PlateDesign, target_design
+from cpc2urdf.model import RobotStructure
+from cpc2urdf.progress import progress
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class HeadCamera:
+    """A head camera's intrinsics (OpenCV model).
+
+    Attributes:
+        K: Camera matrix [px], shape (3, 3).
+        D: Distortion coefficients, shape (5,).
+        image_size: (width, height) [px].
+    """
+
+    K: Array
+    D: Array
+    image_size: tuple[int, int]
+
+
+@dataclass
+class HeadImageMeasurement:
+    """What :func:`measure_head_images` returns.
+
+    Attributes:
+        labels: Per camera, the labels of the records used.
+        q: Per camera, the joint readings of those records, shape (N_c, n).
+        T_camera_target: Per camera, solvePnP target poses, shape (N_c, 4, 4).
+        reprojection_rms: Per camera, the RMS reprojection error per record [px], shape (N_c,).
+        problems: Skipped images with the reason.
+    """
+
+    labels: dict[str, list[str]]
+    q: dict[str, Array]
+    T_camera_target: dict[str, Array]
+    reprojection_rms: dict[str, Array]
+    problems: list[str]
+
+
+def measure_head_images(
+    images_dir: str | Path,
+    cameras: Mapping[str, HeadCamera],
+    structure: RobotStructure,
+    *,
+    joints: str | Path | None = None,
+    design: PlateDesign | None = None,
+    on_error: str = "skip",
+    correct_bias: bool = True,
+    show_progress: bool = False,
+) -> HeadImageMeasurement:
+    """Stage-2 target poses ``T_camera_target`` from the head cameras' images.
+
+    Args:
+        images_dir: Folder with one sub-folder per camera (named like the camera frame) and
+            ``joints.csv``.
+        cameras: Camera frame name -> intrinsics.
+        structure: The robot (for the joint columns).
+        joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
+        design: The target (default :func:`~cpc2urdf.identification.vision.targets.target_design`).
+        on_error: ``"skip"``/``"skip-record"`` (the image) or ``"stop"``.
+        correct_bias: Remove the ellipse-centre offset before the final solvePnP.
+        show_progress: Progress bar on stderr.
+
+    Raises:
+        InputFileError, DetectionError, DegenerateDataError: as
+            :func:`~cpc2urdf.identification.vision.measure_stereo.measure_stereo_images`.
+    """
+    check_on_error(on_error)
+    root = Path(images_dir)
+    if not root.is_dir():
+        raise InputFileError(root, "no such images folder")
+    if not cameras:
+        raise ConfigurationError("no head camera given")
+    for c in cameras:
+        if not (root / c).is_dir():
+            raise InputFileError(root, f"missing sub-folder {c}/ for camera {c}")
+    table = read_joints_csv(joints or root / "joints.csv", structure)
+    design = design or target_design()
+    problems: list[str] = []
+    out_l: dict[str, list[str]] = {c: [] for c in cameras}
+    out_q: dict[str, list[Array]] = {c: [] for c in cameras}
+    out_T: dict[str, list[Array]] = {c: [] for c in cameras}
+    out_r: dict[str, list[float]] = {c: [] for c in cameras}
+    jobs = [(i, c) for i in range(len(table.records)) for c in cameras]
+    for i, c in progress(jobs, "measure") if show_progress else jobs:
+        rec = table.records[i]
+        cam = cameras[c]
+        path = find_image(root / c, rec)
+        try:
+            if path is None:
+                raise RecordError(f"{c}/{rec}.*", design.name, "no image file")
+            img = read_grey(path)
+        except InputFileError as e:
+            report_problem(RecordError(e.path, design.name, e.problem), on_error, problems)
+            continue
+        except RecordError as e:
+            report_problem(e, on_error, problems)
+            continue
+        if (img.shape[1], img.shape[0]) != tuple(cam.image_size):
+            report_problem(RecordError(str(path), design.name, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
+                              f"{cam.image_size[0]} x {cam.image_size[1]}"), on_error, problems)
+            continue
+        r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
+        if isinstance(r, DetectionError):
+            report_problem(r, on_error, problems)
+            continue
+        out_l[c].append(table.labels[i])
+        out_q[c].append(table.q[i])
+        out_T[c].append(r.T_camera_target)
+        out_r[c].append(r.reprojection_rms)
+    for c in cameras:
+        if len(out_T[c]) < 3:
+            raise DegenerateDataError(
+                f"{root}: camera {c} saw the target in {len(out_T[c])} records; hand-eye calibration needs at least 3"
+                + (f"; first problem: {problems[0]}" if problems else "")
+            )
+    return HeadImageMeasurement(
+        out_l, {c: np.array(v) for c, v in out_q.items()}, {c: np.array(v) for c, v in out_T.items()},
+        {c: np.array(v) for c, v in out_r.items()}, problems,
+    )
+
+
+__all__ = ["HeadCamera", "HeadImageMeasurement", "measure_head_images"]

@@ -1,0 +1,180 @@
+"""Stage-1 measurements from images: stereo images of the plates -> a measurement set.
+
+A calibrated stereo rig photographs the head's plates at every configuration (Shih et al.
+sec. 3). The folder layout (``docs/images.md``)::
+
+    IMAGES_DIR/
+      left/<record>.png      # left rig camera (world frame), any format OpenCV reads
+      right/<record>.png     # right rig camera
+      joints.csv             # one row per record: record,<joint>[unit],...
+
+:func:`measure_stereo_images` reads the joint readings
+(:mod:`~cpc2urdf.identification.vision.joints_csv`), detects the plates in each pair,
+triangulates and registers them (:mod:`~cpc2urdf.identification.vision.plate_poses`) and returns
+a :class:`~cpc2urdf.measurements.MeasurementSet` with ``T_world_<plate>`` and the triangulated
+circle centres (``points``). A plate that cannot be measured is handled by the ``on_error``
+policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
+from cpc2urdf.identification.vision.detect import DetectionError
+from cpc2urdf.identification.vision.image_folders import (
+    IMAGE_EXTENSIONS,
+    RecordError,
+    check_on_error,
+    find_image,
+    read_grey,
+    report_problem,
+)
+from cpc2urdf.identification.vision.joints_csv import read_joints_csv
+from cpc2urdf.identification.vision.plate_poses import StereoPlatePose, stereo_plate_poses
+from cpc2urdf.identification.vision.stereo import StereoRig
+from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs
+from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.model import RobotStructure
+from cpc2urdf.progress import progress
+
+STEREO_FOLDERS = ("left", "right")
+
+
+@dataclass
+class ImageMeasurement:
+    """What :func:`measure_stereo_images` returns.
+
+    Attributes:
+        measurements: The records where at least one plate was measured.
+        problems: One line per plate (or record) that was skipped, naming image, plate, reason.
+        details: Per record and plate, the detector's :class:`StereoPlatePose`.
+    """
+
+    measurements: MeasurementSet
+    problems: list[str]
+    details: dict[tuple[str, str], StereoPlatePose] = field(default_factory=dict)
+
+
+def measure_stereo_images(
+    images_dir: str | Path,
+    rig: StereoRig,
+    structure: RobotStructure,
+    *,
+    joints: str | Path | None = None,
+    designs: Sequence[PlateDesign] | None = None,
+    on_error: str = "skip",
+    correct_bias: bool = True,
+    robot_ref: str | None = None,
+    show_progress: bool = False,
+) -> ImageMeasurement:
+    """Stage-1 measurements from stereo images of the plates.
+
+    Args:
+        images_dir: Folder with ``left/`` and ``right/`` images (module docstring).
+        rig: A :class:`~cpc2urdf.identification.vision.stereo.StereoRig` (world = left camera).
+        structure: The robot (joint names, plate frames and their layouts).
+        joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
+        designs: Plate designs (default :func:`~cpc2urdf.identification.vision.targets.robot_plate_designs`).
+        on_error: ``"skip"`` (the plate), ``"skip-record"`` or ``"stop"`` (module docstring).
+        correct_bias: Remove the ellipse-centre offset (:mod:`~cpc2urdf.identification.vision.plate_poses`).
+        robot_ref: Robot reference for the measurement file.
+        show_progress: Progress bar on stderr.
+
+    Raises:
+        InputFileError: A missing folder or bad ``joints.csv``; with ``on_error="stop"`` also a
+            missing/corrupt image.
+        DetectionError: With ``on_error="stop"``, the first plate that could not be measured.
+        DegenerateDataError: No plate measured in any record.
+    """
+    check_on_error(on_error)
+    root = Path(images_dir)
+    if not root.is_dir():
+        raise InputFileError(root, "no such images folder")
+    for sub in STEREO_FOLDERS:
+        if not (root / sub).is_dir():
+            raise InputFileError(root, f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)")
+    table = read_joints_csv(joints or root / "joints.csv", structure)
+    designs = list(designs or robot_plate_designs(structure.frames))
+    if not designs:
+        raise ConfigurationError(f"robot {structure.name!r} has no plate frames with a circle layout")
+    if tuple(rig.image_size) == (0, 0):
+        raise ConfigurationError("the rig has no image size")
+    names = [d.name for d in designs]
+    N = len(table.records)
+    poses = {n: np.full((N, 4, 4), np.nan) for n in names}
+    points = {n: np.full((N, d.n_circles, 3), np.nan) for n, d in zip(names, designs, strict=True)}
+    fit = {n: np.full(N, np.nan) for n in names}
+    problems: list[str] = []
+    details: dict[tuple[str, str], StereoPlatePose] = {}
+    items = progress(range(N), "measure") if show_progress else range(N)
+    for i in items:
+        rec = table.records[i]
+        imgs = []
+        for sub in STEREO_FOLDERS:
+            path = find_image(root / sub, rec)
+            try:
+                if path is None:
+                    raise RecordError(f"{sub}/{rec}.*", "all plates", f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})")
+                img = read_grey(path)
+                if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
+                    raise RecordError(
+                        str(path), "all plates",
+                        f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
+                    )
+                imgs.append((img, str(path)))
+            except InputFileError as e:
+                report_problem(RecordError(e.path, "all plates", e.problem), on_error, problems)
+                break
+            except RecordError as e:
+                report_problem(e, on_error, problems)
+                break
+        if len(imgs) != 2:
+            continue
+        result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
+                                    correct_bias=correct_bias)
+        failed = [r for r in result.values() if isinstance(r, DetectionError)]
+        for err in failed:
+            report_problem(err, on_error, problems)
+        if failed and on_error == "skip-record":
+            continue
+        for n in names:
+            r = result[n]
+            if isinstance(r, DetectionError):
+                continue
+            poses[n][i] = r.T_world_plate
+            points[n][i] = r.p_world
+            fit[n][i] = r.fit_rms
+            details[(rec, n)] = r
+    keep = np.array([any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool)
+    if not keep.any():
+        raise DegenerateDataError(
+            f"{root}: no plate could be measured in any of the {N} records"
+            + (f"; first problem: {problems[0]}" if problems else "")
+        )
+    idx = np.flatnonzero(keep)
+    ms = MeasurementSet(
+        structure, table.q[idx], {n: poses[n][idx] for n in names}, str(root), robot_ref,
+        [table.labels[i] for i in idx], {n: points[n][idx] for n in names}, {n: fit[n][idx] for n in names},
+        {
+            "description": f"stage-1 measurements of {structure.name} from stereo images in {root}",
+            "provenance": {
+                "source": "cpc2urdf measure (identification/measure_images.py)",
+                "images": str(root),
+                "records_in_joints_csv": N,
+                "records_measured": int(keep.sum()),
+                "ellipse_bias_corrected": bool(correct_bias),
+                "plate_designs": {d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index} for d in designs},
+                "rig": rig.to_json(),
+                "skipped": problems[:200],
+            },
+        },
+    )
+    return ImageMeasurement(ms, problems, details)
+
+
+__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "measure_stereo_images"]
