@@ -33,6 +33,9 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.transforms import Array, cpc_rotation, rotation_z
 
+# Share of a joint's limits a calibration uses when the spec gives no calibration_range.
+DEFAULT_RANGE_SHARE = 0.5  # [-]
+
 JointType = Literal["revolute", "prismatic"]
 JOINT_TYPES: tuple[str, ...] = ("revolute", "prismatic")
 BASE = "base"
@@ -290,6 +293,40 @@ class RobotStructure:
         """``{joint name: reading}`` from a configuration vector of shape (n,)."""
         q = np.asarray(q, dtype=float)
         return {n: float(v) for n, v in zip(self.joint_names, q, strict=True)}
+
+    def calibration_ranges(self, overrides: Mapping[str, tuple[float, float]] | None = None) -> Array:
+        """The part of each joint's travel a calibration measures: per joint ``[lo, hi]``
+        [m]/[rad], shape (n, 2). The one rule every simulator, planner, study and test uses:
+
+        1. a range given by the caller (``overrides``, e.g. ``cpc2urdf simulate --range``), else
+        2. the joint's ``calibration_range`` from the robot spec, else
+        3. the middle :data:`DEFAULT_RANGE_SHARE` (one half) of its limits, centred on their
+           middle (where a head's plates and cameras face forward; the extremes of the limits
+           often turn them edge-on or out of view).
+
+        Raises:
+            UnknownNameError: ``overrides`` names a joint the robot does not have.
+            ConfigurationError: An override does not lie within its joint's limits.
+        """
+        out = np.empty((self.n_joints, 2))
+        overrides = dict(overrides or {})
+        for name in overrides:
+            self.joint(name)
+        for i, j in enumerate(self.joints):
+            if j.name in overrides:
+                lo, hi = (float(v) for v in overrides[j.name])
+                if not (j.lower - 1e-12 <= lo <= hi <= j.upper + 1e-12):
+                    raise ConfigurationError(
+                        f"joint {j.name!r}: calibration range [{lo:.6g}, {hi:.6g}] must lie within the "
+                        f"limits [{j.lower:.6g}, {j.upper:.6g}]"
+                    )
+                out[i] = lo, hi
+            elif j.calibration_range is not None:
+                out[i] = j.calibration_range
+            else:
+                mid, half = (j.lower + j.upper) / 2, DEFAULT_RANGE_SHARE * (j.upper - j.lower) / 2
+                out[i] = mid - half, mid + half
+        return out
 
     def check_q(self, q: ArrayLike, *, limits: bool = False) -> Array:
         """Validate a configuration of shape (n,) or (N, n): finite, and within limits if asked.

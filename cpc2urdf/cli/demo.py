@@ -76,7 +76,7 @@ def _target_ahead(model: CPCModel, distance: float = 0.6) -> tuple[Array, Array]
     import numpy as np
 
     s = model.structure
-    q = np.array([np.mean(j.calibration_range) if j.calibration_range else (j.lower + j.upper) / 2 for j in s.joints])
+    q = s.calibration_ranges().mean(axis=1)
     fk = model.fk(q, ["camera_left_optical", "camera_right_optical"])
     L, R = fk["camera_left_optical"], fk["camera_right_optical"]
     ahead = L[:3, 2] + R[:3, 2]
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("render the stage-1 experiment as stereo images, then measure them (circle detector)")
-        from cpc2urdf.identification.vision.measure_images import render_experiment
+        from cpc2urdf.identification.simulation.images import render_experiment
 
         exp = render_experiment(out / "images", seed=args.seed, show_progress=True)
         truth = perturb_cameras(exp.truth, np.random.default_rng(args.seed))
@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye")
-        from cpc2urdf.identification.vision.measure_images import render_head_experiment
+        from cpc2urdf.identification.simulation.images import render_head_experiment
 
         render_head_experiment(out / "head", truth, seed=args.seed)
         _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")

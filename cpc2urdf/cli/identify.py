@@ -13,7 +13,7 @@ import argparse
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from cpc2urdf.identification.kinematics.methods import METHODS
+    from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
 
     p = subparsers.add_parser(
         "identify",
@@ -25,7 +25,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     p.add_argument("measurements", help="measurement file (cpc2urdf/measurements@1)")
     p.add_argument("-o", "--output", required=True, help="model file to write (atomically)")
-    p.add_argument("--method", choices=sorted(METHODS), default="refined",
+    p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
                    help="identification method (default refined: closed form + maximum-likelihood "
                    "refinement with covariance; closed-form: Shih et al. sec. 4.2 only)")
     p.add_argument("--robot", help="robot spec/model file or shipped name, instead of the file's 'robot'")

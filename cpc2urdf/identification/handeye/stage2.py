@@ -84,9 +84,8 @@ def _T_base(model: CPCModel, frame: str, q: Array) -> Array:
 
 
 def home_configuration(model: CPCModel) -> Array:
-    """Middle of every joint's calibration range (or of its limits), shape (n,)."""
-    return np.array([np.mean(j.calibration_range) if j.calibration_range else 0.5 * (j.lower + j.upper)
-                     for j in model.structure.joints])
+    """Middle of every joint's calibration range (:meth:`RobotStructure.calibration_ranges`), shape (n,)."""
+    return model.structure.calibration_ranges().mean(axis=1)
 
 
 def default_target_placement(
@@ -183,8 +182,7 @@ def sample_configurations(
         DegenerateDataError: Fewer than ``n_poses`` usable configurations in 200 x n_poses tries.
     """
     s = truth.structure
-    lo = np.array([j.calibration_range[0] if j.calibration_range else j.lower for j in s.joints])
-    hi = np.array([j.calibration_range[1] if j.calibration_range else j.upper for j in s.joints])
+    lo, hi = s.calibration_ranges().T
     mid, half = 0.5 * (lo + hi), 0.5 * spread * (hi - lo)
     accepted: list[Array] = []
     tries = 0
