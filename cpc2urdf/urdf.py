@@ -138,7 +138,7 @@ def urdf_from_model(model: CPCModel, *, source: str | None = None) -> str:
         model: The CPC model.
         source: Where the model came from, written in a comment.
     """
-    from cpc2urdf import __version__
+    from cpc2urdf.version import __version__
 
     s = model.structure
     out = ['<?xml version="1.0"?>\n']

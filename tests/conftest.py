@@ -1,4 +1,20 @@
+import contextlib
+import io
 import os
+
+import pytest
 
 os.environ.setdefault("CPC2URDF_PROGRESS", "0")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory):
+    """``cpc2urdf demo -o DIR`` once per test session: ``(DIR, exit code, stdout)``."""
+    from cpc2urdf.cli import main
+
+    d = tmp_path_factory.mktemp("demo") / "demo-out"
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["demo", "-o", str(d)])
+    return d, code, out.getvalue()

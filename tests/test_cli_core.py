@@ -85,10 +85,9 @@ def test_bench_fk_small(capsys):
     assert code == 0 and r["max_abs_difference"] < 1e-12 and r["cpc_vectorised_per_s"] > 0
 
 
-def test_demo_runs(tmp_path, capsys):
-    code, out, _ = run(["demo", "-o", str(tmp_path / "demo")], capsys)
+def test_demo_runs(demo_run):
+    d, code, out = demo_run
     assert code == 0, out
-    d = tmp_path / "demo"
     for name in ("nominal.urdf", "stage1_model.json", "model.json", "head.urdf", "view.html"):
         assert (d / name).is_file(), name
     assert out.count("result: all parsers agree with the CPC model") == 3

@@ -37,7 +37,7 @@ COMMANDS = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from cpc2urdf import __version__
+    from cpc2urdf.version import __version__
 
     parser = OneLineParser(
         prog="cpc2urdf",

@@ -1,0 +1,221 @@
+"""The Python API: the whole pipeline, with the same defaults as the command line.
+
+Every ``cpc2urdf`` command is a thin layer over one function here; ``import cpc2urdf`` re-exports
+them all. A typical session::
+
+    import cpc2urdf
+
+    ms = cpc2urdf.load_measurements("measurements.json")   # resolves the robot the file names
+    model = cpc2urdf.identify(ms)                           # closed form + ML refinement
+    model = cpc2urdf.calibrate_cameras(model, "handeye_camera_left_optical.json")
+    cpc2urdf.save_model(model, "model.json")
+    cpc2urdf.export_urdf(model, "head.urdf")
+    assert cpc2urdf.check_urdf("head.urdf", model).ok
+
+Conventions: SI units (m, rad); ``T_a_b`` is the pose of frame b in frame a; camera optical
+frames follow REP-103 (z forward, x right, y down). The layers, and where each concept lives, are
+described in ``docs/architecture.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from cpc2urdf.errors import ConfigurationError, UnknownNameError
+from cpc2urdf.identification.handeye.axxb import HandEyeResult
+from cpc2urdf.identification.handeye.pose_file import HandEyePoses, load_handeye_poses
+from cpc2urdf.identification.handeye.solvers import calibrate
+from cpc2urdf.identification.handeye.stage2 import with_camera_frame
+from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
+from cpc2urdf.identification.kinematics.methods import identify as _identify
+from cpc2urdf.measurements import MeasurementSet, load_measurements
+from cpc2urdf.model import CPCModel
+from cpc2urdf.model_file import save_model
+from cpc2urdf.robot_ref import RobotRef, is_urdf_ref, load_model, load_robot
+from cpc2urdf.spec import RobotSpec
+from cpc2urdf.urdf import write_urdf
+from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
+from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
+from cpc2urdf.validation.gaze import GazeSolution, GazeSolver
+from cpc2urdf.validation.view import ViewSummary, write_view_html
+
+PathLike = str | os.PathLike[str]
+
+#: Hand-eye solver used when none is named (as ``cpc2urdf handeye``): Li et al.'s Kronecker method.
+DEFAULT_HANDEYE_METHOD = "kronecker"
+
+
+def identify(
+    measurements: MeasurementSet | PathLike,
+    method: str = DEFAULT_METHOD,
+    nominal: CPCModel | None = None,
+    *,
+    robot: RobotRef | None = None,
+) -> CPCModel:
+    """Identify a robot's CPC model from stage-1 measurements (``cpc2urdf identify``).
+
+    Args:
+        measurements: A :class:`MeasurementSet` or a ``cpc2urdf/measurements@1`` file.
+        method: One of :data:`METHODS` (default ``"refined"``: the closed form of Shih et al.
+            sec. 4.2, then maximum-likelihood refinement of every record).
+        nominal: Nominal model that keeps unmeasured frames (cameras) and fixes what the data
+            leave open; default: the nominal model of the robot the measurements name.
+        robot: With a file path: use this robot instead of the file's ``"robot"``.
+
+    Returns:
+        The identified model; ``model.metadata`` holds ``provenance``, ``residuals``,
+        ``uncertainty`` (refined methods) and ``notes``.
+    """
+    if isinstance(measurements, MeasurementSet):
+        if robot is not None:
+            raise ConfigurationError("robot= applies to a measurement file path, not to a MeasurementSet")
+        ms = measurements
+    else:
+        ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
+    return _identify(ms, method, nominal)
+
+
+def solve_handeye(poses: HandEyePoses | PathLike, method: str = DEFAULT_HANDEYE_METHOD) -> HandEyeResult:
+    """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``).
+
+    Args:
+        poses: A :class:`HandEyePoses` or a ``cpc2urdf/handeye-poses@1`` file.
+        method: A solver name of :data:`cpc2urdf.identification.handeye.solvers.ALL_METHODS`.
+
+    Returns:
+        ``X = T_hand_camera``, ``Z = T_base_target`` and the residual of every pose.
+    """
+    data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
+    return calibrate(data.T_base_hand, data.T_camera_target, method)
+
+
+def calibrate_cameras(
+    model: CPCModel | RobotRef,
+    poses: HandEyePoses | PathLike,
+    method: str = DEFAULT_HANDEYE_METHOD,
+    *,
+    camera: str | None = None,
+    hand: str | None = None,
+) -> CPCModel:
+    """``model`` with one camera frame added (or replaced) from a hand-eye pose file.
+
+    The camera frame is placed on the link of ``hand`` at ``T_link_hand @ X`` (stage 2 of
+    Shih et al.); ``cpc2urdf handeye POSES --model M -o OUT`` does the same.
+
+    Args:
+        model: The identified model (or a reference :func:`load_model` accepts).
+        poses: Head-camera observations of the target with the hand poses.
+        method: Hand-eye solver (default Li et al.'s Kronecker method).
+        camera: Camera frame name (default: the pose file's ``camera``).
+        hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
+
+    Raises:
+        ConfigurationError: No camera/hand name, an unknown hand frame, or ``camera`` naming a
+            frame that is not a camera.
+        DegenerateDataError: The poses cannot determine ``X`` (the solver says why).
+    """
+    m = model if isinstance(model, CPCModel) else load_model(model)
+    data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
+    source = str(poses) if not isinstance(poses, HandEyePoses) else "<memory>"
+    camera, hand = camera or data.camera, hand or data.hand
+    if not camera or not hand:
+        raise ConfigurationError(
+            f"{source}: give the camera and hand frame names (camera=/hand=, or 'camera'/'hand' in the pose file)"
+        )
+    try:
+        m.structure.frame(hand)
+    except UnknownNameError as e:
+        raise ConfigurationError(f"model {m.structure.name!r}: hand {e}") from e
+    if camera in m.structure.frame_names and m.structure.frame(camera).kind != "camera":
+        raise ConfigurationError(f"model {m.structure.name!r}: frame {camera!r} exists and is not a camera frame")
+    result = calibrate(data.T_base_hand, data.T_camera_target, method)
+    return with_camera_frame(m, camera, hand, result, {"poses": source})
+
+
+def export_urdf(model: CPCModel | RobotRef, path: PathLike) -> Path:
+    """Write the URDF of a model, robot spec or shipped robot atomically (``cpc2urdf export``)."""
+    m = model if isinstance(model, CPCModel) else load_model(model)
+    source = None if isinstance(model, CPCModel | RobotSpec) else os.fspath(model)
+    return write_urdf(m, Path(path), source=source)
+
+
+def check_urdf(
+    urdf: PathLike, model: CPCModel | RobotRef, configurations: int = 100, seed: int = 0
+) -> CrossCheckReport:
+    """FK of every frame of ``urdf`` by Pinocchio and yourdfpy against the CPC model, and urdfdom's
+    parse of the tree, at ``configurations`` seeded random readings (``cpc2urdf check``).
+
+    ``report.ok`` is True when all agree within :data:`cpc2urdf.tolerances.FK_AGREEMENT_TOL`.
+    """
+    if configurations < 1:
+        raise ConfigurationError(f"configurations must be at least 1, got {configurations}")
+    m = model if isinstance(model, CPCModel) else load_model(model)
+    return cross_check(m, urdf, configurations, seed)
+
+
+def gaze_solver(robot: CPCModel | RobotRef) -> GazeSolver:
+    """A gaze solver for a model, model file, robot spec, shipped robot or URDF path."""
+    if isinstance(robot, CPCModel):
+        return GazeSolver.from_model(robot)
+    if not isinstance(robot, RobotSpec) and is_urdf_ref(robot):
+        return GazeSolver.from_urdf(os.fspath(robot))
+    return GazeSolver.from_model(load_model(robot))
+
+
+def fixate(
+    robot: CPCModel | RobotRef, target: ArrayLike, q_current: Sequence[float] | None = None
+) -> GazeSolution:
+    """Joint readings that point both cameras at ``target`` [m] (world), as ``cpc2urdf gaze``."""
+    solver = gaze_solver(robot)
+    q = None if q_current is None else np.asarray(q_current, dtype=float)
+    return solver.solve(np.asarray(target, dtype=float), q_current=q)
+
+
+def write_view(
+    path: PathLike,
+    robot: CPCModel | RobotRef,
+    *,
+    target: ArrayLike | None = None,
+    q: ArrayLike | None = None,
+    ghost: CPCModel | RobotRef | None = None,
+) -> ViewSummary:
+    """A self-contained meshcat page of the robot (``cpc2urdf view --html``)."""
+    src = robot if isinstance(robot, CPCModel) else os.fspath(robot) if not isinstance(robot, RobotSpec) else robot.nominal_model()
+    gh = ghost if ghost is None or isinstance(ghost, CPCModel) else os.fspath(ghost) if not isinstance(ghost, RobotSpec) else ghost.nominal_model()
+    return write_view_html(path, src, target=target, q=q, ghost=gh)
+
+
+__all__ = [
+    "DEFAULT_HANDEYE_METHOD",
+    "DEFAULT_METHOD",
+    "METHODS",
+    "BranchAccuracy",
+    "CPCModel",
+    "CrossCheckReport",
+    "GazeSolution",
+    "GazeSolver",
+    "HandEyePoses",
+    "HandEyeResult",
+    "MeasurementSet",
+    "RobotSpec",
+    "ViewSummary",
+    "accuracy",
+    "calibrate_cameras",
+    "check_urdf",
+    "export_urdf",
+    "fixate",
+    "gaze_solver",
+    "identify",
+    "load_handeye_poses",
+    "load_measurements",
+    "load_model",
+    "load_robot",
+    "save_model",
+    "solve_handeye",
+    "write_view",
+]

@@ -1,0 +1,100 @@
+"""The Python API is the product: the README's block runs, and gives the CLI's model."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cpc2urdf
+from cpc2urdf.cli import main
+from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.robot_ref import load_model
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def readme_python_block() -> str:
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    assert len(blocks) == 1, "the README has one Python block: the pipeline"
+    return blocks[0]
+
+
+def assert_same_geometry(a: cpc2urdf.CPCModel, b: cpc2urdf.CPCModel, tol: float = 1e-12) -> None:
+    assert a.structure.joint_names == b.structure.joint_names
+    assert a.structure.frame_names == b.structure.frame_names
+    np.testing.assert_allclose(a.world_to_base.matrix(), b.world_to_base.matrix(), rtol=0, atol=tol)
+    for name in a.structure.joint_names:
+        np.testing.assert_allclose(a.joints[name].matrix(), b.joints[name].matrix(), rtol=0, atol=tol, err_msg=name)
+    for name in a.structure.frame_names:
+        np.testing.assert_allclose(a.frames[name].matrix(), b.frames[name].matrix(), rtol=0, atol=tol, err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def readme_run(demo_run, tmp_path_factory):
+    """The README's block, run in a folder where ``demo-out`` is the demo's output."""
+    demo_dir, _, _ = demo_run
+    work = tmp_path_factory.mktemp("readme")
+    (work / "demo-out").symlink_to(demo_dir)
+    cwd = os.getcwd()
+    os.chdir(work)
+    out = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(out):
+            exec(compile(readme_python_block(), str(README), "exec"), {"__name__": "__readme__"})
+    finally:
+        os.chdir(cwd)
+    return work, out.getvalue()
+
+
+def test_readme_block_runs_and_writes_every_artefact(readme_run):
+    work, out = readme_run
+    for name in ("stage1_model.json", "model.json", "head.urdf", "view.html"):
+        assert (work / name).is_file(), name
+    assert "plate_left held-out rms" in out and "plate_right held-out rms" in out
+    model = load_model(work / "model.json")
+    assert {"camera_left_optical", "camera_right_optical"} <= set(model.structure.frame_names)
+
+
+def test_readme_block_gives_the_cli_model(readme_run, demo_run, capsys):
+    work, _ = readme_run
+    demo_dir, _, _ = demo_run
+    cli_out = work / "cli_model.json"
+    assert main(["identify", str(demo_dir / "sim" / "measurements.json"), "-o", str(cli_out)]) == 0
+    capsys.readouterr()
+    api_model, cli_model = load_model(work / "stage1_model.json"), load_model(cli_out)
+    assert_same_geometry(api_model, cli_model)
+    assert api_model.metadata["provenance"]["method"] == cli_model.metadata["provenance"]["method"] == "refined"
+
+
+def test_identify_from_a_path_equals_identify_of_the_loaded_set(demo_run):
+    demo_dir, _, _ = demo_run
+    path = demo_dir / "sim" / "measurements.json"
+    a = cpc2urdf.identify(path, "closed-form")
+    b = cpc2urdf.identify(cpc2urdf.load_measurements(path), "closed-form")
+    assert_same_geometry(a, b, tol=0.0)
+    # the robot's nominal model keeps the camera frames the plates do not measure
+    assert "camera_left_optical" in a.structure.frame_names
+
+
+def test_api_refuses_robot_override_with_a_loaded_set(demo_run):
+    demo_dir, _, _ = demo_run
+    ms = cpc2urdf.load_measurements(demo_dir / "sim" / "measurements.json")
+    with pytest.raises(ConfigurationError, match="robot= applies to a measurement file path"):
+        cpc2urdf.identify(ms, robot="iis_head")
+
+
+def test_import_cpc2urdf_is_light_and_lists_the_api():
+    import subprocess
+    import sys
+
+    code = ("import sys, cpc2urdf; heavy = [m for m in ('pinocchio', 'cv2', 'meshcat') if m in sys.modules]; "
+            "print(heavy); print(callable(cpc2urdf.identify))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]" and out[1] == "True"
+    assert {"identify", "export_urdf", "check_urdf", "calibrate_cameras", "fixate", "write_view"} <= set(cpc2urdf.__all__)
