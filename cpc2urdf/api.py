@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.identification.handeye.axxb import HandEyeResult
 from cpc2urdf.identification.handeye.pose_file import HandEyePoses, load_handeye_poses
-from cpc2urdf.identification.handeye.solvers import calibrate
+from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD, calibrate
 from cpc2urdf.identification.handeye.stage2 import with_camera_frame
 from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
 from cpc2urdf.identification.kinematics.methods import identify as _identify
@@ -46,8 +46,6 @@ from cpc2urdf.validation.view import ViewSummary, write_view_html
 
 PathLike = str | os.PathLike[str]
 
-#: Hand-eye solver used when none is named (as ``cpc2urdf handeye``): Li et al.'s Kronecker method.
-DEFAULT_HANDEYE_METHOD = "kronecker"
 
 
 def identify(
@@ -94,6 +92,35 @@ def solve_handeye(poses: HandEyePoses | PathLike, method: str = DEFAULT_HANDEYE_
     return calibrate(data.T_base_hand, data.T_camera_target, method)
 
 
+def camera_mount(
+    model: CPCModel, poses: HandEyePoses, *, camera: str | None = None, hand: str | None = None
+) -> tuple[str, str]:
+    """The camera frame to add and the frame it is fixed to, checked against ``model``.
+
+    Args:
+        model: The model the camera goes into.
+        poses: The hand-eye poses (their file may name ``camera`` and ``hand``).
+        camera: Camera frame name (default: the pose file's ``camera``).
+        hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
+
+    Raises:
+        ConfigurationError: No camera or hand name; a hand the model does not have; ``camera``
+            naming a frame that is not a camera.
+    """
+    camera, hand = camera or poses.camera, hand or poses.hand
+    if not camera or not hand:
+        raise ConfigurationError(
+            f"{poses.source}: give the camera and hand frame names (--camera/--hand, or 'camera'/'hand' in the pose file)"
+        )
+    try:
+        model.structure.frame(hand)
+    except UnknownNameError as e:
+        raise ConfigurationError(f"model {model.structure.name!r}: hand {e}") from e
+    if camera in model.structure.frame_names and model.structure.frame(camera).kind != "camera":
+        raise ConfigurationError(f"model {model.structure.name!r}: frame {camera!r} exists and is not a camera frame")
+    return camera, hand
+
+
 def calibrate_cameras(
     model: CPCModel | RobotRef,
     poses: HandEyePoses | PathLike,
@@ -101,46 +128,40 @@ def calibrate_cameras(
     *,
     camera: str | None = None,
     hand: str | None = None,
+    result: HandEyeResult | None = None,
 ) -> CPCModel:
-    """``model`` with one camera frame added (or replaced) from a hand-eye pose file.
+    """``model`` with one camera frame added (or replaced) from hand-eye poses.
 
     The camera frame is placed on the link of ``hand`` at ``T_link_hand @ X`` (stage 2 of
     Shih et al.); ``cpc2urdf handeye POSES --model M -o OUT`` does the same.
 
     Args:
         model: The identified model (or a reference :func:`load_model` accepts).
-        poses: Head-camera observations of the target with the hand poses.
+        poses: Head-camera observations of the target with the hand poses, or their file.
         method: Hand-eye solver (default Li et al.'s Kronecker method).
         camera: Camera frame name (default: the pose file's ``camera``).
         hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
+        result: A solution of these poses already computed (then ``method`` is not run again).
 
     Raises:
-        ConfigurationError: No camera/hand name, an unknown hand frame, or ``camera`` naming a
-            frame that is not a camera.
+        ConfigurationError: See :func:`camera_mount`.
         DegenerateDataError: The poses cannot determine ``X`` (the solver says why).
     """
     m = model if isinstance(model, CPCModel) else load_model(model)
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
-    source = str(poses) if not isinstance(poses, HandEyePoses) else "<memory>"
-    camera, hand = camera or data.camera, hand or data.hand
-    if not camera or not hand:
-        raise ConfigurationError(
-            f"{source}: give the camera and hand frame names (camera=/hand=, or 'camera'/'hand' in the pose file)"
-        )
-    try:
-        m.structure.frame(hand)
-    except UnknownNameError as e:
-        raise ConfigurationError(f"model {m.structure.name!r}: hand {e}") from e
-    if camera in m.structure.frame_names and m.structure.frame(camera).kind != "camera":
-        raise ConfigurationError(f"model {m.structure.name!r}: frame {camera!r} exists and is not a camera frame")
-    result = calibrate(data.T_base_hand, data.T_camera_target, method)
-    return with_camera_frame(m, camera, hand, result, {"poses": source})
+    camera, hand = camera_mount(m, data, camera=camera, hand=hand)
+    solution = result if result is not None else calibrate(data.T_base_hand, data.T_camera_target, method)
+    return with_camera_frame(m, camera, hand, solution, {"poses": data.source})
 
 
-def export_urdf(model: CPCModel | RobotRef, path: PathLike) -> Path:
-    """Write the URDF of a model, robot spec or shipped robot atomically (``cpc2urdf export``)."""
+def export_urdf(model: CPCModel | RobotRef, path: PathLike, *, source: str | None = None) -> Path:
+    """Write the URDF of a model, robot spec or shipped robot atomically (``cpc2urdf export``).
+
+    ``source`` (default: the reference, when ``model`` is one) is named in the URDF's header.
+    """
     m = model if isinstance(model, CPCModel) else load_model(model)
-    source = None if isinstance(model, CPCModel | RobotSpec) else os.fspath(model)
+    if source is None and not isinstance(model, CPCModel | RobotSpec):
+        source = os.fspath(model)
     return write_urdf(m, Path(path), source=source)
 
 
@@ -206,6 +227,7 @@ __all__ = [
     "ViewSummary",
     "accuracy",
     "calibrate_cameras",
+    "camera_mount",
     "check_urdf",
     "export_urdf",
     "fixate",

@@ -22,9 +22,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from cpc2urdf.measurements import load_measurements
-    from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.validation.accuracy import accuracy, format_table
+    from cpc2urdf.api import accuracy, load_measurements, load_model
+    from cpc2urdf.validation.accuracy import format_table
 
     model = load_model(args.model)
     ms = load_measurements(args.heldout)

@@ -27,13 +27,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.validation.crosscheck import cross_check
+    from cpc2urdf.api import check_urdf
 
     if args.configurations < 1:
-        raise Cpc2UrdfError(f"--configurations must be at least 1, got {args.configurations}")
-    model = load_model(args.model)
-    report = cross_check(model, args.urdf, args.configurations, args.seed)
+        from cpc2urdf.errors import ConfigurationError
+
+        raise ConfigurationError(f"--configurations must be at least 1, got {args.configurations}")
+    report = check_urdf(args.urdf, args.model, args.configurations, args.seed)
     print(json.dumps(report.to_json(), indent=2) if args.json else report.format())
     return 0 if report.ok else 1

@@ -18,11 +18,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.api import export_urdf, load_model
 
     model = load_model(args.model)
-    path = write_urdf(model, args.output, source=str(args.model))
+    path = export_urdf(model, args.output, source=str(args.model))
     s = model.structure
     print(f"wrote {path}: {s.n_joints} joints, {len(s.frames)} frames ({', '.join(s.frame_names)})")
     return 0

@@ -21,7 +21,7 @@ Z_DIRECTION = "Z = T_base_target: target pose in the robot base frame (maps targ
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from cpc2urdf.identification.handeye.solvers import ALL_METHODS
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS, DEFAULT_HANDEYE_METHOD
 
     p = subparsers.add_parser(
         "handeye",
@@ -31,8 +31,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "Z = T_base_target and the residual of every pose in mm and degrees.",
     )
     p.add_argument("poses", help="hand-eye pose file (cpc2urdf/handeye-poses@1)")
-    p.add_argument("--method", default="kronecker", choices=[*ALL_METHODS, "all"],
-                   help="solver, or 'all' to compare every solver side by side (default kronecker)")
+    p.add_argument("--method", default=DEFAULT_HANDEYE_METHOD, choices=[*ALL_METHODS, "all"],
+                   help=f"solver, or 'all' to compare every solver side by side (default {DEFAULT_HANDEYE_METHOD})")
     p.add_argument("--json", action="store_true", help="print the result as JSON (SI units + mm/deg residuals)")
     p.add_argument("--model", help="model file (or shipped robot) to put the camera frame into; needs -o")
     p.add_argument("-o", "--output", help="write MODEL with the camera frame added (atomically)")
@@ -50,9 +50,10 @@ def _pose_line(T: Any) -> str:
             f"rpy = [{rpy[0]:9.4f} {rpy[1]:9.4f} {rpy[2]:9.4f}] deg")
 
 
-def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
-    """Validate --model/-o/--camera/--hand before solving; returns the model or None."""
-    from cpc2urdf.errors import ConfigurationError, UnknownNameError
+def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
+    """The model --model names (checked against the poses before solving), or None."""
+    from cpc2urdf.api import camera_mount, load_model
+    from cpc2urdf.errors import ConfigurationError
 
     if (args.model is None) != (args.output is None):
         raise ConfigurationError("--model and -o/--output go together (the model to extend and where to write it)")
@@ -60,34 +61,23 @@ def _check_model_args(args: argparse.Namespace, data: Any) -> Any:
         return None
     if args.method == "all":
         raise ConfigurationError("--model needs one --method (not 'all') to decide which X to store")
-    camera, hand = args.camera or data.camera, args.hand or data.hand
-    if not camera or not hand:
-        raise ConfigurationError(
-            f"{args.poses}: give the camera and hand frame names (--camera/--hand, or 'camera'/'hand' in the pose file)")
-    from cpc2urdf.robot_ref import load_model
-
     model = load_model(args.model)
-    try:
-        model.structure.frame(hand)
-    except UnknownNameError as e:
-        raise ConfigurationError(f"{args.model}: hand {e}") from e
-    if camera in model.structure.frame_names and model.structure.frame(camera).kind != "camera":
-        raise ConfigurationError(f"{args.model}: frame {camera!r} exists and is not a camera frame")
+    camera_mount(model, data, camera=args.camera, hand=args.hand)
     return model
 
 
 def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.api import calibrate_cameras, load_handeye_poses, save_model, solve_handeye
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
-    from cpc2urdf.identification.handeye.solvers import ALL_METHODS, calibrate
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS
 
     data = load_handeye_poses(args.poses)
-    model = _check_model_args(args, data)
+    model = _model_to_extend(args, data)
     methods = list(ALL_METHODS) if args.method == "all" else [args.method]
     results, refused = {}, {}
     for m in methods:
         try:
-            results[m] = calibrate(data.T_base_hand, data.T_camera_target, m)
+            results[m] = solve_handeye(data, m)
         except DegenerateDataError as e:
             if len(methods) == 1:
                 raise DegenerateDataError(f"{args.poses}: {e}") from e
@@ -95,12 +85,10 @@ def run(args: argparse.Namespace) -> int:
     if not results:  # every solver refused: the data is the problem, say it once
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
     if model is not None:
-        from cpc2urdf.identification.handeye.stage2 import with_camera_frame
-        from cpc2urdf.model_file import save_model
-
-        camera, hand = args.camera or data.camera, args.hand or data.hand
-        out = with_camera_frame(model, camera, hand, results[args.method], {"poses": str(args.poses)})
+        out = calibrate_cameras(model, data, args.method, camera=args.camera, hand=args.hand,
+                                result=results[args.method])
         path = save_model(out, args.output)
+        camera, hand = args.camera or data.camera, args.hand or data.hand
 
     if args.json:
         doc: dict[str, Any] = {

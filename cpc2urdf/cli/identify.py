@@ -35,10 +35,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from cpc2urdf.identification.kinematics.methods import identify
-    from cpc2urdf.measurements import load_measurements
-    from cpc2urdf.model_file import save_model
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.api import identify, load_measurements, load_robot, save_model
 
     ms = load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
     start = time.perf_counter()

@@ -53,6 +53,7 @@ class HandEyePoses:
         labels: One label per record.
         camera: Name of the camera, or "".
         hand: Name of the hand frame, or "".
+        source: Where the poses came from (a file path, or ``"<memory>"``); errors name it.
     """
 
     T_base_hand: Array
@@ -60,6 +61,7 @@ class HandEyePoses:
     labels: tuple[str, ...]
     camera: str = ""
     hand: str = ""
+    source: str = "<memory>"
 
 
 def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEyePoses:
@@ -97,7 +99,7 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
         for key in ("camera", "hand"):
             if key in d and not isinstance(d[key], str):
                 raise ValueError(f"'{key}' must be a string, got {d[key]!r}")
-        return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""))
+        return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""), source)
     except InputFileError:
         raise
     except ValueError as e:

@@ -110,6 +110,8 @@ SOLVERS: dict[str, HandEyeSolver] = {
 HAND_EYE_METHODS = tuple(n for n, s in SOLVERS.items() if s.equation == AX_XB)
 ROBOT_WORLD_METHODS = tuple(n for n, s in SOLVERS.items() if s.equation == AX_ZB)
 ALL_METHODS = HAND_EYE_METHODS + ROBOT_WORLD_METHODS
+#: The solver used when none is named (``cpc2urdf handeye``, the API): Li et al.'s Kronecker method.
+DEFAULT_HANDEYE_METHOD = "kronecker"
 
 
 def _run(
@@ -162,6 +164,7 @@ def calibrate_robot_world(
 
 
 __all__ = [
+    "DEFAULT_HANDEYE_METHOD",
     "ALL_METHODS",
     "AX_XB",
     "AX_ZB",
