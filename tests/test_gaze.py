@@ -1,4 +1,4 @@
-"""Gaze IK (validation/gaze.py).
+"""Gaze IK (cpc2urdf/validation/gaze/).
 
 Fixation is checked by FK the solver does not use: the CPC model's own vectorised FK for every
 solution, and yourdfpy on the same URDF file for a seeded random subset (yourdfpy costs ~1 ms
@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from cpc2urdf.errors import ConfigurationError, InputFileError, SpecError, UnknownNameError
+from cpc2urdf.errors import ConfigurationError, InputFileError, UnknownNameError
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import (
     calibrated_iis_head,
@@ -24,7 +24,8 @@ from cpc2urdf.studies.bench_gaze import (
 )
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
-from cpc2urdf.validation.gaze import POLICIES, GazeSolver
+from cpc2urdf.validation.gaze import POLICIES, GazeSolver, solver_for
+from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 N_TARGETS = 10_000
@@ -225,7 +226,7 @@ def test_bad_input(solver, tmp_path):
         "<joint name='j' type='continuous'><parent link='a'/><child link='camera_left_optical'/></joint>"
         "<joint name='k' type='fixed'><parent link='a'/><child link='camera_right_optical'/></joint></robot>"
     )
-    with pytest.raises(SpecError, match="continuous|RUBZ|RUB"):
+    with pytest.raises(InputFileError, match="joint 'j' is continuous"):
         GazeSolver(continuous)
 
 
@@ -241,11 +242,28 @@ def test_fixation_jacobian_matches_finite_differences(solver):
     for _ in range(5):
         q = solver.lower + (solver.upper - solver.lower) * rng.random(solver.n)
         p = AHEAD + rng.normal(0.0, 0.2, 3)
-        J = solver._evaluate(q, p).J
+        J = solver.evaluate(q, p).J
         h = 1e-7
         Jn = np.empty_like(J)
         for i in range(solver.n):
             dq = np.zeros(solver.n)
             dq[i] = h
-            Jn[:, i] = (solver._evaluate(q + dq, p, False).r - solver._evaluate(q - dq, p, False).r) / (2 * h)
+            Jn[:, i] = (solver.evaluate(q + dq, p, False).r - solver.evaluate(q - dq, p, False).r) / (2 * h)
         assert np.abs(Jn - J).max() < 1e-7
+
+
+def test_one_robot_resolver_and_one_pinocchio_model(tmp_path):
+    """``HEAD.URDF`` is a URDF for the gaze solver as for the view (one rule, robot_ref), and a
+    solver on a loaded PinocchioRobot uses that model rather than parsing the URDF again."""
+    path = write_urdf(load_model("iis_head"), tmp_path / "HEAD.URDF")
+    robot = PinocchioRobot.load(path)
+    assert robot.cpc_model is None and robot.source == str(path)
+    solver = GazeSolver(robot)
+    assert solver.model is robot.model and solver.data is not None
+    assert solver_for(str(path)).solve(AHEAD).reachable
+    assert solver.solve(AHEAD).q.tolist() == GazeSolver.from_model(load_model("iis_head")).solve(AHEAD).q.tolist()
+    # Pinocchio's getFrameId returns nframes for an unknown name; the robot checks names itself
+    with pytest.raises(UnknownNameError, match="unknown frame 'nope'"):
+        robot.frame_id("nope")
+    with pytest.raises(UnknownNameError, match="unknown joint 'neck'"):
+        robot.joint_index("neck")

@@ -189,14 +189,14 @@ def test_scene_matches_the_cpc_model_and_the_gaze_fixates() -> None:
 def test_nominal_head_fixates_and_skewed_eyes_are_reported_unreachable() -> None:
     summary = build_view(static_visualizer(), "iis_head", target=TARGET, sweep=False)
     assert summary.gaze is not None and summary.gaze.reachable
-    assert max(summary.gaze.pointing_error.values()) < 1e-9
+    assert summary.gaze.pointing_error.max() < 1e-9
     assert "fixated" in summary.format()
     skewed = calibrated_head(joints=("vergence_left", "vergence_right"))
     vis = static_visualizer()
     summary = build_view(vis, skewed, target=TARGET, sweep=False)
     assert summary.gaze is not None and not summary.gaze.reachable
     assert "reachable=False" in summary.format()
-    assert min(summary.gaze.pointing_error.values()) > 1e-6
+    assert summary.gaze.pointing_error.min() > 1e-6
     assert "object" in decoded(vis.window)["/meshcat/head/camera_left_optical/ray"]
 
 

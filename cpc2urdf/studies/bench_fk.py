@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 import time
-from pathlib import Path
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 
 from cpc2urdf.argparsing import OneLineParser
+
+R = TypeVar("R")  # what a timed function returns
 
 
 def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5, seed: int = 0) -> dict[str, float]:
@@ -32,19 +34,17 @@ def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5,
     import pinocchio as pin
 
     from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.urdf import urdf_from_model
     from cpc2urdf.validation.crosscheck import sample_configurations
+    from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
     model = load_model(model_name)
     s = model.structure
     Q = sample_configurations(model, n, seed)
-    with tempfile.TemporaryDirectory() as d:
-        path = Path(d) / "robot.urdf"
-        path.write_text(urdf_from_model(model))
-        pmodel = pin.buildModelFromUrdf(str(path))
+    robot = PinocchioRobot.from_model(model)
+    pmodel = robot.model
     data = pmodel.createData()
-    fids = [pmodel.getFrameId(f, pin.FrameType.BODY) for f in s.frame_names]
-    perm = [pmodel.joints[pmodel.getJointId(name)].idx_q for name in s.joint_names]
+    fids = [robot.frame_id(f, pin.FrameType.BODY) for f in s.frame_names]
+    perm = [robot.joint_index(name) for name in s.joint_names]
     Qp = np.zeros_like(Q)
     Qp[:, perm] = Q
 
@@ -59,8 +59,8 @@ def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5,
                 out[k, i] = data.oMf[fid].homogeneous
         return out
 
-    def best(fn) -> tuple[float, object]:  # type: ignore[no-untyped-def]
-        times, result = [], None
+    def best(fn: Callable[[], R]) -> tuple[float, R]:
+        times = []
         for _ in range(repeat):
             t0 = time.perf_counter()
             result = fn()
@@ -69,9 +69,7 @@ def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5,
 
     t_cpc, ours = best(cpc)
     t_pin, theirs = best(pinocchio_loop)
-    err = max(
-        float(np.max(np.abs(ours[f] - theirs[:, i]))) for i, f in enumerate(s.frame_names)  # type: ignore[index, call-overload]
-    )
+    err = max(float(np.max(np.abs(ours[f] - theirs[:, i]))) for i, f in enumerate(s.frame_names))
     return {
         "configurations": float(len(Q)),
         "frames": float(len(fids)),
@@ -101,3 +99,6 @@ def main(argv: list[str]) -> int:
         print(f"  ratio                    {r['speedup']:12.1f}x")
         print(f"  max |difference|         {r['max_abs_difference']:12.2e}")
     return 0
+
+
+__all__ = ["main", "run_benchmark"]

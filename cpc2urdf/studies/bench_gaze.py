@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +37,9 @@ from numpy.typing import NDArray
 from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.model import CPCModel, CPCParams
+
+if TYPE_CHECKING:
+    from cpc2urdf.validation.gaze import GazeSolver
 
 Array = NDArray[np.float64]
 CAMERAS = ("camera_left_optical", "camera_right_optical")
@@ -276,11 +280,11 @@ def too_close_targets(model: CPCModel, q: Array, n: int, seed: int = 0, radius: 
     return centre + r[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
 
 
-def _reference_solver(solver: Any) -> Any:
+def _reference_solver(solver: GazeSolver) -> Callable[[Array, Array], tuple[Array, int]]:
     """scipy least_squares on the same residual and Pinocchio Jacobians (cyclopean free joints)."""
     from scipy.optimize import least_squares
 
-    free = solver._free("cyclopean")
+    free = solver.free_joints("cyclopean")
     lo, hi = solver.lower[free], solver.upper[free]
 
     def solve(p: Array, q0: Array) -> tuple[Array, int]:
@@ -288,11 +292,11 @@ def _reference_solver(solver: Any) -> Any:
 
         def fun(x: Array) -> Array:
             q[free] = x
-            return solver._evaluate(q, p, jacobian=False).r
+            return solver.evaluate(q, p, jacobian=False).r
 
         def jac(x: Array) -> Array:
             q[free] = x
-            return solver._evaluate(q, p).J[:, free]
+            return solver.evaluate(q, p).J[:, free]
 
         x0 = np.clip(q0[free], lo + 1e-12, hi - 1e-12)
         res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
@@ -337,7 +341,7 @@ def run_benchmark(n: int = 2000, seed: int = 0, heads: tuple[str, ...] = ("nomin
             q0 = solver.initial_guess(p)
             q, _ = ref(p, q0)
             rtimes[i] = time.perf_counter() - t0
-            st = solver._evaluate(q, p, jacobian=False)
+            st = solver.evaluate(q, p, jacobian=False)
             err = [math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam]
             rok[i] = max(err) <= GAZE_POINTING_TOL
         results[head] = {
@@ -379,3 +383,21 @@ def main(argv: list[str] | None = None) -> int:
 
         write_json(args.json, res)
     return 0
+
+
+__all__ = [
+    "CAMERAS",
+    "MAX_DISTANCE",
+    "MIN_DISTANCE",
+    "PERTURB_ANGLE",
+    "PERTURB_LENGTH",
+    "axis_distance",
+    "axis_meeting",
+    "calibrated_iis_head",
+    "eyes_coplanar",
+    "main",
+    "reachable_targets",
+    "run_benchmark",
+    "too_close_targets",
+    "unreachable_targets",
+]

@@ -21,12 +21,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.model import BASE, CPCModel
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import Array, rotation_error
 from cpc2urdf.urdf import link_name
+from cpc2urdf.validation.pinocchio_robot import PinocchioRobot, UnsupportedJointError
 
 LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
 
@@ -135,39 +137,38 @@ def _compare(ref: Array, got: Array) -> tuple[float, float]:
 
 def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     """FK of every compared frame with Pinocchio vs the CPC model."""
-    import pinocchio as pin
-
     rep = ParserReport("pinocchio", True)
     try:
-        pmodel = pin.buildModelFromUrdf(urdf_path)
-    except Exception as e:  # pinocchio raises plain RuntimeError/ValueError on bad XML
+        robot = PinocchioRobot.from_urdf(Path(urdf_path))
+    except UnsupportedJointError as e:  # no configuration of one reading per joint: no poses
         rep.ok = False
-        rep.problems.append(f"cannot load: {str(e).strip().splitlines()[0] if str(e).strip() else e}")
+        rep.problems.extend(f"joint {name!r} is {kind}, expected revolute or prismatic" for name, kind in e.joints)
         return rep
+    except InputFileError as e:  # not well-formed, or not readable by Pinocchio
+        rep.ok = False
+        rep.problems.append(f"cannot load: {e.problem}")
+        return rep
+    pmodel = robot.model
     s = model.structure
     idx_q = {}
     for j in s.joints:
-        if not pmodel.existJointName(j.name):
+        if j.name not in robot.joint_names:
             rep.problems.append(f"joint {j.name!r} missing")
             continue
-        jm = pmodel.joints[pmodel.getJointId(j.name)]
-        if jm.nq != 1:
-            rep.problems.append(f"joint {j.name!r} has nq={jm.nq}, expected 1 (continuous joint?)")
-            continue
-        idx_q[j.name] = jm.idx_q
-        lo, hi = pmodel.lowerPositionLimit[jm.idx_q], pmodel.upperPositionLimit[jm.idx_q]
+        i = robot.joint_index(j.name)
+        idx_q[j.name] = i
+        lo, hi = robot.lower[i], robot.upper[i]
         if abs(lo - j.lower) > LIMIT_TOL or abs(hi - j.upper) > LIMIT_TOL:
             rep.problems.append(f"joint {j.name!r} limits [{lo}, {hi}] != [{j.lower}, {j.upper}]")
-    if pmodel.nq != s.n_joints:
-        rep.problems.append(f"model has nq={pmodel.nq}, expected {s.n_joints}")
+    if robot.n_joints != s.n_joints:
+        rep.problems.append(f"model has nq={robot.n_joints}, expected {s.n_joints}")
     frames = _compared_frames(model)
     fids = {}
     for f in frames:
-        # getFrameId returns nframes for an unknown name instead of raising: check explicitly.
-        if not pmodel.existFrame(f, pin.FrameType.BODY):
+        if not robot.has_frame(f, pin.FrameType.BODY):
             rep.problems.append(f"frame {f!r} missing")
         else:
-            fids[f] = pmodel.getFrameId(f, pin.FrameType.BODY)
+            fids[f] = robot.frame_id(f, pin.FrameType.BODY)
     if rep.problems:
         rep.ok = False
         return rep
@@ -286,7 +287,9 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
     return rep
 
 
-def cross_check(model: CPCModel, urdf_path: str | Path, n: int = 100, seed: int = 0) -> CrossCheckReport:
+def cross_check(
+    model: CPCModel, urdf_path: str | os.PathLike[str], n: int = 100, seed: int = 0
+) -> CrossCheckReport:
     """Compare ``urdf_path`` with ``model`` using Pinocchio, yourdfpy and urdfdom.
 
     Args:
@@ -298,9 +301,22 @@ def cross_check(model: CPCModel, urdf_path: str | Path, n: int = 100, seed: int 
     Raises:
         InputFileError: The URDF file does not exist.
     """
-    path = str(urdf_path)
+    path = os.fspath(urdf_path)
     if not Path(path).is_file():
         raise InputFileError(path, "no such file")
     Q = sample_configurations(model, n, seed)
     reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
     return CrossCheckReport(path, len(Q), _compared_frames(model), reports)
+
+
+__all__ = [
+    "LIMIT_TOL",
+    "CrossCheckReport",
+    "ParserReport",
+    "check_pinocchio",
+    "check_urdfdom",
+    "check_urdfdom_executable",
+    "check_yourdfpy",
+    "cross_check",
+    "sample_configurations",
+]

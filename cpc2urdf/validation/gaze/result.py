@@ -1,0 +1,145 @@
+"""The answer of a gaze solve: :class:`GazeSolution` and why a target is not fixated.
+
+``reachable`` is True when both eyes point at the target to within
+:data:`cpc2urdf.tolerances.GAZE_POINTING_TOL` (which implies in front of the cameras), inside
+the limits. Otherwise the readings are the best in-limit configuration found (least sum of the
+squared residuals of the two eyes), with the residuals, and ``status`` says why.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze.fixation import MIN_TARGET_DISTANCE, FixationState, closest_point
+from cpc2urdf.validation.gaze.head import GazeHead
+
+STATUS_FIXATED = "fixated"
+STATUS_LIMITS = "joint_limits"  # the best in-limit configuration does not fixate; a joint is at a limit
+STATUS_BEHIND = "behind"  # an eye would have to look away from the target
+STATUS_TOO_CLOSE = "too_close"  # the target is closer to the cameras than their baseline
+STATUS_NO_SOLUTION = "no_solution"  # no limit active, yet the two eyes cannot both fixate
+STATUSES = (STATUS_FIXATED, STATUS_LIMITS, STATUS_BEHIND, STATUS_TOO_CLOSE, STATUS_NO_SOLUTION)
+
+
+@dataclass(frozen=True)
+class GazeSolution:
+    """The answer of :meth:`~cpc2urdf.validation.gaze.GazeSolver.solve`. Nothing is moved.
+
+    Attributes:
+        q: Joint readings [rad]/[m], shape (n,), in ``joint_names`` order; always inside the limits.
+        joint_names: Names of the joints, in the order of ``q``.
+        reachable: True if both eyes point at the target to within
+            :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL` (which implies in front of the cameras).
+        status: One of :data:`STATUSES`: ``"fixated"`` or why not.
+        pointing_error: Angle between each optical axis and the direction to the target [rad],
+            shape (2,) (left, right).
+        miss_distance: Distance from the target to each optical ray (half-line in front of the
+            camera) [m], shape (2,).
+        fixation_point: Midpoint of the closest points of the two optical axes (world) [m],
+            shape (3,), or None when the axes are parallel.
+        vergence: Angle between the two optical axes [rad].
+        at_limit: Names of the joints at one of their limits.
+        iterations: Gauss-Newton iterations used.
+        policy: The redundancy policy used.
+        target: The target (world) [m], shape (3,).
+    """
+
+    q: Array
+    joint_names: tuple[str, ...]
+    reachable: bool
+    status: str
+    pointing_error: Array
+    miss_distance: Array
+    fixation_point: Array | None
+    vergence: float
+    at_limit: tuple[str, ...]
+    iterations: int
+    policy: str
+    target: Array
+
+    @property
+    def joints(self) -> dict[str, float]:
+        """``{joint name: reading}`` [rad]/[m]."""
+        return {n: float(v) for n, v in zip(self.joint_names, self.q, strict=True)}
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (SI units)."""
+        return {
+            "target": self.target.tolist(),
+            "policy": self.policy,
+            "reachable": self.reachable,
+            "status": self.status,
+            "joints": self.joints,
+            "pointing_error_rad": {"left": float(self.pointing_error[0]), "right": float(self.pointing_error[1])},
+            "miss_distance_m": {"left": float(self.miss_distance[0]), "right": float(self.miss_distance[1])},
+            "fixation_point": None if self.fixation_point is None else self.fixation_point.tolist(),
+            "vergence_rad": self.vergence,
+            "at_limit": list(self.at_limit),
+            "iterations": self.iterations,
+        }
+
+
+def solution_from_state(
+    head: GazeHead, p: Array, q: Array, iterations: int, policy: str, st: FixationState
+) -> GazeSolution:
+    """The :class:`GazeSolution` of readings ``q`` (shape (n,)) for target ``p`` (world) [m],
+    shape (3,), from its fixation state ``st``: pointing errors, miss distances, the joints at a
+    limit, and the status (why a target is not fixated: :data:`STATUSES`)."""
+    errs, misses = [], []
+    for x, y, z in st.p_cam:
+        lateral = math.hypot(x, y)
+        # a target on the camera centre has no direction: count it as missed by pi
+        errs.append(math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi)
+        misses.append(lateral if z >= 0 else math.sqrt(x * x + y * y + z * z))
+    err, miss = np.array(errs), np.array(misses)
+    fix = closest_point(st.origins, st.axes)
+    (a0, a1, a2), (b0, b1, b2) = st.axes
+    vergence = math.acos(max(-1.0, min(1.0, a0 * b0 + a1 * b1 + a2 * b2)))
+    tol = 1e-12
+    at_limit = tuple(
+        n for n, v, lo, hi in zip(head.joint_names, q.tolist(), head.lower_list, head.upper_list, strict=True)
+        if v <= lo + tol or v >= hi - tol
+    )
+    reachable = errs[0] <= GAZE_POINTING_TOL and errs[1] <= GAZE_POINTING_TOL
+    if reachable:
+        status = STATUS_FIXATED
+    elif any(z <= 0 for _, _, z in st.p_cam):
+        status = STATUS_BEHIND
+    elif min(math.sqrt(x * x + y * y + z * z) for x, y, z in st.p_cam) < head.baseline:
+        status = STATUS_TOO_CLOSE
+    elif at_limit:
+        status = STATUS_LIMITS
+    else:
+        status = STATUS_NO_SOLUTION
+    return GazeSolution(
+        q=q,
+        joint_names=head.joint_names,
+        reachable=reachable,
+        status=status,
+        pointing_error=err,
+        miss_distance=miss,
+        fixation_point=fix,
+        vergence=vergence,
+        at_limit=at_limit,
+        iterations=iterations,
+        policy=policy,
+        target=p.copy(),
+    )
+
+
+__all__ = [
+    "STATUSES",
+    "STATUS_BEHIND",
+    "STATUS_FIXATED",
+    "STATUS_LIMITS",
+    "STATUS_NO_SOLUTION",
+    "STATUS_TOO_CLOSE",
+    "GazeSolution",
+    "solution_from_state",
+]

@@ -1,0 +1,239 @@
+"""One way from a URDF (or a CPC model) to Pinocchio: :class:`PinocchioRobot`.
+
+The gaze solver, the view, the URDF cross-check and the FK benchmark all need the same few
+things from Pinocchio: the kinematic model of a URDF, its joints in configuration order with
+their limits, and frame ids by name. :class:`PinocchioRobot` gives them once, with the checks
+every user needs:
+
+- the URDF must be well-formed XML that Pinocchio can read (one clear line otherwise, naming
+  the file; urdfdom's own multi-line complaints are not the message);
+- every moving joint must be a 1-DoF revolute or prismatic joint (no continuous, floating or
+  planar joints), so the configuration is one reading per joint, in :attr:`joint_names` order;
+- frame and joint names are checked here: Pinocchio's ``getFrameId`` returns ``nframes`` for a
+  name it does not know instead of raising.
+
+Which robot a name means (``HEAD.URDF``, a model file, a robot spec, a shipped robot) is decided
+by :mod:`cpc2urdf.robot_ref` (:meth:`PinocchioRobot.load`).
+
+Frames: ``T_world_<frame>`` is the pose of ``<frame>`` in ``world`` (Pinocchio's ``oMf``).
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from cpc2urdf.errors import InputFileError, SpecError, UnknownNameError
+from cpc2urdf.fileio import read_text_file
+from cpc2urdf.model import CPCModel
+from cpc2urdf.robot_ref import is_urdf_ref, load_model
+from cpc2urdf.transforms import Array
+from cpc2urdf.urdf import urdf_from_model
+
+PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")  # Pinocchio joint model short names
+REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
+UNSUPPORTED_KINDS = {  # Pinocchio short name -> the URDF joint type it comes from
+    "RUBX": "continuous",
+    "RUBY": "continuous",
+    "RUBZ": "continuous",
+    "RUBUnaligned": "continuous",
+    "FreeFlyer": "floating",
+    "Planar": "planar",
+}
+TEXT_SOURCE = "<URDF string>"  # the source named in errors about URDF text given directly
+
+
+class UnsupportedJointError(InputFileError):
+    """A URDF with joints other than 1-DoF revolute or prismatic ones.
+
+    Args:
+        path: The URDF's source, as errors name it.
+        joints: ``(joint, kind)`` of every such joint, ``kind`` being the URDF type
+            (``"continuous"``, ``"floating"``, ``"planar"``) or Pinocchio's joint model name.
+    """
+
+    def __init__(self, path: object, joints: list[tuple[str, str]]) -> None:
+        self.joints = list(joints)
+        which = ", ".join(f"joint {name!r} is {kind}" for name, kind in self.joints)
+        super().__init__(
+            path, f"{which}; only revolute and prismatic joints are supported (no continuous, floating or planar joints)"
+        )
+
+
+class PinocchioRobot:
+    """A URDF through Pinocchio: kinematic model, 1-DoF joints and limits, checked frame lookup.
+
+    Build it with :meth:`from_urdf`, :meth:`from_model` or :meth:`load`.
+
+    Attributes:
+        model: ``pinocchio.Model`` of the URDF.
+        urdf: The URDF text.
+        source: Where it came from (a path, a robot reference, ``<model NAME>`` or
+            :data:`TEXT_SOURCE`), as errors name it.
+        cpc_model: The :class:`~cpc2urdf.model.CPCModel` the URDF was exported from, or None for
+            a URDF file or text.
+        visual_model: ``pinocchio.GeometryModel`` of the URDF visuals, or None unless asked for.
+        joint_names: The moving joints in configuration order (one reading each).
+        joint_kinds: ``"revolute"`` or ``"prismatic"`` per joint, in :attr:`joint_names` order.
+        lower: Lower joint limits [rad]/[m], shape (n,), as the URDF gives them.
+        upper: Upper joint limits [rad]/[m], shape (n,).
+        velocity_limit: Joint speed limits [rad/s]/[m/s], shape (n,).
+        links: URDF link names (Pinocchio BODY frames), in tree order.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        urdf: str,
+        source: str,
+        *,
+        cpc_model: CPCModel | None = None,
+        visual_model: pin.GeometryModel | None = None,
+    ) -> None:
+        """Wrap a Pinocchio ``model`` of ``urdf``; :class:`UnsupportedJointError` naming ``source``
+        if a joint is not a 1-DoF revolute or prismatic joint."""
+        names: list[str] = []
+        kinds: list[str] = []
+        unsupported: list[tuple[str, str]] = []
+        for jid in range(1, model.njoints):
+            joint = model.joints[jid]
+            short = joint.shortname().replace("JointModel", "")
+            if joint.nq != 1 or joint.nv != 1 or short not in PRISMATIC + REVOLUTE:
+                unsupported.append((str(model.names[jid]), UNSUPPORTED_KINDS.get(short, short)))
+                continue
+            names.append(str(model.names[jid]))
+            kinds.append("prismatic" if short in PRISMATIC else "revolute")
+        if unsupported:
+            raise UnsupportedJointError(source, unsupported)
+        if any(model.joints[jid].idx_q != jid - 1 for jid in range(1, model.njoints)):
+            raise SpecError("unexpected Pinocchio joint ordering")
+        self.model = model
+        self.urdf = urdf
+        self.source = source
+        self.cpc_model = cpc_model
+        self.visual_model = visual_model
+        self.joint_names: tuple[str, ...] = tuple(names)
+        self.joint_kinds: tuple[str, ...] = tuple(kinds)
+        self.lower: Array = np.array(model.lowerPositionLimit, dtype=float)
+        self.upper: Array = np.array(model.upperPositionLimit, dtype=float)
+        self.velocity_limit: Array = np.array(model.velocityLimit, dtype=float)
+        self.links: tuple[str, ...] = tuple(
+            f.name for f in model.frames if f.type == pin.FrameType.BODY
+        )
+
+    # ---- construction -------------------------------------------------------------------------
+
+    @classmethod
+    def from_urdf(
+        cls,
+        urdf: str | os.PathLike[str],
+        *,
+        source: str | None = None,
+        visuals: bool = False,
+        cpc_model: CPCModel | None = None,
+    ) -> PinocchioRobot:
+        """The robot of a URDF file or URDF text.
+
+        Args:
+            urdf: A path (a ``str`` not starting with ``<`` is a path) or the URDF text.
+            source: How errors name it; default the path, or :data:`TEXT_SOURCE` for text.
+            visuals: Also build the visual geometry model (:attr:`visual_model`).
+            cpc_model: The CPC model the text was exported from, if any.
+
+        Raises:
+            InputFileError: A missing or unreadable file, XML that is not well-formed, a URDF
+                Pinocchio cannot read, or (:class:`UnsupportedJointError`) joints other than
+                revolute/prismatic.
+        """
+        text = os.fspath(urdf)
+        if isinstance(urdf, os.PathLike) or not text.lstrip().startswith("<"):  # a path, not XML
+            label = text if source is None else source
+            text = read_text_file(Path(text), "a URDF file")
+        else:
+            label = TEXT_SOURCE if source is None else source
+        try:  # urdfdom prints its own multi-line complaints about malformed XML; say it in one line
+            ET.fromstring(text)
+        except ET.ParseError as e:
+            raise InputFileError(label, f"not well-formed XML ({e})") from e
+        try:
+            model = pin.buildModelFromXML(text)
+            visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
+        except (RuntimeError, ValueError) as e:
+            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise InputFileError(label, f"not a URDF Pinocchio can read ({first})") from e
+        return cls(model, text, label, cpc_model=cpc_model, visual_model=visual)
+
+    @classmethod
+    def from_model(
+        cls, model: CPCModel, *, source: str | None = None, visuals: bool = False
+    ) -> PinocchioRobot:
+        """The robot of a :class:`~cpc2urdf.model.CPCModel`, through its URDF
+        (:func:`cpc2urdf.urdf.urdf_from_model`; ``source`` is written in its comment)."""
+        label = source if source is not None else f"<model {model.structure.name}>"
+        text = urdf_from_model(model, source=source)
+        return cls.from_urdf(text, source=label, visuals=visuals, cpc_model=model)
+
+    @classmethod
+    def load(
+        cls, ref: str | os.PathLike[str] | CPCModel, *, visuals: bool = False
+    ) -> PinocchioRobot:
+        """The robot ``ref`` names: a :class:`~cpc2urdf.model.CPCModel`, a ``.urdf`` file (any
+        case, :func:`cpc2urdf.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
+        robot name (:func:`cpc2urdf.robot_ref.load_model`).
+
+        Raises:
+            InputFileError: As :meth:`from_urdf`, or a reference :func:`load_model` rejects.
+        """
+        if isinstance(ref, CPCModel):
+            return cls.from_model(ref, visuals=visuals)
+        if is_urdf_ref(ref):
+            return cls.from_urdf(Path(ref), visuals=visuals)
+        label = os.fspath(ref)
+        return cls.from_model(load_model(label), source=label, visuals=visuals)
+
+    # ---- names ----------------------------------------------------------------------------------
+
+    @property
+    def name(self) -> str:
+        """The URDF's ``<robot name>`` (or :attr:`source` if it has none)."""
+        return str(self.model.name) or self.source
+
+    @property
+    def n_joints(self) -> int:
+        """Number of moving joints (= configuration size)."""
+        return len(self.joint_names)
+
+    def joint_index(self, name: str) -> int:
+        """Position of joint ``name`` in the configuration; :class:`UnknownNameError` if none."""
+        if name not in self.joint_names:
+            raise UnknownNameError("joint", name, self.joint_names)
+        return self.joint_names.index(name)
+
+    def frame_names(self, frame_type: pin.FrameType | None = None) -> tuple[str, ...]:
+        """Names of the Pinocchio frames (of ``frame_type``, a ``pinocchio.FrameType``; None: all)."""
+        return tuple(f.name for f in self.model.frames if frame_type is None or f.type == frame_type)
+
+    def has_frame(self, name: str, frame_type: pin.FrameType | None = None) -> bool:
+        """Whether the model has a frame ``name`` (of ``frame_type``; None: any type)."""
+        if frame_type is None:
+            return bool(self.model.existFrame(name))
+        return bool(self.model.existFrame(name, frame_type))
+
+    def frame_id(self, name: str, frame_type: pin.FrameType | None = None) -> int:
+        """Pinocchio's id of frame ``name`` (of ``frame_type``; None: any type).
+
+        Raises:
+            UnknownNameError: No such frame, listing the frames there are (of that type).
+        """
+        if not self.has_frame(name, frame_type):
+            raise UnknownNameError("frame", name, self.frame_names(frame_type))
+        if frame_type is None:
+            return int(self.model.getFrameId(name))
+        return int(self.model.getFrameId(name, frame_type))
+
+
+__all__ = ["PRISMATIC", "REVOLUTE", "TEXT_SOURCE", "UNSUPPORTED_KINDS", "PinocchioRobot", "UnsupportedJointError"]

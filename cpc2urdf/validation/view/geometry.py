@@ -1,0 +1,158 @@
+"""meshcat geometry for the view: URDF visuals as meshcat shapes, materials, bars and triads."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import meshcat
+import meshcat.geometry as mg
+import numpy as np
+import pinocchio as pin
+
+from cpc2urdf.transforms import Array, cpc_rotation
+from cpc2urdf.validation.view.robot import ViewRobot
+
+TRIAD_LENGTH = 0.05  # [m]
+TRIAD_RADIUS = 0.002  # [m]
+
+
+def hex_colour(rgba: Sequence[float]) -> int:
+    """``0xRRGGBB`` of an RGB(A) colour with components in [0, 1]."""
+    r, g, b = (int(round(255 * min(max(float(c), 0.0), 1.0))) for c in rgba[:3])
+    return (r << 16) | (g << 8) | b
+
+
+def material(rgba: Sequence[float], opacity: float | None = None) -> mg.Material:
+    """A Lambert material of colour ``rgba`` (its alpha, or ``opacity``; below 1 translucent)."""
+    a = float(rgba[3]) if opacity is None else opacity
+    if a < 1.0:
+        return mg.MeshLambertMaterial(
+            color=hex_colour(rgba), transparent=True, opacity=a, depthWrite=False
+        )
+    return mg.MeshLambertMaterial(color=hex_colour(rgba))
+
+
+Y_TO_Z = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])  # Rot(x, 90 deg)
+
+
+def meshcat_shape(geometry: Any, mesh_path: str) -> tuple[mg.Geometry, Array, Array] | None:
+    """meshcat geometry of a coal shape, the local transform meshcat needs (its cylinders lie
+    along y, URDF's along z) and the half extents [m], shape (3,), of its bounding box in
+    meshcat's local axes (zeros for meshes); None for a shape the view cannot draw."""
+    kind = type(geometry).__name__
+    if kind == "Box":
+        half = np.asarray(geometry.halfSide, dtype=float)
+        return mg.Box((2.0 * half).tolist()), np.eye(4), half
+    if kind == "Cylinder":
+        r, h = float(geometry.radius), float(geometry.halfLength)
+        return mg.Cylinder(2.0 * h, r), Y_TO_Z, np.array([r, h, r])
+    if kind == "Sphere":
+        r = float(geometry.radius)
+        return mg.Sphere(r), np.eye(4), np.full(3, r)
+    ext = Path(mesh_path).suffix.lower()
+    loaders = {".stl": mg.StlMeshGeometry, ".obj": mg.ObjMeshGeometry, ".dae": mg.DaeMeshGeometry}
+    if ext in loaders and Path(mesh_path).is_file():
+        return loaders[ext].from_file(mesh_path), np.eye(4), np.zeros(3)
+    return None
+
+
+@dataclass
+class Visual:
+    """One drawable URDF visual: its meshcat geometry, pose on its link, colour and half extents
+    [m], shape (3,), of its bounding box in meshcat's local axes (zeros for meshes)."""
+
+    link: str
+    name: str
+    geometry: mg.Geometry
+    T_link_visual: Array
+    rgba: tuple[float, float, float, float]
+    half: Array
+
+    def corners_link(self) -> Array:
+        """The 8 corners of its bounding box in the link frame [m], shape (8, 3)."""
+        signs = np.array(
+            [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float
+        )
+        local = signs * self.half
+        return local @ self.T_link_visual[:3, :3].T + self.T_link_visual[:3, 3]
+
+
+def link_visuals(robot: ViewRobot, q: Array) -> tuple[list[Visual], int]:
+    """Every drawable URDF visual with its pose on its link at readings ``q`` (shape (n,)); and
+    how many were skipped."""
+    data = robot.model.createData()
+    gdata = pin.GeometryData(robot.visual_model)
+    pin.framesForwardKinematics(robot.model, data, q)
+    pin.updateGeometryPlacements(robot.model, data, robot.visual_model, gdata)
+    out, skipped = [], 0
+    for k, go in enumerate(robot.visual_model.geometryObjects):
+        shape = meshcat_shape(go.geometry, str(go.meshPath))
+        if shape is None:
+            skipped += 1
+            continue
+        geometry, T_local, half = shape
+        link = robot.model.frames[go.parentFrame].name
+        T_world_link = data.oMf[go.parentFrame].homogeneous
+        T_world_visual = gdata.oMg[k].homogeneous
+        T_link_visual = np.linalg.solve(T_world_link, T_world_visual) @ T_local
+        if type(go.geometry).__name__ not in ("Box", "Cylinder", "Sphere"):
+            T_link_visual = T_link_visual @ np.diag([*np.asarray(go.meshScale, dtype=float), 1.0])
+        rgba = tuple(float(c) for c in go.meshColor)
+        out.append(Visual(link, str(go.name), geometry, T_link_visual, rgba, half))  # type: ignore[arg-type]
+    return out, skipped
+
+
+def bar_pose(p0: Array, p1: Array) -> tuple[Array, float]:
+    """The pose of a meshcat cylinder (axis y) from ``p0`` to ``p1`` [m], and its length [m]."""
+    d = p1 - p0
+    length = float(np.linalg.norm(d))
+    T = np.eye(4)
+    if length > 0:
+        T[:3, :3] = cpc_rotation(d / length) @ Y_TO_Z[:3, :3].T  # eq. (4): z onto d, then y onto z
+    T[:3, 3] = 0.5 * (p0 + p1)
+    return T, length
+
+
+def draw_triad(vis: meshcat.Visualizer, scale: float = 1.0) -> None:
+    """An axis triad (x red, y green, z blue) at the node ``vis``, ``scale`` times the default size."""
+    for axis, rgba in zip(
+        range(3), ((0.9, 0.1, 0.1, 1), (0.1, 0.75, 0.1, 1), (0.1, 0.2, 0.95, 1)), strict=True
+    ):
+        end = np.zeros(3)
+        end[axis] = scale * TRIAD_LENGTH
+        T, length = bar_pose(np.zeros(3), end)
+        node = vis["xyz"[axis]]
+        node.set_object(mg.Cylinder(length, scale * TRIAD_RADIUS), material(rgba))
+        node.set_transform(T)
+
+
+def residual_rgba(fraction: float) -> tuple[float, float, float, float]:
+    """Yellow (0) to red (1)."""
+    f = min(max(fraction, 0.0), 1.0)
+    return (0.95, 0.85 * (1.0 - f) + 0.05 * f, 0.1, 1.0)
+
+
+def translation(p: Array) -> Array:
+    """The (4, 4) pose that translates by ``p`` [m], shape (3,)."""
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+__all__ = [
+    "TRIAD_LENGTH",
+    "TRIAD_RADIUS",
+    "Y_TO_Z",
+    "Visual",
+    "bar_pose",
+    "draw_triad",
+    "hex_colour",
+    "link_visuals",
+    "material",
+    "meshcat_shape",
+    "residual_rgba",
+    "translation",
+]

@@ -1,0 +1,176 @@
+"""The robot as the view sees it: a :class:`PinocchioRobot` with visuals and display limits."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike
+
+from cpc2urdf.errors import ConfigurationError, UnknownNameError
+from cpc2urdf.model import CPCModel
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+
+RobotSource = str | os.PathLike[str] | CPCModel  # what load_view_robot accepts
+
+
+@dataclass
+class ViewRobot:
+    """A robot as the view sees it: Pinocchio's model and visual geometry from its URDF.
+
+    Attributes:
+        pinocchio: The URDF through Pinocchio (kinematic model, visual model, joints); the gaze
+            solver of a view works on this same model.
+        lower: Lower joint limits [rad]/[m], shape (n,), as shown and swept: a URDF joint without
+            limits is shown at 0 and swept +-pi.
+        upper: Upper joint limits [rad]/[m], shape (n,).
+        kinds: Link name -> ``"plate"``/``"camera"``/``"frame"`` for the named frames of a cpc2urdf
+            model (for a plain URDF, guessed from the names: ``plate*``, ``*camera*``).
+        metadata: A cpc2urdf model's metadata (provenance, residuals, ...), else empty.
+    """
+
+    pinocchio: PinocchioRobot
+    lower: Array
+    upper: Array
+    kinds: dict[str, str] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """Robot name (URDF ``<robot name>``)."""
+        return self.pinocchio.name
+
+    @property
+    def source(self) -> str:
+        """Where it came from (a path or a shipped robot name)."""
+        return self.pinocchio.source
+
+    @property
+    def urdf(self) -> str:
+        """The URDF text."""
+        return self.pinocchio.urdf
+
+    @property
+    def model(self) -> pin.Model:
+        """``pinocchio.Model``."""
+        return self.pinocchio.model
+
+    @property
+    def visual_model(self) -> pin.GeometryModel:
+        """``pinocchio.GeometryModel`` of the URDF visuals."""
+        return self.pinocchio.visual_model
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Moving joints in Pinocchio's configuration order (all 1-DoF)."""
+        return self.pinocchio.joint_names
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        """URDF link names (Pinocchio BODY frames), in tree order."""
+        return self.pinocchio.links
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_names)
+
+    def default_q(self) -> Array:
+        """The middle of every joint's range [rad]/[m], shape (n,)."""
+        return 0.5 * (self.lower + self.upper)
+
+    def q_from(
+        self, values: Mapping[str, float] | ArrayLike | None, *, base: ArrayLike | None = None
+    ) -> Array:
+        """A configuration of shape (n,) from ``{joint: value}`` (others from ``base``, default
+        the middle of the ranges) or from n values in :attr:`joint_names` order.
+
+        Raises:
+            UnknownNameError: A joint the robot does not have.
+            ConfigurationError: Wrong count, NaN/inf, or a value outside the joint limits.
+        """
+        q = np.array(base, dtype=float) if base is not None else self.default_q()
+        if values is None:
+            pass
+        elif isinstance(values, Mapping):
+            for name, v in values.items():
+                if name not in self.joint_names:
+                    raise UnknownNameError("joint", str(name), self.joint_names)
+                q[self.joint_names.index(name)] = float(v)
+        else:
+            arr = np.asarray(values, dtype=float)
+            if arr.shape != (self.n_joints,):
+                raise ConfigurationError(
+                    f"configuration needs {self.n_joints} values for joints {list(self.joint_names)}, "
+                    f"got shape {arr.shape}"
+                )
+            q = arr.copy()
+        if not np.all(np.isfinite(q)):
+            raise ConfigurationError("configuration contains NaN or inf")
+        for i, name in enumerate(self.joint_names):
+            if not self.lower[i] - 1e-12 <= q[i] <= self.upper[i] + 1e-12:
+                raise ConfigurationError(
+                    f"joint {name!r}: value {q[i]:.9g} outside its limits [{self.lower[i]:.9g}, {self.upper[i]:.9g}]"
+                )
+        return q
+
+    def link_poses(self, q: ArrayLike) -> dict[str, Array]:
+        """``T_world_<link>`` of every URDF link, each of shape (4, 4), at ``q`` (shape (n,))."""
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, np.asarray(q, dtype=float))
+        return {
+            f.name: data.oMf[i].homogeneous.copy()
+            for i, f in enumerate(self.model.frames)
+            if f.type == pin.FrameType.BODY
+        }
+
+    def frame(self, name: str) -> str:
+        """``name`` if the robot has a link of that name, else :class:`UnknownNameError`."""
+        if name not in self.links:
+            raise UnknownNameError("frame", name, self.links)
+        return name
+
+
+def kind_from_name(link: str) -> str:
+    """A plain URDF link's kind, guessed from its name: ``plate*``, ``*camera*``, else ``frame``."""
+    if link.startswith("plate"):
+        return "plate"
+    if "camera" in link:
+        return "camera"
+    return "frame"
+
+
+def load_view_robot(source: RobotSource) -> ViewRobot:
+    """The robot to view: a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot
+    name (``iis_head``), or a :class:`cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`).
+
+    Raises:
+        InputFileError: Missing or unreadable file, a URDF Pinocchio cannot parse, or joints other
+            than revolute/prismatic.
+    """
+    return view_robot(PinocchioRobot.load(source, visuals=True))
+
+
+def view_robot(robot: PinocchioRobot) -> ViewRobot:
+    """The :class:`ViewRobot` of a loaded robot (built with ``visuals=True``): its display limits,
+    and the kinds and metadata of the CPC model it came from, if any."""
+    kinds: dict[str, str] = {}
+    metadata: dict[str, Any] = {}
+    if robot.cpc_model is not None:
+        kinds = {f.name: f.kind for f in robot.cpc_model.structure.frames}
+        metadata = dict(robot.cpc_model.metadata)
+    lo, hi = robot.lower.copy(), robot.upper.copy()
+    # URDF joints without limits give +-huge; show them at 0 and sweep them +-pi (or +-0.5 m).
+    unlimited = ~np.isfinite(lo) | ~np.isfinite(hi) | (hi - lo > 1e6)
+    lo[unlimited], hi[unlimited] = -math.pi, math.pi
+    links = robot.links
+    kinds = {**{ln: kind_from_name(ln) for ln in links if kind_from_name(ln) != "frame"}, **kinds}
+    return ViewRobot(robot, lo, hi, kinds, metadata)
+
+
+__all__ = ["RobotSource", "ViewRobot", "kind_from_name", "load_view_robot", "view_robot"]

@@ -1,0 +1,332 @@
+"""The scene of a view: the head in a configuration (given, or the gaze solution), with its
+target and optical rays, a ghost model, measured plate positions, and a joint sweep animation.
+
+- ``/meshcat/head/<link>``: one node per URDF link, placed at ``T_world_<link>``; its visuals and,
+  for plate and camera frames, an axis triad (x red, y green, z blue) are children;
+- with a target: a sphere at ``p_world``, the head in the gaze solution, and a ray along each
+  camera's optical (z) axis, as long as the distance to the point of the axis nearest the target;
+- with another model (e.g. the nominal one): ``/meshcat/ghost``, the same links in the same
+  configuration, translucent green;
+- with measurements: each measured plate origin (small dark sphere) and a bar from it to the
+  model's prediction at that record's joint readings, coloured by length (yellow = smallest,
+  red = largest); bars are magnified so that the longest is visible (the factor is reported);
+- an animation (meshcat's "Animations" panel, paused at t = 0): a sweep of one joint at a time
+  around the shown configuration, which also works in the static HTML page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import meshcat
+import meshcat.animation
+import meshcat.geometry as mg
+import numpy as np
+from meshcat.commands import SetAnimation
+from numpy.typing import ArrayLike
+
+from cpc2urdf.errors import InputFileError
+from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
+from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
+from cpc2urdf.validation.view.geometry import (
+    bar_pose,
+    draw_triad,
+    link_visuals,
+    material,
+    residual_rgba,
+    translation,
+)
+from cpc2urdf.validation.view.robot import RobotSource, ViewRobot, load_view_robot
+from cpc2urdf.validation.view.summary import ViewSummary
+
+TARGET_RGBA = (0.95, 0.1, 0.75, 1.0)  # magenta: no other part of the scene has this hue
+GHOST_RGBA = (0.2, 0.75, 0.35, 0.35)
+MEASURED_RGBA = (0.1, 0.1, 0.1, 1.0)
+RAY_RGBA = (0.3, 0.8, 0.9, 1.0)  # the lens colour of cpc2urdf.urdf
+BACKGROUND_TOP = (0.98, 0.98, 0.98)  # [0-1] light, so that every scene colour stands out
+BACKGROUND_BOTTOM = (0.8, 0.82, 0.86)
+TARGET_RADIUS = 0.015  # [m]
+RAY_RADIUS = 0.0025  # [m]
+MEASURED_RADIUS = 0.004  # [m]
+RESIDUAL_RADIUS = 0.0025  # [m]
+MIN_VISIBLE_RESIDUAL = 0.02  # [m]: the longest residual bar is drawn at least this long
+SWEEP_FRACTION = 0.4  # each joint sweeps +-40 % of its range around the shown configuration
+SWEEP_KEYS = 20  # keyframes per joint
+SWEEP_FPS = 10  # [1/s]
+
+
+def gaze_configuration(
+    robot: ViewRobot,
+    p_world: ArrayLike,
+    q_current: ArrayLike,
+    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    policy: str = "cyclopean",
+) -> GazeSolution:
+    """The configuration fixating ``p_world`` [m], shape (3,), from the gaze solver
+    (:class:`cpc2urdf.validation.gaze.GazeSolver` on the robot's own Pinocchio model, started at
+    ``q_current``, shape (n,), with its redundancy ``policy``). Its readings ``q`` are in
+    :attr:`ViewRobot.joint_names` order (the solver's, as both use one model)."""
+    solver = GazeSolver(robot.pinocchio, tuple(cameras))
+    return solver.solve(
+        np.asarray(p_world, dtype=float),
+        q_current=np.asarray(q_current, dtype=float),
+        policy=policy,
+    )
+
+
+def _parse_target(target: ArrayLike | None) -> Array | None:
+    return None if target is None else target_point(target)
+
+
+def build_view(
+    vis: meshcat.Visualizer,
+    robot: ViewRobot | RobotSource,
+    *,
+    q: Mapping[str, float] | ArrayLike | None = None,
+    target: ArrayLike | None = None,
+    ghost: ViewRobot | RobotSource | None = None,
+    measurements: MeasurementSet | None = None,
+    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    policy: str = "cyclopean",
+    sweep: bool = True,
+    upright: bool = True,
+) -> ViewSummary:
+    """Draw the head (and target, ghost, measurements) into a meshcat visualizer.
+
+    Args:
+        vis: A ``meshcat.Visualizer`` (served, or :func:`static_visualizer` for a page).
+        robot: The robot (see :func:`load_view_robot`) or a loaded :class:`ViewRobot`.
+        q: Joint values [rad]/[m]: ``{joint: value}`` (others at mid-range) or n values in
+            joint order; with a target, where the gaze solve starts. Default: mid-range.
+        target: A point to fixate [m], shape (3,), in world; the head is shown in the gaze
+            solution (:func:`gaze_configuration`) with a ray along each camera's optical axis.
+        ghost: Another model of the same robot (e.g. the nominal one) drawn translucent.
+        measurements: A :class:`cpc2urdf.measurements.MeasurementSet` of this robot.
+        cameras: The two camera optical frames (left, right) used for the gaze.
+        policy: The gaze solver's redundancy policy (``"cyclopean"``, ``"min-motion"``, ...).
+        sweep: Add the joint sweep animation (paused at t = 0).
+        upright: For a head (camera frames), turn the scene so that its first revolute joint's
+            axis (the pan axis) points up on screen; False keeps world z up. The world triad
+            shows the world axes.
+
+    Raises:
+        UnknownNameError: A camera or measured frame, or a joint, the robot does not have.
+        ConfigurationError: A bad configuration or target (shape, NaN, limits).
+        InputFileError: The robot or ghost cannot be loaded, or joints differ between them.
+    """
+    robot = robot if isinstance(robot, ViewRobot) else load_view_robot(robot)
+    p_target = _parse_target(target)
+    q0 = robot.q_from(q)
+    gaze = None
+    if p_target is not None:
+        for c in cameras:
+            robot.frame(c)
+        gaze = gaze_configuration(robot, p_target, q0, cameras, policy)
+        q0 = gaze.q
+    summary = ViewSummary(
+        robot.name, dict(zip(robot.joint_names, q0.tolist(), strict=True)), p_target, gaze,
+        cameras=tuple(cameras),
+    )
+
+    vis.delete()
+    vis["/Background"].set_property("top_color", list(BACKGROUND_TOP))
+    vis["/Background"].set_property("bottom_color", list(BACKGROUND_BOTTOM))
+    vis["/Grid"].set_property("visible", False)
+    vis["/Axes"].set_property(
+        "visible", False
+    )  # meshcat's axes sit at the viewer origin, not world
+    draw_triad(vis["world"], 2.0)
+
+    head = vis["head"]
+    visuals, skipped = link_visuals(robot, q0)
+    summary.skipped_visuals = skipped
+    for v in visuals:
+        node = head[v.link][v.name]
+        node.set_object(v.geometry, material(v.rgba))
+        node.set_transform(v.T_link_visual)
+    for link, kind in robot.kinds.items():
+        if link in robot.links and kind in ("plate", "camera"):
+            draw_triad(head[link]["triad"])
+    T_links = robot.link_poses(q0)
+    for link in robot.links:
+        head[link].set_transform(T_links[link])
+    points = focus_points(robot, T_links, visuals)
+
+    if p_target is not None:
+        _draw_target(vis, p_target, cameras, T_links)
+        points.append(p_target)
+
+    ghost_robot = None
+    if ghost is not None:
+        ghost_robot = ghost if isinstance(ghost, ViewRobot) else load_view_robot(ghost)
+        _draw_ghost(vis["ghost"], ghost_robot, robot, q0)
+        summary.ghost = ghost_robot.source
+
+    if measurements is not None:
+        points.extend(_draw_measurements(vis["measurements"], robot, measurements, summary))
+
+    if sweep:
+        _sweep(vis, robot, q0, ghost_robot)
+    eyes = [T_links[c][:3, 3] for c in cameras if c in T_links]
+    if p_target is not None and eyes:
+        forward = p_target - np.mean(eyes, axis=0)
+    else:
+        forward = np.mean(
+            [T_links[c][:3, 2] for c in cameras if c in T_links] or [np.array([1.0, 0, 0])], axis=0
+        )
+    up = up_direction(robot, q0, T_links, cameras) if upright else np.array([0.0, 0.0, 1.0])
+    eye, centre = place_camera(vis, np.array(points), up, forward)
+    summary.camera_position, summary.camera_target, summary.up = eye, centre, up
+    return summary
+
+
+def _draw_target(
+    vis: meshcat.Visualizer, p_target: Array, cameras: Sequence[str], T_links: dict[str, Array]
+) -> None:
+    """The target sphere at ``p_target`` [m] (world), shape (3,), and a ray along each camera's
+    optical axis (the cameras' link poses ``T_links``)."""
+    vis["target"].set_object(mg.Sphere(TARGET_RADIUS), material(TARGET_RGBA))
+    vis["target"].set_transform(translation(p_target))
+    head = vis["head"]
+    for c in cameras:
+        # The ray runs along the optical axis to the point nearest the target (the fixation
+        # point when the eye fixates); it hangs on the camera, so it moves in the sweep.
+        d = T_links[c][:3, :3].T @ (p_target - T_links[c][:3, 3])
+        T, length = bar_pose(np.zeros(3), np.array([0.0, 0.0, max(float(d[2]), 1e-3)]))
+        head[c]["ray"].set_object(mg.Cylinder(length, RAY_RADIUS), material(RAY_RGBA))
+        head[c]["ray"].set_transform(T)
+
+
+def _draw_ghost(vis: meshcat.Visualizer, ghost: ViewRobot, robot: ViewRobot, q: Array) -> None:
+    """``ghost`` translucent at ``robot``'s readings ``q`` (shape (n,)), joint by joint by name.
+
+    Raises:
+        InputFileError: The ghost lacks joints of ``robot``.
+    """
+    missing = [j for j in robot.joint_names if j not in ghost.joint_names]
+    if missing:
+        raise InputFileError(
+            ghost.source,
+            f"lacks joints {missing} of {robot.name!r}; cannot pose it alike",
+        )
+    q_ghost = _ghost_q(ghost, robot, q)
+    gv, _ = link_visuals(ghost, q_ghost)
+    for v in gv:
+        node = vis[v.link][v.name]
+        node.set_object(v.geometry, material(GHOST_RGBA))
+        node.set_transform(v.T_link_visual)
+    for link, T in ghost.link_poses(q_ghost).items():
+        vis[link].set_transform(T)
+
+
+def _ghost_q(ghost: ViewRobot, robot: ViewRobot, q: Array) -> Array:
+    """The ghost's readings equal to ``robot``'s at ``q`` (shape (n,)), joint by joint by name,
+    within the ghost's own limits."""
+    by_name = dict(zip(robot.joint_names, q.tolist(), strict=True))
+    qg = np.array(
+        [by_name.get(j, m) for j, m in zip(ghost.joint_names, ghost.default_q(), strict=True)]
+    )
+    return np.clip(qg, ghost.lower, ghost.upper)
+
+
+
+def _draw_measurements(
+    vis: meshcat.Visualizer, robot: ViewRobot, ms: MeasurementSet, summary: ViewSummary
+) -> list[Array]:
+    """Measured plate origins and bars to the model's predictions into ``vis``; fills the
+    residual statistics of ``summary``; returns the measured points [m] (world), each (3,)."""
+    names = list(ms.structure.joint_names)
+    missing = [j for j in robot.joint_names if j not in names]
+    if missing:
+        raise InputFileError(
+            getattr(ms, "source", "<measurements>"),
+            f"lacks joints {missing} of robot {robot.name!r}",
+        )
+    cols = [names.index(j) for j in robot.joint_names]
+    measured, predicted = [], []
+    for frame, poses in ms.poses.items():
+        robot.frame(frame)
+        for i in range(len(ms.q)):
+            if np.all(np.isfinite(poses[i])):
+                measured.append(poses[i][:3, 3])
+                predicted.append(
+                    robot.link_poses(np.asarray(ms.q[i], dtype=float)[cols])[frame][:3, 3]
+                )
+    if not measured:
+        return []
+    P_m, P_p = np.array(measured), np.array(predicted)
+    r = np.linalg.norm(P_p - P_m, axis=1)
+    rmax = float(r.max())
+    scale = max(1.0, MIN_VISIBLE_RESIDUAL / rmax) if rmax > 0 else 1.0
+    summary.n_measured = len(r)
+    summary.residual_max = rmax
+    summary.residual_rms = float(np.sqrt(np.mean(r**2)))
+    summary.residual_scale = scale
+    rmin = float(r.min())
+    for k, (pm, pp, rk) in enumerate(zip(P_m, P_p, r, strict=True)):
+        vis["measured"][str(k)].set_object(mg.Sphere(MEASURED_RADIUS), material(MEASURED_RGBA))
+        vis["measured"][str(k)].set_transform(translation(pm))
+        if rk > 0:
+            T, length = bar_pose(pm, pm + scale * (pp - pm))
+            frac = (rk - rmin) / (rmax - rmin) if rmax > rmin else 1.0
+            vis["residual"][str(k)].set_object(
+                mg.Cylinder(length, RESIDUAL_RADIUS), material(residual_rgba(frac))
+            )
+            vis["residual"][str(k)].set_transform(T)
+    return list(P_m)
+
+
+def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobot | None) -> None:
+    """One joint at a time: q0 -> q0 - a -> q0 + a -> q0 (a = SWEEP_FRACTION of the range, clamped
+    to the limits), so the animation starts and ends at the shown configuration."""
+    anim = meshcat.animation.Animation(default_framerate=SWEEP_FPS)
+    frame = 0
+    s = np.sin(np.linspace(0.0, 2.0 * np.pi, SWEEP_KEYS + 1))
+    for i in range(robot.n_joints):
+        a = SWEEP_FRACTION * (robot.upper[i] - robot.lower[i])
+        for k, sk in enumerate(s if i == robot.n_joints - 1 else s[:-1]):
+            q = q0.copy()
+            q[i] = np.clip(q0[i] + a * sk, robot.lower[i], robot.upper[i])
+            with anim.at_frame(vis, frame + k) as f:
+                for link, T in robot.link_poses(q).items():
+                    f["head"][link].set_transform(T)
+                if ghost is not None:
+                    for link, T in ghost.link_poses(_ghost_q(ghost, robot, q)).items():
+                        f["ghost"][link].set_transform(T)
+        frame += SWEEP_KEYS
+    vis.window.send(_SetAnimationLast(anim, play=False))
+
+
+class _SetAnimationLast(SetAnimation):
+    """meshcat's ``set_animation``, stored on its own node created after the scene. meshcat's
+    server replays its tree to each new browser root first; an animation stored on the root would
+    load before the objects it animates and bind to nothing (the static page orders it last
+    anyway)."""
+
+    def lower(self) -> dict[str, Any]:
+        data: dict[str, Any] = super().lower()
+        data["path"] = "/cpc2urdf_sweep"
+        return data
+
+
+__all__ = [
+    "BACKGROUND_BOTTOM",
+    "BACKGROUND_TOP",
+    "GHOST_RGBA",
+    "MEASURED_RADIUS",
+    "MEASURED_RGBA",
+    "MIN_VISIBLE_RESIDUAL",
+    "RAY_RADIUS",
+    "RAY_RGBA",
+    "RESIDUAL_RADIUS",
+    "SWEEP_FPS",
+    "SWEEP_FRACTION",
+    "SWEEP_KEYS",
+    "TARGET_RADIUS",
+    "TARGET_RGBA",
+    "build_view",
+    "gaze_configuration",
+]
