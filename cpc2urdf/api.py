@@ -66,7 +66,7 @@ def identify(
         robot: With a file path: use this robot instead of the file's ``"robot"``.
 
     Returns:
-        The identified model; ``model.metadata`` holds ``provenance``, ``residuals``,
+        The identified model; ``model.metadata`` (typed sections) holds ``provenance``, ``residuals``,
         ``uncertainty`` (refined methods) and ``notes``.
     """
     if isinstance(measurements, MeasurementSet):

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
+from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.transforms import Array, cpc_rotation, rotation_z
 
 # Share of a joint's limits a calibration uses when the spec gives no calibration_range.
@@ -381,14 +382,15 @@ class CPCModel:
         world_to_base: ``T_world_base`` as CPC parameters (eq. (14)).
         joints: Constants placing each joint's axis frame, by joint name.
         frames: Constants placing each named frame on its link, by frame name.
-        metadata: Free-form provenance/uncertainty carried by model files.
+        metadata: What the model carries besides its geometry (provenance, fit residuals,
+            parameter covariance, hand-eye results, notes): :class:`~cpc2urdf.model_metadata.ModelMetadata`.
     """
 
     structure: RobotStructure
     world_to_base: CPCParams
     joints: dict[str, CPCParams]
     frames: dict[str, CPCParams]
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: ModelMetadata = field(default_factory=ModelMetadata)
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -421,7 +423,7 @@ class CPCModel:
         world_to_base: CPCParams | None = None,
         joints: Mapping[str, CPCParams] | None = None,
         frames: Mapping[str, CPCParams] | None = None,
-        metadata: Mapping[str, Any] | None = None,
+        metadata: ModelMetadata | None = None,
     ) -> CPCModel:
         """A copy with some parameters replaced."""
         return CPCModel(
@@ -429,7 +431,7 @@ class CPCModel:
             world_to_base or self.world_to_base,
             {**self.joints, **(joints or {})},
             {**self.frames, **(frames or {})},
-            dict(metadata) if metadata is not None else dict(self.metadata),
+            metadata if metadata is not None else self.metadata,
         )
 
     # ---- forward kinematics ------------------------------------------------------------------
@@ -522,7 +524,7 @@ class CPCModel:
             self.world_to_base,
             dict(self.joints),
             dict(self.frames),
-            dict(self.metadata),
+            self.metadata,
         )
 
     def without_frames(self, kinds: Iterable[str]) -> CPCModel:
@@ -534,7 +536,7 @@ class CPCModel:
             self.world_to_base,
             dict(self.joints),
             {n: p for n, p in self.frames.items() if n not in drop},
-            dict(self.metadata),
+            self.metadata,
         )
 
     def with_frame(self, frame: Frame, params: CPCParams) -> CPCModel:
@@ -546,7 +548,7 @@ class CPCModel:
             self.world_to_base,
             dict(self.joints),
             {**{n: p for n, p in self.frames.items() if n != frame.name}, frame.name: params},
-            dict(self.metadata),
+            self.metadata,
         )
 
 

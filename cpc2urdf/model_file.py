@@ -27,6 +27,7 @@ from typing import Any
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError
 from cpc2urdf.fileio import require_format, write_json
 from cpc2urdf.model import BASE, CPCModel
+from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.spec import (
     cpc_to_json,
     parse_placement,
@@ -35,7 +36,7 @@ from cpc2urdf.spec import (
 from cpc2urdf.units import Units
 
 MODEL_FORMAT = "cpc2urdf/model@1"
-# Free-form sections a model file may carry; they round-trip untouched in CPCModel.metadata.
+# Optional sections a model file may carry: CPCModel.metadata (cpc2urdf.model_metadata) types them.
 OPTIONAL_SECTIONS = ("description", "provenance", "uncertainty", "residuals", "handeye", "notes")
 
 
@@ -61,8 +62,7 @@ def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
             if g is None:
                 raise ValueError(f"frame {f.name!r} lacks 'cpc'")
             frames[f.name] = parse_placement(g, units, f"frame {f.name!r}")
-        metadata = {k: d[k] for k in OPTIONAL_SECTIONS if k in d}
-        return CPCModel(structure, T_wb, joints, frames, metadata)
+        return CPCModel(structure, T_wb, joints, frames, ModelMetadata.from_json(d, source))
     except InputFileError:
         raise
     except (ValueError, Cpc2UrdfError) as e:
@@ -102,9 +102,7 @@ def model_to_json(model: CPCModel) -> dict[str, Any]:
         "joints": joints,
         "frames": frames,
     }
-    for k in OPTIONAL_SECTIONS:
-        if k in model.metadata:
-            doc[k] = model.metadata[k]
+    doc.update(model.metadata.to_json())
     return doc
 
 

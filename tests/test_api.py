@@ -69,7 +69,7 @@ def test_readme_block_gives_the_cli_model(readme_run, demo_run, capsys):
     capsys.readouterr()
     api_model, cli_model = load_model(work / "stage1_model.json"), load_model(cli_out)
     assert_same_geometry(api_model, cli_model)
-    assert api_model.metadata["provenance"]["method"] == cli_model.metadata["provenance"]["method"] == "refined"
+    assert api_model.metadata.provenance.method == cli_model.metadata.provenance.method == "refined"
 
 
 def test_identify_from_a_path_equals_identify_of_the_loaded_set(demo_run):

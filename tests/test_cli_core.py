@@ -93,7 +93,8 @@ def test_demo_runs(demo_run):
     assert out.count("result: all parsers agree with the CPC model") == 3
     assert "predicted rms" in out and "policy cyclopean:" in out
     model = load_model(d / "model.json")
-    assert "handeye" in model.metadata and "uncertainty" in model.metadata
+    assert model.metadata.handeye.keys() == {"camera_left_optical", "camera_right_optical"}
+    assert model.metadata.uncertainty is not None
 
 
 def test_demo_from_images_runs(tmp_path, capsys):

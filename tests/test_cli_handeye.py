@@ -160,7 +160,7 @@ def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.Captu
     cal = load_model(out)
     assert cal.structure.frame("camera_right_optical").kind == "camera"
     assert np.abs(cal.frames["camera_right_optical"].matrix() - truth.frames["camera_right_optical"].matrix()).max() < 1e-8
-    assert cal.metadata["handeye"]["camera_right_optical"]["method"] == "park_martin"
+    assert cal.metadata.handeye["camera_right_optical"].method == "park_martin"
 
     bad = tmp_path / "bad_out.json"
     for argv in (["--model", str(identified)],  # no -o

@@ -123,7 +123,7 @@ def test_default_method_is_refined_and_exact_on_noise_free_data(user_robot, caps
     assert main(["identify", str(tmp / "measurements.json"), "-o", str(out)]) == 0
     assert "refined identification of 'my_arm'" in capsys.readouterr().out
     model = load_model(out)
-    assert "uncertainty" in model.metadata
+    assert model.metadata.uncertainty is not None
     plates = [f.name for f in truth.structure.frames if f.kind == "plate"]
     s = truth.structure
     Q = np.random.default_rng(3).uniform(s.lower, s.upper, (50, s.n_joints))

@@ -8,6 +8,7 @@ import pytest
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.model_file import model_to_json, save_model
+from cpc2urdf.model_metadata import ModelMetadata, Provenance
 from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.robots import available, spec_path
 from cpc2urdf.spec import load_spec
@@ -27,10 +28,10 @@ def test_model_round_trip_is_exact(tmp_path):
     rng = np.random.default_rng(0)
     for k in range(10):
         m = random_tree(rng)
-        m.metadata["provenance"] = {"method": "test", "k": k}
+        m = m.with_params(metadata=ModelMetadata(provenance=Provenance(method="test", details={"k": k})))
         save_model(m, tmp_path / "m.json")
         m2 = load_model(tmp_path / "m.json")
-        assert m2.metadata["provenance"] == {"method": "test", "k": k}
+        assert m2.metadata == m.metadata and m2.metadata.provenance.to_json() == {"method": "test", "k": k}
         Q = rng.uniform(m.structure.lower, m.structure.upper, size=(5, m.structure.n_joints))
         a, b = m.fk(Q), m2.fk(Q)
         for f in a:

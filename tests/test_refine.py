@@ -193,8 +193,8 @@ def test_identify_cli_method_refined(tmp_path):
     assert main(["identify", str(path), "-o", str(tmp_path / "cf.json"), "--method", "closed-form"]) == 0
     assert main(["identify", str(path), "-o", str(tmp_path / "r.json"), "--method", "refined"]) == 0
     cf, ref = load_model(tmp_path / "cf.json"), load_model(tmp_path / "r.json")
-    assert ref.metadata["provenance"]["method"] == "refined"
-    assert ref.metadata["provenance"]["sigma_source"] == "measurement file noise section"
+    assert ref.metadata.provenance.method == "refined"
+    assert ref.metadata.provenance.details["sigma_source"] == "measurement file noise section"
     # What the refinement promises per data set is a weighted fit no worse than its start (one
     # trial's held-out error is a noisy draw; the averages are tested above).
     chart = Parametrization(cf, PLATES)
@@ -218,7 +218,7 @@ def test_identify_cli_method_refined(tmp_path):
     path2 = save_measurements(free, tmp_path / "free.json", robot="iis_head")
     assert main(["identify", str(path2), "-o", str(tmp_path / "free_model.json"), "--method", "refined"]) == 0
     m = load_model(tmp_path / "free_model.json")
-    assert m.metadata["provenance"]["start"] == "nominal"
+    assert m.metadata.provenance.details["start"] == "nominal"
     assert heldout_error(m, truth, heldout.q) < 1e-9
 
 

@@ -154,7 +154,7 @@ def test_default_placement_hides_no_circle() -> None:
     assert lo > 1.2 and hi < 1.8 and lo < hi
     # The placement depends on the robot, rig and protocol, not on the seed.
     t2, _, _ = simulate_experiment("iis_head", seed=6, n_heldout=2, noise="none")
-    assert t2.metadata["provenance"]["nominal_world_to_base"] == truth.metadata["provenance"]["nominal_world_to_base"]
+    assert t2.metadata.provenance.details["nominal_world_to_base"] == truth.metadata.provenance.details["nominal_world_to_base"]
 
 
 def test_occlusion_is_reported_by_the_view_check() -> None:

@@ -71,10 +71,10 @@ def test_exact_recovery_without_noise(nominal_and_truth: tuple, method: str) -> 
         et, er = r.errors[c]
         assert et < 1e-8 and er < 1e-8
         assert r.results[c].rms_translation() < 1e-8
-    hd = r.model.metadata["handeye"]
-    assert hd["camera_left_optical"]["hand"] == "plate_left" and hd["camera_left_optical"]["n_poses"] == 8
+    hd = r.model.metadata.handeye
+    assert hd["camera_left_optical"].hand == "plate_left" and hd["camera_left_optical"].n_poses == 8
     # the camera frame pose = T_link_plate @ X
-    X = np.array(hd["camera_right_optical"]["T_hand_camera"])
+    X = hd["camera_right_optical"].T_hand_camera
     assert np.abs(truth.frames["plate_right"].matrix() @ X - truth.frames["camera_right_optical"].matrix()).max() < 1e-8
 
 
@@ -83,7 +83,9 @@ def test_model_file_and_urdf_carry_the_cameras(nominal_and_truth: tuple, tmp_pat
     r = s2.run_stage2(nominal, truth, n_poses=6, pixel_noise=0.0, seed=4)
     path = save_model(r.model, tmp_path / "calibrated.json")
     back = load_model(path)
-    assert "handeye" in back.metadata and "handeye" in model_to_json(r.model)
+    assert back.metadata.handeye.keys() == set(CAMERAS) and "handeye" in model_to_json(r.model)
+    for c in CAMERAS:
+        np.testing.assert_array_equal(back.metadata.handeye[c].T_hand_camera, r.model.metadata.handeye[c].T_hand_camera)
     for c in CAMERAS:
         assert np.abs(back.frames[c].matrix() - truth.frames[c].matrix()).max() < 1e-8
     assert 'link name="camera_left_optical"' in urdf_from_model(back)

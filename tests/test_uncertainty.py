@@ -17,6 +17,7 @@ from cpc2urdf.identification.kinematics.uncertainty import (
     predicted_position_std,
 )
 from cpc2urdf.model_file import save_model
+from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.robot_ref import load_model
 
 PLATES = ("plate_left", "plate_right")
@@ -100,19 +101,19 @@ def test_model_file_round_trip(refined, tmp_path):
     a, b = predicted_position_std(loaded, q), predicted_position_std(res.model, q)
     for f in PLATES:
         np.testing.assert_allclose(a[f], b[f], rtol=1e-8)
-    section = loaded.metadata["uncertainty"]
-    assert section["identifiability"]["rank"] == 32 and section["outliers"] == []
-    assert Covariance.from_json(section).scale == "known"
+    details = loaded.metadata.uncertainty.details
+    assert details["identifiability"]["rank"] == 32 and details["outliers"] == []
+    assert Covariance.from_json(loaded.metadata.uncertainty.to_json()).scale == "known"
 
 
 def test_missing_or_bad_section(refined):
     _, res = refined
     q = random_q(res.model, 2, np.random.default_rng(4))
-    bare = res.model.with_params(metadata={})
+    bare = res.model.with_params(metadata=ModelMetadata())
     with pytest.raises(NoUncertaintyError, match="no 'uncertainty' section"):
         predicted_position_std(bare, q)
-    broken = res.model.with_params(metadata={"uncertainty": {"format": "something-else"}})
+    # a broken section is refused when it is read (a model file never carries one past loading)
     with pytest.raises(NoUncertaintyError, match="bad 'uncertainty' section"):
-        predicted_position_std(broken, q)
+        Covariance.from_json({"format": "something-else"})
     with pytest.raises(NoUncertaintyError, match="was not identified"):
         predicted_position_std(res.model, q, ["camera_left_optical"])

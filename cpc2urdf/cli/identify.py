@@ -41,17 +41,19 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     model = identify(ms, args.method)
     elapsed = time.perf_counter() - start
-    meta = dict(model.metadata)
-    meta["provenance"] = {**meta.get("provenance", {}), "measurements": args.measurements,
-                          "robot": ms.robot, "identification_time_s": elapsed}
+    import math
+
+    from cpc2urdf.model_metadata import Provenance
+
+    prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
+    meta = model.metadata.replace(provenance=prov)
     path = save_model(model.with_params(metadata=meta), args.output)
-    prov = meta["provenance"]
-    count = prov.get("identified_parameters", {}).get("total")
+    count = prov.details.get("identified_parameters", {}).get("total")
     print(f"wrote {path}: {args.method} identification of {ms.structure.name!r} from {ms.n_records} records "
           f"in {elapsed * 1e3:.0f} ms" + (f", {count} independent parameters" if count else ""))
-    for f, r in meta["residuals"]["per_frame"].items():
-        print(f"  {f}: fit residual rms {r['rms_translation_m'] * 1e3:.3f} mm (max "
-              f"{r['max_translation_m'] * 1e3:.3f} mm), {r['rms_rotation_rad'] * 180 / 3.141592653589793:.3f} deg rms")
-    for note in meta.get("notes", []):
+    for f, r in (meta.residuals.per_frame if meta.residuals else {}).items():
+        print(f"  {f}: fit residual rms {r.rms_translation_m * 1e3:.3f} mm (max "
+              f"{r.max_translation_m * 1e3:.3f} mm), {math.degrees(r.rms_rotation_rad):.3f} deg rms")
+    for note in meta.notes:
         print(f"  note: {note}")
     return 0

@@ -131,7 +131,7 @@ def accuracy(model: CPCModel, ms: MeasurementSet) -> dict[str, BranchAccuracy]:
         out[f] = BranchAccuracy(
             f, len(e), a.mean(axis=0), a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
             float(d.mean()), float(np.sqrt(np.mean(d**2))), float(d.max()), float(r.mean()), float(r.max()),
-            predicted_rms(model, ms, f) if "uncertainty" in model.metadata else None,
+            predicted_rms(model, ms, f) if model.metadata.uncertainty is not None else None,
         )
     return out
 

@@ -36,6 +36,7 @@ from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
 from cpc2urdf.identification.handeye.solvers import calibrate
 from cpc2urdf.identification.vision.targets import TARGET_LAYOUT
 from cpc2urdf.model import CPCModel, CPCParams, Frame
+from cpc2urdf.model_metadata import HandEyeRecord
 from cpc2urdf.transforms import Array, homogeneous, inverse, rotation_error
 
 # ---- cameras -----------------------------------------------------------------------------------
@@ -247,7 +248,7 @@ def calibrate_cameras(
 
     Returns:
         The model with ``camera_*_optical`` frames on the vergence links at ``T_link_plate @ X``
-        and ``metadata["handeye"]`` holding each camera's solution and residuals; and the
+        and ``metadata.handeye`` holding each camera's solution and residuals; and the
         per-camera results.
 
     Raises:
@@ -270,7 +271,7 @@ def with_camera_frame(
     model: CPCModel, camera: str, hand: str, result: HandEyeResult, extra: dict[str, Any] | None = None
 ) -> CPCModel:
     """A copy of ``model`` with frame ``camera`` (kind ``camera``) on the link carrying ``hand``,
-    at ``T_link_hand @ X``, and the solution recorded in ``metadata["handeye"][camera]``.
+    at ``T_link_hand @ X``, and the solution recorded in ``metadata.handeye[camera]`` (a :class:`~cpc2urdf.model_metadata.HandEyeRecord`).
 
     Raises:
         UnknownNameError: ``hand`` is not a frame of the model.
@@ -278,22 +279,18 @@ def with_camera_frame(
     h = model.structure.frame(hand)
     T_link_camera = model.frames[hand].matrix() @ result.X
     out = model.with_frame(Frame(camera, h.parent, "camera"), CPCParams.from_matrix(T_link_camera))
-    section = dict(out.metadata.get("handeye") or {})
-    section[camera] = {
-        "hand": hand,
-        "method": result.method,
-        "n_poses": len(result.residual_translation),
-        **(extra or {}),
-        "T_hand_camera": result.X.tolist(),
-        "T_base_target": result.Z.tolist(),
-        "rms_translation_mm": result.rms_translation() * 1e3,
-        "rms_rotation_deg": math.degrees(result.rms_rotation()),
-        "residual_translation_mm": (result.residual_translation * 1e3).tolist(),
-        "residual_rotation_deg": np.degrees(result.residual_rotation).tolist(),
-        "warnings": list(result.warnings),
-    }
-    section["units"] = {"note": "T_* matrices in metres; residuals in mm and deg"}
-    return out.with_params(metadata={**out.metadata, "handeye": section})
+    record = HandEyeRecord(
+        hand=hand,
+        method=result.method,
+        T_hand_camera=result.X,
+        T_base_target=result.Z,
+        residual_translation_mm=result.residual_translation * 1e3,
+        residual_rotation_deg=np.degrees(result.residual_rotation),
+        warnings=tuple(result.warnings),
+        details=dict(extra or {}),
+    )
+    handeye = {**out.metadata.handeye, camera: record}
+    return out.with_params(metadata=out.metadata.replace(handeye=handeye))
 
 
 @dataclass

@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -59,6 +58,7 @@ from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.protocol import Protocol, recognise_protocol
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
+from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.transforms import (
     Array,
     cpc_rotation,
@@ -542,19 +542,22 @@ def identify_paper_branches(ms: MeasurementSet, *, protocol: Protocol | None = N
     return {f: solver.step3_model(None, branch=f) for f in protocol.frames}
 
 
-def provenance(ms: MeasurementSet, protocol: Protocol, details: ClosedFormDetails) -> dict[str, Any]:
+def provenance(ms: MeasurementSet, protocol: Protocol, details: ClosedFormDetails) -> Provenance:
     """The ``provenance`` section of an identified model file."""
     counts = count_parameters(ms.structure, protocol.frames)
-    return {
-        "method": METHOD,
-        "reference": "Shih et al. 1992, sec. 4.2 (closed form, generalised to trees)",
-        "measurements": ms.source,
-        "records": ms.n_records,
-        **protocol.summary(),
-        "identified_parameters": counts,
-        "translation_fit_rms_m": details.translation_rms,
-        "beta_rad": {j: v for j, v in details.beta.items() if v},
-    }
+    return Provenance(
+        method=METHOD,
+        measurements=ms.source,
+        robot=ms.robot,
+        details={
+            "reference": "Shih et al. 1992, sec. 4.2 (closed form, generalised to trees)",
+            "records": ms.n_records,
+            **protocol.summary(),
+            "identified_parameters": counts,
+            "translation_fit_rms_m": details.translation_rms,
+            "beta_rad": {j: v for j, v in details.beta.items() if v},
+        },
+    )
 
 
 __all__ = ["METHOD", "ClosedFormDetails", "b_from_direction", "count_parameters", "identify_closed_form", "provenance"]

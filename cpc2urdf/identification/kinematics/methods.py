@@ -1,9 +1,10 @@
 """Identification methods by name, and the metadata every identified model file carries.
 
 ``cpc2urdf identify --method NAME`` looks the method up in :data:`METHODS`. A method is a function
-``(measurements, nominal_or_None) -> CPCModel`` whose model's ``metadata`` holds at least a
-``provenance`` section (``{"method": NAME, ...}``) and may hold ``notes``; :func:`identify` adds
-the ``residuals`` section (per record and per branch) for every method alike. To add a method,
+``(measurements, nominal_or_None) -> CPCModel`` whose model's ``metadata``
+(:class:`~cpc2urdf.model_metadata.ModelMetadata`) holds at least a ``provenance`` and may hold
+``notes``; :func:`identify` adds the fit ``residuals`` (per record and per branch) for every method
+alike. To add a method,
 add one entry to :data:`METHODS`.
 
 The CLI's default, "closed form, then refine", is :func:`identify_refined`: it starts the
@@ -26,6 +27,7 @@ from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError
 from cpc2urdf.identification.kinematics.problem import DEFAULT_SIGMA_R, DEFAULT_SIGMA_T
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.model_metadata import FrameResiduals, Provenance, RecordResiduals, Residuals
 from cpc2urdf.transforms import rotation_error
 
 Method = Callable[[MeasurementSet, "CPCModel | None"], CPCModel]
@@ -38,10 +40,7 @@ def closed_form(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
 
     protocol = recognise_protocol(ms)
     model, details = identify_closed_form(ms, nominal, protocol=protocol)
-    meta = dict(model.metadata)
-    meta["provenance"] = provenance(ms, protocol, details)
-    if details.notes:
-        meta["notes"] = list(details.notes)
+    meta = model.metadata.replace(provenance=provenance(ms, protocol, details), notes=tuple(details.notes))
     return model.with_params(metadata=meta)
 
 
@@ -136,22 +135,25 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
     res = refine(start, ms, sigma_t, sigma_r, robust=robust, frames=fitted,
                  covariance_scale="known" if known else "a_posteriori", warn=False)
     model = _carry_frames(res.model, start, fitted)
-    meta = dict(model.metadata)
-    start_prov = dict(start.metadata.get("provenance", {})) if start_method == "closed-form" else {}
-    meta["provenance"] = {
-        **start_prov,
-        "method": "refined-robust" if robust else "refined",
-        "reference": "weighted least squares of every record (eq. (23) with the Fig. 10 noise "
-        "weights), started from " + start_method,
-        "start": start_method,
-        "sigma_t_m": sigma_t,
-        "sigma_r_rad": sigma_r,
-        "sigma_source": "measurement file noise section" if known else "default (paper's 0.5 mm / 0.5 deg)",
-        "identified_parameters": res.parametrization.counts(),
-        "refinement_time_s": res.seconds,
-        "outlier_records": res.outlier_records,
-    }
-    notes += list(start.metadata.get("notes", [])) if start_method == "closed-form" else []
+    start_prov = start.metadata.provenance if start_method == "closed-form" else None
+    prov = Provenance(
+        method="refined-robust" if robust else "refined",
+        measurements=ms.source,
+        robot=ms.robot,
+        details={
+            **(start_prov.details if start_prov is not None else {}),
+            "reference": "weighted least squares of every record (eq. (23) with the Fig. 10 noise "
+            "weights), started from " + start_method,
+            "start": start_method,
+            "sigma_t_m": sigma_t,
+            "sigma_r_rad": sigma_r,
+            "sigma_source": "measurement file noise section" if known else "default (paper's 0.5 mm / 0.5 deg)",
+            "identified_parameters": res.parametrization.counts(),
+            "refinement_time_s": res.seconds,
+            "outlier_records": res.outlier_records,
+        },
+    )
+    notes += list(start.metadata.notes) if start_method == "closed-form" else []
     notes += [f"outlier: {o.describe()}" for o in res.outliers]
     notes += [f"identifiability: {w}" for w in res.identifiability.warnings]
     if res.covariance.variance_factor > 25.0:
@@ -164,9 +166,7 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
             f"noise sigmas not given: covariance scaled by the variance factor "
             f"{res.covariance.variance_factor:.3g}"
         )
-    if notes:
-        meta["notes"] = notes
-    return model.with_params(metadata=meta)
+    return model.with_params(metadata=model.metadata.replace(provenance=prov, notes=tuple(notes)))
 
 
 def refined(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
@@ -186,33 +186,30 @@ METHODS: dict[str, Method] = {
 }
 
 
-def residuals(model: CPCModel, ms: MeasurementSet) -> dict[str, Any]:
+def residuals(model: CPCModel, ms: MeasurementSet) -> Residuals:
     """Fit residuals of ``model`` on ``ms``: per branch (measured frame) and per record.
 
-    Returns:
-        ``{"per_frame": {frame: {"rms_translation_m", "max_translation_m", "rms_rotation_rad",
-        "max_rotation_rad", "records"}}, "per_record": [{"label", frame: {"translation_m",
-        "rotation_rad"}}, ...]}``: translation = distance between the measured and predicted
-        origins [m], rotation = angle between the measured and predicted orientations [rad].
+    Translation = distance between the measured and predicted origins [m], rotation = angle
+    between the measured and predicted orientations [rad].
     """
     frames = [f for f in ms.frames if f in model.structure.frame_names]
     T = model.fk(ms.q, frames) if frames else {}
-    per_frame: dict[str, Any] = {}
-    per_record: list[dict[str, Any]] = [{"label": lb} for lb in ms.labels]
+    per_frame: dict[str, FrameResiduals] = {}
+    per_record: list[dict[str, tuple[float, float]]] = [{} for _ in ms.labels]
     for f in frames:
         ok = ms.has_pose(f)
         dt = np.linalg.norm(T[f][ok, :3, 3] - ms.poses[f][ok, :3, 3], axis=1)
         dr = rotation_error(T[f][ok, :3, :3], ms.poses[f][ok, :3, :3])
-        per_frame[f] = {
-            "records": int(ok.sum()),
-            "rms_translation_m": float(np.sqrt(np.mean(dt**2))),
-            "max_translation_m": float(np.max(dt)),
-            "rms_rotation_rad": float(np.sqrt(np.mean(dr**2))),
-            "max_rotation_rad": float(np.max(dr)),
-        }
+        per_frame[f] = FrameResiduals(
+            records=int(ok.sum()),
+            rms_translation_m=float(np.sqrt(np.mean(dt**2))),
+            max_translation_m=float(np.max(dt)),
+            rms_rotation_rad=float(np.sqrt(np.mean(dr**2))),
+            max_rotation_rad=float(np.max(dr)),
+        )
         for i, a, b in zip(np.flatnonzero(ok), dt, dr, strict=True):
-            per_record[int(i)][f] = {"translation_m": float(a), "rotation_rad": float(b)}
-    return {"per_frame": per_frame, "per_record": per_record}
+            per_record[int(i)][f] = (float(a), float(b))
+    return Residuals(per_frame, tuple(RecordResiduals(lb, r) for lb, r in zip(ms.labels, per_record, strict=True)))
 
 
 DEFAULT_METHOD = "refined"
@@ -237,10 +234,10 @@ def identify(ms: MeasurementSet, method: str = DEFAULT_METHOD, nominal: CPCModel
     if nominal is None and ms.spec is not None and ms.spec.nominal is not None:
         nominal = ms.spec.nominal_model()
     model = METHODS[method](ms, nominal)
-    meta = dict(model.metadata)
-    meta.setdefault("provenance", {"method": method})
-    meta["residuals"] = residuals(model, ms)
-    return model.with_params(metadata=meta)
+    meta = model.metadata
+    if meta.provenance is None:
+        meta = meta.replace(provenance=Provenance(method=method, measurements=ms.source, robot=ms.robot))
+    return model.with_params(metadata=meta.replace(residuals=residuals(model, ms)))
 
 
 __all__ = [

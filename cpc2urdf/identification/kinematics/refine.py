@@ -27,7 +27,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -99,7 +99,8 @@ class RefinementResult:
     """What :func:`refine` returns.
 
     Attributes:
-        model: The refined model; its metadata carries ``uncertainty`` (and ``refinement``).
+        model: The refined model; ``metadata.uncertainty`` is its covariance, whose ``details``
+            carry the refinement's report (settings, identifiability, outliers).
         start: The model it started from.
         parametrization: The chart centred on ``model`` (names, units, counts).
         covariance: Parameter covariance in that chart (:mod:`uncertainty`).
@@ -307,10 +308,8 @@ def refine(
         drs.append(dr[keep])
     dp_all, dr_all = np.concatenate(dps), np.concatenate(drs)
     seconds = time.perf_counter() - t0
-    refined = with_uncertainty(refined, cov)
-    # Model files keep only known sections: the refinement's report travels inside "uncertainty".
-    refined.metadata["uncertainty"].update(
-        {
+    # Model files keep only known sections: the refinement's report travels with the covariance.
+    cov = replace(cov, details={
             "refinement": {
                 "method": "weighted least squares (scipy least_squares, Levenberg-Marquardt)" + (", robust" if robust else ""),
                 "parameters": final_chart.n_params,
@@ -320,8 +319,8 @@ def refine(
             },
             "identifiability": ident.to_json(),
             "outliers": [o.__dict__ for o in outliers],
-        }
-    )
+    })
+    refined = with_uncertainty(refined, cov)
     if not sol.success and warn:
         warnings.warn(f"refinement did not converge: {sol.message}", RuntimeWarning, stacklevel=2)
     return RefinementResult(

@@ -28,116 +28,22 @@ Model files store this under the ``"uncertainty"`` section (SI units, parameters
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cpc2urdf.errors import Cpc2UrdfError
 from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.problem import IdentificationProblem
 from cpc2urdf.model import CPCModel
+from cpc2urdf.model_metadata import Covariance, NoUncertaintyError
 from cpc2urdf.transforms import Array
 
-UNCERTAINTY_FORMAT = "cpc2urdf/uncertainty@1"
 SCALES = ("known", "a_posteriori")
 # A configuration's position Jacobian "sees" a null direction when its response to it exceeds
 # this fraction of its response to a typical identifiable direction.
 NULL_VISIBILITY_TOL = 1e-6  # [-]
-
-
-class NoUncertaintyError(Cpc2UrdfError):
-    """The model carries no (or an unusable) ``uncertainty`` section."""
-
-
-@dataclass
-class Covariance:
-    """Covariance of a model's identifiable parameters in its own local chart.
-
-    Attributes:
-        names: Parameter names, length P (``"<owner>.<param>"``).
-        units: ``"m"`` or ``"rad"`` per parameter.
-        frames: Measured frames the parametrisation was built for.
-        matrix: Covariance [m^2, m rad, rad^2], shape (P, P); zero along undetermined directions.
-        null_space: Undetermined directions, shape (P, k) (k = 0 when fully identifiable).
-        scale: ``"known"`` or ``"a_posteriori"`` (see module doc).
-        variance_factor: ``s0^2 = |r|^2 / dof`` of the weighted residuals (1 when the sigmas
-            are right), whatever the scale.
-        dof: Residuals minus rank.
-        sigma_t: Translation noise [m] the weights assumed.
-        sigma_r: Rotation-angle noise [rad] the weights assumed.
-    """
-
-    names: tuple[str, ...]
-    units: tuple[str, ...]
-    frames: tuple[str, ...]
-    matrix: Array
-    null_space: Array
-    scale: str
-    variance_factor: float
-    dof: int
-    sigma_t: float
-    sigma_r: float
-
-    @property
-    def std(self) -> Array:
-        """Standard deviation per parameter [m] or [rad]; NaN where undetermined."""
-        sd = np.sqrt(np.clip(np.diag(self.matrix), 0.0, None))
-        if self.null_space.size:
-            touched = np.linalg.norm(self.null_space, axis=1) > 1e-6
-            sd = np.where(touched, np.nan, sd)
-        return sd
-
-    def to_json(self) -> dict[str, Any]:
-        """The model-file section (SI units; NaN std as null)."""
-        return {
-            "format": UNCERTAINTY_FORMAT,
-            "units": {"length": "m", "angle": "rad"},
-            "method": "first-order covariance of the weighted least-squares estimate",
-            "chart": "local CPC update of this model's own parameters (identification/parametrization.py)",
-            "scale": self.scale,
-            "variance_factor": self.variance_factor,
-            "dof": self.dof,
-            "sigma_t": self.sigma_t,
-            "sigma_r": self.sigma_r,
-            "frames": list(self.frames),
-            "parameters": list(self.names),
-            "parameter_units": list(self.units),
-            "std": [None if not np.isfinite(v) else float(v) for v in self.std],
-            "covariance": [[float(v) for v in row] for row in self.matrix],
-            "null_space": [[float(v) for v in row] for row in self.null_space],
-        }
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any], source: str = "<model>") -> Covariance:
-        """Parse a model file's ``uncertainty`` section (errors name ``source``)."""
-        try:
-            if d.get("format") != UNCERTAINTY_FORMAT:
-                raise ValueError(f"format is {d.get('format')!r}, expected {UNCERTAINTY_FORMAT!r}")
-            names = tuple(str(n) for n in d["parameters"])
-            P = len(names)
-            C = np.asarray(d["covariance"], dtype=float).reshape(P, P)
-            ns = d.get("null_space") or []
-            N0 = np.asarray(ns, dtype=float).reshape(P, -1) if len(ns) else np.zeros((P, 0))
-            if not np.all(np.isfinite(C)):
-                raise ValueError("covariance has non-finite entries")
-            return cls(
-                names,
-                tuple(str(u) for u in d["parameter_units"]),
-                tuple(str(f) for f in d["frames"]),
-                C,
-                N0,
-                str(d["scale"]),
-                float(d["variance_factor"]),
-                int(d["dof"]),
-                float(d["sigma_t"]),
-                float(d["sigma_r"]),
-            )
-        except (KeyError, TypeError, ValueError) as e:
-            raise NoUncertaintyError(f"{source}: bad 'uncertainty' section: {e}") from e
 
 
 def covariance_from_jacobian(
@@ -224,19 +130,19 @@ def cramer_rao_covariance(
 
 
 def with_uncertainty(model: CPCModel, cov: Covariance) -> CPCModel:
-    """A copy of ``model`` whose metadata carries ``cov`` as its ``"uncertainty"`` section."""
-    return model.with_params(metadata={**model.metadata, "uncertainty": cov.to_json()})
+    """A copy of ``model`` whose metadata carries ``cov`` (its ``"uncertainty"`` section)."""
+    return model.with_params(metadata=model.metadata.replace(uncertainty=cov))
 
 
 def covariance_of_model(model: CPCModel) -> Covariance:
     """The :class:`Covariance` a model (file) carries; :class:`NoUncertaintyError` if none."""
-    section = model.metadata.get("uncertainty")
-    if not isinstance(section, Mapping):
+    cov = model.metadata.uncertainty
+    if cov is None:
         raise NoUncertaintyError(
             f"model {model.structure.name!r} carries no 'uncertainty' section "
             "(identify it with --method refined)"
         )
-    return Covariance.from_json(section, model.structure.name)
+    return cov
 
 
 def position_covariance(

@@ -55,6 +55,7 @@ from cpc2urdf.identification.simulation.visibility import ViewReport, check_view
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.progress import progress
 from cpc2urdf.spec import RobotSpec
 
@@ -212,12 +213,12 @@ def simulate_experiment(
         metadata={"description": f"held-out configurations of {s.name} with TRUE poses (no noise)",
                   "noise": {"model": "none"}, "provenance": {**provenance, "seed_stream": "heldout"}},
     )
-    truth = truth.with_params(metadata={
-        **nominal.metadata,
-        "provenance": {"simulated_truth": True, "seed": seed, "nominal": ref,
-                       "geometry_error": provenance["geometry_error"],
-                       "nominal_world_to_base": {"b": list(w2b.b), "beta": w2b.beta, "l": list(w2b.l)}},
-    })
+    truth = truth.with_params(metadata=nominal.metadata.replace(provenance=Provenance(
+        method="simulated truth", robot=ref,
+        details={"simulated_truth": True, "seed": seed, "nominal": ref,
+                 "geometry_error": provenance["geometry_error"],
+                 "nominal_world_to_base": {"b": list(w2b.b), "beta": w2b.beta, "l": list(w2b.l)}},
+    )))
     return Experiment(truth, measured, heldout)
 
 

@@ -6,7 +6,6 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -14,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.model import CPCModel
+from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -39,7 +39,7 @@ class ViewRobot:
     lower: Array
     upper: Array
     kinds: dict[str, str] = field(default_factory=dict)
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: ModelMetadata = field(default_factory=ModelMetadata)
 
     @property
     def name(self) -> str:
@@ -160,10 +160,10 @@ def view_robot(robot: PinocchioRobot) -> ViewRobot:
     """The :class:`ViewRobot` of a loaded robot (built with ``visuals=True``): its display limits,
     and the kinds and metadata of the CPC model it came from, if any."""
     kinds: dict[str, str] = {}
-    metadata: dict[str, Any] = {}
+    metadata = ModelMetadata()
     if robot.cpc_model is not None:
         kinds = {f.name: f.kind for f in robot.cpc_model.structure.frames}
-        metadata = dict(robot.cpc_model.metadata)
+        metadata = robot.cpc_model.metadata
     lo, hi = robot.lower.copy(), robot.upper.copy()
     # URDF joints without limits give +-huge; show them at 0 and sweep them +-pi (or +-0.5 m).
     unlimited = ~np.isfinite(lo) | ~np.isfinite(hi) | (hi - lo > 1e6)
