@@ -36,12 +36,18 @@ from cpc2urdf.identification.kinematics.methods import identify as _identify
 from cpc2urdf.measurements import MeasurementSet, load_measurements
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import RobotRef, is_urdf_ref, load_model, load_robot
+from cpc2urdf.robot_ref import RobotRef, load_model, load_robot
 from cpc2urdf.spec import RobotSpec
 from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
 from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
-from cpc2urdf.validation.gaze import GazeSolution, GazeSolver
+from cpc2urdf.validation.gaze import (
+    DEFAULT_CAMERAS,
+    DEFAULT_VIEWING_DISTANCE,
+    GazeSolution,
+    GazeSolver,
+    solver_for,
+)
 from cpc2urdf.validation.view import ViewSummary, write_view_html
 
 PathLike = str | os.PathLike[str]
@@ -179,13 +185,22 @@ def check_urdf(
     return cross_check(m, urdf, configurations, seed)
 
 
-def gaze_solver(robot: CPCModel | RobotRef) -> GazeSolver:
-    """A gaze solver for a model, model file, robot spec, shipped robot or URDF path."""
-    if isinstance(robot, CPCModel):
-        return GazeSolver.from_model(robot)
-    if not isinstance(robot, RobotSpec) and is_urdf_ref(robot):
-        return GazeSolver.from_urdf(os.fspath(robot))
-    return GazeSolver.from_model(load_model(robot))
+def gaze_solver(
+    robot: CPCModel | RobotRef,
+    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    *,
+    viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+) -> GazeSolver:
+    """A gaze solver (``cpc2urdf gaze``) for a model, model file, robot spec, shipped robot or
+    URDF path, pointing the optical axes of ``cameras``.
+
+    Args:
+        robot: The head.
+        cameras: Its two camera optical frames (REP-103).
+        viewing_distance: Distance [m] at which the start's grid looks for the target.
+    """
+    ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
+    return solver_for(ref, cameras, viewing_distance=viewing_distance)
 
 
 def fixate(

@@ -47,3 +47,9 @@ def cpc_from_dh(theta: float, d: float, a: float, alpha: float) -> CPCParams:
             it is still converted exactly (see ``cpc_rotation``).
     """
     return CPCParams.from_matrix(dh_matrix(theta, d, a, alpha))
+
+
+__all__ = [
+    "cpc_from_dh",
+    "dh_matrix",
+]

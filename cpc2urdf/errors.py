@@ -56,3 +56,14 @@ class DegenerateDataError(Cpc2UrdfError):
 
 class ConfigurationError(Cpc2UrdfError):
     """A joint configuration of the wrong shape, non-finite, or outside the joint limits."""
+
+
+__all__ = [
+    "ConfigurationError",
+    "Cpc2UrdfError",
+    "DegenerateDataError",
+    "InputFileError",
+    "OutputError",
+    "SpecError",
+    "UnknownNameError",
+]

@@ -142,3 +142,16 @@ def float_list(value: Any, n: int, where: str) -> list[float]:
     if not isinstance(value, (list, tuple)) or len(value) != n:
         raise ValueError(f"{where} must be a list of {n} numbers, got {value!r}")
     return [finite_float(v, f"{where}[{i}]") for i, v in enumerate(value)]
+
+
+__all__ = [
+    "dumps",
+    "finite_float",
+    "float_list",
+    "make_folder",
+    "read_json",
+    "read_text_file",
+    "require_format",
+    "write_atomic",
+    "write_json",
+]

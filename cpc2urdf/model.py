@@ -15,7 +15,7 @@ So the paper's link transform ``T_{i-1,i} = Q_i(q_i) R_i Rot(z, beta_i) Trans(l_
 here, joint i's motion followed by the constant transform (:class:`CPCParams`) that places its
 child's axis frame. In a tree, each child edge carries its own constants, so branches that share
 a trunk (the head's two vergence joints on the tilt link) share every joint before the branch
-point: one physical tilt axis, not the paper's two (eq. (11)), see DESIGN.md.
+point: one physical tilt axis, not the paper's two (eq. (11)), see docs/identification.md.
 
 Joint variables are transducer readings with no offsets: ``q = 0`` is the zero reading.
 """
@@ -555,3 +555,22 @@ class CPCModel:
 def replace_joint(joint: Joint, **changes: Any) -> Joint:
     """A copy of ``joint`` with fields changed (dataclasses.replace, re-exported for callers)."""
     return replace(joint, **changes)
+
+
+__all__ = [
+    "BASE",
+    "DEFAULT_RANGE_SHARE",
+    "FRAME_KINDS",
+    "IDENTITY",
+    "JOINT_TYPES",
+    "RESERVED_NAMES",
+    "TABLE_1_FREE_PARAMETERS",
+    "WORLD",
+    "CPCModel",
+    "CPCParams",
+    "Frame",
+    "Joint",
+    "JointType",
+    "RobotStructure",
+    "replace_joint",
+]

@@ -78,3 +78,10 @@ def pose_to_json(T: Array, units: Units | None = None) -> dict[str, Any]:
     M = np.array(T, dtype=float)
     M[:3, 3] = M[:3, 3] / u.length
     return {"matrix": [[float(v) for v in row] for row in M]}
+
+
+__all__ = [
+    "POSE_KEYS",
+    "pose_from_json",
+    "pose_to_json",
+]

@@ -48,3 +48,8 @@ def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterat
     if not quiet and k:
         sys.stderr.write(f"\r{label}: {k} done in {time.perf_counter() - start:.1f}s" + " " * 30 + "\n")
         sys.stderr.flush()
+
+
+__all__ = [
+    "progress",
+]

@@ -144,3 +144,10 @@ def registration_rms(T_b_a: ArrayLike, p_a: ArrayLike, p_b: ArrayLike) -> Array:
     r2 = np.sum((b - pred) ** 2, axis=-1)
     ok = np.isfinite(r2)
     return np.sqrt(np.where(ok, r2, 0.0).sum(axis=-1) / np.maximum(ok.sum(axis=-1), 1))
+
+
+__all__ = [
+    "plate_pose_from_points",
+    "registration_rms",
+    "transforms_from_point_pairs",
+]

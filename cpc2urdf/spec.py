@@ -283,3 +283,17 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
 def load_spec(path: str | Path) -> RobotSpec:
     """Read and parse a robot spec file."""
     return spec_from_json(read_json(path), str(path))
+
+
+__all__ = [
+    "DEFAULT_EFFORT",
+    "DEFAULT_VELOCITY",
+    "ROBOT_FORMAT",
+    "RobotSpec",
+    "cpc_to_json",
+    "load_spec",
+    "parse_cpc",
+    "parse_placement",
+    "parse_tree",
+    "spec_from_json",
+]

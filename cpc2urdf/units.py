@@ -54,3 +54,11 @@ class Units:
 
 
 SI = Units()
+
+
+__all__ = [
+    "ANGLE_UNITS",
+    "LENGTH_UNITS",
+    "SI",
+    "Units",
+]

@@ -182,3 +182,16 @@ def urdf_from_model(model: CPCModel, *, source: str | None = None) -> str:
 def write_urdf(model: CPCModel, path: str | Path, *, source: str | None = None) -> Path:
     """Write the URDF of ``model`` to ``path`` atomically (no partial file on failure)."""
     return write_atomic(path, urdf_from_model(model, source=source))
+
+
+__all__ = [
+    "BONE_RADIUS",
+    "HEAD_RGBA",
+    "JOINT_LENGTH",
+    "JOINT_RADIUS",
+    "MATERIALS",
+    "MIN_BONE",
+    "link_name",
+    "urdf_from_model",
+    "write_urdf",
+]

@@ -104,3 +104,12 @@ def test_demo_from_images_runs(tmp_path, capsys):
     assert len(list((d / "images" / "left").glob("*.png"))) == 55
     assert (d / "measurements.json").is_file() and (d / "handeye" / "handeye_camera_left_optical.json").is_file()
     assert out.count("result: all parsers agree with the CPC model") == 3
+
+
+@pytest.mark.parametrize("group", [["study", "fig11"], ["study", "crb"], ["study", "stage2"], ["bench", "fk"], ["bench", "gaze"]])
+def test_study_and_bench_options_return_exit_codes(group, capsys):
+    # main() returns (never raises SystemExit) for a study's or benchmark's own parser too
+    code, _, err = run([*group, "--bogus"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "unrecognized arguments: --bogus" in err
+    code, out, _ = run([*group, "--help"], capsys)
+    assert code == 0 and "usage:" in out

@@ -50,12 +50,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.api import gaze_solver
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.validation.gaze import solver_for
 
     if not (math.isfinite(args.viewing_distance) and args.viewing_distance > 0):
         raise ConfigurationError(f"--viewing-distance must be a positive number of metres, got {args.viewing_distance}")
-    solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
+    solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
     sol = solver.solve(args.target, args.q_current, args.policy)
     if args.json:
         print(json.dumps(sol.to_json(), indent=2))

@@ -100,7 +100,7 @@ def run_study(
         rows.append({"sigma_mm": sigma, "M": M, "mean_mm": float(a.mean()), "std_mm": float(a.std()),
                      "max_mm": float(a.max())})
     reference = [trial_error(robot, seed + t, min(M_values), 0.0, n_heldout)[0] * 1e3 for t in range(trials)]
-    # 32 vs 34 parameters (DESIGN.md on l_3R): same data, the paper's M = 9, sigma = 0.5 mm.
+    # 32 vs 34 parameters (docs/identification.md on l_3R): same data, the paper's M = 9, sigma = 0.5 mm.
     pairs = np.array([shared_vs_paper(robot, seed + t, COMPARE_M, COMPARE_SIGMA, n_heldout)
                       for t in range(max(trials, 20))]) * 1e3
     claim = [r for r in rows if r["sigma_mm"] <= PAPER_SIGMA_MAX and r["M"] >= PAPER_M_MIN]
@@ -229,3 +229,19 @@ def main(argv: list[str]) -> int:
     print(table)
     print(f"wrote {out / 'fig11.md'}, {out / 'fig11.json'}, {out / 'fig11.png'}")
     return 0
+
+
+__all__ = [
+    "M_VALUES",
+    "PAPER_M_MIN",
+    "PAPER_SIGMA_MAX",
+    "PAPER_TARGET",
+    "SIGMAS_MM",
+    "TRIALS",
+    "format_table",
+    "main",
+    "plot",
+    "run_study",
+    "shared_vs_paper",
+    "trial_error",
+]

@@ -12,7 +12,7 @@ Table 1, generalised to a tree; it is also the count of a product-of-exponential
 
 For the IIS-head (2 prismatic, 4 revolute joints, 2 plates) that is 2*2 + 4*4 + 2*6 = 32: the
 tilt axis is one line shared by both branches. The paper's model (eq. (11)) gives the right branch
-its own ``l_3R`` on the tilt axis and has 34 parameters; 2 of them are redundant (DESIGN.md).
+its own ``l_3R`` on the tilt axis and has 34 parameters; 2 of them are redundant (docs/identification.md).
 
 Gauge (fixed, not estimated): ``T_world_base``; for a revolute joint, its axis frame's rotation
 about and translation along its own axis (``beta``, ``l_z``); for a prismatic joint, its axis

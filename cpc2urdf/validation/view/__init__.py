@@ -17,7 +17,7 @@ Modules: :mod:`.robot` (the robot: :class:`ViewRobot` on a
 shapes, materials, bars, triads), :mod:`.camera` (up direction, framing, camera placement),
 :mod:`.scene`, :mod:`.summary` (:class:`ViewSummary`), :mod:`.page`, :mod:`.screenshot`.
 
-Frames as in DESIGN.md: ``T_world_link`` is the pose of ``link`` in ``world`` (Pinocchio's oMf).
+Frames as in docs/architecture.md: ``T_world_link`` is the pose of ``link`` in ``world`` (Pinocchio's oMf).
 """
 
 from __future__ import annotations
