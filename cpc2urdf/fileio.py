@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -19,7 +20,7 @@ from cpc2urdf.errors import InputFileError, OutputError
 
 def read_text_file(path: str | os.PathLike[str], expected: str, encoding: str = "utf-8") -> str:
     """The text of a user's input file, or one :class:`InputFileError` naming the file and why:
-    missing, a folder, binary (undecodable or with NUL bytes), unreadable.
+    missing, a folder, binary (NUL bytes), UTF-16/32 or otherwise not UTF-8, unreadable.
 
     Args:
         path: The file.
@@ -32,31 +33,208 @@ def read_text_file(path: str | os.PathLike[str], expected: str, encoding: str = 
     if p.is_dir():
         raise InputFileError(p, f"is a folder, expected {expected}")
     try:
-        text = p.read_text(encoding=encoding)
-    except UnicodeDecodeError:
-        raise InputFileError(p, f"is a binary file, expected {expected}") from None
+        data = p.read_bytes()
     except OSError as e:
         raise InputFileError(p, f"cannot read ({e.strerror})") from None
-    if "\x00" in text:
+    for bom, name in _OTHER_ENCODINGS:
+        if data.startswith(bom):
+            raise InputFileError(p, f"is {name} text, expected {expected} in UTF-8")
+    if b"\x00" in data:
         raise InputFileError(p, f"is a binary file, expected {expected}")
-    return text
+    try:
+        text = data.decode(encoding)
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise InputFileError(
+            p, f"is not UTF-8 text (byte 0x{data[e.start]:02x} on line {line}), expected {expected}"
+        ) from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open() reads
+
+
+# Byte-order marks of encodings we do not read (UTF-32 first: its LE mark starts like UTF-16's).
+_OTHER_ENCODINGS = (
+    (b"\xff\xfe\x00\x00", "UTF-32"),
+    (b"\x00\x00\xfe\xff", "UTF-32"),
+    (b"\xff\xfe", "UTF-16"),
+    (b"\xfe\xff", "UTF-16"),
+)
+
+
+JSON_MAX_DEPTH = 64  # nesting levels of arrays/objects; our formats need fewer than 10
 
 
 def read_json(path: str | os.PathLike[str]) -> Any:
-    """Load a JSON file, raising :class:`InputFileError` naming the file and the problem."""
+    """Load a JSON file, the one JSON reader of every cpc2urdf input file.
+
+    Beyond the JSON grammar it refuses, as one :class:`InputFileError` naming the file and the
+    place: nesting deeper than :data:`JSON_MAX_DEPTH`, a key repeated in one object (``json``
+    would keep the last value silently), ``NaN``/``Infinity`` literals and numbers that overflow
+    to infinity, integers too long to convert, and strings that are not valid Unicode (lone
+    surrogates). Places are written ``records[3].joints.pan``. A UTF-8 byte-order mark is
+    accepted.
+
+    Raises:
+        InputFileError: Missing, a folder, binary, not JSON, or one of the problems above.
+    """
     p = Path(path)
-    text = read_text_file(p, "a JSON file")
+    text = read_text_file(p, "a JSON file", encoding="utf-8-sig")
+    reader = _StrictJson()
     try:
-        return json.loads(text, parse_constant=_reject_constant)
+        doc = json.loads(
+            text,
+            object_pairs_hook=reader.object,
+            parse_constant=reader.constant,
+            parse_float=reader.float,
+            parse_int=reader.int,
+        )
     except json.JSONDecodeError as e:
-        raise InputFileError(p, f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
-    except ValueError as e:
-        raise InputFileError(p, str(e)) from e
+        raise InputFileError(p, f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:  # nested far deeper than JSON_MAX_DEPTH: find where from the text
+        raise InputFileError(p, _too_deep(_deep_position(text))) from None
+    # Only a \uD800-\uDFFF escape gives a lone surrogate: look at the strings only then.
+    problem = reader.first_problem(doc, check_strings=_SURROGATE_ESCAPE.search(text) is not None)
+    if problem:
+        raise InputFileError(p, problem)
+    return doc
 
 
-def _reject_constant(name: str) -> float:
-    # json accepts NaN/Infinity by default; a calibration file must not contain them.
-    raise ValueError(f"non-finite number {name} is not allowed")
+def _too_deep(where: str) -> str:
+    if len(where) > 80:  # a path 64 levels deep: its start and its end say enough
+        where = f"{where[:40]}...{where[-30:]}"
+    return f"nested more than {JSON_MAX_DEPTH} levels deep ({where})"
+
+
+class _Rejected:
+    """A value ``json`` parsed that the file must not contain (kept to be named with its place)."""
+
+    __slots__ = ("why",)
+
+    def __init__(self, why: str) -> None:
+        self.why = why
+
+
+class _StrictJson:
+    """Hooks for :func:`json.loads` that mark duplicate keys and non-finite numbers, and a walk
+    that names the first such place (in file order) and checks the depth."""
+
+    def __init__(self) -> None:
+        self.duplicates: dict[int, str] = {}  # id(object) -> its first repeated key
+        self.keep: list[dict[str, Any]] = []  # keeps those ids alive and unique
+        self.rejected = 0
+
+    def object(self, pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        obj = dict(pairs)
+        if len(obj) != len(pairs):
+            seen: set[str] = set()
+            for key, _ in pairs:
+                if key in seen:
+                    self.duplicates[id(obj)] = key
+                    self.keep.append(obj)
+                    break
+                seen.add(key)
+        return obj
+
+    def constant(self, name: str) -> _Rejected:
+        self.rejected += 1
+        return _Rejected(f"non-finite number {name} is not allowed")
+
+    def float(self, text: str) -> float | _Rejected:
+        v = float(text)
+        if math.isfinite(v):
+            return v
+        self.rejected += 1
+        return _Rejected(f"number {text} is out of range (it reads as infinity)")
+
+    def int(self, text: str) -> int | _Rejected:
+        try:
+            return int(text)
+        except ValueError:  # longer than sys.get_int_max_str_digits()
+            self.rejected += 1
+            return _Rejected(f"an integer of {len(text)} digits is too long")
+
+    def first_problem(self, doc: Any, check_strings: bool) -> str | None:
+        """The first problem in file order, or None (a walk without recursion).
+
+        Args:
+            doc: What :func:`json.loads` returned with these hooks.
+            check_strings: Also look for lone surrogates in keys and strings.
+        """
+        scalars = check_strings or self.rejected > 0  # else only objects and arrays need a look
+        # (value, depth, trail): the trail (parent trail, key or index) is spelled out only
+        # for the message, so a clean file costs one tuple per object or array.
+        stack: list[tuple[Any, int, _Trail]] = [(doc, 0, None)]
+        while stack:
+            value, depth, trail = stack.pop()
+            if isinstance(value, dict):
+                if depth >= JSON_MAX_DEPTH:
+                    return _too_deep(f"at {_spell(trail)}")
+                if id(value) in self.duplicates:
+                    return f"duplicate key {_spell((trail, self.duplicates[id(value)]))!r}"
+                if check_strings:
+                    bad = next((k for k in value if not _is_unicode(k)), None)
+                    if bad is not None:
+                        return f"{_spell((trail, bad))}: key is not valid Unicode (a lone surrogate)"
+                children: list[tuple[str | int, Any]] = list(value.items())
+            elif isinstance(value, list):
+                if depth >= JSON_MAX_DEPTH:
+                    return _too_deep(f"at {_spell(trail)}")
+                children = list(enumerate(value))
+            elif isinstance(value, _Rejected):
+                return f"{_spell(trail)}: {value.why}"
+            elif check_strings and isinstance(value, str) and not _is_unicode(value):
+                return f"{_spell(trail)}: string is not valid Unicode (a lone surrogate)"
+            else:
+                continue
+            stack.extend(
+                (v, depth + 1, (trail, k)) for k, v in reversed(children) if scalars or isinstance(v, (dict, list))
+            )
+        return None
+
+
+_Trail = tuple[Any, str | int] | None  # (parent trail, key or index), None at the top level
+
+
+def _spell(trail: _Trail) -> str:
+    """``records[3].joints.pan``; a key that is not a plain name is quoted: ``x["a b"]``."""
+    parts: list[str] = []
+    while trail is not None:
+        trail, key = trail
+        if isinstance(key, int):
+            parts.append(f"[{key}]")
+        elif _PLAIN_KEY.match(key):
+            parts.append(f".{key}")
+        else:
+            parts.append(f"[{json.dumps(key)}]")
+    text = "".join(reversed(parts)).removeprefix(".")
+    return text or "the top level"
+
+
+_SURROGATE_ESCAPE = re.compile(r"\\u[dD][89a-fA-F]")
+_PLAIN_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*\Z")
+
+
+def _is_unicode(s: str) -> bool:
+    try:
+        s.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _deep_position(text: str) -> str:
+    """``line L, column C`` where brackets outside strings first nest deeper than the limit."""
+    depth = 0
+    for m in re.finditer(r'"(?:[^"\\]|\\.)*"|[\[\]{}]', text):
+        c = m.group()
+        if c in "[{":
+            depth += 1
+            if depth > JSON_MAX_DEPTH:
+                line = text.count("\n", 0, m.start()) + 1
+                col = m.start() - (text.rfind("\n", 0, m.start()) + 1) + 1
+                return f"line {line}, column {col}"
+        elif c in "]}":
+            depth -= 1
+    return "somewhere in the file"
 
 
 def require_format(doc: Any, expected: str, path: object) -> Mapping[str, Any]:
@@ -80,11 +258,12 @@ def make_folder(path: str | os.PathLike[str]) -> Path:
     return p
 
 
-def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temp file in the same folder, then rename).
+def check_output_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a file :func:`write_atomic` can create: call it before long work whose result
+    goes there, so that a bad ``-o`` is refused first, not after the work.
 
     Raises:
-        OutputError: The folder does not exist or is not writable, or the path is a folder.
+        OutputError: The path is a folder, or its folder does not exist.
     """
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
@@ -92,6 +271,17 @@ def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
         raise OutputError(f"{p}: is a folder, expected a file path")
     if not folder.is_dir():
         raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
+    return p
+
+
+def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (temp file in the same folder, then rename).
+
+    Raises:
+        OutputError: The folder does not exist or is not writable, or the path is a folder.
+    """
+    p = check_output_path(path)
+    folder = p.parent if str(p.parent) else Path(".")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
     except OSError as e:
@@ -145,6 +335,8 @@ def float_list(value: Any, n: int, where: str) -> list[float]:
 
 
 __all__ = [
+    "JSON_MAX_DEPTH",
+    "check_output_path",
     "dumps",
     "finite_float",
     "float_list",

@@ -30,24 +30,40 @@ def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterat
     live = not quiet and sys.stderr.isatty()
     start = last = time.perf_counter()
     k = 0
-    for k, item in enumerate(items, 1):
-        yield item
-        now = time.perf_counter()
-        if live and (now - last > 0.2 or k == total):
-            last = now
-            elapsed = now - start
-            if total:
-                width = 30
-                fill = int(width * k / total)
-                eta = elapsed / k * (total - k)
-                line = f"\r{label} [{'#' * fill}{'.' * (width - fill)}] {k}/{total} {elapsed:6.1f}s eta {eta:6.1f}s"
-            else:
-                line = f"\r{label} {k} {elapsed:6.1f}s"
-            sys.stderr.write(line)
+    drawn = False
+    try:
+        for k, item in enumerate(items, 1):
+            yield item
+            if _draw(label, k, total, start, last, live):
+                drawn, last = True, time.perf_counter()
+    except GeneratorExit:
+        # Closed early (an error in the loop body): clear a half-drawn bar so the error that
+        # follows stands alone on its line.
+        if drawn:
+            sys.stderr.write("\r\033[K")
             sys.stderr.flush()
+        raise
     if not quiet and k:
         sys.stderr.write(f"\r{label}: {k} done in {time.perf_counter() - start:.1f}s" + " " * 30 + "\n")
         sys.stderr.flush()
+
+
+def _draw(label: str, k: int, total: int | None, start: float, last: float, live: bool) -> bool:
+    """Redraw the bar after item ``k`` if it is time to; True if it drew."""
+    now = time.perf_counter()
+    if not (live and (now - last > 0.2 or k == total)):
+        return False
+    elapsed = now - start
+    if total:
+        width = 30
+        fill = int(width * k / total)
+        eta = elapsed / k * (total - k)
+        line = f"\r{label} [{'#' * fill}{'.' * (width - fill)}] {k}/{total} {elapsed:6.1f}s eta {eta:6.1f}s"
+    else:
+        line = f"\r{label} {k} {elapsed:6.1f}s"
+    sys.stderr.write(line)
+    sys.stderr.flush()
+    return True
 
 
 __all__ = [

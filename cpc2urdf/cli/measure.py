@@ -11,6 +11,10 @@ Stage 2 (the head's cameras looking at the 25-disk target), hand poses from an i
         -o OUT_DIR [--on-error skip|stop]
 
 The folder layouts, ``joints.csv`` and the rig/camera files are documented in ``docs/images.md``.
+
+Every argument and input file that can be checked before the images are measured is checked
+first (rig, robot, model, cameras and their hand frames, the output path), so that bad input is
+refused with one line before any progress is shown.
 """
 
 from __future__ import annotations
@@ -63,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     if args.stage2:
         return _run_stage2(args)
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import check_output_path
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.identification.vision.rig_file import load_rig
     from cpc2urdf.measurements import save_measurements
@@ -72,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError("stage 1 needs --rig rig.yaml (or pass --stage2 for the head cameras)")
     rig = load_rig(args.rig)
     spec = load_robot(args.robot)
+    check_output_path(args.output)
     res = measure_stereo_images(
         args.images, rig, spec.structure, joints=args.joints, on_error=args.on_error,
         correct_bias=not args.no_bias_correction, robot_ref=args.robot, show_progress=True,
@@ -112,15 +118,19 @@ def _run_stage2(args: argparse.Namespace) -> int:
                 f"no camera found: expected {images}/<camera>/ image folders with {images}/<camera>.yaml "
                 f"intrinsics for cameras {', '.join(HAND_OF_CAMERA)}, or --camera NAME=FILE"
             )
+    for c in files:  # write_handeye_files needs each camera's hand frame in the model
+        if c not in HAND_OF_CAMERA:
+            raise ConfigurationError(f"no hand frame known for camera {c!r}; known: {sorted(HAND_OF_CAMERA)}")
+        model.structure.frame(HAND_OF_CAMERA[c])
     cams = {c: HeadCamera(*load_camera(f)) for c, f in files.items()}
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: --stage2 writes one file per camera into a folder; this is a file")
+    if not out.exists() and not out.parent.is_dir():
+        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
     res = measure_head_images(images, cams, model.structure, joints=args.joints, on_error=args.on_error,
                               correct_bias=not args.no_bias_correction, show_progress=True)
     if not out.exists():
-        if not out.parent.is_dir():
-            raise OutputError(f"{out}: parent folder {out.parent} does not exist")
         out.mkdir()
     paths = write_handeye_files(res, model, out)
     for c, p in paths.items():

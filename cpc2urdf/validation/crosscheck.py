@@ -8,6 +8,12 @@
 Every named frame, ``base`` and every joint's link frame is compared, at seeded random
 configurations inside the joint limits plus the two limit corners. A URDF that passes agrees with
 the CPC model to ``FK_AGREEMENT_TOL`` (1e-9 m / 1e-9 rad) in both FK parsers.
+
+A URDF that does not parse is bad input, not a discrepancy: :func:`cpc2urdf.urdf_input.read_urdf`
+checks it before any parser sees it, and a parser that still cannot read it raises
+:class:`~cpc2urdf.errors.InputFileError` naming the file and the parser's first complaint. What the
+parsers print themselves (urdfdom's C++ messages, yourdfpy's log) is captured, never shown. A
+report (and ``check``'s exit code 1) is only for a URDF that parses but disagrees with the model.
 """
 
 from __future__ import annotations
@@ -25,9 +31,11 @@ import pinocchio as pin
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.model import BASE, CPCModel
+from cpc2urdf.native_output import captured_output
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import Array, rotation_error
 from cpc2urdf.urdf import link_name
+from cpc2urdf.urdf_input import read_urdf
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot, UnsupportedJointError
 
 LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
@@ -129,6 +137,10 @@ def _worst(report: ParserReport, errors: dict[str, tuple[float, float]]) -> None
         report.ok = False
 
 
+def _or_zero(value: float | None) -> float:
+    return 0.0 if value is None else float(value)  # an absent URDF limit bound is 0
+
+
 def _compare(ref: Array, got: Array) -> tuple[float, float]:
     dp = float(np.max(np.linalg.norm(ref[:, :3, 3] - got[:, :3, 3], axis=-1)))
     dr = float(np.max(rotation_error(ref[:, :3, :3], got[:, :3, :3])))
@@ -136,17 +148,17 @@ def _compare(ref: Array, got: Array) -> tuple[float, float]:
 
 
 def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
-    """FK of every compared frame with Pinocchio vs the CPC model."""
+    """FK of every compared frame with Pinocchio vs the CPC model.
+
+    Raises:
+        InputFileError: The URDF does not parse (:meth:`PinocchioRobot.from_urdf`).
+    """
     rep = ParserReport("pinocchio", True)
     try:
         robot = PinocchioRobot.from_urdf(Path(urdf_path))
-    except UnsupportedJointError as e:  # no configuration of one reading per joint: no poses
+    except UnsupportedJointError as e:  # parses, but has joints the CPC model cannot have
         rep.ok = False
         rep.problems.extend(f"joint {name!r} is {kind}, expected revolute or prismatic" for name, kind in e.joints)
-        return rep
-    except InputFileError as e:  # not well-formed, or not readable by Pinocchio
-        rep.ok = False
-        rep.problems.append(f"cannot load: {e.problem}")
         return rep
     pmodel = robot.model
     s = model.structure
@@ -187,18 +199,28 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
 
 
 def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
-    """FK of every compared frame with yourdfpy vs the CPC model."""
+    """FK of every compared frame with yourdfpy vs the CPC model.
+
+    Raises:
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+            yourdfpy cannot load it).
+    """
     import yourdfpy
 
+    read_urdf(urdf_path)
     rep = ParserReport("yourdfpy", True)
-    try:
-        robot = yourdfpy.URDF.load(
-            urdf_path, load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False
-        )
-    except Exception as e:  # lxml/yourdfpy errors have no common base
-        rep.ok = False
-        rep.problems.append(f"cannot load: {e}")
-        return rep
+    with captured_output() as out:  # yourdfpy logs its parse problems; they are not our output
+        try:
+            robot = yourdfpy.URDF.load(
+                urdf_path, load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False
+            )
+        except Exception as e:  # lxml/yourdfpy errors have no common base
+            failure: Exception | None = e
+        else:
+            failure = None
+    if failure is not None:
+        said = (str(failure).strip() or out.text.strip() or type(failure).__name__).splitlines()[0]
+        raise InputFileError(urdf_path, f"yourdfpy cannot read it ({said})") from failure
     s = model.structure
     names = list(robot.actuated_joint_names)
     missing = [n for n in s.joint_names if n not in names]
@@ -210,10 +232,12 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
             uj = robot.joint_map[j.name]
             if uj.type != j.type:
                 rep.problems.append(f"joint {j.name!r} has type {uj.type}, expected {j.type}")
-            elif uj.limit is None or abs(uj.limit.lower - j.lower) > LIMIT_TOL or abs(uj.limit.upper - j.upper) > LIMIT_TOL:
+            elif uj.limit is None or max(
+                abs(_or_zero(uj.limit.lower) - j.lower), abs(_or_zero(uj.limit.upper) - j.upper)
+            ) > LIMIT_TOL:
                 rep.problems.append(f"joint {j.name!r} limits differ")
     frames = _compared_frames(model)
-    for f in frames:
+    for f in ["world", *frames]:  # poses are taken from "world"
         if f not in robot.link_map:
             rep.problems.append(f"frame {f!r} missing")
     if rep.problems:
@@ -245,7 +269,13 @@ def check_urdfdom_executable() -> str | None:
 
 
 def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
-    """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's."""
+    """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's.
+
+    Raises:
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+            ``check_urdf`` refuses it).
+    """
+    read_urdf(urdf_path)
     rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
     exe = check_urdfdom_executable()
     if exe is None:
@@ -253,13 +283,14 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
         rep.problems.append("check_urdf not found (it ships with the 'pin' package)")
         return rep
     proc = subprocess.run(
-        [exe, urdf_path], capture_output=True, text=True, timeout=60, env={**os.environ, "LC_ALL": "C"}
+        [exe, urdf_path], capture_output=True, text=True, errors="replace", timeout=60,
+        env={**os.environ, "LC_ALL": "C"},
     )
-    if proc.returncode != 0 or "Successfully Parsed XML" not in proc.stdout:
-        rep.ok = False
-        msg = (proc.stderr or proc.stdout).strip().splitlines()
-        rep.problems.append(f"check_urdf failed: {msg[-1] if msg else proc.returncode}")
-        return rep
+    # check_urdf also reports an error and goes on without the part it could not read.
+    said = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip().lower().startswith("error")]
+    if proc.returncode != 0 or "Successfully Parsed XML" not in proc.stdout or said:
+        why = said[0].removeprefix("Error:").strip() if said else f"exit code {proc.returncode}"
+        raise InputFileError(urdf_path, f"urdfdom's check_urdf cannot read it ({why})")
     edges = set()
     stack: list[tuple[int, str]] = []
     root = re.search(r"root Link: (\S+)", proc.stdout)
@@ -299,11 +330,11 @@ def cross_check(
         seed: Seed of the configurations.
 
     Raises:
-        InputFileError: The URDF file does not exist.
+        InputFileError: The URDF file is missing, unreadable or does not parse (any of the three
+            parsers); a URDF that parses but disagrees is a report with ``ok`` False instead.
     """
     path = os.fspath(urdf_path)
-    if not Path(path).is_file():
-        raise InputFileError(path, "no such file")
+    read_urdf(path)
     Q = sample_configurations(model, n, seed)
     reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
     return CrossCheckReport(path, len(Q), _compared_frames(model), reports)

@@ -5,8 +5,10 @@ things from Pinocchio: the kinematic model of a URDF, its joints in configuratio
 their limits, and frame ids by name. :class:`PinocchioRobot` gives them once, with the checks
 every user needs:
 
-- the URDF must be well-formed XML that Pinocchio can read (one clear line otherwise, naming
-  the file; urdfdom's own multi-line complaints are not the message);
+- the URDF must pass :func:`cpc2urdf.urdf_input.validate_urdf` (well-formed XML, one tree of
+  named links and joints, finite numbers, ...) before Pinocchio sees it, and Pinocchio must read
+  it without complaint: one clear line otherwise, naming the file; urdfdom's own output is
+  captured (:func:`cpc2urdf.native_output.captured_output`), never shown;
 - every moving joint must be a 1-DoF revolute or prismatic joint (no continuous, floating or
   planar joints), so the configuration is one reading per joint, in :attr:`joint_names` order;
 - frame and joint names are checked here: Pinocchio's ``getFrameId`` returns ``nframes`` for a
@@ -21,7 +23,6 @@ Frames: ``T_world_<frame>`` is the pose of ``<frame>`` in ``world`` (Pinocchio's
 from __future__ import annotations
 
 import os
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +31,11 @@ import pinocchio as pin
 from cpc2urdf.errors import InputFileError, SpecError, UnknownNameError
 from cpc2urdf.fileio import read_text_file
 from cpc2urdf.model import CPCModel
+from cpc2urdf.native_output import captured_output
 from cpc2urdf.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf import urdf_from_model
+from cpc2urdf.urdf_input import validate_urdf
 
 PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")  # Pinocchio joint model short names
 REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
@@ -145,26 +148,30 @@ class PinocchioRobot:
             cpc_model: The CPC model the text was exported from, if any.
 
         Raises:
-            InputFileError: A missing or unreadable file, XML that is not well-formed, a URDF
-                Pinocchio cannot read, or (:class:`UnsupportedJointError`) joints other than
-                revolute/prismatic.
+            InputFileError: A missing or unreadable file, a URDF
+                :func:`~cpc2urdf.urdf_input.validate_urdf` refuses, a URDF Pinocchio cannot read,
+                or (:class:`UnsupportedJointError`) joints other than revolute/prismatic.
         """
         text = os.fspath(urdf)
         if isinstance(urdf, os.PathLike) or not text.lstrip().startswith("<"):  # a path, not XML
             label = text if source is None else source
-            text = read_text_file(Path(text), "a URDF file")
+            text = read_text_file(Path(text), "a URDF file", encoding="utf-8-sig")
         else:
             label = TEXT_SOURCE if source is None else source
-        try:  # urdfdom prints its own multi-line complaints about malformed XML; say it in one line
-            ET.fromstring(text)
-        except ET.ParseError as e:
-            raise InputFileError(label, f"not well-formed XML ({e})") from e
-        try:
-            model = pin.buildModelFromXML(text)
-            visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
-        except (RuntimeError, ValueError) as e:
-            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise InputFileError(label, f"not a URDF Pinocchio can read ({first})") from e
+        validate_urdf(text, label)  # one line for what urdfdom would complain about on stderr
+        with captured_output() as out:  # urdfdom's own complaints are not the message
+            try:
+                model = pin.buildModelFromXML(text)
+                visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
+            except (RuntimeError, ValueError) as e:
+                failure: Exception | None = e
+            else:
+                failure = None
+        # urdfdom can also report an error and go on without the part it could not read.
+        said = out.error_lines()
+        if failure is not None or said:
+            why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
+            raise InputFileError(label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})") from failure
         return cls(model, text, label, cpc_model=cpc_model, visual_model=visual)
 
     @classmethod

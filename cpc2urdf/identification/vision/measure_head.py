@@ -18,7 +18,8 @@ that cannot be measured is handled by the ``on_error`` policy of
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import itertools
+from collections.abc import Generator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,38 +123,47 @@ def measure_head_images(
     out_T: dict[str, list[Array]] = {c: [] for c in cameras}
     out_r: dict[str, list[float]] = {c: [] for c in cameras}
     jobs = [(i, c) for i in range(len(table.records)) for c in cameras]
-    for i, c in progress(jobs, "measure") if show_progress else jobs:
-        rec = table.records[i]
-        cam = cameras[c]
-        path = find_image(root / c, rec)
-        try:
-            if path is None:
-                raise RecordError(f"{c}/{rec}.*", design.name, "no image file")
-            img = read_grey(path)
-        except InputFileError as e:
-            report_problem(RecordError(e.path, design.name, e.problem), on_error, problems)
-            continue
-        except RecordError as e:
-            report_problem(e, on_error, problems)
-            continue
-        if (img.shape[1], img.shape[0]) != tuple(cam.image_size):
-            report_problem(RecordError(str(path), design.name, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
-                              f"{cam.image_size[0]} x {cam.image_size[1]}"), on_error, problems)
-            continue
-        r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
-        if isinstance(r, DetectionError):
-            report_problem(r, on_error, problems)
-            continue
-        out_l[c].append(table.labels[i])
-        out_q[c].append(table.q[i])
-        out_T[c].append(r.T_camera_target)
-        out_r[c].append(r.reprojection_rms)
-    for c in cameras:
-        if len(out_T[c]) < 3:
-            raise DegenerateDataError(
-                f"{root}: camera {c} saw the target in {len(out_T[c])} records; hand-eye calibration needs at least 3"
-                + (f"; first problem: {problems[0]}" if problems else "")
-            )
+    # As in measure_stereo_images: the bar's "done" line only once the records are known to be
+    # usable, and an error closes the bar first, so that a refusal is the only line on stderr.
+    bar = progress(jobs, "measure") if show_progress else iter(jobs)
+    try:
+        for i, c in itertools.islice(bar, len(jobs)):
+            rec = table.records[i]
+            cam = cameras[c]
+            path = find_image(root / c, rec)
+            try:
+                if path is None:
+                    raise RecordError(f"{c}/{rec}.*", design.name, "no image file")
+                img = read_grey(path)
+            except InputFileError as e:
+                report_problem(RecordError(e.path, design.name, e.problem), on_error, problems)
+                continue
+            except RecordError as e:
+                report_problem(e, on_error, problems)
+                continue
+            if (img.shape[1], img.shape[0]) != tuple(cam.image_size):
+                report_problem(RecordError(str(path), design.name, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
+                                      f"{cam.image_size[0]} x {cam.image_size[1]}"), on_error, problems)
+                continue
+            r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
+            if isinstance(r, DetectionError):
+                report_problem(r, on_error, problems)
+                continue
+            out_l[c].append(table.labels[i])
+            out_q[c].append(table.q[i])
+            out_T[c].append(r.T_camera_target)
+            out_r[c].append(r.reprojection_rms)
+        for c in cameras:
+            if len(out_T[c]) < 3:
+                raise DegenerateDataError(
+                    f"{root}: camera {c} saw the target in {len(out_T[c])} records; hand-eye calibration needs at least 3"
+                    + (f"; first problem: {problems[0]}" if problems else "")
+                )
+    except BaseException:
+        if isinstance(bar, Generator):
+            bar.close()
+        raise
+    next(bar, None)
     return HeadImageMeasurement(
         out_l, {c: np.array(v) for c, v in out_q.items()}, {c: np.array(v) for c, v in out_T.items()},
         {c: np.array(v) for c, v in out_r.items()}, problems,

@@ -18,7 +18,8 @@ policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Generator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -111,51 +112,60 @@ def measure_stereo_images(
     fit = {n: np.full(N, np.nan) for n in names}
     problems: list[str] = []
     details: dict[tuple[str, str], StereoPlatePose] = {}
-    items = progress(range(N), "measure") if show_progress else range(N)
-    for i in items:
-        rec = table.records[i]
-        imgs = []
-        for sub in STEREO_FOLDERS:
-            path = find_image(root / sub, rec)
-            try:
-                if path is None:
-                    raise RecordError(f"{sub}/{rec}.*", "all plates", f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})")
-                img = read_grey(path)
-                if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
-                    raise RecordError(
-                        str(path), "all plates",
-                        f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
-                    )
-                imgs.append((img, str(path)))
-            except InputFileError as e:
-                report_problem(RecordError(e.path, "all plates", e.problem), on_error, problems)
-                break
-            except RecordError as e:
-                report_problem(e, on_error, problems)
-                break
-        if len(imgs) != 2:
-            continue
-        result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
-                                    correct_bias=correct_bias)
-        failed = [r for r in result.values() if isinstance(r, DetectionError)]
-        for err in failed:
-            report_problem(err, on_error, problems)
-        if failed and on_error == "skip-record":
-            continue
-        for n in names:
-            r = result[n]
-            if isinstance(r, DetectionError):
+    # The bar's "done" line waits until the records are known to be usable (islice does not ask
+    # it for more after the last record), and an error closes it first: a refusal is then the
+    # only line on stderr.
+    bar = progress(range(N), "measure") if show_progress else iter(range(N))
+    try:
+        for i in itertools.islice(bar, N):
+            rec = table.records[i]
+            imgs = []
+            for sub in STEREO_FOLDERS:
+                path = find_image(root / sub, rec)
+                try:
+                    if path is None:
+                        raise RecordError(f"{sub}/{rec}.*", "all plates", f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})")
+                    img = read_grey(path)
+                    if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
+                        raise RecordError(
+                            str(path), "all plates",
+                            f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
+                        )
+                    imgs.append((img, str(path)))
+                except InputFileError as e:
+                    report_problem(RecordError(e.path, "all plates", e.problem), on_error, problems)
+                    break
+                except RecordError as e:
+                    report_problem(e, on_error, problems)
+                    break
+            if len(imgs) != 2:
                 continue
-            poses[n][i] = r.T_world_plate
-            points[n][i] = r.p_world
-            fit[n][i] = r.fit_rms
-            details[(rec, n)] = r
-    keep = np.array([any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool)
-    if not keep.any():
-        raise DegenerateDataError(
-            f"{root}: no plate could be measured in any of the {N} records"
-            + (f"; first problem: {problems[0]}" if problems else "")
-        )
+            result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
+                                        correct_bias=correct_bias)
+            failed = [r for r in result.values() if isinstance(r, DetectionError)]
+            for err in failed:
+                report_problem(err, on_error, problems)
+            if failed and on_error == "skip-record":
+                continue
+            for n in names:
+                r = result[n]
+                if isinstance(r, DetectionError):
+                    continue
+                poses[n][i] = r.T_world_plate
+                points[n][i] = r.p_world
+                fit[n][i] = r.fit_rms
+                details[(rec, n)] = r
+        keep = np.array([any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool)
+        if not keep.any():
+            raise DegenerateDataError(
+                f"{root}: no plate could be measured in any of the {N} records"
+                + (f"; first problem: {problems[0]}" if problems else "")
+            )
+    except BaseException:
+        if isinstance(bar, Generator):
+            bar.close()
+        raise
+    next(bar, None)
     idx = np.flatnonzero(keep)
     ms = MeasurementSet(
         structure, table.q[idx], {n: poses[n][idx] for n in names}, str(root), robot_ref,

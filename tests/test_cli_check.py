@@ -1,0 +1,210 @@
+"""``cpc2urdf check`` (and ``gaze``) on URDFs that do not parse: exit 2 and one line naming the file
+and the element, nothing from urdfdom, Pinocchio or yourdfpy on the terminal; exit 1 (a report)
+only for a URDF that parses but disagrees with the model."""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from cpc2urdf.cli import main
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.urdf import urdf_from_model
+
+HEAD = urdf_from_model(load_model("iis_head"))
+# What urdfdom (console_bridge), check_urdf and yourdfpy print themselves.
+NATIVE = re.compile(r"Error:|at line \d+ in|Using different parsing approach|Successfully Parsed|Document is empty")
+
+
+def _visual_origin(value: str) -> str:
+    vis = HEAD.index('<visual name="table_x_axis">')
+    origin = HEAD.index('<origin xyz="0 0 0"', vis)
+    return HEAD[:origin] + f'<origin xyz="{value}"' + HEAD[origin + len('<origin xyz="0 0 0"'):]
+
+
+def _in_joint(name: str, old: str, new: str) -> str:
+    i = HEAD.index(f'<joint name="{name}"')
+    j = HEAD.index("</joint>", i)
+    assert old in HEAD[i:j]
+    return HEAD[:i] + HEAD[i:j].replace(old, new, 1) + HEAD[j:]
+
+
+BAD: dict[str, tuple[Callable[[], str | bytes], str]] = {
+    "not_xml": (lambda: "this is not a URDF", "not well-formed XML (syntax error: line 1, column 0)"),
+    "empty": (lambda: "", "is empty, expected a URDF file"),
+    "binary": (lambda: b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "is a binary file, expected a URDF file"),
+    "truncated": (lambda: HEAD[: len(HEAD) // 2], "not well-formed XML ("),
+    "utf16": (lambda: HEAD.encode("utf-16"), "is UTF-16 text, expected a URDF file in UTF-8"),
+    "missing_link": (
+        lambda: HEAD.replace('<parent link="table_x_link"/>', '<parent link="nope"/>'),
+        "joint 'table_y': parent link 'nope' is not a link of this URDF",
+    ),
+    "nan_visual_origin": (
+        lambda: _visual_origin("nan 0 0"),
+        "link 'table_x_link': visual 'table_x_axis' origin xyz 'nan 0 0' is not finite",
+    ),
+    "inf_joint_origin": (
+        lambda: _in_joint("pan", '<origin xyz="', '<origin xyz="inf 0 0" old="'),
+        "joint 'pan': origin xyz 'inf 0 0' is not finite",
+    ),
+    "overflowing_limit": (
+        lambda: _in_joint("tilt", 'upper="', 'upper="1e999" old="'),
+        "joint 'tilt': limit upper '1e999' is not finite",
+    ),
+    "nan_axis": (lambda: _in_joint("pan", '<axis xyz="', '<axis xyz="nan 0 1" old="'), "joint 'pan': axis xyz 'nan 0 1' is not finite"),
+    "nan_box": (
+        lambda: HEAD.replace('<box size="0.12 0.12 0.01"/>', '<box size="0.12 0.12 -nan"/>'),
+        "link 'base': visual 'base_plate' geometry box size '0.12 0.12 -nan' is not finite",
+    ),
+    "nan_color": (
+        lambda: HEAD.replace('rgba="0.55 0.55 0.55 1.0"', 'rgba="0.55 0.55 0.55 NaN"'),
+        "material 'cpc2urdf_base': color rgba '0.55 0.55 0.55 NaN' is not finite",
+    ),
+    "nan_inertia": (
+        lambda: HEAD.replace('<link name="base">', '<link name="base"><inertial><mass value="nan"/>'
+                             '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>'),
+        "link 'base': inertial mass value 'nan' is not finite",
+    ),
+    "zero_axis": (lambda: _in_joint("pan", '<axis xyz="', '<axis xyz="0 0 0" old="'), "joint 'pan': axis xyz '0 0 0' is zero"),
+    "no_limit": (lambda: _in_joint("pan", "<limit ", "<nolimit "), "joint 'pan' is revolute but has no <limit>"),
+    "unknown_type": (lambda: _in_joint("pan", 'type="revolute"', 'type="hinge"'), "joint 'pan': type 'hinge' is not a URDF joint type"),
+    "duplicate_link": (lambda: HEAD.replace('<link name="world"/>', '<link name="world"/><link name="world"/>'), "link 'world' is defined twice"),
+    "two_roots": (lambda: HEAD.replace("</robot>", '<link name="lonely"/></robot>'), "links 'world', 'lonely' are all roots"),
+    "cycle": (
+        lambda: HEAD.replace("</robot>", '<joint name="b" type="fixed"><parent link="pan_link"/><child link="world"/></joint></robot>'),
+        "form a cycle; a URDF is a tree",
+    ),
+    "capsule": (
+        lambda: HEAD.replace('<box size="0.12 0.12 0.01"/>', '<capsule radius="1" length="1"/>'),
+        "link 'base': visual 'base_plate' geometry <capsule> is not a URDF shape",
+    ),
+    "entity": (lambda: HEAD.replace("<robot ", '<!DOCTYPE robot [<!ENTITY a "1">]>\n<robot ', 1), "declares the XML entity 'a'"),
+    "xacro": (
+        lambda: _in_joint("pan", '<origin xyz="', '<origin xyz="${x} 0 0" old="'),
+        "joint 'pan': origin xyz '${x} 0 0' is not 3 numbers (an unexpanded xacro expression? run xacro first)",
+    ),
+    "root": (lambda: '<sdf version="1.6"><model name="m"/></sdf>', "the root element is <sdf>, expected <robot>"),
+}
+
+
+def _write(path: Path, content: str | bytes) -> None:
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content, encoding="utf-8")
+
+
+def _one_line(capfd: pytest.CaptureFixture[str], command: str, path: Path, expected: str) -> str:
+    cap = capfd.readouterr()
+    assert cap.out == "", cap.out
+    err = cap.err.splitlines()
+    assert len(err) == 1, cap.err
+    assert err[0].startswith(f"cpc2urdf {command}: error: {path}: ") and expected in err[0], err[0]
+    assert "Traceback" not in cap.err and not NATIVE.search(cap.err), cap.err
+    return err[0]
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_check_refuses_a_urdf_that_does_not_parse(tmp_path: Path, capfd: pytest.CaptureFixture[str], case: str) -> None:
+    make, expected = BAD[case]
+    path = tmp_path / "head.urdf"
+    _write(path, make())
+    before = sorted(tmp_path.iterdir())
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 2
+    _one_line(capfd, "check", path, expected)
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_check_names_a_folder_given_as_the_urdf(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "head.urdf"
+    folder.mkdir()
+    assert main(["check", str(folder), "--model", "iis_head"]) == 2
+    _one_line(capfd, "check", folder, "is a folder, expected a URDF file")
+
+
+@pytest.mark.parametrize("case", ["not_xml", "nan_visual_origin", "missing_link", "zero_axis"])
+def test_gaze_refuses_the_same_urdfs_in_one_line(tmp_path: Path, capfd: pytest.CaptureFixture[str], case: str) -> None:
+    make, expected = BAD[case]
+    path = tmp_path / "bad.urdf"
+    _write(path, make())
+    assert main(["gaze", str(path), "--target", "0", "0", "1"]) == 2
+    _one_line(capfd, "gaze", path, expected)
+
+
+def test_a_urdf_that_parses_but_disagrees_is_a_discrepancy(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "head.urdf"
+    path.write_text(_in_joint("pan", 'type="revolute"', 'type="continuous"'))
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 1
+    cap = capfd.readouterr()
+    assert "joint 'pan' is continuous, expected revolute or prismatic" in cap.out and "result: DISCREPANCY" in cap.out
+    assert cap.err == "" and not NATIVE.search(cap.out)
+    # A URDF without the "world" link the poses are taken from: a discrepancy, not a traceback.
+    no_world = re.sub(r'<link name="world"/>\s*<joint name="base_joint".*?</joint>', "", HEAD, count=1, flags=re.S)
+    path.write_text(no_world)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 1
+    cap = capfd.readouterr()
+    assert "frame 'world' missing" in cap.out and cap.err == ""
+
+
+def test_a_clean_urdf_still_passes_quietly(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 0
+    cap = capfd.readouterr()
+    assert "result: all parsers agree with the CPC model" in cap.out and cap.err == ""
+
+
+# ---- a parser that still refuses a file the validation accepted: bad input, said in one line ----
+
+
+def test_pinocchio_complaining_on_stderr_is_captured_and_refused(tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    import pinocchio as pin
+
+    real = pin.buildModelFromXML
+
+    def chatty(text: str) -> pin.Model:  # urdfdom reports an error on stderr and goes on
+        os.write(2, b"Error:   Could not parse visual element for Link [base]\n         at line 537 in link.cpp\n")
+        return real(text)
+
+    monkeypatch.setattr(pin, "buildModelFromXML", chatty)
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 2
+    line = _one_line(capfd, "check", path, "not a URDF Pinocchio can read (Could not parse visual element for Link [base])")
+    assert "at line 537" not in line
+
+
+def test_yourdfpy_failing_is_bad_input(tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    import yourdfpy
+
+    def broken(*args: object, **kwargs: object) -> None:
+        print("Using different parsing approach.", file=sys.stderr)
+        raise ValueError("cannot build the scene graph")
+
+    monkeypatch.setattr(yourdfpy.URDF, "load", staticmethod(broken))
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 2
+    _one_line(capfd, "check", path, "yourdfpy cannot read it (cannot build the scene graph)")
+
+
+@pytest.mark.parametrize("status", [1, 0])
+def test_check_urdf_refusing_is_bad_input(tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, status: int) -> None:
+    from cpc2urdf.validation import crosscheck
+
+    fake = tmp_path / "check_urdf"
+    # exit 1, or exit 0 with "Successfully Parsed" after an error (urdfdom drops what it cannot read)
+    fake.write_text(f"#!/bin/sh\necho 'Error:   Unknown geometry type' >&2\necho '         at line 342 in link.cpp' >&2\n"
+                    f"echo '---------- Successfully Parsed XML ---------------'\nexit {status}\n")
+    fake.chmod(fake.stat().st_mode | stat.S_IXUSR)
+    monkeypatch.setattr(crosscheck, "check_urdfdom_executable", lambda: str(fake))
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 2
+    _one_line(capfd, "check", path, "urdfdom's check_urdf cannot read it (Unknown geometry type)")
