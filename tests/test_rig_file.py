@@ -110,3 +110,27 @@ def test_corrupt_missing_and_binary_files(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match="does not exist"):
         save_rig(StereoRig.verged(), tmp_path / "no" / "rig.yaml")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["good.yaml", "rig.png", "truncated.yaml"]
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "expected"),
+    [
+        # OpenCV's parsers recurse without a limit: these crashed the process (exit 139) before
+        ("deep.json", '{"K1": ' + "[" * 100000 + "1" + "]" * 100000 + "}", "levels deep"),
+        ("deep.yaml", "K1:\n" + "- " * 5000 + "1\n", "levels deep"),
+        # a mapping where a matrix belongs made node.mat() raise cv2.error (a traceback)
+        ("map.yaml", "%YAML:1.0\n---\nK1:\n  a:\n    b: 1\n", "K1 is not a matrix"),
+    ],
+    ids=["deep.json", "deep.yaml", "map.yaml"],
+)
+def test_hostile_rig_files_are_refused_in_one_line(tmp_path, name, text, expected):
+    import subprocess
+    import sys
+
+    (tmp_path / "imgs").mkdir()
+    (tmp_path / name).write_text(text)
+    r = subprocess.run(
+        [sys.executable, "-m", "cpc2urdf", "measure", str(tmp_path / "imgs"), "--rig", str(tmp_path / name),
+         "-o", str(tmp_path / "m.json")], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and expected in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "m.json").exists()

@@ -54,8 +54,45 @@ MAX_BASELINE_WITHOUT_UNITS = 5.0  # [m]: a longer T without a 'units' key is ref
 RIG_ROTATION_TOL = 1e-5  # [-]: max |R^T R - I| entry accepted for R in a rig file
 
 
+# A rig file holds a few matrices (K1, D1, ..., each a mapping of rows/cols/dt/data): a few levels
+# of nesting. OpenCV's parsers recurse without a limit and crash the process (segfault) on deeply
+# nested input, so depth is checked on the text first.
+RIG_MAX_DEPTH = 16
+
+
+def _nesting_depth(text: str) -> int:
+    """Deepest nesting of a FileStorage text: brackets (JSON/YAML flow) or YAML block sequences
+    and indentation, whichever is deeper. Quoted strings are skipped."""
+    depth = deepest = 0
+    quote = ""
+    for ch in text:
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+    for line in text.splitlines():
+        stripped = line.lstrip(" ")
+        indent = len(line) - len(stripped)
+        dashes = 0
+        while stripped.startswith("- ") or stripped == "-":
+            dashes += 1
+            stripped = stripped[2:].lstrip(" ")
+        deepest = max(deepest, dashes + indent // 2)
+    return deepest
+
+
 def _open(path: Path) -> cv2.FileStorage:
     text = read_text_file(path, "an OpenCV FileStorage YAML rig file")
+    if _nesting_depth(text) > RIG_MAX_DEPTH:
+        raise InputFileError(
+            path, f"nested more than {RIG_MAX_DEPTH} levels deep; a rig file holds matrices "
+            "(K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)"
+        )
     # OpenCV's YAML parser insists on the "%YAML:1.0" header; hand-written files often lack it.
     if path.suffix.lower() in (".yaml", ".yml") and not text.lstrip().startswith("%YAML"):
         text = "%YAML:1.0\n---\n" + text
@@ -88,7 +125,10 @@ def _matrix(node: cv2.FileNode, name: str, path: Path) -> Array:
             raise InputFileError(path, f"{name} must be a matrix or a list of numbers")
         m = np.array([v.real() for v in vals], dtype=float)
     else:
-        mat = node.mat()
+        try:
+            mat = node.mat()
+        except cv2.error:
+            mat = None
         if mat is None:
             raise InputFileError(path, f"{name} is not a matrix (expected !!opencv-matrix or a list of numbers)")
         m = np.asarray(mat, dtype=float)
