@@ -4,7 +4,7 @@ In memory a :class:`MeasurementSet` holds N records of one robot: the readings `
 per measured frame, ``T_world_<frame>`` (N, 4, 4), NaN where a record lacks that frame. On disk::
 
     {"format": "cpc2urdf/measurements@1",
-     "robot": "iis_head",                       # shipped robot name, or a robot spec/model file
+     "robot": "iis_head",                       # shipped robot name, or a robot spec/model/URDF file
      "units": {"length": "mm", "angle": "deg"}, # optional, default m/rad
      "description": "...",                      # optional, free text
      "noise": {...}, "provenance": {...},       # optional, free-form, round-tripped
@@ -20,6 +20,13 @@ A record's ``points`` give a plate's measured circle centres in world, one per e
 plate's ``layout`` (same order; ``null`` for a circle that was not seen). The pose is then
 estimated on load by rigid registration (Shih et al. sec. 3.3) unless the record also gives it
 under ``poses`` (a given pose wins; the points are kept). See ``docs/measurements.md``.
+
+With a URDF robot (``"robot": "robot.urdf"``, :mod:`cpc2urdf.urdf_robot`) the frames are link
+names of the URDF and the joints its joint names; the robot is the sub-tree on the paths from the
+root to the links the records measure (their ``poses``/``points`` keys), so a record needs
+readings only for the joints on those paths. Readings of other joints of the URDF (a whole
+``/joint_states`` message) are accepted and ignored. In memory the set uses the model's names
+(:class:`~cpc2urdf.urdf_robot.NameMap`); files use the URDF's.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ from cpc2urdf.registration import plate_pose_from_points, registration_rms
 from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.spec import RobotSpec
 from cpc2urdf.units import Units
+from cpc2urdf.urdf_robot import UrdfRobot
 
 MEASUREMENTS_FORMAT = "cpc2urdf/measurements@1"
 # Free-form top-level sections that round-trip untouched in MeasurementSet.metadata.
@@ -212,7 +220,9 @@ def measurements_from_json(
         records = d.get("records")
         if not isinstance(records, list) or not records:
             raise ValueError("'records' must be a non-empty list of records")
-        ms = _parse_records(records, robot.structure, units, source, ref, d)
+        if isinstance(robot, UrdfRobot):
+            robot = robot.restricted(_measured_links(records, robot))
+        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot))
         ms.spec = robot
         return ms
     except InputFileError as e:
@@ -224,6 +234,57 @@ def measurements_from_json(
         raise InputFileError(source, str(e)) from e
 
 
+@dataclass(frozen=True)
+class _FileNames:
+    """How a file names the joints and frames of a structure (the URDF's names for a URDF robot).
+
+    Attributes:
+        joints: Model joint -> name in the file.
+        frames: Model frame -> name in the file.
+        ignored: Joint names a record may give that the model does not have (a URDF's other joints).
+        subtree: True when the structure is the measured sub-tree of a URDF.
+    """
+
+    joints: Mapping[str, str]
+    frames: Mapping[str, str]
+    ignored: frozenset[str] = frozenset()
+    subtree: bool = False
+
+    @classmethod
+    def of(cls, robot: RobotSpec | None, s: RobotStructure | None = None) -> _FileNames:
+        """The names of ``s`` (default: ``robot``'s structure) in a file about ``robot``."""
+        s = s if s is not None else robot.structure if robot is not None else None
+        assert s is not None
+        if isinstance(robot, UrdfRobot) and robot.names is not None and robot.tree is not None:
+            joints = {n: robot.names.urdf_joint(n) for n in s.joint_names}
+            return cls(joints, {n: robot.names.urdf_link(n) for n in s.frame_names},
+                       frozenset(robot.tree.joints) - set(joints.values()), True)
+        return cls({n: n for n in s.joint_names}, {n: n for n in s.frame_names})
+
+    def frame(self, name: str) -> str | None:
+        """The model frame a file's frame name stands for, or None."""
+        return next((m for m, f in self.frames.items() if f == name), None)
+
+
+def _measured_links(records: list[Any], robot: UrdfRobot) -> list[str]:
+    """The URDF links the records measure (``poses`` and ``points`` keys), in order of appearance.
+
+    Raises:
+        ValueError: A key that is not a link of the URDF, naming the record.
+    """
+    assert robot.tree is not None
+    links: list[str] = []
+    for i, rec in enumerate(records):
+        for key in ("poses", "points"):
+            named = rec.get(key) if isinstance(rec, Mapping) else None
+            for name in named if isinstance(named, Mapping) else ():
+                if not robot.tree.has_link(name):
+                    raise ValueError(f"records[{i}].{key}: {name!r} is not a link of {robot.tree.source} "
+                                     "(measured frames are URDF link names)")
+                links.append(name)
+    return list(dict.fromkeys(links))
+
+
 def _parse_records(
     records: list[Any],
     s: RobotStructure,
@@ -231,7 +292,10 @@ def _parse_records(
     source: str,
     robot_ref: str | None,
     doc: Mapping[str, Any],
+    names: _FileNames | None = None,
 ) -> MeasurementSet:
+    names = names or _FileNames.of(None, s)
+    file_joints = [names.joints[n] for n in s.joint_names]
 
     N, n = len(records), s.n_joints
     q = np.empty((N, n))
@@ -259,20 +323,22 @@ def _parse_records(
         if not isinstance(joints, Mapping):
             raise ValueError(f"{where}.joints must be an object {{joint name: reading}}")
         for name in joints:
-            if name not in s.joint_names:
+            if name not in file_joints and name not in names.ignored:
                 raise ValueError(
-                    f"{where}.joints: unknown joint {name!r}; robot {s.name!r} has {', '.join(s.joint_names)}"
+                    f"{where}.joints: unknown joint {name!r}; robot {s.name!r} has {', '.join(file_joints)}"
                 )
-        missing = [j for j in s.joint_names if j not in joints]
+        missing = [j for j in file_joints if j not in joints]
         if missing:
-            raise ValueError(f"{where}.joints lacks {missing} (every joint needs a reading)")
+            need = "every joint on the paths from the root to the measured links" if names.subtree else "every joint"
+            raise ValueError(f"{where}.joints lacks {missing} ({need} needs a reading)")
         for k, j in enumerate(s.joints):
-            v = finite_float(joints[j.name], f"{where}.joints.{j.name}") * units.joint_scale(j.type)
+            key = names.joints[j.name]
+            v = finite_float(joints[key], f"{where}.joints.{key}") * units.joint_scale(j.type)
             if not (j.lower - 1e-9 <= v <= j.upper + 1e-9):
                 unit = units.length_name if j.type == "prismatic" else units.angle_name
                 scale = units.joint_scale(j.type)
                 raise ValueError(
-                    f"{where}.joints.{j.name} = {joints[j.name]} {unit} is outside the joint limits "
+                    f"{where}.joints.{key} = {joints[key]} {unit} is outside the joint limits "
                     f"[{j.lower / scale:.6g}, {j.upper / scale:.6g}] {unit} (wrong units?)"
                 )
             q[i, k] = v
@@ -284,20 +350,21 @@ def _parse_records(
             raise ValueError(f"{where}.points must be an object {{plate name: [[x, y, z], ...]}}")
         if not rec_poses and not rec_points:
             raise ValueError(f"{where} has no 'poses' and no 'points': a record must measure at least one frame")
-        for name, obj in rec_poses.items():
-            _known_frame(s, name, f"{where}.poses")
-            slot(poses, name, (4, 4))[i] = pose_from_json(obj, units, f"{where}.poses.{name}")
-        for name, pts in rec_points.items():
-            frame = _known_frame(s, name, f"{where}.points")
+        for key, obj in rec_poses.items():
+            name = _known_frame(s, names, key, f"{where}.poses").name
+            slot(poses, name, (4, 4))[i] = pose_from_json(obj, units, f"{where}.poses.{key}")
+        for key, pts in rec_points.items():
+            frame = _known_frame(s, names, key, f"{where}.points")
+            name = frame.name
             if frame.layout is None:
                 raise ValueError(
-                    f"{where}.points.{name}: frame {name!r} has no circle 'layout' in the robot spec, "
+                    f"{where}.points.{key}: frame {key!r} has no circle 'layout' in the robot spec, "
                     "so its pose cannot be estimated from points"
                 )
             K = len(frame.layout)
             if not isinstance(pts, list) or len(pts) != K:
                 raise ValueError(
-                    f"{where}.points.{name} must list {K} points [x, y, z] (null for an unseen circle), "
+                    f"{where}.points.{key} must list {K} points [x, y, z] (null for an unseen circle), "
                     f"one per layout circle"
                 )
             P = slot(points, name, (K, 3))
@@ -305,8 +372,8 @@ def _parse_records(
                 if p is None:
                     continue
                 if not isinstance(p, list) or len(p) != 3:
-                    raise ValueError(f"{where}.points.{name}[{k}] must be [x, y, z] or null, got {p!r}")
-                P[i, k] = [finite_float(v, f"{where}.points.{name}[{k}][{c}]") * units.length for c, v in enumerate(p)]
+                    raise ValueError(f"{where}.points.{key}[{k}] must be [x, y, z] or null, got {p!r}")
+                P[i, k] = [finite_float(v, f"{where}.points.{key}[{k}][{c}]") * units.length for c, v in enumerate(p)]
     # Poses from points (sec. 3.3) where the record did not give the pose itself.
     fit_rms: dict[str, NDArray[np.float64]] = {}
     for name, P in points.items():
@@ -316,19 +383,19 @@ def _parse_records(
         rms = np.full(N, np.nan)
         for i in np.flatnonzero(have).tolist():
             if not np.all(np.isfinite(T[i])):
-                T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{name}")
+                T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{names.frames[name]}")
             rms[i] = registration_rms(T[i], layout, P[i])
         fit_rms[name] = rms
     metadata = {k: doc[k] for k in OPTIONAL_SECTIONS if k in doc}
     return MeasurementSet(s, q, poses, source, robot_ref, labels, points, fit_rms, metadata)
 
 
-def _known_frame(s: RobotStructure, name: str, where: str) -> Any:
+def _known_frame(s: RobotStructure, names: _FileNames, key: str, where: str) -> Any:
     try:
-        return s.frame(name)
+        return s.frame(names.frame(key) or key)
     except UnknownNameError:
         raise ValueError(
-            f"{where}: unknown frame {name!r}; robot {s.name!r} has {', '.join(s.frame_names)}"
+            f"{where}: unknown frame {key!r}; robot {s.name!r} has {', '.join(names.frames.values())}"
         ) from None
 
 
@@ -349,7 +416,8 @@ def load_measurements(path: str | os.PathLike[str], *, robot: RobotSpec | None =
 
 
 def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dict[str, Any]:
-    """The set as a ``cpc2urdf/measurements@1`` document in SI units (full precision).
+    """The set as a ``cpc2urdf/measurements@1`` document in SI units (full precision); for a set
+    of a URDF robot (``ms.spec``), with the URDF's joint and link names.
 
     Args:
         ms: The measurements.
@@ -362,16 +430,20 @@ def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dic
     if not ref:
         raise ValueError("the measurement set has no robot reference (pass robot='iis_head' or a spec path)")
     s = ms.structure
+    names = _FileNames.of(ms.spec, s)
     records = []
     for i in range(ms.n_records):
-        rec: dict[str, Any] = {"label": ms.labels[i], "joints": s.q_to_dict(ms.q[i])}
-        poses = {f: pose_to_json(ms.poses[f][i]) for f in s.frame_names if f in ms.poses and ms.has_pose(f)[i]}
+        joints = {names.joints[n]: v for n, v in s.q_to_dict(ms.q[i]).items()}
+        rec: dict[str, Any] = {"label": ms.labels[i], "joints": joints}
+        poses = {names.frames[f]: pose_to_json(ms.poses[f][i])
+                 for f in s.frame_names if f in ms.poses and ms.has_pose(f)[i]}
         if poses:
             rec["poses"] = poses
         pts = {}
         for f in s.frame_names:
             if f in ms.points and np.any(np.isfinite(ms.points[f][i])):
-                pts[f] = [None if not np.all(np.isfinite(p)) else [float(v) for v in p] for p in ms.points[f][i]]
+                pts[names.frames[f]] = [None if not np.all(np.isfinite(p)) else [float(v) for v in p]
+                                        for p in ms.points[f][i]]
         if pts:
             rec["points"] = pts
         records.append(rec)

@@ -13,8 +13,15 @@ its CPC constants under ``"cpc"`` and ``world_to_base`` is required::
                   "cpc": {"b": [0, 0, 1], "beta": 0, "l": [0, 0, 0]}}, ...],
       "frames": [{"name": "plate_left", "parent": "vergence_left", "kind": "plate",
                   "cpc": {...}}, ...],
-      "provenance": {...}, "uncertainty": {...}, "residuals": {...}     # optional, free-form
+      "provenance": {...}, "uncertainty": {...}, "residuals": {...},    # optional, free-form
+      "urdf": {"path": "/abs/robot.urdf", "root": "base_footprint", ...}  # optional, see below
     }
+
+A model built from a URDF (:mod:`cpc2urdf.urdf_robot`) carries the optional ``"urdf"`` section:
+the source file, its root link, the CPC name of each URDF joint and link it models with each
+joint's axis rotation, and the origins and axes the constants were derived from
+(:class:`~cpc2urdf.urdf_robot.UrdfSource`), so that ``export`` writes that URDF back with the
+calibrated origins (:mod:`cpc2urdf.urdf_writeback`).
 
 Files are written in SI units with full float precision; they may be read in mm/deg.
 """
@@ -34,10 +41,11 @@ from cpc2urdf.spec import (
     parse_tree,
 )
 from cpc2urdf.units import Units
+from cpc2urdf.urdf_robot import URDF_SECTION, UrdfSource, urdf_source, with_urdf_source
 
 MODEL_FORMAT = "cpc2urdf/model@1"
 # Optional sections a model file may carry: CPCModel.metadata (cpc2urdf.model_metadata) types them.
-OPTIONAL_SECTIONS = ("description", "provenance", "uncertainty", "residuals", "handeye", "notes")
+OPTIONAL_SECTIONS = ("description", "provenance", "uncertainty", "residuals", "handeye", "notes", URDF_SECTION)
 
 
 def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
@@ -62,7 +70,10 @@ def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
             if g is None:
                 raise ValueError(f"frame {f.name!r} lacks 'cpc'")
             frames[f.name] = parse_placement(g, units, f"frame {f.name!r}")
-        return CPCModel(structure, T_wb, joints, frames, ModelMetadata.from_json(d, source))
+        model = CPCModel(structure, T_wb, joints, frames, ModelMetadata.from_json(d, source))
+        if URDF_SECTION in d:
+            model = with_urdf_source(model, UrdfSource.from_json(d[URDF_SECTION]))
+        return model
     except InputFileError:
         raise
     except (ValueError, Cpc2UrdfError) as e:
@@ -103,6 +114,9 @@ def model_to_json(model: CPCModel) -> dict[str, Any]:
         "frames": frames,
     }
     doc.update(model.metadata.to_json())
+    source = urdf_source(model)
+    if source is not None:
+        doc[URDF_SECTION] = source.to_json()
     return doc
 
 

@@ -1,9 +1,13 @@
-"""One resolver for "which robot": a shipped name, a robot spec, a model file (later: a URDF).
+"""One resolver for "which robot": a shipped name, a robot spec, a model file or a URDF.
 
 Every command and API function that accepts a robot goes through :func:`load_robot`, so a name or
 path means the same thing everywhere: a measurement file's ``"robot"``, ``--robot``, ``export``,
 ``check``, ``gaze``, ``view``, ``simulate``. A relative path inside a file is tried against that
 file's folder first (``relative_to``).
+
+A path ending in ``.urdf`` is read as a URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot,
+every link reachable from the root through calibratable joints a frame; a measurement file then
+restricts it to the sub-tree of the links it measures.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from cpc2urdf.fileio import read_json
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import MODEL_FORMAT, model_from_json
 from cpc2urdf.spec import ROBOT_FORMAT, RobotSpec, spec_from_json
+from cpc2urdf.urdf_robot import load_urdf_robot
 
 RobotRef = str | os.PathLike[str] | RobotSpec
 
@@ -43,14 +48,15 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
 
     Args:
         ref: A :class:`~cpc2urdf.spec.RobotSpec` (returned as is), a shipped robot name (e.g.
-            ``"iis_head"``), or the path of a robot spec (``cpc2urdf/robot@1``) or model file
-            (``cpc2urdf/model@1``; its model becomes the spec's nominal model).
+            ``"iis_head"``), or the path of a robot spec (``cpc2urdf/robot@1``), model file
+            (``cpc2urdf/model@1``; its model becomes the spec's nominal model) or URDF (``.urdf``:
+            a :class:`~cpc2urdf.urdf_robot.UrdfRobot` whose nominal model remembers the file).
         relative_to: Folder against which a relative path is tried first (the folder of the file
             that named the robot).
 
     Raises:
         InputFileError: Naming the reference: not a shipped name and no such file, or a file of
-            another format, or a file that does not parse.
+            another format, or a file that does not parse (for a URDF: the element and its line).
     """
     if isinstance(ref, RobotSpec):
         return ref
@@ -73,6 +79,8 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
         raise InputFileError(
             text, f"no such file, and not a shipped robot name ({', '.join(shipped_robots())})"
         )
+    if is_urdf_ref(path):
+        return load_urdf_robot(path)
     doc = read_json(path)
     fmt = doc.get("format") if isinstance(doc, Mapping) else None
     if fmt == MODEL_FORMAT:
@@ -88,7 +96,7 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
 
 
 def load_model(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = None) -> CPCModel:
-    """A model: a model file, or the nominal model of a robot spec or shipped robot."""
+    """A model: a model file, or the nominal model of a robot spec, URDF or shipped robot."""
     return load_robot(ref, relative_to=relative_to).nominal_model()
 
 
