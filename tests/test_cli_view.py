@@ -180,3 +180,77 @@ def test_bad_input_in_serve_mode_fails_before_serving(capsys: pytest.CaptureFixt
     captured = capsys.readouterr()
     assert "unknown frame 'left'" in captured.err and len(captured.err.strip().splitlines()) == 1
     assert "http" not in captured.out  # no server was started
+
+
+# ---- meshes and change colours ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("filename", "extra", "message"),
+    [
+        (
+            "package://nowhere/a.stl",
+            [],
+            "link 'l0': mesh 'package://nowhere/a.stl' not found: no package 'nowhere'",
+        ),
+        ("meshes/missing.stl", [], "link 'l0': mesh 'meshes/missing.stl' not found (no file"),
+        ("garbage.stl", [], "link 'l0': mesh 'garbage.stl' cannot be read ("),
+        ("garbage.stl", ["--package-path", "nodir"], "nodir: no such folder"),
+    ],
+)
+def test_meshes_that_do_not_resolve_one_line_exit_2(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    filename: str,
+    extra: list[str],
+    message: str,
+) -> None:
+    from test_view_meshes import urdf_with_meshes
+
+    (tmp_path / "garbage.stl").write_bytes(b"not a mesh")
+    urdf = urdf_with_meshes(tmp_path / "r.urdf", [(filename, "1 0 0 1")])
+    html = tmp_path / "out.html"
+    assert main(["view", str(urdf), *extra, "--html", str(html)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not html.exists()
+
+
+def test_tiago_elsewhere_with_package_path_and_nominal(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A 'calibrated' TIAGo written outside its package (head_1_joint moved 5 mm) finds its
+    meshes only through --package-path; against the nominal TIAGo its head links moved 5 mm."""
+    import xml.etree.ElementTree as ET
+
+    from test_view_meshes import SHARE, TIAGO
+
+    root = ET.parse(TIAGO).getroot()
+    origin = next(j for j in root.findall("joint") if j.get("name") == "head_1_joint").find(
+        "origin"
+    )
+    xyz = [float(v) for v in origin.get("xyz").split()]  # type: ignore[union-attr]
+    origin.set("xyz", " ".join(repr(v) for v in (xyz[0] + 0.005, xyz[1], xyz[2])))  # type: ignore[union-attr]
+    cal = tmp_path / "calibrated.urdf"
+    cal.write_text(ET.tostring(root, encoding="unicode"))
+    html = tmp_path / "tiago.html"
+    argv = ["view", str(cal), "--nominal", str(TIAGO), "--no-sweep", "--html", str(html)]
+    assert main(argv) == 2
+    assert "no package 'example-robot-data'" in capsys.readouterr().err and not html.exists()
+    assert main([*argv, "--package-path", str(SHARE)]) == 0
+    out = capsys.readouterr().out
+    assert "visuals: 65, of which 44 meshes" in out and "all resolved" in out
+    assert "head_1_link 5 mm (origin 5 mm, 0 deg)" in out and "0 >= 10 mm (red)" in out
+    assert 'id="cpc2urdf-legend"' in html.read_text()
+
+
+def test_keep_colours(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = save_model(calibrated_head(), tmp_path / "cal.json")
+    html = tmp_path / "v.html"
+    assert (
+        main(["view", str(model), "--nominal", "iis_head", "--keep-colours", "--html", str(html)])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "translucent green" in out and "calibration moved" not in out
+    assert "cpc2urdf-legend" not in html.read_text()

@@ -303,7 +303,9 @@ def test_page_in_headless_chromium(tmp_path: Path) -> None:
     cal = calibrated_head()
     html = tmp_path / "view.html"
     ms = measurements_of(load_model("iis_head"), n=6)
-    summary = write_view_html(html, cal, target=TARGET, ghost="iis_head", measurements=ms)
+    summary = write_view_html(
+        html, cal, target=TARGET, ghost="iis_head", measurements=ms, change_colours=False
+    )
     still = screenshot_html(html, tmp_path / "still.png", size=SIZE)
     check_picture(still, summary, target=True, ghost=True)
     img = matplotlib.image.imread(str(still))[..., :3]
@@ -366,6 +368,100 @@ def test_any_urdf_robot(tmp_path: Path) -> None:
     path.write_text(ARM_URDF.replace("</robot>", ""))
     with pytest.raises(InputFileError, match="not well-formed XML"):
         load_view_robot(path)
+    # A continuous joint is an unlimited revolute joint: shown at 0, swept +-pi.
     path.write_text(ARM_URDF.replace('type="revolute"', 'type="continuous"'))
-    with pytest.raises(InputFileError, match="joint 'turn' is continuous"):
+    robot = load_view_robot(path)
+    assert robot.pinocchio.continuous_joints == ("turn",)
+    assert robot.pinocchio.upper[1] == math.inf and (robot.lower[1], robot.upper[1]) == (
+        -math.pi,
+        math.pi,
+    )
+    assert build_view(static_visualizer(), robot).q["turn"] == 0.0
+    path.write_text(ARM_URDF.replace('type="revolute"', 'type="planar"'))
+    with pytest.raises(InputFileError, match="joint 'turn' is planar"):
         load_view_robot(path)
+
+
+# ---- meshes and change colours in a real browser ----------------------------------------------
+
+
+def hue_mask(img: np.ndarray, rgba: tuple[float, ...], hue_tol_deg: float = 12.0) -> np.ndarray:
+    """:func:`colour_mask` for colours of any brightness (dark or light, saturated)."""
+    hsv = rgb_to_hsv(np.clip(img[..., :3], 0.0, 1.0))
+    h0 = colorsys.rgb_to_hsv(*rgba[:3])[0]
+    dh = np.abs((hsv[..., 0] - h0 + 0.5) % 1.0 - 0.5) * 360.0
+    return (dh < hue_tol_deg) & (hsv[..., 1] > 0.5) & (hsv[..., 2] > 0.3)
+
+
+def near(mask: np.ndarray, uv: tuple[float, float], radius: float = 50.0) -> int:
+    """How many pixels of ``mask`` lie within ``radius`` [px] of ``uv`` (column, row)."""
+    rows, cols = np.mgrid[: mask.shape[0], : mask.shape[1]]
+    return int((mask & ((cols - uv[0]) ** 2 + (rows - uv[1]) ** 2 < radius**2)).sum())
+
+
+def test_tiago_meshes_in_headless_chromium(tmp_path: Path) -> None:
+    """TIAGo (example-robot-data, 44 STL meshes under package://) drawn from its own meshes:
+    the robot covers a plausible area, its orange base ring is where its base link projects, and
+    its dark arm and white torso are there."""
+    require_chromium()
+    from test_view_meshes import TIAGO
+
+    html = tmp_path / "tiago.html"
+    tiago = load_view_robot(TIAGO)
+    summary = write_view_html(html, tiago, sweep=False)
+    img = matplotlib.image.imread(str(screenshot_html(html, tmp_path / "tiago.png", size=SIZE)))[
+        ..., :3
+    ]
+    # The background is a vertical gradient: each row's most common colour.
+    background = np.array([np.median(row, axis=0) for row in img])[:, None, :]
+    robot = np.abs(img - background).max(axis=2) > 0.06
+    ys, xs = np.nonzero(robot)
+    assert 0.05 < robot.mean() < 0.6, f"robot covers {robot.mean():.1%}"
+    assert ys.max() - ys.min() > 0.6 * SIZE[1] and xs.max() - xs.min() > 0.3 * SIZE[0]
+    orange = hue_mask(img, (1.0, 0.5088, 0.0468))  # the URDF's "Orange" of base_cover_link
+    T = tiago.link_poses(np.array(list(summary.q.values())))
+    assert orange.sum() > 2000
+    assert (
+        near(orange, summary.pixel(T["base_cover_link"][:3, 3], *SIZE), 200.0) > 0.8 * orange.sum()
+    )
+    robot[:30] = False  # meshcat's "Open Controls" bar
+    dark = (img.max(axis=2) < 0.2) & robot  # Hey5DarkGrey / FlatBlack arm, hand, torso
+    white = (img.min(axis=2) > 0.85) & robot & (np.ptp(img, axis=2) < 0.05)  # "White" shells
+    assert dark.sum() > 3000 and white.sum() > 8000, (dark.sum(), white.sum())
+
+
+def test_change_colours_in_headless_chromium(tmp_path: Path) -> None:
+    """A head whose tilt joint moved 12 mm against the nominal one: the links below tilt red,
+    those above green, where they project; the legend's green-yellow-red bar in the page."""
+    require_chromium()
+    from test_view_change import shifted_tilt
+
+    from cpc2urdf.validation.view.change import GREEN_RGBA, RED_RGBA, YELLOW_RGBA
+
+    html = tmp_path / "change.html"
+    cal = load_view_robot(shifted_tilt())
+    summary = write_view_html(html, cal, ghost="iis_head", sweep=False)
+    img = matplotlib.image.imread(str(screenshot_html(html, tmp_path / "change.png", size=SIZE)))[
+        ..., :3
+    ]
+    T = cal.link_poses(np.array(list(summary.q.values())))
+    red, green = (
+        hue_mask(img, RED_RGBA, 10.0),
+        hue_mask(img, GREEN_RGBA, 30.0),
+    )  # under the ghost: bluer
+    # (The triads' thin red and green axes are there too, whatever the change.)
+    for link in ("plate_left", "camera_left"):  # below tilt: moved 12 mm
+        uv = summary.pixel(T[link][:3, 3], *SIZE)
+        assert near(red, uv) > 1500 and near(red, uv) > 3 * near(green, uv), link
+    for link in ("base", "pan_link"):  # above tilt: did not move
+        uv = summary.pixel(T[link][:3, 3], *SIZE)
+        assert near(green, uv) > 1500 and near(green, uv) > 3 * near(red, uv), link
+    # The legend's bar: one row of the lower left, green at its left end, yellow in the middle,
+    # red at its right end.
+    yellow = hue_mask(img, YELLOW_RGBA, 10.0)
+    bar_rows = [
+        y
+        for y in range(SIZE[1] // 2, SIZE[1])
+        if green[y, 20:30].all() and yellow[y, 175:190].all() and red[y, 335:345].all()
+    ]
+    assert bar_rows, "no legend bar"

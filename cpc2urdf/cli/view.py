@@ -1,4 +1,5 @@
-"""``cpc2urdf view URDF_OR_MODEL [--target X Y Z] [--nominal OTHER] [--measurements FILE] [--html OUT]``.
+"""``cpc2urdf view URDF_OR_MODEL [--target X Y Z] [--nominal OTHER] [--measurements FILE]
+[--package-path DIR ...] [--html OUT]``.
 
 Without ``--html`` the scene is served by meshcat on localhost: the URL is printed and the command
 waits until interrupted (Ctrl-C stops the server and exits 0). With ``--html`` it writes one
@@ -19,9 +20,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p = subparsers.add_parser(
         "view",
         help="show a head (calibrated or nominal) in meshcat, in a browser",
-        description="Show a robot from its URDF visuals in meshcat, with axis triads on plate and "
-        "camera frames; with --target the head fixates it (gaze solver) and a ray runs along each "
-        "optical axis; --nominal adds another model as a translucent ghost; --measurements draws "
+        description="Show a robot from its URDF visuals (boxes, cylinders, spheres and its own "
+        "STL/DAE/OBJ meshes) in meshcat, with axis triads on plate and camera frames; with "
+        "--target the head fixates it (gaze solver) and a ray runs along each optical axis; "
+        "--nominal adds another model as a translucent ghost and colours each link by how far "
+        "calibration moved it (green < 1 mm, yellow, red >= 10 mm); --measurements draws "
         "measured plate positions and bars to the model's predictions. Serves on localhost until "
         "Ctrl-C, or writes a self-contained page with --html. Lengths in m, angles in rad.",
     )
@@ -34,7 +37,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "--target", nargs=3, metavar=("X", "Y", "Z"), help="point to fixate, in world [m]"
     )
     p.add_argument(
-        "--nominal", metavar="OTHER", help="another model/URDF of the same robot, shown as a ghost"
+        "--nominal",
+        metavar="OTHER",
+        help="another model/URDF of the same robot (the nominal one), shown as a ghost; each link "
+        "is coloured by how far it moved from the ghost's link of the same name",
+    )
+    p.add_argument(
+        "--keep-colours",
+        action="store_true",
+        help="with --nominal: keep the URDF colours instead of colouring links by how far they moved",
+    )
+    p.add_argument(
+        "--package-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="where package://NAME/... meshes are found (DIR/NAME, or DIR itself if named NAME); "
+        "repeatable; searched before ROS_PACKAGE_PATH, AMENT_PREFIX_PATH and the folders above "
+        "the URDF",
     )
     p.add_argument(
         "--measurements", metavar="FILE", help="a cpc2urdf/measurements@1 file of this robot"
@@ -102,15 +122,16 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
     target = _numbers(args.target, "--target X Y Z") if args.target else None
-    robot = load_view_robot(args.robot)
+    robot = load_view_robot(args.robot, package_dirs=args.package_path)
     options: dict[str, Any] = {
         "q": parse_q(args.q),
         "target": target,
         "cameras": tuple(args.cameras),
         "policy": args.policy,
+        "change_colours": not args.keep_colours,
     }
     if args.nominal:
-        options["ghost"] = load_view_robot(args.nominal)
+        options["ghost"] = load_view_robot(args.nominal, package_dirs=args.package_path)
     if args.measurements:
         from cpc2urdf.measurements import load_measurements
 

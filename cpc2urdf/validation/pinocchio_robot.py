@@ -9,8 +9,10 @@ every user needs:
   named links and joints, finite numbers, ...) before Pinocchio sees it, and Pinocchio must read
   it without complaint: one clear line otherwise, naming the file; urdfdom's own output is
   captured (:func:`cpc2urdf.native_output.captured_output`), never shown;
-- every moving joint must be a 1-DoF revolute or prismatic joint (no continuous, floating or
-  planar joints), so the configuration is one reading per joint, in :attr:`joint_names` order;
+- every moving joint must be a 1-DoF revolute or prismatic joint (no floating or planar joints),
+  so the configuration is one reading per joint, in :attr:`joint_names` order; a ``continuous``
+  joint is refused too, unless asked to read it as an unlimited revolute joint
+  (``continuous_as_revolute=True``, as the view does: limits -inf..inf, one reading, the angle);
 - frame and joint names are checked here: Pinocchio's ``getFrameId`` returns ``nframes`` for a
   name it does not know instead of raising.
 
@@ -23,6 +25,7 @@ Frames: ``T_world_<frame>`` is the pose of ``<frame>`` in ``world`` (Pinocchio's
 from __future__ import annotations
 
 import os
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +51,7 @@ UNSUPPORTED_KINDS = {  # Pinocchio short name -> the URDF joint type it comes fr
     "Planar": "planar",
 }
 TEXT_SOURCE = "<URDF string>"  # the source named in errors about URDF text given directly
+UNLIMITED = 1e300  # [rad]: the limit a continuous joint is given for Pinocchio; set to inf after
 
 
 class UnsupportedJointError(InputFileError):
@@ -63,7 +67,8 @@ class UnsupportedJointError(InputFileError):
         self.joints = list(joints)
         which = ", ".join(f"joint {name!r} is {kind}" for name, kind in self.joints)
         super().__init__(
-            path, f"{which}; only revolute and prismatic joints are supported (no continuous, floating or planar joints)"
+            path,
+            f"{which}; only revolute and prismatic joints are supported (no continuous, floating or planar joints)",
         )
 
 
@@ -86,6 +91,10 @@ class PinocchioRobot:
         upper: Upper joint limits [rad]/[m], shape (n,).
         velocity_limit: Joint speed limits [rad/s]/[m/s], shape (n,).
         links: URDF link names (Pinocchio BODY frames), in tree order.
+        path: The URDF file it was read from, or None (URDF text, a CPC model): relative mesh
+            paths and ``package://`` look-ups start from its folder.
+        continuous_joints: The URDF ``continuous`` joints read as unlimited revolute joints
+            (lower -inf, upper inf), in :attr:`joint_names` order.
     """
 
     def __init__(
@@ -96,9 +105,12 @@ class PinocchioRobot:
         *,
         cpc_model: CPCModel | None = None,
         visual_model: pin.GeometryModel | None = None,
+        path: Path | None = None,
+        continuous_joints: tuple[str, ...] = (),
     ) -> None:
         """Wrap a Pinocchio ``model`` of ``urdf``; :class:`UnsupportedJointError` naming ``source``
-        if a joint is not a 1-DoF revolute or prismatic joint."""
+        if a joint is not a 1-DoF revolute or prismatic joint. The joints named in
+        ``continuous_joints`` (made revolute for Pinocchio) get limits -inf..inf."""
         names: list[str] = []
         kinds: list[str] = []
         unsupported: list[tuple[str, str]] = []
@@ -121,8 +133,14 @@ class PinocchioRobot:
         self.visual_model = visual_model
         self.joint_names: tuple[str, ...] = tuple(names)
         self.joint_kinds: tuple[str, ...] = tuple(kinds)
+        self.path = path
+        self.continuous_joints: tuple[str, ...] = tuple(j for j in names if j in continuous_joints)
         self.lower: Array = np.array(model.lowerPositionLimit, dtype=float)
         self.upper: Array = np.array(model.upperPositionLimit, dtype=float)
+        for j in self.continuous_joints:
+            k = names.index(j)
+            self.lower[k], self.upper[k] = -np.inf, np.inf
+            model.lowerPositionLimit[k], model.upperPositionLimit[k] = -np.inf, np.inf
         self.velocity_limit: Array = np.array(model.velocityLimit, dtype=float)
         self.links: tuple[str, ...] = tuple(
             f.name for f in model.frames if f.type == pin.FrameType.BODY
@@ -138,14 +156,22 @@ class PinocchioRobot:
         source: str | None = None,
         visuals: bool = False,
         cpc_model: CPCModel | None = None,
+        continuous_as_revolute: bool = False,
+        path: str | os.PathLike[str] | None = None,
     ) -> PinocchioRobot:
         """The robot of a URDF file or URDF text.
 
         Args:
             urdf: A path (a ``str`` not starting with ``<`` is a path) or the URDF text.
             source: How errors name it; default the path, or :data:`TEXT_SOURCE` for text.
-            visuals: Also build the visual geometry model (:attr:`visual_model`).
+            visuals: Also build the visual geometry model (:attr:`visual_model`; meshes must be
+                absolute paths: the view resolves ``package://`` itself,
+                :mod:`cpc2urdf.validation.view.meshes`).
             cpc_model: The CPC model the text was exported from, if any.
+            continuous_as_revolute: Read ``continuous`` joints as revolute joints without limits
+                (:attr:`continuous_joints`) instead of refusing them.
+            path: For URDF text: the file it stands for (e.g. the URDF a written-back text came
+                from), as :attr:`path`; its relative mesh paths resolve from that file's folder.
 
         Raises:
             InputFileError: A missing or unreadable file, a URDF
@@ -153,16 +179,26 @@ class PinocchioRobot:
                 or (:class:`UnsupportedJointError`) joints other than revolute/prismatic.
         """
         text = os.fspath(urdf)
+        file = None if path is None else Path(path)
         if isinstance(urdf, os.PathLike) or not text.lstrip().startswith("<"):  # a path, not XML
             label = text if source is None else source
-            text = read_text_file(Path(text), "a URDF file", encoding="utf-8-sig")
+            file = Path(text)
+            text = read_text_file(file, "a URDF file", encoding="utf-8-sig")
         else:
             label = TEXT_SOURCE if source is None else source
         validate_urdf(text, label)  # one line for what urdfdom would complain about on stderr
+        for_pinocchio = text
+        continuous: tuple[str, ...] = ()
+        if continuous_as_revolute:
+            for_pinocchio, continuous = revolute_from_continuous(text)
         with captured_output() as out:  # urdfdom's own complaints are not the message
             try:
-                model = pin.buildModelFromXML(text)
-                visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
+                model = pin.buildModelFromXML(for_pinocchio)
+                visual = (
+                    pin.buildGeomFromUrdfString(model, for_pinocchio, pin.GeometryType.VISUAL)
+                    if visuals
+                    else None
+                )
             except (RuntimeError, ValueError) as e:
                 failure: Exception | None = e
             else:
@@ -170,9 +206,23 @@ class PinocchioRobot:
         # urdfdom can also report an error and go on without the part it could not read.
         said = out.error_lines()
         if failure is not None or said:
-            why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
-            raise InputFileError(label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})") from failure
-        return cls(model, text, label, cpc_model=cpc_model, visual_model=visual)
+            why = (
+                said[0]
+                if said
+                else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
+            )
+            raise InputFileError(
+                label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})"
+            ) from failure
+        return cls(
+            model,
+            text,
+            label,
+            cpc_model=cpc_model,
+            visual_model=visual,
+            path=file,
+            continuous_joints=continuous,
+        )
 
     @classmethod
     def from_model(
@@ -186,11 +236,16 @@ class PinocchioRobot:
 
     @classmethod
     def load(
-        cls, ref: str | os.PathLike[str] | CPCModel, *, visuals: bool = False
+        cls,
+        ref: str | os.PathLike[str] | CPCModel,
+        *,
+        visuals: bool = False,
+        continuous_as_revolute: bool = False,
     ) -> PinocchioRobot:
         """The robot ``ref`` names: a :class:`~cpc2urdf.model.CPCModel`, a ``.urdf`` file (any
         case, :func:`cpc2urdf.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
-        robot name (:func:`cpc2urdf.robot_ref.load_model`).
+        robot name (:func:`cpc2urdf.robot_ref.load_model`). ``continuous_as_revolute`` as in
+        :meth:`from_urdf`.
 
         Raises:
             InputFileError: As :meth:`from_urdf`, or a reference :func:`load_model` rejects.
@@ -198,7 +253,9 @@ class PinocchioRobot:
         if isinstance(ref, CPCModel):
             return cls.from_model(ref, visuals=visuals)
         if is_urdf_ref(ref):
-            return cls.from_urdf(Path(ref), visuals=visuals)
+            return cls.from_urdf(
+                Path(ref), visuals=visuals, continuous_as_revolute=continuous_as_revolute
+            )
         label = os.fspath(ref)
         return cls.from_model(load_model(label), source=label, visuals=visuals)
 
@@ -222,7 +279,9 @@ class PinocchioRobot:
 
     def frame_names(self, frame_type: pin.FrameType | None = None) -> tuple[str, ...]:
         """Names of the Pinocchio frames (of ``frame_type``, a ``pinocchio.FrameType``; None: all)."""
-        return tuple(f.name for f in self.model.frames if frame_type is None or f.type == frame_type)
+        return tuple(
+            f.name for f in self.model.frames if frame_type is None or f.type == frame_type
+        )
 
     def has_frame(self, name: str, frame_type: pin.FrameType | None = None) -> bool:
         """Whether the model has a frame ``name`` (of ``frame_type``; None: any type)."""
@@ -243,4 +302,37 @@ class PinocchioRobot:
         return int(self.model.getFrameId(name, frame_type))
 
 
-__all__ = ["PRISMATIC", "REVOLUTE", "TEXT_SOURCE", "UNSUPPORTED_KINDS", "PinocchioRobot", "UnsupportedJointError"]
+def revolute_from_continuous(urdf: str) -> tuple[str, tuple[str, ...]]:
+    """The URDF text with every ``continuous`` joint made ``revolute`` with limits
+    +-:data:`UNLIMITED` (its effort and velocity kept, 0 if it had none), for Pinocchio, and the
+    names of those joints. The text must have passed
+    :func:`~cpc2urdf.urdf_input.validate_urdf`; without continuous joints it is returned as is."""
+    root = ET.fromstring(urdf)
+    changed = []
+    for joint in root.findall("joint"):
+        if joint.get("type") != "continuous":
+            continue
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", effort="0", velocity="0")
+        limit.set("lower", repr(-UNLIMITED))
+        limit.set("upper", repr(UNLIMITED))
+        limit.set("effort", limit.get("effort", "0"))
+        limit.set("velocity", limit.get("velocity", "0"))
+        changed.append(str(joint.get("name")))
+    if not changed:
+        return urdf, ()
+    return ET.tostring(root, encoding="unicode"), tuple(changed)
+
+
+__all__ = [
+    "PRISMATIC",
+    "REVOLUTE",
+    "TEXT_SOURCE",
+    "UNLIMITED",
+    "UNSUPPORTED_KINDS",
+    "PinocchioRobot",
+    "UnsupportedJointError",
+    "revolute_from_continuous",
+]

@@ -2,7 +2,8 @@
 
 The page holds meshcat's viewer script inline, followed by every scene command inline (decoded
 synchronously, no ``fetch``), animations last, so it opens without a network and without a
-server and renders completely in the first frame.
+server and renders completely in the first frame. A view with change colours (a calibrated robot
+and its nominal ghost) also carries their legend (:func:`~.change.legend_html`), over the scene.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import umsgpack
 from meshcat.servers.tree import SceneTree, find_node, walk
 
 from cpc2urdf.fileio import write_atomic
+from cpc2urdf.validation.view.change import LEGEND_CSS, legend_html
 from cpc2urdf.validation.view.robot import RobotSource, ViewRobot
 from cpc2urdf.validation.view.scene import build_view
 from cpc2urdf.validation.view.summary import ViewSummary
@@ -35,11 +37,15 @@ class StaticWindow:
 
     ``meshcat.Visualizer(window=StaticWindow())`` accepts every scene command; ``static_html()``
     then returns one self-contained page (same scene tree semantics as meshcat's server).
+
+    Attributes:
+        overlay: HTML shown over the scene (a legend), or empty.
     """
 
     def __init__(self) -> None:
         self.tree = SceneTree()
         self.web_url = None
+        self.overlay = ""
 
     def send(self, command: SceneCommand) -> None:
         """Record ``command`` in the scene tree, as meshcat's server does."""
@@ -83,16 +89,23 @@ class StaticWindow:
         viewer_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text(
             encoding="utf-8"
         )
-        return _PAGE.format(viewer_js=viewer_js.replace("</script", "<\\/script"), blobs=blobs)
+        return _PAGE.format(
+            viewer_js=viewer_js.replace("</script", "<\\/script"),
+            blobs=blobs,
+            css=LEGEND_CSS if self.overlay else "",
+            overlay=self.overlay,
+        )
 
 
 _PAGE = """<!DOCTYPE html>
 <html>
 <head><meta charset="utf-8"><title>cpc2urdf view</title>
-<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}</style>
+<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
+{css}</style>
 </head>
 <body>
 <div id="meshcat-pane"></div>
+{overlay}
 <script>
 {viewer_js}
 </script>
@@ -120,6 +133,10 @@ def static_view_html(robot: ViewRobot | RobotSource, **options: Any) -> tuple[st
     """The self-contained HTML page of :func:`build_view` (same options) and its summary."""
     vis = static_visualizer()
     summary = build_view(vis, robot, **options)
+    if summary.link_changes and summary.ghost is not None:
+        vis.window.overlay = legend_html(
+            summary.link_changes, os.path.basename(summary.ghost), summary.unmatched_links
+        )
     return vis.static_html(), summary
 
 
@@ -137,4 +154,10 @@ def write_view_html(
     return summary
 
 
-__all__ = ["SceneCommand", "StaticWindow", "static_view_html", "static_visualizer", "write_view_html"]
+__all__ = [
+    "SceneCommand",
+    "StaticWindow",
+    "static_view_html",
+    "static_visualizer",
+    "write_view_html",
+]

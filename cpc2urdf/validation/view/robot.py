@@ -1,4 +1,5 @@
-"""The robot as the view sees it: a :class:`PinocchioRobot` with visuals and display limits."""
+"""The robot as the view sees it: a :class:`PinocchioRobot` with visuals (meshes resolved,
+:mod:`.meshes`) and display limits."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.validation.view.meshes import PackageDirs, VisualMeshes, visual_geometry
 
 RobotSource = str | os.PathLike[str] | CPCModel  # what load_view_robot accepts
 
@@ -33,6 +35,10 @@ class ViewRobot:
         kinds: Link name -> ``"plate"``/``"camera"``/``"frame"`` for the named frames of a cpc2urdf
             model (for a plain URDF, guessed from the names: ``plate*``, ``*camera*``).
         metadata: A cpc2urdf model's metadata (provenance, residuals, ...), else empty.
+        visuals: ``pinocchio.GeometryModel`` of the URDF visuals, meshes resolved and read
+            (:func:`~cpc2urdf.validation.view.meshes.visual_geometry`); None: the
+            :class:`PinocchioRobot`'s own (built with ``visuals=True``).
+        meshes: What the visuals are made of (how many meshes, which files).
     """
 
     pinocchio: PinocchioRobot
@@ -40,6 +46,8 @@ class ViewRobot:
     upper: Array
     kinds: dict[str, str] = field(default_factory=dict)
     metadata: ModelMetadata = field(default_factory=ModelMetadata)
+    visuals: pin.GeometryModel | None = None
+    meshes: VisualMeshes = field(default_factory=lambda: VisualMeshes(0, ()))
 
     @property
     def name(self) -> str:
@@ -64,7 +72,7 @@ class ViewRobot:
     @property
     def visual_model(self) -> pin.GeometryModel:
         """``pinocchio.GeometryModel`` of the URDF visuals."""
-        return self.pinocchio.visual_model
+        return self.visuals if self.visuals is not None else self.pinocchio.visual_model
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -129,6 +137,24 @@ class ViewRobot:
             if f.type == pin.FrameType.BODY
         }
 
+    def links_below(self, joint: str) -> tuple[str, ...]:
+        """The links that ``joint`` moves (every link below it), in tree order.
+
+        Raises:
+            UnknownNameError: The robot has no such moving joint.
+        """
+        jid = self.pinocchio.joint_index(joint) + 1  # Pinocchio's joint id (0 is the universe)
+        out = []
+        for f in self.model.frames:
+            if f.type != pin.FrameType.BODY:
+                continue
+            j = f.parentJoint
+            while j > jid:  # parents have smaller ids
+                j = self.model.parents[j]
+            if j == jid:
+                out.append(f.name)
+        return tuple(out)
+
     def frame(self, name: str) -> str:
         """``name`` if the robot has a link of that name, else :class:`UnknownNameError`."""
         if name not in self.links:
@@ -145,19 +171,27 @@ def kind_from_name(link: str) -> str:
     return "frame"
 
 
-def load_view_robot(source: RobotSource) -> ViewRobot:
+def load_view_robot(source: RobotSource, *, package_dirs: PackageDirs = ()) -> ViewRobot:
     """The robot to view: a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot
     name (``iis_head``), or a :class:`cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`).
+    A URDF's ``continuous`` joints are read as unlimited revolute joints (shown at 0, swept
+    +-pi); its meshes are resolved (``package://`` through ``package_dirs`` first, then
+    ``ROS_PACKAGE_PATH``/``AMENT_PREFIX_PATH``, then the folders above the URDF) and read
+    (:func:`~cpc2urdf.validation.view.meshes.visual_geometry`).
 
     Raises:
-        InputFileError: Missing or unreadable file, a URDF Pinocchio cannot parse, or joints other
-            than revolute/prismatic.
+        InputFileError: Missing or unreadable file, a URDF Pinocchio cannot parse, joints other
+            than revolute/prismatic/continuous, or
+            (:class:`~cpc2urdf.validation.view.meshes.UnresolvedMeshError`) a mesh that does not
+            resolve or cannot be read, naming the link and the mesh path.
     """
-    return view_robot(PinocchioRobot.load(source, visuals=True))
+    robot = PinocchioRobot.load(source, continuous_as_revolute=True)
+    return view_robot(robot, package_dirs=package_dirs)
 
 
-def view_robot(robot: PinocchioRobot) -> ViewRobot:
-    """The :class:`ViewRobot` of a loaded robot (built with ``visuals=True``): its display limits,
+def view_robot(robot: PinocchioRobot, *, package_dirs: PackageDirs = ()) -> ViewRobot:
+    """The :class:`ViewRobot` of a loaded robot: its visuals (meshes resolved through
+    ``package_dirs``, :func:`~cpc2urdf.validation.view.meshes.visual_geometry`), display limits,
     and the kinds and metadata of the CPC model it came from, if any."""
     kinds: dict[str, str] = {}
     metadata = ModelMetadata()
@@ -170,7 +204,8 @@ def view_robot(robot: PinocchioRobot) -> ViewRobot:
     lo[unlimited], hi[unlimited] = -math.pi, math.pi
     links = robot.links
     kinds = {**{ln: kind_from_name(ln) for ln in links if kind_from_name(ln) != "frame"}, **kinds}
-    return ViewRobot(robot, lo, hi, kinds, metadata)
+    visuals, meshes = visual_geometry(robot, package_dirs)
+    return ViewRobot(robot, lo, hi, kinds, metadata, visuals, meshes)
 
 
 __all__ = ["RobotSource", "ViewRobot", "kind_from_name", "load_view_robot", "view_robot"]

@@ -6,7 +6,10 @@ target and optical rays, a ghost model, measured plate positions, and a joint sw
 - with a target: a sphere at ``p_world``, the head in the gaze solution, and a ray along each
   camera's optical (z) axis, as long as the distance to the point of the axis nearest the target;
 - with another model (e.g. the nominal one): ``/meshcat/ghost``, the same links in the same
-  configuration, translucent green;
+  joint readings, translucent; each link of the head is then coloured by how far calibration
+  moved it from the ghost's link of the same name (:mod:`.change`: green < 1 mm, yellow, red
+  >= 10 mm; grey: no such link in the ghost) and the ghost is blue, or, with
+  ``change_colours=False``, the head keeps its URDF colours and the ghost is green;
 - with measurements: each measured plate origin (small dark sphere) and a bar from it to the
   model's prediction at that record's joint readings, coloured by length (yellow = smallest,
   red = largest); bars are magnified so that the longest is visible (the factor is reported);
@@ -23,15 +26,24 @@ import meshcat
 import meshcat.animation
 import meshcat.geometry as mg
 import numpy as np
+import pinocchio as pin
 from meshcat.commands import SetAnimation
 from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
 from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
+from cpc2urdf.validation.view.change import (
+    CHANGE_GHOST_RGBA,
+    UNMATCHED_RGBA,
+    change_rgba,
+    link_changes,
+)
 from cpc2urdf.validation.view.geometry import (
+    Visual,
     bar_pose,
     draw_triad,
     link_visuals,
@@ -93,6 +105,7 @@ def build_view(
     policy: str = "cyclopean",
     sweep: bool = True,
     upright: bool = True,
+    change_colours: bool = True,
 ) -> ViewSummary:
     """Draw the head (and target, ghost, measurements) into a meshcat visualizer.
 
@@ -103,7 +116,8 @@ def build_view(
             joint order; with a target, where the gaze solve starts. Default: mid-range.
         target: A point to fixate [m], shape (3,), in world; the head is shown in the gaze
             solution (:func:`gaze_configuration`) with a ray along each camera's optical axis.
-        ghost: Another model of the same robot (e.g. the nominal one) drawn translucent.
+        ghost: Another model of the same robot (e.g. the nominal one) drawn translucent, in the
+            same joint readings (joints matched by name).
         measurements: A :class:`cpc2urdf.measurements.MeasurementSet` of this robot.
         cameras: The two camera optical frames (left, right) used for the gaze.
         policy: The gaze solver's redundancy policy (``"cyclopean"``, ``"min-motion"``, ...).
@@ -111,6 +125,9 @@ def build_view(
         upright: For a head (camera frames), turn the scene so that its first revolute joint's
             axis (the pan axis) points up on screen; False keeps world z up. The world triad
             shows the world axes.
+        change_colours: With a ghost, colour each link by how far it moved from the ghost's
+            link of the same name (:mod:`cpc2urdf.validation.view.change`; the numbers are in
+            :attr:`ViewSummary.link_changes`); False keeps the URDF colours.
 
     Raises:
         UnknownNameError: A camera or measured frame, or a joint, the robot does not have.
@@ -143,14 +160,22 @@ def build_view(
     head = vis["head"]
     visuals, skipped = link_visuals(robot, q0)
     summary.skipped_visuals = skipped
+    summary.meshes = robot.meshes
+    T_links = robot.link_poses(q0)
+    ghost_robot = None
+    colours: dict[str, tuple[float, float, float, float]] = {}
+    if ghost is not None:
+        ghost_robot = ghost if isinstance(ghost, ViewRobot) else load_view_robot(ghost)
+        summary.ghost = ghost_robot.source
+        if change_colours:
+            colours = _change_colours(robot, ghost_robot, q0, T_links, visuals, summary)
     for v in visuals:
         node = head[v.link][v.name]
-        node.set_object(v.geometry, material(v.rgba))
+        node.set_object(v.geometry, material(colours.get(v.link, v.rgba)))
         node.set_transform(v.T_link_visual)
     for link, kind in robot.kinds.items():
         if link in robot.links and kind in ("plate", "camera"):
             draw_triad(head[link]["triad"])
-    T_links = robot.link_poses(q0)
     for link in robot.links:
         head[link].set_transform(T_links[link])
     points = focus_points(robot, T_links, visuals)
@@ -159,11 +184,10 @@ def build_view(
         _draw_target(vis, p_target, cameras, T_links)
         points.append(p_target)
 
-    ghost_robot = None
-    if ghost is not None:
-        ghost_robot = ghost if isinstance(ghost, ViewRobot) else load_view_robot(ghost)
-        _draw_ghost(vis["ghost"], ghost_robot, robot, q0)
-        summary.ghost = ghost_robot.source
+    if ghost_robot is not None:
+        _draw_ghost(
+            vis["ghost"], ghost_robot, robot, q0, CHANGE_GHOST_RGBA if colours else GHOST_RGBA
+        )
 
     if measurements is not None:
         points.extend(_draw_measurements(vis["measurements"], robot, measurements, summary))
@@ -200,23 +224,58 @@ def _draw_target(
         head[c]["ray"].set_transform(T)
 
 
-def _draw_ghost(vis: meshcat.Visualizer, ghost: ViewRobot, robot: ViewRobot, q: Array) -> None:
-    """``ghost`` translucent at ``robot``'s readings ``q`` (shape (n,)), joint by joint by name.
-
-    Raises:
-        InputFileError: The ghost lacks joints of ``robot``.
-    """
+def _check_ghost(ghost: ViewRobot, robot: ViewRobot) -> None:
+    """:class:`InputFileError` if the ghost lacks joints of ``robot`` (it cannot be posed alike)."""
     missing = [j for j in robot.joint_names if j not in ghost.joint_names]
     if missing:
         raise InputFileError(
             ghost.source,
             f"lacks joints {missing} of {robot.name!r}; cannot pose it alike",
         )
+
+
+def _change_colours(
+    robot: ViewRobot,
+    ghost: ViewRobot,
+    q: Array,
+    T_links: dict[str, Array],
+    visuals: list[Visual],
+    summary: ViewSummary,
+) -> dict[str, tuple[float, float, float, float]]:
+    """Link name -> the colour of how far it moved from ``ghost``'s link of that name at
+    ``robot``'s readings ``q`` (shape (n,)); fills :attr:`ViewSummary.link_changes` and
+    :attr:`ViewSummary.unmatched_links`."""
+    _check_ghost(ghost, robot)
+    points: dict[str, list[Array]] = {}
+    for v in visuals:
+        points.setdefault(v.link, []).append(v.corners_link())
+    changes = link_changes(T_links, ghost.link_poses(_ghost_q(ghost, robot, q)), points)
+    summary.link_changes = changes
+    summary.unmatched_links = tuple(ln for ln in robot.links if ln not in changes)
+    colours = {ln: change_rgba(c.displacement) for ln, c in changes.items()}
+    colours.update({ln: UNMATCHED_RGBA for ln in summary.unmatched_links})
+    return colours
+
+
+def _draw_ghost(
+    vis: meshcat.Visualizer,
+    ghost: ViewRobot,
+    robot: ViewRobot,
+    q: Array,
+    rgba: tuple[float, float, float, float] = GHOST_RGBA,
+) -> None:
+    """``ghost`` translucent in colour ``rgba`` at ``robot``'s readings ``q`` (shape (n,)),
+    joint by joint by name.
+
+    Raises:
+        InputFileError: The ghost lacks joints of ``robot``.
+    """
+    _check_ghost(ghost, robot)
     q_ghost = _ghost_q(ghost, robot, q)
     gv, _ = link_visuals(ghost, q_ghost)
     for v in gv:
         node = vis[v.link][v.name]
-        node.set_object(v.geometry, material(GHOST_RGBA))
+        node.set_object(v.geometry, material(rgba))
         node.set_transform(v.T_link_visual)
     for link, T in ghost.link_poses(q_ghost).items():
         vis[link].set_transform(T)
@@ -281,22 +340,52 @@ def _draw_measurements(
 
 def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobot | None) -> None:
     """One joint at a time: q0 -> q0 - a -> q0 + a -> q0 (a = SWEEP_FRACTION of the range, clamped
-    to the limits), so the animation starts and ends at the shown configuration."""
+    to the limits), so the animation starts and ends at the shown configuration.
+
+    A link gets keys only while a joint above it moves, and at the first and last frame (so every
+    link's clip lasts the whole sweep): between those keys it rests at its shown pose. A robot
+    with many joints and links (a TIAGo: 48 joints, 90 links) then stays a page of a few MB.
+    """
     anim = meshcat.animation.Animation(default_framerate=SWEEP_FPS)
-    frame = 0
     s = np.sin(np.linspace(0.0, 2.0 * np.pi, SWEEP_KEYS + 1))
-    for i in range(robot.n_joints):
-        a = SWEEP_FRACTION * (robot.upper[i] - robot.lower[i])
-        for k, sk in enumerate(s if i == robot.n_joints - 1 else s[:-1]):
-            q = q0.copy()
-            q[i] = np.clip(q0[i] + a * sk, robot.lower[i], robot.upper[i])
-            with anim.at_frame(vis, frame + k) as f:
-                for link, T in robot.link_poses(q).items():
-                    f["head"][link].set_transform(T)
-                if ghost is not None:
-                    for link, T in ghost.link_poses(_ghost_q(ghost, robot, q)).items():
-                        f["ghost"][link].set_transform(T)
-        frame += SWEEP_KEYS
+    last = SWEEP_KEYS * robot.n_joints
+    models = [(robot, vis["head"])]
+    if ghost is not None:
+        models.append((ghost, vis["ghost"]))
+    for model, node in models:
+        data = model.model.createData()
+        keys: dict[str, dict[int, Array]] = {}
+        for i, joint in enumerate(robot.joint_names):
+            if joint not in model.joint_names:
+                continue
+            below = model.links_below(joint)
+            frames = [model.pinocchio.frame_id(link, pin.FrameType.BODY) for link in below]
+            a = SWEEP_FRACTION * (robot.upper[i] - robot.lower[i])
+            for k, sk in enumerate(s):
+                q = q0.copy()
+                q[i] = np.clip(q0[i] + a * sk, robot.lower[i], robot.upper[i])
+                pin.framesForwardKinematics(model.model, data, _ghost_q(model, robot, q))
+                for link, f in zip(below, frames, strict=True):
+                    keys.setdefault(link, {})[SWEEP_KEYS * i + k] = np.array(
+                        data.oMf[f].homogeneous
+                    )
+        rest = model.link_poses(_ghost_q(model, robot, q0))
+        for link, by_frame in keys.items():
+            by_frame[0] = by_frame[last] = rest[link]
+            times = sorted(by_frame)
+            T = np.array([by_frame[t] for t in times])
+            xyzw = Rotation.from_matrix(T[:, :3, :3]).as_quat()  # three.js order (x, y, z, w)
+            anim.clips[node[link].path] = meshcat.animation.AnimationClip(
+                tracks={
+                    "position": meshcat.animation.AnimationTrack(
+                        "position", "vector3", times, T[:, :3, 3].tolist()
+                    ),
+                    "quaternion": meshcat.animation.AnimationTrack(
+                        "quaternion", "quaternion", times, xyzw.tolist()
+                    ),
+                },
+                fps=SWEEP_FPS,
+            )
     vis.window.send(_SetAnimationLast(anim, play=False))
 
 

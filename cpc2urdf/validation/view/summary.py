@@ -11,6 +11,8 @@ from numpy.typing import ArrayLike
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution
 from cpc2urdf.validation.view.camera import VIEWER_FOV
+from cpc2urdf.validation.view.change import CHANGE_GREEN, CHANGE_RED, LinkChange
+from cpc2urdf.validation.view.meshes import VisualMeshes
 
 
 @dataclass
@@ -32,6 +34,11 @@ class ViewSummary:
         camera_target: The point it looks at [m], shape (3,), in world.
         up: The world direction shown upwards, unit, shape (3,).
         cameras: The two camera optical frames (left, right) of the gaze.
+        link_changes: With a ghost (the nominal model) and change colours: how far calibration
+            moved each link, link name -> :class:`~cpc2urdf.validation.view.change.LinkChange`
+            (:mod:`cpc2urdf.validation.view.change`); empty otherwise.
+        unmatched_links: Links of the robot the ghost does not have (drawn grey).
+        meshes: What the robot's visuals are made of (mesh count, files, triangles).
     """
 
     robot: str
@@ -48,6 +55,13 @@ class ViewSummary:
     camera_target: Array = field(default_factory=lambda: np.zeros(3))
     up: Array = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     cameras: tuple[str, ...] = DEFAULT_CAMERAS
+    link_changes: dict[str, LinkChange] = field(default_factory=dict)
+    unmatched_links: tuple[str, ...] = ()
+    meshes: VisualMeshes | None = None
+
+    def largest_changes(self, n: int = 5) -> list[LinkChange]:
+        """The ``n`` links calibration moved most, largest first."""
+        return sorted(self.link_changes.values(), key=lambda c: -c.displacement)[:n]
 
     def pixel(
         self, p_world: ArrayLike, width: int = 1024, height: int = 768
@@ -78,7 +92,21 @@ class ViewSummary:
                 f"target {np.array2string(self.target, precision=4)} m: {self.gaze.status}"
                 f" (reachable={self.gaze.reachable}; pointing error {err})"
             )
-        if self.ghost:
+        if self.meshes is not None and self.meshes.n_meshes:
+            lines.append(self.meshes.format())
+        if self.ghost and self.link_changes:
+            lines.append(f"ghost: {self.ghost} (translucent blue, same joint readings)")
+            d = np.array([c.displacement for c in self.link_changes.values()])
+            lines.append(
+                f"calibration moved {len(d)} links (matched by name): "
+                f"{int((d < CHANGE_GREEN).sum())} < {1e3 * CHANGE_GREEN:g} mm (green), "
+                f"{int(((d >= CHANGE_GREEN) & (d < CHANGE_RED)).sum())} in between (yellow), "
+                f"{int((d >= CHANGE_RED).sum())} >= {1e3 * CHANGE_RED:g} mm (red); most: "
+                + "; ".join(c.format() for c in self.largest_changes(3))
+            )
+            if self.unmatched_links:
+                lines.append(f"not in the ghost (grey): {', '.join(self.unmatched_links)}")
+        elif self.ghost:
             lines.append(f"ghost: {self.ghost} (translucent green, same configuration)")
         if self.n_measured:
             lines.append(
