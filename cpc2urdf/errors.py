@@ -58,10 +58,25 @@ class ConfigurationError(Cpc2UrdfError):
     """A joint configuration of the wrong shape, non-finite, or outside the joint limits."""
 
 
+class InconsistentDataError(DegenerateDataError):
+    """The data disagree with the model beyond chance: a fit far from the data's own noise
+    statement (above or below it), an implausible robot size, gross outliers.
+
+    Args:
+        message: One line naming the most likely cause and what to change.
+        report: The evidence (a consistency report), or None.
+    """
+
+    def __init__(self, message: str, report: object = None) -> None:
+        super().__init__(message)
+        self.report = report
+
+
 __all__ = [
     "ConfigurationError",
     "Cpc2UrdfError",
     "DegenerateDataError",
+    "InconsistentDataError",
     "InputFileError",
     "OutputError",
     "SpecError",

@@ -85,3 +85,72 @@ def test_refined_model_shows_predicted_next_to_observed() -> None:
         assert "predicted rms" in format_table(report)
     rms_ratio = float(np.sqrt(np.mean(np.square(ratios))))
     assert rms_ratio == pytest.approx(1.0, rel=0.5) and rms_ratio > 1 / 1.5
+
+
+# ---- held-out errors against the model's own prediction ------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """A refined model of a simulated head, its stage-1 file and its held-out file (SI units)."""
+    from cpc2urdf.identification.kinematics.methods import identify
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.measurements import measurements_to_json
+
+    d = tmp_path_factory.mktemp("accuracy")
+    _, measured, heldout = simulate_experiment("iis_head", seed=0, n_heldout=30)
+    measured.spec = load_robot("iis_head")
+    save_model(identify(measured), d / "model.json")
+    return d, measurements_to_json(measured, robot="iis_head"), measurements_to_json(heldout, robot="iis_head")
+
+
+def _run(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(["accuracy", *args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_heldout_file_with_a_unit_mistake_is_refused_naming_it(identified, capsys) -> None:
+    import stage1_mistakes as sm
+
+    from cpc2urdf.fileio import write_json
+
+    d, _, held = identified
+    write_json(d / "held_mm.json", sm.metres_as_mm(held))
+    code, out, err = _run(capsys, str(d / "model.json"), str(d / "held_mm.json"))
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert "held_mm.json: held-out errors are" in err and "what the model predicts" in err
+    assert "in the held-out file, lengths look like metres labelled mm" in err and "--accept-inconsistent" in err
+    code, out, err = _run(capsys, str(d / "model.json"), str(d / "held_mm.json"), "--accept-inconsistent")
+    assert code == 0 and "plate_left (30 held-out records)" in out
+    assert "warning: INCONSISTENT" in out and "metres labelled mm" in out
+
+
+def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(identified, tmp_path, capsys) -> None:
+    """The issue's case: stage-1 and held-out files both in metres labelled mm; the model (kept with
+    --accept-inconsistent) predicts about 1 mm, the held-out errors are 1000x smaller."""
+    import stage1_mistakes as sm
+
+    from cpc2urdf.fileio import write_json
+
+    _, measured, held = identified
+    write_json(tmp_path / "m.json", sm.metres_as_mm(measured))
+    write_json(tmp_path / "h.json", sm.metres_as_mm(held))
+    assert main(["identify", str(tmp_path / "m.json"), "-o", str(tmp_path / "bad.json"), "--accept-inconsistent"]) == 0
+    capsys.readouterr()
+    code, out, err = _run(capsys, str(tmp_path / "bad.json"), str(tmp_path / "h.json"))
+    assert code == 2 and err.count("\n") == 1, err
+    assert "about 1000x smaller than predicted" in err and "metres labelled mm" in err
+
+
+def test_clean_heldout_data_are_consistent_with_the_prediction(identified, capsys) -> None:
+    from cpc2urdf.fileio import write_json
+    from cpc2urdf.measurements import measurements_from_json
+    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.validation.accuracy import prediction_check
+
+    d, _, held = identified
+    write_json(d / "held.json", held)
+    assert main(["accuracy", str(d / "model.json"), str(d / "held.json")]) == 0
+    check = prediction_check(load_model(d / "model.json"), measurements_from_json(held, "held.json"))
+    assert check is not None and check.consistent and 0.5 < check.observed_rms / check.predicted_rms < 2.0

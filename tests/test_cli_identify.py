@@ -130,3 +130,29 @@ def test_default_method_is_refined_and_exact_on_noise_free_data(user_robot, caps
     A, B = truth.fk(Q, plates), model.fk(Q, plates)
     for f in plates:
         assert np.max(np.abs(A[f] - B[f])) < FK_AGREEMENT_TOL
+
+
+def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
+    """A spec without geometry, noise-free data without a noise statement: the refits still tell a
+    swapped pair of plates (which the closed form cannot even fit as read), transposed rotations,
+    radians labelled degrees and an off-by-one pairing (the fix loses q0: refitted from the fit as
+    read), and the prismatic joints' travel against their limits tells the length unit."""
+    import stage1_mistakes as sm
+
+    truth, tmp, doc = user_robot
+    plates = [f.name for f in truth.structure.frames if f.kind == "plate"]
+    assert any(j.type == "prismatic" for j in truth.structure.joints)
+    cases = [
+        (sm.plates_swapped(doc, plates[0], plates[1]), f"the poses of {plates[0]} and {plates[1]} look swapped"),
+        (sm.metres_as_mm(doc), "lengths look like metres labelled mm"),
+        (sm.rotations_transposed(doc), "the rotation blocks look transposed"),
+        (sm.radians_as_degrees(doc), "revolute readings look like radians labelled deg"),
+        (sm.next_record_poses(doc), "readings look paired with the next record's poses"),
+    ]
+    for k, (bad, words) in enumerate(cases):
+        write_json(tmp / f"bad{k}.json", bad)
+        out = tmp / f"bad{k}_model.json"
+        assert main(["identify", str(tmp / f"bad{k}.json"), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1, err
+        assert not out.exists()

@@ -169,6 +169,21 @@ def test_m9_refinement_converges_in_few_evaluations(head):
     assert res.iterations <= 20
 
 
+def test_a_fit_the_model_cannot_explain_stops_when_it_stalls(head):
+    """Plates swapped: no model explains the data, and Levenberg-Marquardt would crawl for the
+    whole budget (200 evaluations per stage); it stops once 20 evaluations gain less than 0.1 %."""
+    from cpc2urdf.identification.kinematics.refine import STALL_NFEV
+
+    rng = np.random.default_rng(8)
+    truth = perturbed(head, rng)
+    ms = measure(truth, protocol_q(truth, 5), rng, SIGMA_T, SIGMA_R)
+    swapped = MeasurementSet(ms.structure, ms.q, {"plate_left": ms.poses["plate_right"], "plate_right": ms.poses["plate_left"]})
+    res = refine(perturbed(truth, rng, 1e-3, 0.003), swapped, SIGMA_T, SIGMA_R, warn=False)
+    assert not res.success and "lowered the cost by less than" in res.message
+    assert res.iterations < 200 and res.iterations % STALL_NFEV == 0
+    assert res.covariance.variance_factor > 100  # what the consistency gate then refuses
+
+
 def test_bad_input(head):
     rng = np.random.default_rng(6)
     ms = measure(head, protocol_q(head, 3), rng, 0.0, 0.0)
@@ -231,4 +246,8 @@ def test_crb_study_runs_with_tiny_sizes(tmp_path):
     s = json.loads((tmp_path / "crb.json").read_text())["summary"]
     assert s["n_params"] == 32 and (tmp_path / "crb.png").stat().st_size > 10_000
     assert 0.3 < s["estimators"]["refined"]["param_ratio"] < 2.0
+    # The default pipeline (refined + consistency gate) is the refinement, and passes clean data.
+    assert s["estimators"]["default: refined + consistency gate"]["param_ratio"] == pytest.approx(
+        s["estimators"]["refined"]["param_ratio"], rel=1e-6)
+    assert s["gate_passed_clean"] == "2/2" and s["outliers"]["default_named_exactly"] == "2/2"
     assert main(["study", "crb", "--trials", "1", "--out", str(tmp_path)]) == 2

@@ -4,7 +4,14 @@ Reads stage-1 measurements (``cpc2urdf/measurements@1``), runs an identification
 (``--method``, default ``refined``: the closed form of Shih et al. sec. 4.2, then maximum-likelihood
 refinement of every record, which reaches the Cramér-Rao bound (docs/refinement.md); the registry is
 :data:`cpc2urdf.identification.kinematics.methods.METHODS`) and writes a model file with the sections
-``provenance`` (method, data used), ``residuals`` (per record and per branch) and ``notes``.
+``provenance`` (method, data used, the consistency gate's verdict), ``residuals`` (per record and per
+branch) and ``notes``.
+
+Data that cannot determine the robot (a joint never moved, too few distinct configurations, copied
+records), or that are inconsistent with the fit (residuals far above or below the file's stated
+noise, an implausible robot size, gross outliers; the cause is diagnosed by refitting the likely
+mistakes), are refused: one line on stderr, exit code 2, no file. ``--accept-inconsistent`` keeps
+the model of inconsistent data with the diagnosis in its notes and provenance (docs/identification.md).
 """
 
 from __future__ import annotations
@@ -29,6 +36,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    help="identification method (default refined: closed form + maximum-likelihood "
                    "refinement with covariance; closed-form: Shih et al. sec. 4.2 only)")
     p.add_argument("--robot", help="robot spec/model file or shipped name, instead of the file's 'robot'")
+    p.add_argument("--accept-inconsistent", action="store_true",
+                   help="keep the model even when the data are inconsistent with it (a fit far from the file's "
+                   "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
+                   "notes and provenance")
     p.set_defaults(run=run)
 
 
@@ -39,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
 
     ms = load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
     start = time.perf_counter()
-    model = identify(ms, args.method)
+    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent)
     elapsed = time.perf_counter() - start
     import math
 
@@ -56,4 +67,8 @@ def run(args: argparse.Namespace) -> int:
               f"{r.max_translation_m * 1e3:.3f} mm), {math.degrees(r.rms_rotation_rad):.3f} deg rms")
     for note in meta.notes:
         print(f"  note: {note}")
+    consistency = prov.details.get("consistency", {})
+    if consistency.get("accepted"):
+        print(f"warning: the data are INCONSISTENT with the model; kept because of --accept-inconsistent: "
+              f"{consistency['diagnosis']['cause']} (stored in the model's notes)")
     return 0

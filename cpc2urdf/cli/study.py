@@ -11,6 +11,7 @@ STUDIES: dict[str, tuple[str, str]] = {
     "stage2": ("cpc2urdf.studies.stage2", "stage-2 camera frame error vs pixel noise, per hand-eye solver"),
     "li2010": ("cpc2urdf.studies.li2010", "Li et al. 2010 Fig. 1: AX=ZB errors vs number of poses"),
     "fig11": ("cpc2urdf.studies.fig11", "Shih et al. Fig. 11: positioning error vs M and noise"),
+    "gate": ("cpc2urdf.studies.gate", "stage-1 consistency gate: clean data passed, mistakes named, over seeded trials"),
     "crb": ("cpc2urdf.studies.crb", "closed form and refinement vs the Cramér-Rao bound (M = 9, 0.5 mm)"),
     "images": ("cpc2urdf.studies.images", "image pipeline: centre, pose and identification errors from rendered images"),
 }

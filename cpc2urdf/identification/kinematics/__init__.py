@@ -11,6 +11,13 @@ does not load scipy's optimiser for every command):
 - ``refine``: the weighted least-squares refinement and its robust mode (``refine``).
 - ``identifiability``: rank analysis of the weighted Jacobian, named free combinations.
 - ``uncertainty``: parameter covariance, its propagation to frame positions, the Cramér-Rao bound.
+- ``start``: where a refinement starts (the closed form, or the nominal model placed in world).
 - ``methods``: identification methods by name (``identify``, ``METHODS``), including the CLI's
-  default "closed form, then refine" (``identify_refined``).
+  default "closed form, then refine" (``identify_refined``); ``identify`` runs the checks below.
+- ``sufficiency``: records that cannot determine the robot, refused before any solver runs.
+- ``fit_statistics``: the fit's residuals against the stated noise (chi-square, both tails).
+- ``plausibility``: the size of the robot the data imply, against the nominal model or the limits.
+- ``alternatives``: the likely mistakes in a measurement file, each as the fix that undoes it.
+- ``verdict``, ``diagnosis``, ``consistency``: the consistency gate after every fit (its tests and
+  report, the refits that name the cause, and ``check_consistency``).
 """

@@ -25,6 +25,7 @@ import numpy as np
 
 from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError
 from cpc2urdf.identification.kinematics.problem import DEFAULT_SIGMA_R, DEFAULT_SIGMA_T
+from cpc2urdf.identification.kinematics.start import align_base, closed_form_model, refinement_start
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.model_metadata import FrameResiduals, Provenance, RecordResiduals, Residuals
@@ -35,13 +36,7 @@ Method = Callable[[MeasurementSet, "CPCModel | None"], CPCModel]
 
 def closed_form(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
     """Shih et al. sec. 4.2, generalised to trees (:mod:`cpc2urdf.identification.kinematics.closed_form`)."""
-    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form, provenance
-    from cpc2urdf.identification.kinematics.protocol import recognise_protocol
-
-    protocol = recognise_protocol(ms)
-    model, details = identify_closed_form(ms, nominal, protocol=protocol)
-    meta = model.metadata.replace(provenance=provenance(ms, protocol, details), notes=tuple(details.notes))
-    return model.with_params(metadata=meta)
+    return closed_form_model(ms, nominal)
 
 
 def noise_from_metadata(metadata: dict[str, Any]) -> tuple[float, float, bool]:
@@ -76,29 +71,6 @@ def _carry_frames(refined: CPCModel, start: CPCModel, fitted: list[str]) -> CPCM
     return refined.with_params(frames=moved) if moved else refined
 
 
-def align_base(model: CPCModel, ms: MeasurementSet, frames: list[str]) -> CPCModel:
-    """``model`` with ``T_world_base`` re-fitted so its frame origins best match the measured ones.
-
-    A nominal model usually does not know where the robot stands in the measuring system's
-    world; the chart of :class:`Parametrization` keeps ``T_world_base`` fixed (gauge), so a start
-    must be placed first. Kabsch/Arun fit of all measured origins (sec. 3.3's registration).
-    """
-    T_pred = model.fk(ms.q, frames)
-    a, b = [], []
-    for f in frames:
-        ok = ms.has_pose(f)
-        a.append(T_pred[f][ok, :3, 3])
-        b.append(ms.poses[f][ok, :3, 3])
-    A, B = np.concatenate(a), np.concatenate(b)
-    ca, cb = A.mean(0), B.mean(0)
-    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    G = np.eye(4)
-    G[:3, :3], G[:3, 3] = R, cb - R @ ca
-    return model.with_params(world_to_base=CPCParams.from_matrix(G @ model.T_world_base()))
-
-
 def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, robust: bool = False) -> CPCModel:
     """``cpc2urdf identify --method refined``: closed form, then :func:`refine.refine` on every record.
 
@@ -114,22 +86,8 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
     """
     from cpc2urdf.identification.kinematics.refine import refine
 
-    notes: list[str] = []
-    try:
-        start = closed_form(ms, nominal)
-        start_method = "closed-form"
-    except DegenerateDataError as e:
-        if nominal is None:
-            raise DegenerateDataError(
-                f"refined identification needs a start: the closed form failed ({e}) and the robot "
-                "has no nominal geometry"
-            ) from e
-        fitted = [f for f in nominal.structure.frame_names if f in ms.poses and ms.has_pose(f).any()]
-        start, start_method = align_base(nominal, ms, fitted), "nominal"
-        notes.append(
-            f"closed form not applicable ({e}); refinement started from the nominal model placed "
-            "in world by a rigid fit of the measured plate origins"
-        )
+    start, start_method, note = refinement_start(ms, nominal)
+    notes: list[str] = [note] if note else []
     sigma_t, sigma_r, known = noise_from_metadata(ms.metadata)
     fitted = [f for f in start.structure.frame_names if f in ms.poses and ms.has_pose(f).any()]
     res = refine(start, ms, sigma_t, sigma_r, robust=robust, frames=fitted,
@@ -156,11 +114,6 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
     notes += list(start.metadata.notes) if start_method == "closed-form" else []
     notes += [f"outlier: {o.describe()}" for o in res.outliers]
     notes += [f"identifiability: {w}" for w in res.identifiability.warnings]
-    if res.covariance.variance_factor > 25.0:
-        notes.append(
-            f"fit residuals are {np.sqrt(res.covariance.variance_factor):.0f}x the stated noise: wrong "
-            "sigmas, gross outliers (try --method refined-robust) or a start too far from the robot"
-        )
     if not known:
         notes.append(
             f"noise sigmas not given: covariance scaled by the variance factor "
@@ -215,28 +168,71 @@ def residuals(model: CPCModel, ms: MeasurementSet) -> Residuals:
 DEFAULT_METHOD = "refined"
 
 
-def identify(ms: MeasurementSet, method: str = DEFAULT_METHOD, nominal: CPCModel | None = None) -> CPCModel:
-    """Run ``METHODS[method]`` and attach the ``residuals`` section.
+def _method_outliers(model: CPCModel) -> list[tuple[str, int]]:
+    """``(frame, record)`` poses a robust method rejected (from its uncertainty section)."""
+    cov = model.metadata.uncertainty
+    found = cov.details.get("outliers", []) if cov is not None else []
+    return [(str(o["frame"]), int(o["record"])) for o in found]
+
+
+def identify(
+    ms: MeasurementSet,
+    method: str = DEFAULT_METHOD,
+    nominal: CPCModel | None = None,
+    *,
+    accept_inconsistent: bool = False,
+) -> CPCModel:
+    """Check the data suffice, run ``METHODS[method]``, test the fit against the data's noise
+    (:mod:`consistency`) and attach the ``residuals`` section.
 
     Args:
         ms: The measurements.
         method: A name in :data:`METHODS`; the default is the CLI's (closed form, then
             maximum-likelihood refinement).
-        nominal: The nominal model (keeps unmeasured frames such as cameras, and fixes what the
-            data leave open); default: the nominal model of the robot ``ms`` was read with.
+        nominal: The nominal model (keeps unmeasured frames such as cameras, fixes what the data
+            leave open, and is the size yardstick of the consistency gate); default: the nominal
+            model of the robot ``ms`` was read with.
+        accept_inconsistent: Keep the model of inconsistent data, with the gate's diagnosis in
+            its ``notes`` and its provenance (``details["consistency"]``), instead of refusing.
 
     Raises:
         Cpc2UrdfError: Unknown method name.
-        DegenerateDataError: The data cannot determine the robot.
+        DegenerateDataError: The data cannot determine the robot (a joint never moved, too few
+            distinct configurations, copied records, free parameters), named before any solver
+            runs where the records show it.
+        InconsistentDataError: The fit disagrees with the data's noise beyond chance (unless
+            ``accept_inconsistent``), or the method cannot fit the data as read and a likely
+            mistake's fix makes them fit (always); one line naming the most likely cause.
     """
+    from cpc2urdf.identification.kinematics.consistency import (
+        Noise,
+        check_consistency,
+        diagnose_unfittable,
+    )
+    from cpc2urdf.identification.kinematics.sufficiency import check_data_suffice
+
     if method not in METHODS:
         raise Cpc2UrdfError(f"unknown identification method {method!r}; known: {', '.join(METHODS)}")
     if nominal is None and ms.spec is not None and ms.spec.nominal is not None:
         nominal = ms.spec.nominal_model()
-    model = METHODS[method](ms, nominal)
+    check_data_suffice(ms)
+    noise = Noise(*noise_from_metadata(ms.metadata))
+    try:
+        model = METHODS[method](ms, nominal)
+    except DegenerateDataError as e:  # a likely mistake may be why the data cannot be fitted
+        found = diagnose_unfittable(ms, nominal, noise, e)
+        if found is not None:
+            raise found from e
+        raise
+    report = check_consistency(ms, model, nominal, noise, drop=_method_outliers(model))
+    if not report.consistent and not accept_inconsistent:
+        raise report.error()
     meta = model.metadata
-    if meta.provenance is None:
-        meta = meta.replace(provenance=Provenance(method=method, measurements=ms.source, robot=ms.robot))
+    prov = meta.provenance or Provenance(method=method, measurements=ms.source, robot=ms.robot)
+    consistency = {**report.to_json(), **({} if report.consistent else {"accepted": True})}
+    meta = meta.replace(provenance=prov.with_details(consistency=consistency))
+    if not report.consistent:
+        meta = meta.replace(notes=(*meta.notes, f"INCONSISTENT DATA, kept with --accept-inconsistent: {report.line()}"))
     return model.with_params(metadata=meta.replace(residuals=residuals(model, ms)))
 
 
