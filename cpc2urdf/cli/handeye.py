@@ -38,6 +38,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("-o", "--output", help="write MODEL with the camera frame added (atomically)")
     p.add_argument("--camera", help="camera frame name (default: the pose file's 'camera')")
     p.add_argument("--hand", help="hand frame name in MODEL (default: the pose file's 'hand')")
+    p.add_argument("--accept-inconsistent", action="store_true",
+                   help="keep the result of poses the consistency gate finds inconsistent with A X = Z B "
+                   "(inverted or transposed poses, wrong units, pairing off by one, outliers; see "
+                   "docs/handeye.md): the diagnosis is printed as a warning and stored in the model")
     p.set_defaults(run=run)
 
 
@@ -68,7 +72,7 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import calibrate_cameras, load_handeye_poses, save_model, solve_handeye
-    from cpc2urdf.errors import DegenerateDataError
+    from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
     from cpc2urdf.identification.handeye.solvers import ALL_METHODS
 
     data = load_handeye_poses(args.poses)
@@ -77,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
     results, refused = {}, {}
     for m in methods:
         try:
-            results[m] = solve_handeye(data, m)
+            results[m] = solve_handeye(data, m, accept_inconsistent=args.accept_inconsistent)
+        except InconsistentDataError:
+            raise  # the gate judges the data, the same for every solver: names the file already
         except DegenerateDataError as e:
             if len(methods) == 1:
                 raise DegenerateDataError(f"{args.poses}: {e}") from e
@@ -86,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
     if model is not None:
         out = calibrate_cameras(model, data, args.method, camera=args.camera, hand=args.hand,
-                                result=results[args.method])
+                                result=results[args.method], accept_inconsistent=args.accept_inconsistent)
         path = save_model(out, args.output)
         camera, hand = args.camera or data.camera, args.hand or data.hand
 

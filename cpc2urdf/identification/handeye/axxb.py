@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.identification.handeye.consistency_report import ConsistencyReport
 from cpc2urdf.transforms import (
     Array,
     dual_quat_from_transform,
@@ -126,8 +127,10 @@ def check_directions(T_base_hand: Array, T_camera_target: Array) -> list[str]:
     residuals are above 1 mm / 0.1 deg and the inversion shrinks them tenfold, the data is refused.
 
     Limits: inverting one list fits exactly as well as inverting the other (inverting *both* lists
-    is an exact symmetry of ``A X = Z B``: it swaps X with ``inv(Z)``), so the message names both
-    possibilities, and both lists inverted at once cannot be detected from the data at all.
+    is an exact symmetry of ``A X = Z B``: it swaps X and Z), so the message names both
+    possibilities, and both lists inverted at once cannot be detected from the residuals at all.
+    The consistency gate (:mod:`~cpc2urdf.identification.handeye.consistency`) replaces this check
+    in ``calibrate(..., gate=True)`` and tells the cases apart by plausibility.
 
     Returns:
         A warning if the residuals are large (over 10 mm or 1 deg RMS) and inversion does not help.
@@ -155,12 +158,12 @@ def check_directions(T_base_hand: Array, T_camera_target: Array) -> list[str]:
     return []
 
 
-def diagnose(T_base_hand: Array, T_camera_target: Array) -> list[str]:
+def check_degenerate(T_base_hand: Array, T_camera_target: Array) -> list[str]:
     """Refuse data that cannot determine X and Z; return warnings for weak data.
 
     Raises:
         DegenerateDataError: Fewer than 3 poses, different list lengths, rotations too small,
-            rotations about parallel axes only, or pose lists in the wrong direction.
+            or rotations about parallel axes only.
     """
     n, m = len(T_base_hand), len(T_camera_target)
     if n != m:
@@ -183,13 +186,23 @@ def diagnose(T_base_hand: Array, T_camera_target: Array) -> list[str]:
             f"{math.degrees(rms[1]):.3g} deg RMS about any other direction): X's rotation about "
             "that axis is undetermined; move a second joint with a non-parallel axis"
         )
-    warnings = check_directions(T_base_hand, T_camera_target)
     if rms[1] < WEAK_ROTATION:
-        warnings.append(
+        return [
             f"weak data: the hand rotations excite a second axis by only {math.degrees(rms[1]):.3g} "
             f"deg RMS (< {math.degrees(WEAK_ROTATION):g} deg); expect noise to be amplified"
-        )
-    return warnings
+        ]
+    return []
+
+
+def diagnose(T_base_hand: Array, T_camera_target: Array) -> list[str]:
+    """:func:`check_degenerate`, then :func:`check_directions`; returns their warnings.
+
+    Raises:
+        DegenerateDataError: Fewer than 3 poses, different list lengths, rotations too small,
+            rotations about parallel axes only, or pose lists in the wrong direction.
+    """
+    weak = check_degenerate(T_base_hand, T_camera_target)
+    return check_directions(T_base_hand, T_camera_target) + weak
 
 
 # ---- the result --------------------------------------------------------------------------------
@@ -208,6 +221,8 @@ class HandEyeResult:
             frame), shape (N,).
         residual_rotation: Per pose k, angle [rad] of ``(A_k X)^-1 Z B_k``, shape (N,).
         warnings: Weak or suspicious data, in words.
+        consistency: The consistency gate's verdict on the data (``calibrate(..., gate=True)``),
+            or None if the gate did not run.
     """
 
     method: str
@@ -216,6 +231,7 @@ class HandEyeResult:
     residual_translation: Array
     residual_rotation: Array
     warnings: tuple[str, ...] = field(default=())
+    consistency: ConsistencyReport | None = None
 
     @property
     def T_hand_camera(self) -> Array:
@@ -246,6 +262,7 @@ class HandEyeResult:
             "rms_translation_mm": self.rms_translation() * 1e3,
             "rms_rotation_deg": math.degrees(self.rms_rotation()),
             "warnings": list(self.warnings),
+            **({"consistency": self.consistency.to_json()} if self.consistency is not None else {}),
         }
 
 
@@ -438,6 +455,7 @@ __all__ = [
     "WEAK_ROTATION",
     "HandEyeResult",
     "as_pose_stack",
+    "check_degenerate",
     "check_directions",
     "diagnose",
     "make_result",

@@ -7,6 +7,8 @@ On disk::
      "description": "...",                        # optional, free text
      "camera": "camera_left_optical",             # optional: which camera (free text)
      "hand": "plate_left",                        # optional: which hand frame (free text)
+     "noise": {"T_base_hand": {"position": 0.05, "angle": 0.01},          # optional: std per
+               "T_camera_target": {"position": 0.3, "angle": 0.05}},    # axis, file units
      "records": [
        {"label": "q0",                                            # optional
         "T_base_hand": {"matrix": [[...], [...], [...], [0, 0, 0, 1]]},
@@ -18,7 +20,8 @@ On disk::
 frame, from the robot's kinematics. ``T_camera_target`` is the pose of the calibration target in
 the camera's optical frame, as ``cv2.solvePnP`` returns it (``rvec, tvec``: target points to
 camera coordinates). Each pose is a 4x4 ``matrix`` or ``xyz`` + ``quat_xyzw`` (or ``xyz`` +
-``rpy``), see :mod:`cpc2urdf.poses`. Documented in ``docs/handeye.md``.
+``rpy``), see :mod:`cpc2urdf.poses`. ``noise`` (optional, :class:`~cpc2urdf.identification.handeye.noise.PoseNoise`)
+is what the consistency gate tests the residuals against. Documented in ``docs/handeye.md``.
 """
 
 from __future__ import annotations
@@ -34,12 +37,13 @@ from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.fileio import read_json, require_format, write_json
+from cpc2urdf.identification.handeye.noise import PoseNoise
 from cpc2urdf.poses import pose_from_json, pose_to_json
 from cpc2urdf.transforms import Array
 from cpc2urdf.units import Units
 
 HANDEYE_POSES_FORMAT = "cpc2urdf/handeye-poses@1"
-_TOP_KEYS = {"format", "units", "description", "camera", "hand", "records", "provenance"}
+_TOP_KEYS = {"format", "units", "description", "camera", "hand", "noise", "records", "provenance"}
 _RECORD_KEYS = {"label", "T_base_hand", "T_camera_target"}
 
 
@@ -54,6 +58,7 @@ class HandEyePoses:
         camera: Name of the camera, or "".
         hand: Name of the hand frame, or "".
         source: Where the poses came from (a file path, or ``"<memory>"``); errors name it.
+        noise: The noise the file states, or None (the consistency gate then estimates it).
     """
 
     T_base_hand: Array
@@ -62,6 +67,7 @@ class HandEyePoses:
     camera: str = ""
     hand: str = ""
     source: str = "<memory>"
+    noise: PoseNoise | None = None
 
 
 def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEyePoses:
@@ -76,6 +82,7 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(_TOP_KEYS)}")
         units = Units.from_json(d.get("units"))
+        noise = PoseNoise.from_json(d["noise"], units) if "noise" in d else None
         records = d.get("records")
         if not isinstance(records, list) or not records:
             raise ValueError("'records' must be a non-empty list of {T_base_hand, T_camera_target} records")
@@ -99,7 +106,8 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
         for key in ("camera", "hand"):
             if key in d and not isinstance(d[key], str):
                 raise ValueError(f"'{key}' must be a string, got {d[key]!r}")
-        return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""), source)
+        return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""), source,
+                            noise)
     except InputFileError:
         raise
     except ValueError as e:
@@ -120,8 +128,9 @@ def handeye_poses_to_json(
     hand: str = "",
     units: Units | None = None,
     description: str = "",
+    noise: PoseNoise | None = None,
 ) -> dict[str, Any]:
-    """A ``cpc2urdf/handeye-poses@1`` document (poses as matrices, lengths in ``units``)."""
+    """A ``cpc2urdf/handeye-poses@1`` document (poses as matrices, lengths and noise in ``units``)."""
     u = units or Units()
     H = np.asarray(T_base_hand, dtype=float)
     C = np.asarray(T_camera_target, dtype=float)
@@ -132,6 +141,8 @@ def handeye_poses_to_json(
         doc["camera"] = camera
     if hand:
         doc["hand"] = hand
+    if noise is not None:
+        doc["noise"] = noise.to_json(u)
     doc["records"] = [
         {"label": labels[k] if labels else f"pose {k}",
          "T_base_hand": pose_to_json(H[k], u), "T_camera_target": pose_to_json(C[k], u)}
@@ -150,10 +161,12 @@ def save_handeye_poses(
     hand: str = "",
     units: Units | None = None,
     description: str = "",
+    noise: PoseNoise | None = None,
 ) -> Path:
     """Write a pose file atomically; keyword arguments as :func:`handeye_poses_to_json`."""
     return write_json(path, handeye_poses_to_json(
-        T_base_hand, T_camera_target, labels=labels, camera=camera, hand=hand, units=units, description=description
+        T_base_hand, T_camera_target, labels=labels, camera=camera, hand=hand, units=units, description=description,
+        noise=noise,
     ))
 
 

@@ -14,20 +14,26 @@ Every solver takes the same absolute poses -- ``T_base_hand`` and ``T_camera_tar
 :func:`calibrate` validates the poses, refuses degenerate data
 (:func:`~cpc2urdf.identification.handeye.axxb.diagnose`, plus a solver's own check), solves and
 returns a :class:`~cpc2urdf.identification.handeye.axxb.HandEyeResult` with per-pose residuals
-and warnings. :func:`calibrate_hand_eye` and :func:`calibrate_robot_world` do the same restricted
-to one equation's solvers.
+and warnings. With ``gate=True`` (the API, the CLI and the stage-2 pipeline) the consistency gate
+(:func:`~cpc2urdf.identification.handeye.consistency.check_consistency`) replaces the quick
+direction check: data inconsistent with ``A X = Z B`` and their noise are refused with
+:class:`~cpc2urdf.identification.handeye.consistency_report.InconsistentPosesError` naming the most
+likely mistake, or kept with the diagnosis (``accept_inconsistent=True``).
+:func:`calibrate_hand_eye` and :func:`calibrate_robot_world` do the same restricted to one
+equation's solvers.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from numpy.typing import ArrayLike
 
 from cpc2urdf.identification.handeye.axxb import (
     HandEyeResult,
     as_pose_stack,
+    check_degenerate,
     diagnose,
     make_result,
     relative_motions,
@@ -43,6 +49,13 @@ from cpc2urdf.identification.handeye.axzb import (
     solve_zhuang,
     zhuang_a0_check,
 )
+from cpc2urdf.identification.handeye.consistency import check_consistency
+from cpc2urdf.identification.handeye.consistency_report import (
+    ConsistencyReport,
+    InconsistentPosesError,
+)
+from cpc2urdf.identification.handeye.noise import PoseNoise
+from cpc2urdf.identification.handeye.pose_file import HandEyePoses
 from cpc2urdf.transforms import Array, inverse
 
 AX_XB = "AX = XB"
@@ -114,53 +127,104 @@ ALL_METHODS = HAND_EYE_METHODS + ROBOT_WORLD_METHODS
 DEFAULT_HANDEYE_METHOD = "kronecker"
 
 
+@dataclass(frozen=True)
+class Gate:
+    """Options of the consistency gate (:func:`calibrate` with ``gate=``).
+
+    Attributes:
+        noise: The noise the poses' file states, or None (estimated from the data).
+        labels: One name per pose (outliers are named by them).
+        accept_inconsistent: Keep the result of inconsistent data, with the diagnosis in
+            ``result.consistency`` and ``result.warnings``, instead of raising.
+    """
+
+    noise: PoseNoise | None = None
+    labels: Sequence[str] | None = None
+    accept_inconsistent: bool = False
+
+
 def _run(
-    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str, methods: Sequence[str], kind: str
+    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str, methods: Sequence[str], kind: str,
+    gate: Gate | bool,
 ) -> HandEyeResult:
-    """Validate, diagnose and solve with ``SOLVERS[method]``, which must be one of ``methods``."""
+    """Validate, diagnose (or gate) and solve with ``SOLVERS[method]``, which must be one of ``methods``."""
     if method not in methods:
         raise ValueError(f"unknown {kind}method {method!r}; known: {', '.join(methods)}")
     solver = SOLVERS[method]
     H = as_pose_stack(T_base_hand, "T_base_hand")
     C = as_pose_stack(T_camera_target, "T_camera_target")
-    warnings = diagnose(H, C)
+    options = Gate() if gate is True else gate or None
+    warnings = check_degenerate(H, C) if options is not None else diagnose(H, C)
     if solver.check is not None:
         warnings += solver.check(H)
+    report: ConsistencyReport | None = None
+    if options is not None:
+        report = check_consistency(H, C, noise=options.noise, labels=options.labels)
+        if not report.consistent and not options.accept_inconsistent:
+            raise InconsistentPosesError(report)
+        if not report.consistent:
+            warnings.append(f"inconsistent data accepted: {report.summary()}")
+        warnings += report.warnings
     X, Z = solver.solve(H, C)
-    return make_result(method, H, C, X, Z, warnings)
+    result = make_result(method, H, C, X, Z, warnings)
+    return replace(result, consistency=report) if report is not None else result
 
 
-def calibrate(T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str) -> HandEyeResult:
+def calibrate(
+    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str, *, gate: Gate | bool = False
+) -> HandEyeResult:
     """Solve for ``X = T_hand_camera`` and ``Z = T_base_target`` with any solver of :data:`ALL_METHODS`.
 
     Args:
         T_base_hand: Hand poses in the robot base frame, shape (N, 4, 4) [m].
         T_camera_target: Target poses in the camera frame (solvePnP), shape (N, 4, 4) [m].
         method: One of :data:`ALL_METHODS`.
+        gate: Run the consistency gate after the degenerate-data checks (``True``, or a
+            :class:`Gate` with the stated noise, pose labels and whether to accept inconsistent
+            data); ``False`` (default, the solver studies) keeps only the quick direction check.
 
     Returns:
-        The solution with per-pose residuals and warnings.
+        The solution with per-pose residuals and warnings (and, gated, ``consistency``).
 
     Raises:
         DegenerateDataError: See :func:`~cpc2urdf.identification.handeye.axxb.diagnose`, and hand
             rotations near 180 deg for ``zhuang``.
+        InconsistentPosesError: Gated, the data contradict ``A X = Z B`` beyond chance (a
+            ``DegenerateDataError``); the message names the most likely mistake.
         ValueError: Malformed poses or an unknown method.
     """
-    return _run(T_base_hand, T_camera_target, method, ALL_METHODS, "")
+    return _run(T_base_hand, T_camera_target, method, ALL_METHODS, "", gate)
+
+
+def calibrate_poses(poses: HandEyePoses, method: str, *, accept_inconsistent: bool = False) -> HandEyeResult:
+    """:func:`calibrate` of a pose file's poses through the consistency gate (the API and the CLI).
+
+    The gate uses the file's ``noise`` (if stated) and names outliers by the records' labels.
+
+    Raises:
+        DegenerateDataError: As :func:`calibrate`.
+        InconsistentPosesError: The poses contradict ``A X = Z B`` (unless ``accept_inconsistent``);
+            the message names ``poses.source`` and the most likely mistake.
+    """
+    gate = Gate(noise=poses.noise, labels=poses.labels, accept_inconsistent=accept_inconsistent)
+    try:
+        return calibrate(poses.T_base_hand, poses.T_camera_target, method, gate=gate)
+    except InconsistentPosesError as e:
+        raise InconsistentPosesError(e.report, poses.source) from e
 
 
 def calibrate_hand_eye(
     T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str = "tsai"
 ) -> HandEyeResult:
     """:func:`calibrate` restricted to the ``A X = X B`` solvers (:data:`HAND_EYE_METHODS`)."""
-    return _run(T_base_hand, T_camera_target, method, HAND_EYE_METHODS, "AX=XB ")
+    return _run(T_base_hand, T_camera_target, method, HAND_EYE_METHODS, "AX=XB ", False)
 
 
 def calibrate_robot_world(
     T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str = "kronecker"
 ) -> HandEyeResult:
     """:func:`calibrate` restricted to the ``A X = Z B`` solvers (:data:`ROBOT_WORLD_METHODS`)."""
-    return _run(T_base_hand, T_camera_target, method, ROBOT_WORLD_METHODS, "AX=ZB ")
+    return _run(T_base_hand, T_camera_target, method, ROBOT_WORLD_METHODS, "AX=ZB ", False)
 
 
 __all__ = [
@@ -171,8 +235,10 @@ __all__ = [
     "HAND_EYE_METHODS",
     "ROBOT_WORLD_METHODS",
     "SOLVERS",
+    "Gate",
     "HandEyeSolver",
     "calibrate",
     "calibrate_hand_eye",
+    "calibrate_poses",
     "calibrate_robot_world",
 ]

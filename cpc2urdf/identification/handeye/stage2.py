@@ -32,8 +32,9 @@ import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.axxb import HandEyeResult
+from cpc2urdf.identification.handeye.consistency_report import InconsistentPosesError
 from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
-from cpc2urdf.identification.handeye.solvers import calibrate
+from cpc2urdf.identification.handeye.solvers import Gate, calibrate
 from cpc2urdf.identification.vision.targets import TARGET_LAYOUT
 from cpc2urdf.model import CPCModel, CPCParams, Frame
 from cpc2urdf.model_metadata import HandEyeRecord
@@ -237,14 +238,19 @@ def hand_poses(model: CPCModel, camera: str, q: Array) -> Array:
 
 
 def calibrate_cameras(
-    model: CPCModel, obs: Stage2Observations, method: str = "tsai"
+    model: CPCModel, obs: Stage2Observations, method: str = "tsai", *, accept_inconsistent: bool = False
 ) -> tuple[CPCModel, dict[str, HandEyeResult]]:
     """Solve X = T_plate_camera for every observed camera and set the camera frames.
+
+    Every camera's poses pass the consistency gate
+    (:func:`~cpc2urdf.identification.handeye.consistency.check_consistency`, noise estimated).
 
     Args:
         model: The identified kinematic model (gives ``T_base_hand``).
         obs: Joint readings and PnP target poses.
         method: Any solver of :data:`cpc2urdf.identification.handeye.solvers.ALL_METHODS`.
+        accept_inconsistent: Keep the cameras of inconsistent data (the diagnosis goes into the
+            model's hand-eye record) instead of raising.
 
     Returns:
         The model with ``camera_*_optical`` frames on the vergence links at ``T_link_plate @ X``
@@ -252,14 +258,19 @@ def calibrate_cameras(
         per-camera results.
 
     Raises:
-        DegenerateDataError: As the solvers (too few poses, parallel axes, ...), naming the camera.
+        DegenerateDataError: As the solvers (too few poses, parallel axes, ...), naming the camera;
+            ``InconsistentPosesError`` (a subclass) when the gate refuses the data.
     """
     results: dict[str, HandEyeResult] = {}
     out = model
+    labels = [f"config {k}" for k in range(len(obs.q))]
     for camera, C in obs.T_camera_target.items():
         hand = HAND_OF_CAMERA[camera]
         try:
-            r = calibrate(hand_poses(model, camera, obs.q), C, method)
+            gate = Gate(labels=labels, accept_inconsistent=accept_inconsistent)
+            r = calibrate(hand_poses(model, camera, obs.q), C, method, gate=gate)
+        except InconsistentPosesError as e:
+            raise InconsistentPosesError(e.report, camera) from e
         except DegenerateDataError as e:
             raise DegenerateDataError(f"{camera}: {e}") from e
         results[camera] = r
@@ -271,7 +282,8 @@ def with_camera_frame(
     model: CPCModel, camera: str, hand: str, result: HandEyeResult, extra: dict[str, Any] | None = None
 ) -> CPCModel:
     """A copy of ``model`` with frame ``camera`` (kind ``camera``) on the link carrying ``hand``,
-    at ``T_link_hand @ X``, and the solution recorded in ``metadata.handeye[camera]`` (a :class:`~cpc2urdf.model_metadata.HandEyeRecord`).
+    at ``T_link_hand @ X``, and the solution recorded in ``metadata.handeye[camera]`` (a :class:`~cpc2urdf.model_metadata.HandEyeRecord`;
+    the consistency gate's report, if the gate ran, under ``details["consistency"]``).
 
     Raises:
         UnknownNameError: ``hand`` is not a frame of the model.
@@ -287,7 +299,8 @@ def with_camera_frame(
         residual_translation_mm=result.residual_translation * 1e3,
         residual_rotation_deg=np.degrees(result.residual_rotation),
         warnings=tuple(result.warnings),
-        details=dict(extra or {}),
+        details={**(extra or {}),
+                 **({"consistency": result.consistency.to_json()} if result.consistency is not None else {})},
     )
     handeye = {**out.metadata.handeye, camera: record}
     return out.with_params(metadata=out.metadata.replace(handeye=handeye))
