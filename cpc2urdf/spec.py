@@ -10,6 +10,9 @@ viewing, gaze and simulation need geometry. Format (lengths/angles in the file's
       "units": {"length": "mm", "angle": "deg"},
       "geometry": "dh",                     # optional: "dh" or "cpc" (default "cpc")
       "world_to_base": {"xyz": [0, 0, 0], "rpy": [0, 0, 0]},            # optional
+      "up": {"joint": "pan"},              # optional: or [x, y, z] in base coordinates
+      "density": 2700,                     # optional: kg/m^3 of the drawn solids (SI always)
+      "masses": {"camera_left": 0.3},      # optional: kg by URDF link name
       "joints": [
         {"name": "pan", "type": "revolute", "parent": "base",
          "lower": -90, "upper": 90, "velocity": 60, "effort": 5,        # velocity, effort optional
@@ -34,13 +37,17 @@ Nominal geometry, per joint and frame, is one of:
   0, every child of joint i has its axis on DH frame i's z axis, and a frame is either
   ``{"dh_frame": true}`` (it *is* DH frame i of its parent joint i) or a pose relative to DH
   frame i. This makes ``T_base_frame = A_1 ... A_i`` exact (:func:`cpc2urdf.dh.cpc_from_dh`).
+
+``up``, ``density`` and ``masses`` are for simulators (:mod:`cpc2urdf.physical`): which way is up
+(``cpc2urdf export``'s gravity-aligned ``world``), and the link inertials of the URDF
+(:mod:`cpc2urdf.urdf`). ``masses`` names URDF links (:func:`cpc2urdf.urdf.urdf_link_names`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -50,8 +57,10 @@ from cpc2urdf.dh import dh_matrix
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError, SpecError
 from cpc2urdf.fileio import finite_float, float_list, read_json, require_format
 from cpc2urdf.model import BASE, IDENTITY, CPCModel, CPCParams, Frame, Joint, RobotStructure
+from cpc2urdf.physical import SPEC_KEYS, PhysicalProperties, check_masses, physical_from_json
 from cpc2urdf.poses import pose_from_json
 from cpc2urdf.units import Units
+from cpc2urdf.urdf import urdf_link_names
 
 ROBOT_FORMAT = "cpc2urdf/robot@1"
 DEFAULT_VELOCITY = {"revolute": 1.0, "prismatic": 0.1}  # [rad/s], [m/s]
@@ -64,11 +73,13 @@ _FRAME_KEYS = {"name", "parent", "kind", "layout", "nominal", "cpc", "descriptio
 
 @dataclass
 class RobotSpec:
-    """A parsed robot spec: its tree and, if the spec had geometry, the nominal model."""
+    """A parsed robot spec: its tree, the nominal model if the spec had geometry, and what a
+    simulator needs (density, masses, up: :class:`~cpc2urdf.physical.PhysicalProperties`)."""
 
     structure: RobotStructure
     nominal: CPCModel | None
     source: str
+    physical: PhysicalProperties = field(default_factory=PhysicalProperties)
 
     def nominal_model(self) -> CPCModel:
         """The nominal model, or :class:`SpecError` if the spec gives no geometry."""
@@ -244,12 +255,15 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
     """Parse a ``cpc2urdf/robot@1`` document; errors name ``source`` and the field."""
     try:
         d = require_format(doc, ROBOT_FORMAT, source)
-        allowed = {"format", "name", "description", "units", "geometry", "world_to_base", "joints", "frames"}
+        allowed = {"format", "name", "description", "units", "geometry", "world_to_base", "joints", "frames",
+                   *SPEC_KEYS}
         unknown = set(d) - allowed
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
         units = Units.from_json(d.get("units"))
         structure, geo_j, geo_f = parse_tree(d, units)
+        physical = physical_from_json(d, structure.joint_names)
+        check_masses(physical, urdf_link_names(structure))
         T_wb = parse_placement(d["world_to_base"], units, "world_to_base") if "world_to_base" in d else IDENTITY
         style = d.get("geometry", "cpc")
         if style not in ("cpc", "dh"):
@@ -273,7 +287,7 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
                     for f, g in zip(structure.frames, geo_f, strict=True)
                 }
                 nominal = CPCModel(structure, T_wb, joints, frames)
-        return RobotSpec(structure, nominal, source)
+        return RobotSpec(structure, nominal, source, physical)
     except InputFileError:
         raise
     except (ValueError, Cpc2UrdfError) as e:

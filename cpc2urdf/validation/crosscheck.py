@@ -5,9 +5,15 @@
 - urdfdom (``check_urdf``, shipped with ``pin``): parses the file and prints the link tree; it
   exposes no poses, so for it we check that it parses and that its tree equals the model's.
 
-Every named frame, ``base`` and every joint's link frame is compared, at seeded random
-configurations inside the joint limits plus the two limit corners. A URDF that passes agrees with
-the CPC model to ``FK_AGREEMENT_TOL`` (1e-9 m / 1e-9 rad) in both FK parsers.
+Every named frame, ``base``, every joint's link frame and every camera body link the URDF has
+(:func:`cpc2urdf.urdf.camera_body_names`; URDFs of earlier versions have none) is compared, at
+seeded random configurations inside the joint limits plus the two limit corners. A URDF that passes
+agrees with the CPC model to ``FK_AGREEMENT_TOL`` (1e-9 m / 1e-9 rad) in both FK parsers.
+
+Either mount of :mod:`cpc2urdf.urdf` passes: the URDF's ``world`` -> ``base`` must be the model's
+``T_world_base`` (``mount="rig"``: poses compared in the model's world) or a rotation at the base
+origin (``mount="base"``, the gravity-aligned world of ``cpc2urdf export``: poses compared relative
+to ``base``, i.e. the model's poses carried into that world). Anything else is a discrepancy.
 
 A URDF that does not parse is bad input, not a discrepancy: :func:`cpc2urdf.urdf_input.read_urdf`
 checks it before any parser sees it, and a parser that still cannot read it raises
@@ -34,7 +40,7 @@ from cpc2urdf.model import BASE, CPCModel
 from cpc2urdf.native_output import captured_output
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import Array, rotation_error
-from cpc2urdf.urdf import link_name
+from cpc2urdf.urdf import T_BODY_OPTICAL, camera_body_names, link_name
 from cpc2urdf.urdf_input import read_urdf
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot, UnsupportedJointError
 
@@ -106,17 +112,47 @@ class CrossCheckReport:
         return "\n".join(lines)
 
 
-def _compared_frames(model: CPCModel) -> list[str]:
+def _compared_frames(model: CPCModel, bodies: dict[str, str] | None = None) -> list[str]:
     s = model.structure
-    return [BASE, *(link_name(n) for n in s.joint_names), *s.frame_names]
+    return [BASE, *(link_name(n) for n in s.joint_names), *s.frame_names, *(bodies or {}).values()]
 
 
-def _reference_poses(model: CPCModel, Q: Array) -> dict[str, Array]:
-    """CPC poses (N, 4, 4) of every compared frame, keyed by URDF link name."""
+def _bodies_in(model: CPCModel, links: object) -> dict[str, str]:
+    """``{camera frame: body link}`` for the camera body links the URDF has (``links`` supports ``in``)."""
+    return {f: b for f, b in camera_body_names(model.structure).items() if b in links}  # type: ignore[operator]
+
+
+def _reference_poses(
+    model: CPCModel, Q: Array, bodies: dict[str, str] | None = None, T_world_base: Array | None = None
+) -> dict[str, Array]:
+    """CPC poses (N, 4, 4) of every compared frame, keyed by URDF link name, in the model's world
+    or, given the URDF's ``T_world_base``, in the URDF's world (the same poses relative to base)."""
     _, link = model.link_poses(Q)
     ref = {link_name(n): link[:, i] for i, n in enumerate(model.structure.joint_names)}
     ref.update(model.fk(Q, [BASE, *model.structure.frame_names]))
+    for frame, body in (bodies or {}).items():
+        ref[body] = ref[frame] @ T_BODY_OPTICAL.T
+    if T_world_base is not None:
+        M = T_world_base @ np.linalg.inv(model.T_world_base())
+        ref = {k: M @ v for k, v in ref.items()}
     return ref
+
+
+def _mount(model: CPCModel, T_world_base: Array, report: ParserReport) -> Array:
+    """The URDF's ``world`` -> ``base`` (shape (4, 4)) as the poses are compared: the model's
+    ``T_world_base`` (rig mount), or the URDF's own rotation at the base origin (base mount); a
+    problem in ``report`` if it is neither."""
+    T_model = model.T_world_base()
+    if float(np.max(np.abs(T_world_base - T_model))) <= FK_AGREEMENT_TOL:
+        report.note = "world: the model's world (mount rig)"
+        return T_model
+    if float(np.linalg.norm(T_world_base[:3, 3])) <= FK_AGREEMENT_TOL:
+        report.note = "world: a rotation at the base origin (mount base); poses compared relative to base"
+        return T_world_base
+    report.problems.append(
+        "world -> base is neither the model's T_world_base (mount rig) nor a rotation at the base origin (mount base)"
+    )
+    return T_model
 
 
 def sample_configurations(model: CPCModel, n: int, seed: int = 0) -> Array:
@@ -174,7 +210,8 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
             rep.problems.append(f"joint {j.name!r} limits [{lo}, {hi}] != [{j.lower}, {j.upper}]")
     if robot.n_joints != s.n_joints:
         rep.problems.append(f"model has nq={robot.n_joints}, expected {s.n_joints}")
-    frames = _compared_frames(model)
+    bodies = _bodies_in(model, robot.frame_names(pin.FrameType.BODY))
+    frames = _compared_frames(model, bodies)
     fids = {}
     for f in frames:
         if not robot.has_frame(f, pin.FrameType.BODY):
@@ -185,7 +222,6 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
         rep.ok = False
         return rep
     data = pmodel.createData()
-    ref = _reference_poses(model, Q)
     got = {f: np.empty((len(Q), 4, 4)) for f in frames}
     qp = np.zeros(pmodel.nq)
     for k, q in enumerate(Q):
@@ -194,7 +230,9 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
         pin.framesForwardKinematics(pmodel, data, qp)
         for f in frames:
             got[f][k] = data.oMf[fids[f]].homogeneous
+    ref = _reference_poses(model, Q, bodies, _mount(model, got[BASE][0], rep))
     _worst(rep, {f: _compare(ref[f], got[f]) for f in frames})
+    rep.ok = rep.ok and not rep.problems
     return rep
 
 
@@ -236,7 +274,8 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
                 abs(_or_zero(uj.limit.lower) - j.lower), abs(_or_zero(uj.limit.upper) - j.upper)
             ) > LIMIT_TOL:
                 rep.problems.append(f"joint {j.name!r} limits differ")
-    frames = _compared_frames(model)
+    bodies = _bodies_in(model, robot.link_map)
+    frames = _compared_frames(model, bodies)
     for f in ["world", *frames]:  # poses are taken from "world"
         if f not in robot.link_map:
             rep.problems.append(f"frame {f!r} missing")
@@ -244,13 +283,14 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
         rep.ok = False
         return rep
     order = [s.joint_index(n) for n in names]
-    ref = _reference_poses(model, Q)
     got = {f: np.empty((len(Q), 4, 4)) for f in frames}
     for k, q in enumerate(Q):
         robot.update_cfg(q[order])
         for f in frames:
             got[f][k] = robot.get_transform(frame_to=f, frame_from="world")
+    ref = _reference_poses(model, Q, bodies, _mount(model, got[BASE][0], rep))
     _worst(rep, {f: _compare(ref[f], got[f]) for f in frames})
+    rep.ok = rep.ok and not rep.problems
     return rep
 
 
@@ -307,9 +347,12 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
             edges.add((stack[-1][1], m.group(2)))
         stack.append((depth, m.group(2)))
     s = model.structure
+    bodies = _bodies_in(model, {child for _, child in edges})
     expected = {("world", BASE)}
     expected |= {(link_name(j.parent), link_name(j.name)) for j in s.joints}
-    expected |= {(link_name(f.parent), f.name) for f in s.frames}
+    expected |= {(link_name(f.parent), f.name) for f in s.frames if f.name not in bodies}
+    expected |= {(link_name(s.frame(f).parent), b) for f, b in bodies.items()}
+    expected |= {(b, f) for f, b in bodies.items()}
     if edges != expected:
         rep.ok = False
         rep.problems.append(
@@ -333,11 +376,14 @@ def cross_check(
         InputFileError: The URDF file is missing, unreadable or does not parse (any of the three
             parsers); a URDF that parses but disagrees is a report with ``ok`` False instead.
     """
+    import xml.etree.ElementTree as ET
+
     path = os.fspath(urdf_path)
-    read_urdf(path)
+    text = read_urdf(path)
     Q = sample_configurations(model, n, seed)
     reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
-    return CrossCheckReport(path, len(Q), _compared_frames(model), reports)
+    links = {el.get("name") for el in ET.fromstring(text).iter("link")}
+    return CrossCheckReport(path, len(Q), _compared_frames(model, _bodies_in(model, links)), reports)
 
 
 __all__ = [

@@ -16,6 +16,7 @@ from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import ModelMetadata
 from cpc2urdf.transforms import Array
+from cpc2urdf.urdf import camera_body_names
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 from cpc2urdf.validation.view.meshes import PackageDirs, VisualMeshes, visual_geometry
 
@@ -196,7 +197,9 @@ def view_robot(robot: PinocchioRobot, *, package_dirs: PackageDirs = ()) -> View
     kinds: dict[str, str] = {}
     metadata = ModelMetadata()
     if robot.cpc_model is not None:
+        # a cpc2urdf model says what each frame is; its camera *body* links carry no triad of their own
         kinds = {f.name: f.kind for f in robot.cpc_model.structure.frames}
+        kinds |= {body: "frame" for body in camera_body_names(robot.cpc_model.structure).values()}
         metadata = robot.cpc_model.metadata
     lo, hi = robot.lower.copy(), robot.upper.copy()
     # URDF joints without limits give +-huge; show them at 0 and sweep them +-pi (or +-0.5 m).
