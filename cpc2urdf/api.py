@@ -29,16 +29,23 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.identification.handeye.axxb import HandEyeResult
 from cpc2urdf.identification.handeye.pose_file import HandEyePoses, load_handeye_poses
-from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD, calibrate
+from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD, calibrate_poses
 from cpc2urdf.identification.handeye.stage2 import with_camera_frame
 from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
 from cpc2urdf.identification.kinematics.methods import identify as _identify
+from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
 from cpc2urdf.measurements import MeasurementSet, load_measurements
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import save_model
 from cpc2urdf.robot_ref import RobotRef, load_model, load_robot
 from cpc2urdf.spec import RobotSpec
 from cpc2urdf.urdf import write_urdf
+from cpc2urdf.urdf_export import plan_export
+from cpc2urdf.urdf_origins import writeback_plan
+from cpc2urdf.urdf_report import CalibrationReport
+from cpc2urdf.urdf_report import calibration_report as _calibration_report
+from cpc2urdf.urdf_robot import attach_urdf_source, urdf_source
+from cpc2urdf.urdf_writeback import write_calibrated_urdf
 from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
 from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
 from cpc2urdf.validation.gaze import (
@@ -48,7 +55,7 @@ from cpc2urdf.validation.gaze import (
     GazeSolver,
     solver_for,
 )
-from cpc2urdf.validation.view import ViewSummary, write_view_html
+from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
 
 PathLike = str | os.PathLike[str]
 
@@ -60,6 +67,7 @@ def identify(
     nominal: CPCModel | None = None,
     *,
     robot: RobotRef | None = None,
+    accept_inconsistent: bool = False,
 ) -> CPCModel:
     """Identify a robot's CPC model from stage-1 measurements (``cpc2urdf identify``).
 
@@ -70,6 +78,8 @@ def identify(
         nominal: Nominal model that keeps unmeasured frames (cameras) and fixes what the data
             leave open; default: the nominal model of the robot the measurements name.
         robot: With a file path: use this robot instead of the file's ``"robot"``.
+        accept_inconsistent: Keep a model whose data fail the consistency gate (the diagnosis is
+            stored in its notes and provenance) instead of raising.
 
     Returns:
         The identified model; ``model.metadata`` (typed sections) holds ``provenance``, ``residuals``,
@@ -81,21 +91,27 @@ def identify(
         ms = measurements
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
-    return _identify(ms, method, nominal)
+    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent)
+    return attach_urdf_source(model, ms.spec)
 
 
-def solve_handeye(poses: HandEyePoses | PathLike, method: str = DEFAULT_HANDEYE_METHOD) -> HandEyeResult:
-    """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``).
+def solve_handeye(
+    poses: HandEyePoses | PathLike, method: str = DEFAULT_HANDEYE_METHOD, *, accept_inconsistent: bool = False
+) -> HandEyeResult:
+    """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``),
+    through the consistency gate (the poses' stated noise against the residuals; docs/handeye.md).
 
     Args:
         poses: A :class:`HandEyePoses` or a ``cpc2urdf/handeye-poses@1`` file.
         method: A solver name of :data:`cpc2urdf.identification.handeye.solvers.ALL_METHODS`.
+        accept_inconsistent: Keep a result whose poses fail the gate (the diagnosis is in its
+            warnings) instead of raising.
 
     Returns:
         ``X = T_hand_camera``, ``Z = T_base_target`` and the residual of every pose.
     """
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
-    return calibrate(data.T_base_hand, data.T_camera_target, method)
+    return calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
 
 
 def camera_mount(
@@ -135,6 +151,7 @@ def calibrate_cameras(
     camera: str | None = None,
     hand: str | None = None,
     result: HandEyeResult | None = None,
+    accept_inconsistent: bool = False,
 ) -> CPCModel:
     """``model`` with one camera frame added (or replaced) from hand-eye poses.
 
@@ -148,6 +165,7 @@ def calibrate_cameras(
         camera: Camera frame name (default: the pose file's ``camera``).
         hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
         result: A solution of these poses already computed (then ``method`` is not run again).
+        accept_inconsistent: As :func:`solve_handeye`.
 
     Raises:
         ConfigurationError: See :func:`camera_mount`.
@@ -156,19 +174,46 @@ def calibrate_cameras(
     m = model if isinstance(model, CPCModel) else load_model(model)
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
     camera, hand = camera_mount(m, data, camera=camera, hand=hand)
-    solution = result if result is not None else calibrate(data.T_base_hand, data.T_camera_target, method)
+    solution = result if result is not None else calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
     return with_camera_frame(m, camera, hand, solution, {"poses": data.source})
 
 
-def export_urdf(model: CPCModel | RobotRef, path: PathLike, *, source: str | None = None) -> Path:
+def export_urdf(
+    model: CPCModel | RobotRef,
+    path: PathLike,
+    *,
+    source: str | None = None,
+    urdf: PathLike | None = None,
+    mount: str = "base",
+    up: ArrayLike | None = None,
+) -> Path:
     """Write the URDF of a model, robot spec or shipped robot atomically (``cpc2urdf export``).
 
-    ``source`` (default: the reference, when ``model`` is one) is named in the URDF's header.
+    A model identified from a user's URDF (or that URDF itself) is written back into THAT URDF:
+    only the calibrated joints' origins change, with a calibration report next to it
+    (``docs/urdf.md``); ``urdf`` names the copy to write into (default: the file it came from).
+    Otherwise a simulation-ready URDF (inertials at the spec's density or masses, collisions,
+    camera body frames): root ``world`` gravity-aligned at the base (``mount="base"``, the spec's
+    ``up`` or ``up`` given here, in base coordinates) or the measuring rig (``mount="rig"``);
+    ``source`` (default: the reference, when ``model`` is one) is named in the header.
     """
-    m = model if isinstance(model, CPCModel) else load_model(model)
+    plan = plan_export(model if not isinstance(model, RobotSpec) else model.nominal_model(), up=up)
+    m = plan.model
+    if urdf_source(m) is not None:
+        return write_calibrated_urdf(
+            m, Path(path), urdf=None if urdf is None else Path(urdf), uncertainty=origin_uncertainty(m)
+        )
     if source is None and not isinstance(model, CPCModel | RobotSpec):
         source = os.fspath(model)
-    return write_urdf(m, Path(path), source=source)
+    return write_urdf(m, Path(path), source=source, mount=mount, physical=plan.physical)
+
+
+def calibration_report(model: CPCModel | RobotRef, *, urdf: PathLike | None = None) -> CalibrationReport:
+    """What calibration changed in the URDF the model came from, per joint in mm and degrees,
+    with 1-sigma from the model's covariance (``docs/urdf.md``)."""
+    m = model if isinstance(model, CPCModel) else load_model(model)
+    plan = writeback_plan(m, None if urdf is None else Path(urdf))
+    return _calibration_report(m, plan=plan, uncertainty=origin_uncertainty(m, plan))
 
 
 def check_urdf(
@@ -219,11 +264,28 @@ def write_view(
     target: ArrayLike | None = None,
     q: ArrayLike | None = None,
     ghost: CPCModel | RobotRef | None = None,
+    package_dirs: Sequence[PathLike] = (),
+    change_colours: bool = True,
 ) -> ViewSummary:
-    """A self-contained meshcat page of the robot (``cpc2urdf view --html``)."""
-    src = robot if isinstance(robot, CPCModel) else os.fspath(robot) if not isinstance(robot, RobotSpec) else robot.nominal_model()
-    gh = ghost if ghost is None or isinstance(ghost, CPCModel) else os.fspath(ghost) if not isinstance(ghost, RobotSpec) else ghost.nominal_model()
-    return write_view_html(path, src, target=target, q=q, ghost=gh)
+    """A self-contained meshcat page of the robot (``cpc2urdf view --html``).
+
+    Args:
+        path: The HTML file to write (atomically).
+        robot: A model, model file, spec, shipped robot or URDF (drawn with its own meshes).
+        target: A 3D point [m] (world) to fixate and draw, with the gaze solution.
+        q: The configuration to show (default: the gaze solution or the middle of the limits).
+        ghost: The nominal model drawn translucent; with ``change_colours`` every link is
+            coloured by how far calibration moved it from the ghost's (legend in the page).
+        package_dirs: Folders where ``package://NAME/...`` mesh paths are looked up first.
+        change_colours: Colour links by their change from ``ghost`` (else keep URDF colours).
+    """
+
+    def view_robot(ref: CPCModel | RobotRef) -> ViewRobot:
+        src = ref.nominal_model() if isinstance(ref, RobotSpec) else ref
+        return load_view_robot(src, package_dirs=tuple(os.fspath(p) for p in package_dirs))
+
+    return write_view_html(path, view_robot(robot), target=target, q=q,
+                           ghost=None if ghost is None else view_robot(ghost), change_colours=change_colours)
 
 
 __all__ = [
@@ -231,6 +293,7 @@ __all__ = [
     "DEFAULT_METHOD",
     "METHODS",
     "BranchAccuracy",
+    "CalibrationReport",
     "CPCModel",
     "CrossCheckReport",
     "GazeSolution",
@@ -241,6 +304,7 @@ __all__ = [
     "RobotSpec",
     "ViewSummary",
     "accuracy",
+    "calibration_report",
     "calibrate_cameras",
     "camera_mount",
     "check_urdf",
