@@ -231,9 +231,102 @@ def test_bad_input(solver, tmp_path):
 
 
 def test_target_on_camera_centre_is_not_fixated(nominal, solver):
-    T = nominal.fk(solver.home, CAMERAS)
-    sol = solver.solve(T[CAMERAS[0]][:3, 3], solver.home, "eyes-only")
-    assert not sol.reachable
+    """A target on a camera centre has no direction: that eye counts as missed by pi, the
+    status says too close, and the readings stay finite (the iteration used to start from an
+    infinite Jacobian there and return NaN readings, or raise LinAlgError)."""
+    for q in (solver.home, solver.lower, solver.upper):
+        left, right = solver.camera_poses(q)
+        for k, T in enumerate((left, right)):
+            for policy in POLICIES:
+                with np.errstate(over="raise", invalid="raise", divide="raise"):
+                    sol = solver.solve(T[:3, 3], q, policy, q_start=q)
+                assert np.all(np.isfinite(sol.q)), (policy, k)
+                assert np.all(sol.q >= solver.lower) and np.all(sol.q <= solver.upper)
+                if policy == "eyes-only":  # the camera cannot leave its centre
+                    assert not sol.reachable and sol.status == "too_close"
+                    assert sol.pointing_error[k] == math.pi
+            sol = solver.solve(T[:3, 3], q, "eyes-only")
+            assert sol.status == "too_close" and sol.pointing_error[k] == math.pi
+
+
+def _reference_cyclopean_step(solver, q, p, act):
+    """The task-priority step of the cyclopean policy written out with numpy (damping
+    mu = |r|^2, version zeroed in the null space of fixation over the active joints)."""
+    from cpc2urdf.validation.gaze import MAX_STEP, NULL_EIGENVALUE
+
+    head = solver.head
+    st = solver.evaluate(q, p)
+    J1 = st.J[:, act]
+    lam, V = np.linalg.eigh(J1.T @ J1)
+    mu = st.rr
+    k0 = int(np.sum(lam <= max(mu, NULL_EIGENVALUE)))
+    assert k0 >= 1  # the null-space branch is exercised
+    d = -V[:, k0:] @ ((V[:, k0:].T @ (J1.T @ st.r)) / (lam[k0:] + mu))
+    a = head.version_row[act] @ V[:, :k0]
+    if a @ a > 0:
+        e2 = head.version(q) + head.version_row[act] @ d
+        d = d - V[:, :k0] @ (a * e2 / (a @ a))
+    out = np.zeros(solver.n)
+    out[act] = d
+    return out * (MAX_STEP / max(MAX_STEP, np.abs(out).max()))
+
+
+def test_cyclopean_step_with_an_eye_held_at_its_limit(solver):
+    """Issue 14: once an eye joint is held at its limit (out of the active set), the cyclopean
+    step used to look it up in the active set and raise ValueError ('4 is not in list')."""
+    engine = solver._engine
+    head = solver.head
+    free = solver.free_joints("cyclopean")
+    left, right = solver.camera_poses(solver.home)
+    behind = 0.5 * (left[:3, 3] + right[:3, 3]) + np.array([0.0, 0.0, -0.5])
+    issue = np.array([-0.43113785, -0.00847718, 0.49782345])
+    for held, p in (([head.e0], issue), ([head.e1], issue), ([head.e0, head.e1], behind)):
+        q = solver.home.copy()
+        q[held] = solver.lower[held]
+        act = np.array([i for i in free if i not in held])
+        st = solver.evaluate(q, p)
+        dq = engine.step("cyclopean", q, solver.home, p, st, act)
+        assert np.all(dq[held] == 0)
+        assert np.allclose(dq, _reference_cyclopean_step(solver, q, p, act), rtol=0, atol=1e-9), held
+
+
+def test_issue_14_targets_are_answered():
+    """The targets of issue 14 (and one of each exception class the fuzz found before the fix)
+    get an answer; these are out of reach of the cyclopean policy (multi-start least squares
+    finds no better residual than ~0.04 and ~0.07), and say so."""
+    solver = solver_for("iis_head")
+    for p in ([-0.43113785, -0.00847718, 0.49782345], [-0.5193035806142361, 0.2288544102489361, 0.740739145620153]):
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            sol = solver.solve(p)
+        assert not sol.reachable and sol.status in ("too_close", "joint_limits")
+        assert np.all(np.isfinite(sol.q)) and np.all(sol.q >= solver.lower) and np.all(sol.q <= solver.upper)
+        assert sol.pointing_error.max() > 0.08
+
+
+def test_astronomically_far_targets(solver):
+    """Targets up to the largest float are solved for their direction and judged on the target
+    itself: far ahead is fixated, behind is not, and nothing overflows."""
+    left, right = solver.camera_poses(solver.home)
+    centre = 0.5 * (left[:3, 3] + right[:3, 3])
+    ahead = (AHEAD - centre) / np.linalg.norm(AHEAD - centre)
+    near = solver.solve(centre + 1e9 * ahead)
+    for r in (1e16, 1e100, 1e300):
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            sol = solver.solve(centre + r * ahead)
+        assert sol.reachable and sol.pointing_error.max() < GAZE_POINTING_TOL, r
+        assert np.allclose(sol.q, near.q, atol=1e-8)
+        assert np.all(np.isfinite(sol.miss_distance))
+    for p in ([1.7e308, -1.7e308, 1.7e308], [-1.7e308, -1.7e308, -1.7e308], [5e-324, 0.0, 0.0]):
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            for policy in POLICIES:
+                sol = solver.solve(p, None, policy)
+                assert np.all(np.isfinite(sol.q)) and np.all(np.isfinite(sol.pointing_error)), (p, policy)
+                assert sol.reachable == (sol.status == "fixated")
+    assert not solver.solve(centre - 1e300 * ahead).reachable
+    # beyond the largest float (|p_cam| > 1.8e308) the angles still come from the direction
+    huge = np.array([-1.7e308, -1.7e308, 1.7e308])
+    a, b = solver.solve(huge, None, "eyes-only"), solver.solve(huge * 1e-8, None, "eyes-only")
+    assert np.array_equal(a.q, b.q) and np.allclose(a.pointing_error, b.pointing_error, rtol=0, atol=1e-12)
 
 
 def test_fixation_jacobian_matches_finite_differences(solver):

@@ -37,6 +37,9 @@ Method (one :meth:`GazeSolver.solve` call):
    within :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL` (which implies in front of the cameras),
    inside the limits. Otherwise the readings are the best in-limit configuration found (least
    sum of the squared residuals of the two eyes), with the residuals, and ``status`` says why.
+   Every finite target gets an answer: a target within :data:`MIN_TARGET_DISTANCE` of a camera
+   centre has no direction for that eye (missed by pi, ``too_close``), and one farther than
+   :data:`FAR_TARGET` is solved for by its direction and judged on itself.
 
 Redundancy policies (the secondary task, :mod:`.policies`): ``"cyclopean"`` (default, zero
 version), ``"min-motion"``, ``"eyes-only"`` and ``"use-table"``.
@@ -88,7 +91,7 @@ from cpc2urdf.validation.gaze.result import (
     STATUSES,
     GazeSolution,
 )
-from cpc2urdf.validation.gaze.solver import RETRIES, GazeSolver, solver_for
+from cpc2urdf.validation.gaze.solver import FAR_TARGET, RETRIES, GazeSolver, solver_for
 from cpc2urdf.validation.gaze.tracking import Trajectory
 
 __all__ = [
@@ -97,6 +100,7 @@ __all__ = [
     "CONVERGED_STEP",
     "DEFAULT_CAMERAS",
     "DEFAULT_VIEWING_DISTANCE",
+    "FAR_TARGET",
     "FLOOR_RESIDUAL",
     "GUESS_MAX_CORRECTION",
     "MAX_ITERATIONS",

@@ -22,6 +22,7 @@ from cpc2urdf.validation.gaze.head import GazeHead, Index
 
 NULL_EIGENVALUE = 1e-14  # [-]: eigenvalues of J1^T J1 below this span the fixation null space
 MIN_TARGET_DISTANCE = 1e-9  # [m]: a target this close to a camera centre cannot be pointed at
+SCALED_DISTANCE = 1e150  # [m]: beyond this from a camera, p_cam is computed scaled (no overflow)
 
 
 def target_point(p_world: ArrayLike) -> Array:
@@ -67,6 +68,39 @@ class FixationState:
         return self.jacobian
 
 
+def _direction_outside(
+    dx: float, dy: float, dz: float, R: tuple[float, float, float, float, float, float, float, float, float]
+) -> tuple[float, float, float, float, float, float, float]:
+    """The target in the camera frame, its unit direction and ``1 / |p_cam|`` where the direct
+    formula fails: ``(x, y, z, ux, uy, uz, inv)``.
+
+    ``(dx, dy, dz)`` is ``p - o`` (world) [m] and ``R`` the camera rotation, row by row.
+    Within :data:`MIN_TARGET_DISTANCE` of the camera centre the direction is undefined: ``u = 0``
+    (residual ``(0, 0, -1)``, counted as missed by pi) and ``inv = 0``, so this eye's Jacobian
+    block is zero rather than infinite: the eye cannot point at a target on its own centre, and
+    the step is taken by the other eye (or the motion that carries this camera off the target).
+    Beyond :data:`SCALED_DISTANCE` the rotation runs on ``p - o`` scaled by a power of two (exact),
+    so squares cannot overflow; ``inv`` (below 1e-150) is taken as 0, and a coordinate beyond the
+    largest float is inf.
+    """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    m = max(abs(dx), abs(dy), abs(dz))
+    if m < 1.0:  # within MIN_TARGET_DISTANCE of the centre: exact coordinates, no direction
+        x = r00 * dx + r10 * dy + r20 * dz
+        y = r01 * dx + r11 * dy + r21 * dz
+        z = r02 * dx + r12 * dy + r22 * dz
+        return x, y, z, 0.0, 0.0, 0.0, 0.0
+    k = math.frexp(m)[1]  # m = f 2^k with 0.5 <= f < 1, k <= 1024
+    s = math.ldexp(1.0, -k)
+    sx, sy, sz = dx * s, dy * s, dz * s  # exact: scaled by a power of two, in [-1, 1]
+    xs = r00 * sx + r10 * sy + r20 * sz
+    ys = r01 * sx + r11 * sy + r21 * sz
+    zs = r02 * sx + r12 * sy + r22 * sz
+    inv_s = 1.0 / math.sqrt(xs * xs + ys * ys + zs * zs)  # |(xs, ys, zs)| = |s (p - o)| in [0.5, 1.8]
+    half = math.ldexp(1.0, k - 1)  # 2^k itself overflows for k = 1024; Python floats go to inf silently
+    return xs * half * 2.0, ys * half * 2.0, zs * half * 2.0, xs * inv_s, ys * inv_s, zs * inv_s, 0.0
+
+
 def evaluate_fixation(head: GazeHead, q: Array, p: Array, jacobian: bool = True) -> FixationState:
     """Residual state at readings ``q`` (shape (n,)) for target ``p`` (world) [m], shape (3,);
     its Jacobian now (``jacobian``) or when first used."""
@@ -83,9 +117,12 @@ def evaluate_fixation(head: GazeHead, q: Array, p: Array, jacobian: bool = True)
         x = r00 * dx + r10 * dy + r20 * dz
         y = r01 * dx + r11 * dy + r21 * dz
         z = r02 * dx + r12 * dy + r22 * dz
-        nrm = math.sqrt(x * x + y * y + z * z) or 1e-300  # target on a camera centre: see solution_from_state
-        inv = 1.0 / nrm
-        ux, uy, uz = x * inv, y * inv, z * inv
+        nrm = math.sqrt(x * x + y * y + z * z)
+        if MIN_TARGET_DISTANCE <= nrm <= SCALED_DISTANCE:
+            inv = 1.0 / nrm
+            ux, uy, uz = x * inv, y * inv, z * inv
+        else:  # rare: on a camera centre, or astronomically far (NaN-safe test)
+            x, y, z, ux, uy, uz, inv = _direction_outside(dx, dy, dz, (r00, r01, r02, r10, r11, r12, r20, r21, r22))
         res += (ux, uy, uz - 1.0)
         rr += ux * ux + uy * uy + (uz - 1.0) * (uz - 1.0)
         origins.append([ox, oy, oz])
@@ -96,6 +133,20 @@ def evaluate_fixation(head: GazeHead, q: Array, p: Array, jacobian: bool = True)
     if jacobian:
         st.J  # noqa: B018 (computed now, while q is the caller's)
     return st
+
+
+def pointing_errors(st: FixationState) -> list[float]:
+    """Angle [rad] between each camera's optical axis and the direction to the target, (left,
+    right); pi for a target within :data:`MIN_TARGET_DISTANCE` of that camera's centre (no
+    direction to point along)."""
+    # from p_cam while it is finite (0 * (x + y + z) is 0.0), else from the direction (a
+    # coordinate beyond the largest float)
+    return [
+        math.pi if not (ux or uy or uz)
+        else math.atan2(math.hypot(x, y), z) if 0.0 * (x + y + z) == 0.0
+        else math.atan2(math.hypot(ux, uy), uz)
+        for (x, y, z), (ux, uy, uz, _) in zip(st.p_cam, st.u, strict=True)
+    ]
 
 
 def fixation_jacobian(head: GazeHead, st: FixationState) -> Array:
@@ -176,10 +227,12 @@ def fixation_redundancy(head: GazeHead, free: Index) -> tuple[bool, float]:
 __all__ = [
     "MIN_TARGET_DISTANCE",
     "NULL_EIGENVALUE",
+    "SCALED_DISTANCE",
     "FixationState",
     "closest_point",
     "evaluate_fixation",
     "fixation_jacobian",
     "fixation_redundancy",
+    "pointing_errors",
     "target_point",
 ]

@@ -239,20 +239,33 @@ class ActiveSetGaussNewton:
         has_block = block is not None and block.size > 0
         if k0 and policy == "cyclopean" and not has_block:
             # Null space of fixation V0 = V[:, :k0]; the policy is one row (version), so
-            # A2 = a^T (1, k0) and (a a^T + eps I)^-1 a = a / (|a|^2 + eps).
+            # A2 = a^T (1, k0) and (a a^T + eps I)^-1 a = a / (|a|^2 + eps). The version row
+            # over the active joints: an eye joint held at its limit (not in act) does not move,
+            # so it contributes to the version's value only, not to its change.
             act_l = act.tolist()
             head = self.head
-            i0, i1 = act_l.index(head.e0), act_l.index(head.e1)  # the version row's entries
-            vs = head.version_sign
+            e0, e1, vs = head.e0, head.e1, head.version_sign
             Vl = V.tolist()
-            a = [Vl[i0][j] + vs * Vl[i1][j] for j in range(k0)]
-            e2 = head.version(q) + (dl[i0] + vs * dl[i1])
-            f = e2 / (sum(x * x for x in a) + (1e-24 if k0 == 1 else 1e-12))
-            if k0 == 1:
-                fa = f * a[0]
-                dl = [dl[i] - fa * Vl[i][0] for i in range(m)]
+            if e0 in act_l and e1 in act_l:  # the version row's entries (both eyes free: the usual case)
+                i0, i1 = act_l.index(e0), act_l.index(e1)
+                a = [Vl[i0][j] + vs * Vl[i1][j] for j in range(k0)]
+                e2 = head.version(q) + (dl[i0] + vs * dl[i1])
             else:
-                dl = (d_arr - V[:, :k0] @ (f * np.array(a))).tolist()
+                a = [0.0] * k0
+                e2 = head.version(q)
+                for joint, weight in ((e0, 1.0), (e1, vs)):
+                    if joint in act_l:
+                        i = act_l.index(joint)
+                        a = [a[j] + weight * Vl[i][j] for j in range(k0)]
+                        e2 += weight * dl[i]
+            aa = sum(x * x for x in a)
+            if aa > 0.0:  # else both eyes are held: the policy has nothing to move
+                f = e2 / (aa + (1e-24 if k0 == 1 else 1e-12))
+                if k0 == 1:
+                    fa = f * a[0]
+                    dl = [dl[i] - fa * Vl[i][0] for i in range(m)]
+                else:
+                    dl = (d_arr - V[:, :k0] @ (f * np.array(a))).tolist()
         elif k0:
             # Null space of fixation (at this damping), in coordinates y: motion V0 @ y.
             d = d_arr

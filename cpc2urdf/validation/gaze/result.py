@@ -16,7 +16,7 @@ import numpy as np
 
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.fixation import MIN_TARGET_DISTANCE, FixationState, closest_point
+from cpc2urdf.validation.gaze.fixation import FixationState, closest_point, pointing_errors
 from cpc2urdf.validation.gaze.head import GazeHead
 
 STATUS_FIXATED = "fixated"
@@ -91,12 +91,9 @@ def solution_from_state(
     """The :class:`GazeSolution` of readings ``q`` (shape (n,)) for target ``p`` (world) [m],
     shape (3,), from its fixation state ``st``: pointing errors, miss distances, the joints at a
     limit, and the status (why a target is not fixated: :data:`STATUSES`)."""
-    errs, misses = [], []
-    for x, y, z in st.p_cam:
-        lateral = math.hypot(x, y)
-        # a target on the camera centre has no direction: count it as missed by pi
-        errs.append(math.atan2(lateral, z) if lateral + abs(z) > MIN_TARGET_DISTANCE else math.pi)
-        misses.append(lateral if z >= 0 else math.sqrt(x * x + y * y + z * z))
+    errs = pointing_errors(st)
+    # the miss distance is the lateral offset in front of the camera, the distance behind it
+    misses = [math.hypot(x, y) if z >= 0 else math.hypot(x, y, z) for x, y, z in st.p_cam]
     err, miss = np.array(errs), np.array(misses)
     fix = closest_point(st.origins, st.axes)
     (a0, a1, a2), (b0, b1, b2) = st.axes
@@ -109,9 +106,11 @@ def solution_from_state(
     reachable = errs[0] <= GAZE_POINTING_TOL and errs[1] <= GAZE_POINTING_TOL
     if reachable:
         status = STATUS_FIXATED
+    elif any(not (ux or uy or uz) for ux, uy, uz, _ in st.u):
+        status = STATUS_TOO_CLOSE  # on a camera centre: no direction to look along
     elif any(z <= 0 for _, _, z in st.p_cam):
         status = STATUS_BEHIND
-    elif min(math.sqrt(x * x + y * y + z * z) for x, y, z in st.p_cam) < head.baseline:
+    elif min(math.hypot(x, y, z) for x, y, z in st.p_cam) < head.baseline:
         status = STATUS_TOO_CLOSE
     elif at_limit:
         status = STATUS_LIMITS

@@ -17,6 +17,7 @@ One :meth:`GazeSolver.solve` call:
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 
@@ -49,6 +50,7 @@ from cpc2urdf.validation.gaze.tracking import Trajectory, track
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
+FAR_TARGET = 1e15  # [m]: a target with a coordinate beyond this is solved for by its direction
 
 
 class GazeSolver:
@@ -105,6 +107,8 @@ class GazeSolver:
         self._guesses = GuessTable(head, converge_sign)
         self._free_joints = {policy: free_joints(head, policy) for policy in POLICIES}
         self._fixed_joints = {policy: np.setdiff1d(np.arange(self.n), free) for policy, free in self._free_joints.items()}
+        left, right = head.camera_poses(head.home)
+        self._centre: Array = 0.5 * (left[:3, 3] + right[:3, 3])  # cyclopean point at home (world) [m]
 
     @classmethod
     def from_model(
@@ -159,7 +163,7 @@ class GazeSolver:
         p = target_point(p_world)
         qc = self.head.check_q(q_current)
         q = (self.home if qc is None else qc).copy()
-        return self._guesses.guess(p, q, refine=self.redundant)
+        return self._guesses.guess(self._solved_target(p), q, refine=self.redundant)
 
     def solve(
         self,
@@ -202,6 +206,7 @@ class GazeSolver:
         the entry of :meth:`track`, which does not re-check the readings it produced itself."""
         q_ref = self.home.copy() if qc is None else qc
         free = self._free_joints[policy]
+        p_solve = self._solved_target(p)
         if q_start is not None:
             q0 = np.clip(np.asarray(q_start, dtype=float).reshape(self.n), self.lower, self.upper)
             fixed = self._fixed_joints[policy]
@@ -217,21 +222,41 @@ class GazeSolver:
             # they want; on a calibrated head it saves nothing (the first step along the weak
             # direction dominates) and loses a few near-fold targets (seeds 2 and 4: 0.5 % and
             # 1.1 % of 1,000 targets).
-            q0 = self._guesses.guess(p, q_ref, refine=policy == "cyclopean" and self.redundant)
-        q, it, st = self._solve_from(p, q0, q_ref, policy, free, max_iterations)
+            q0 = self._guesses.guess(p_solve, q_ref, refine=policy == "cyclopean" and self.redundant)
+        q, it, st = self._solve_from(p_solve, q0, q_ref, policy, free, max_iterations)
         if st.rr > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
             # Local minimum against a limit (e.g. pan at 0 deg while the eyes would have to
             # turn far): retry from the best grid starts with the eyes already turned.
             for rank in range(1, RETRIES + 1):
                 q1, it1, st1 = self._solve_from(
-                    p, self._guesses.guess(p, q_ref, rank), q_ref, policy, free, max_iterations
+                    p_solve, self._guesses.guess(p_solve, q_ref, rank), q_ref, policy, free, max_iterations
                 )
                 it += it1
                 if st1.rr < st.rr:
                     q, st = q1, st1
                 if st.rr <= FLOOR_RESIDUAL:
                     break
+        if p_solve is not p:  # the answer is judged on the target itself
+            st = evaluate_fixation(self.head, q, p, jacobian=False)
         return solution_from_state(self.head, p, q, it, policy, st)
+
+    def _solved_target(self, p: Array) -> Array:
+        """The point the iteration aims at for target ``p`` (world) [m], shape (3,): ``p`` itself,
+        or for a target with a coordinate beyond :data:`FAR_TARGET` the point on the ray from the
+        head's centre (cyclopean point at home) through ``p`` at that distance.
+
+        Seen from any camera, the two differ in direction by less than the head's reach over
+        :data:`FAR_TARGET` (~1e-15 rad), below the rounding of a direction at that distance;
+        beyond it the guess table and the policies would square coordinates out of the float
+        range. The answer is still judged on ``p`` (:func:`evaluate_fixation` scales far
+        targets).
+        """
+        px, py, pz = p.tolist()
+        if max(abs(px), abs(py), abs(pz)) <= FAR_TARGET:
+            return p
+        d = p - self._centre
+        d = d / np.max(np.abs(d))  # components in [-1, 1]: no overflow in the norm
+        return self._centre + FAR_TARGET * (d / math.sqrt(float(d @ d)))
 
     def _solve_from(
         self, p: Array, q0: Array, q_ref: Array, policy: str, free: Index, max_iterations: int
@@ -286,4 +311,4 @@ def solver_for(
     return GazeSolver(PinocchioRobot.load(ref), cameras, viewing_distance=viewing_distance)
 
 
-__all__ = ["RETRIES", "GazeSolver", "solver_for"]
+__all__ = ["FAR_TARGET", "RETRIES", "GazeSolver", "solver_for"]

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.fixation import evaluate_fixation
+from cpc2urdf.validation.gaze.fixation import evaluate_fixation, pointing_errors
 from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
 from cpc2urdf.validation.gaze.head import GazeHead
 from cpc2urdf.validation.gaze.policies import check_policy
@@ -121,7 +121,7 @@ def track(
         Q[k] = q_cmd
         ok[k] = sol.reachable
         st = evaluate_fixation(head, q_cmd, P[k], jacobian=False)
-        err[k] = [math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam]
+        err[k] = pointing_errors(st)
     return Trajectory(np.arange(T, dtype=float) * float(dt), Q, G, ok, err, locked, head.joint_names)
 
 
