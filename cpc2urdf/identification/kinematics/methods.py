@@ -25,7 +25,12 @@ import numpy as np
 
 from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError
 from cpc2urdf.identification.kinematics.problem import DEFAULT_SIGMA_R, DEFAULT_SIGMA_T
-from cpc2urdf.identification.kinematics.start import align_base, closed_form_model, refinement_start
+from cpc2urdf.identification.kinematics.start import (
+    align_base,
+    closed_form_model,
+    on_the_parts,
+    refinement_start,
+)
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.model_metadata import FrameResiduals, Provenance, RecordResiduals, Residuals
@@ -36,7 +41,7 @@ Method = Callable[[MeasurementSet, "CPCModel | None"], CPCModel]
 
 def closed_form(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
     """Shih et al. sec. 4.2, generalised to trees (:mod:`cpc2urdf.identification.kinematics.closed_form`)."""
-    return closed_form_model(ms, nominal)
+    return on_the_parts(closed_form_model(ms, nominal), nominal)
 
 
 def noise_from_metadata(metadata: dict[str, Any]) -> tuple[float, float, bool]:
@@ -87,6 +92,8 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
     from cpc2urdf.identification.kinematics.refine import refine
 
     start, start_method, note = refinement_start(ms, nominal)
+    if start_method == "closed-form":
+        start = on_the_parts(start, nominal)
     notes: list[str] = [note] if note else []
     sigma_t, sigma_r, known = noise_from_metadata(ms.metadata)
     fitted = [f for f in start.structure.frame_names if f in ms.poses and ms.has_pose(f).any()]

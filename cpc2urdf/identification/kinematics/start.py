@@ -17,9 +17,7 @@ from cpc2urdf.model import CPCModel, CPCParams
 
 
 def closed_form_model(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
-    """Shih et al. sec. 4.2 generalised to trees, with its ``provenance`` and ``notes``; with a
-    nominal model, what the data cannot see is chosen closest to it (:mod:`gauge`), so every link
-    frame sits on its part (the refinement keeps that choice: its chart fixes the gauge).
+    """Shih et al. sec. 4.2 generalised to trees, with its ``provenance`` and ``notes``.
 
     Raises:
         DegenerateDataError: The records do not follow the one-joint-at-a-time protocol, or do
@@ -30,10 +28,6 @@ def closed_form_model(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
 
     protocol = recognise_protocol(ms)
     model, details = identify_closed_form(ms, nominal, protocol=protocol)
-    if nominal is not None and nominal.structure.joint_names == model.structure.joint_names:
-        from cpc2urdf.identification.kinematics.gauge import align_to_nominal
-
-        model = align_to_nominal(model, nominal)
     meta = model.metadata.replace(provenance=provenance(ms, protocol, details), notes=tuple(details.notes))
     return model.with_params(metadata=meta)
 
@@ -71,6 +65,18 @@ def align_base(model: CPCModel, ms: MeasurementSet, frames: list[str]) -> CPCMod
     return model.with_params(world_to_base=CPCParams.from_matrix(G @ model.T_world_base()))
 
 
+def on_the_parts(model: CPCModel, nominal: CPCModel | None) -> CPCModel:
+    """``model`` with what the data cannot see chosen closest to ``nominal`` (:mod:`gauge`), so every
+    link frame sits on its part; measured frames unchanged. The refinement keeps that choice (its
+    chart fixes the gauge). Applied to the model a method returns, not to the consistency gate's
+    refits, whose gauge does not matter."""
+    if nominal is None or nominal.structure.joint_names != model.structure.joint_names:
+        return model
+    from cpc2urdf.identification.kinematics.gauge import align_to_nominal
+
+    return align_to_nominal(model, nominal)
+
+
 def refinement_start(ms: MeasurementSet, nominal: CPCModel | None) -> tuple[CPCModel, str, str | None]:
     """The model a refinement of ``ms`` starts from.
 
@@ -97,4 +103,4 @@ def refinement_start(ms: MeasurementSet, nominal: CPCModel | None) -> tuple[CPCM
         return align_base(nominal, ms, measured_frames(nominal, ms)), "nominal", note
 
 
-__all__ = ["align_base", "closed_form_model", "measured_frames", "refinement_start"]
+__all__ = ["align_base", "closed_form_model", "measured_frames", "on_the_parts", "refinement_start"]
