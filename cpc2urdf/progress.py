@@ -12,16 +12,18 @@ final line with the elapsed time. With ``CPC2URDF_PROGRESS=0`` in the environmen
 
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 import time
-from collections.abc import Iterable, Iterator, Sized
+from collections.abc import Generator, Iterable, Iterator, Sequence, Sized
+from contextlib import contextmanager
 from typing import TypeVar
 
 T = TypeVar("T")
 
 
-def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterator[T]:
+def progress(items: Iterable[T], label: str, total: int | None = None) -> Generator[T, None, None]:
     """Yield ``items`` while drawing ``label [#####.....] k/n  elapsed  eta`` on stderr."""
     if total is None and isinstance(items, Sized):
         total = len(items)
@@ -48,6 +50,23 @@ def progress(items: Iterable[T], label: str, total: int | None = None) -> Iterat
         sys.stderr.flush()
 
 
+@contextmanager
+def progress_checked(items: Sequence[T], label: str, show: bool = True) -> Iterator[Iterator[T]]:
+    """``with progress_checked(items, label) as it: for x in it: ...`` draws the bar like
+    :func:`progress`, but prints its "done" line only when the block ends without an error; an
+    error clears a half-drawn bar first, so that a refusal is the only line on stderr."""
+    if not show:
+        yield iter(items)
+        return
+    bar = progress(items, label)
+    try:
+        yield itertools.islice(bar, len(items))  # islice does not ask the bar past the last item
+    except BaseException:
+        bar.close()
+        raise
+    next(bar, None)
+
+
 def _draw(label: str, k: int, total: int | None, start: float, last: float, live: bool) -> bool:
     """Redraw the bar after item ``k`` if it is time to; True if it drew."""
     now = time.perf_counter()
@@ -68,4 +87,5 @@ def _draw(label: str, k: int, total: int | None, start: float, last: float, live
 
 __all__ = [
     "progress",
+    "progress_checked",
 ]

@@ -18,8 +18,7 @@ that cannot be measured is handled by the ``on_error`` policy of
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Generator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +38,7 @@ from cpc2urdf.identification.vision.joints_csv import read_joints_csv
 from cpc2urdf.identification.vision.plate_poses import target_pose
 from cpc2urdf.identification.vision.targets import PlateDesign, target_design
 from cpc2urdf.model import RobotStructure
-from cpc2urdf.progress import progress
+from cpc2urdf.progress import progress_checked
 
 Array = NDArray[np.float64]
 
@@ -123,11 +122,9 @@ def measure_head_images(
     out_T: dict[str, list[Array]] = {c: [] for c in cameras}
     out_r: dict[str, list[float]] = {c: [] for c in cameras}
     jobs = [(i, c) for i in range(len(table.records)) for c in cameras]
-    # As in measure_stereo_images: the bar's "done" line only once the records are known to be
-    # usable, and an error closes the bar first, so that a refusal is the only line on stderr.
-    bar = progress(jobs, "measure") if show_progress else iter(jobs)
-    try:
-        for i, c in itertools.islice(bar, len(jobs)):
+    # The bar's "done" line only once the records are known to be usable (progress_checked).
+    with progress_checked(jobs, "measure", show_progress) as bar:
+        for i, c in bar:
             rec = table.records[i]
             cam = cameras[c]
             path = find_image(root / c, rec)
@@ -159,11 +156,6 @@ def measure_head_images(
                     f"{root}: camera {c} saw the target in {len(out_T[c])} records; hand-eye calibration needs at least 3"
                     + (f"; first problem: {problems[0]}" if problems else "")
                 )
-    except BaseException:
-        if isinstance(bar, Generator):
-            bar.close()
-        raise
-    next(bar, None)
     return HeadImageMeasurement(
         out_l, {c: np.array(v) for c, v in out_q.items()}, {c: np.array(v) for c, v in out_T.items()},
         {c: np.array(v) for c, v in out_r.items()}, problems,

@@ -18,8 +18,7 @@ policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Generator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,7 +40,7 @@ from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import RobotStructure
-from cpc2urdf.progress import progress
+from cpc2urdf.progress import progress_checked
 
 STEREO_FOLDERS = ("left", "right")
 
@@ -112,12 +111,9 @@ def measure_stereo_images(
     fit = {n: np.full(N, np.nan) for n in names}
     problems: list[str] = []
     details: dict[tuple[str, str], StereoPlatePose] = {}
-    # The bar's "done" line waits until the records are known to be usable (islice does not ask
-    # it for more after the last record), and an error closes it first: a refusal is then the
-    # only line on stderr.
-    bar = progress(range(N), "measure") if show_progress else iter(range(N))
-    try:
-        for i in itertools.islice(bar, N):
+    # The bar's "done" line only once the records are known to be usable (progress_checked).
+    with progress_checked(range(N), "measure", show_progress) as bar:
+        for i in bar:
             rec = table.records[i]
             imgs = []
             for sub in STEREO_FOLDERS:
@@ -161,11 +157,6 @@ def measure_stereo_images(
                 f"{root}: no plate could be measured in any of the {N} records"
                 + (f"; first problem: {problems[0]}" if problems else "")
             )
-    except BaseException:
-        if isinstance(bar, Generator):
-            bar.close()
-        raise
-    next(bar, None)
     idx = np.flatnonzero(keep)
     ms = MeasurementSet(
         structure, table.q[idx], {n: poses[n][idx] for n in names}, str(root), robot_ref,
