@@ -1,4 +1,5 @@
-"""Stage-1 measurements: joint readings with measured frame poses (``cpc2urdf/measurements@1``).
+"""Stage-1 measurements: joint readings with measured frame poses (``cpc2urdf/measurements@1``)
+or marker points (``cpc2urdf/measurements@2``).
 
 In memory a :class:`MeasurementSet` holds N records of one robot: the readings ``q`` (N, n) and,
 per measured frame, ``T_world_<frame>`` (N, 4, 4), NaN where a record lacks that frame. On disk::
@@ -27,6 +28,21 @@ root to the links the records measure (their ``poses``/``points`` keys), so a re
 readings only for the joints on those paths. Readings of other joints of the URDF (a whole
 ``/joint_states`` message) are accepted and ignored. In memory the set uses the model's names
 (:class:`~cpc2urdf.urdf_robot.NameMap`); files use the URDF's.
+
+**Position-only data** (``cpc2urdf/measurements@2``: everything of ``@1`` plus markers). A laser
+tracker, motion capture or a touch probe gives 3-D points of markers fixed to links, not poses::
+
+    {"format": "cpc2urdf/measurements@2", "robot": ..., "units": ...,
+     "markers": {"m1": {"link": "head_2_link"},                      # position on the link unknown
+                 "m2": {"link": "head_2_link", "position": [x, y, z]}},  # known, in the link's frame
+     "records": [{"joints": {...}, "markers": {"m1": [x, y, z], "m2": null}}]}
+
+A marker's ``link`` is a frame of the robot (a spec robot's frame, e.g. ``plate_left``; a URDF
+link, which then becomes a measured link of the sub-tree); its ``position`` (file units, in that
+frame) is optional: without it the marker's position is identified. In memory the set holds
+:attr:`MeasurementSet.markers` (:class:`Marker`) and ``marker_points`` (N, 3) per marker, NaN
+where a record did not see it. An ``@1`` file reads exactly as before, and a set without markers
+is written as ``@1``.
 """
 
 from __future__ import annotations
@@ -51,9 +67,33 @@ from cpc2urdf.units import Units
 from cpc2urdf.urdf_robot import UrdfRobot
 
 MEASUREMENTS_FORMAT = "cpc2urdf/measurements@1"
+# The version with marker points (position-only data); a superset of @1.
+MEASUREMENTS_FORMAT_2 = "cpc2urdf/measurements@2"
+MEASUREMENTS_FORMATS = (MEASUREMENTS_FORMAT, MEASUREMENTS_FORMAT_2)
 # Free-form top-level sections that round-trip untouched in MeasurementSet.metadata.
 OPTIONAL_SECTIONS = ("description", "noise", "provenance", "notes")
 _RECORD_KEYS = {"label", "joints", "poses", "points"}
+_RECORD_KEYS_2 = _RECORD_KEYS | {"markers"}
+_MARKER_KEYS = {"link", "position"}
+
+
+@dataclass(frozen=True)
+class Marker:
+    """A marker (a tracker's reflector, a mocap ball, a probed point) fixed to a frame of the robot.
+
+    Attributes:
+        name: The marker's name (as in the file).
+        frame: The model frame it is fixed to (a URDF robot: the frame of that link).
+        position: Its position in that frame [m], shape (3,), or None when it is to be identified.
+    """
+
+    name: str
+    frame: str
+    position: tuple[float, float, float] | None = None
+
+    @property
+    def known(self) -> bool:
+        return self.position is not None
 
 
 @dataclass
@@ -76,6 +116,9 @@ class MeasurementSet:
         metadata: Free-form file sections (``description``, ``noise``, ``provenance``, ``notes``).
         spec: The robot the file refers to, as resolved when it was read (its nominal geometry
             is what identification starts from and keeps unmeasured frames with), or None.
+        markers: Marker name -> :class:`Marker` (the frame it is on, its position if known).
+        marker_points: Marker name -> measured world positions [m], shape (N, 3), NaN where a
+            record did not see it (position-only data).
     """
 
     structure: RobotStructure
@@ -88,6 +131,8 @@ class MeasurementSet:
     fit_rms: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     metadata: dict[str, Any] = field(default_factory=dict)
     spec: RobotSpec | None = None
+    markers: dict[str, Marker] = field(default_factory=dict)
+    marker_points: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         s = self.structure
@@ -111,6 +156,17 @@ class MeasurementSet:
             if layout is None or P.shape != (N, len(layout), 3):
                 raise ValueError(f"points[{name!r}] must have shape (N, K, 3) for a plate with a layout")
             self.points[name] = P
+        for name, m in self.markers.items():
+            s.frame(m.frame)
+            if m.position is not None and len(m.position) != 3:
+                raise ValueError(f"marker {name!r}: position must have 3 entries")
+        for name, Y in list(self.marker_points.items()):
+            if name not in self.markers:
+                raise ValueError(f"marker_points[{name!r}]: no such marker (markers: {sorted(self.markers)})")
+            Y = np.asarray(Y, dtype=float)
+            if Y.shape != (N, 3):
+                raise ValueError(f"marker_points[{name!r}] must have shape ({N}, 3), got {Y.shape}")
+            self.marker_points[name] = Y
 
     # ---- queries -------------------------------------------------------------------------------
 
@@ -133,6 +189,27 @@ class MeasurementSet:
             return np.zeros(self.n_records, dtype=bool)
         return np.all(np.isfinite(self.poses[frame]), axis=(1, 2))
 
+    @property
+    def has_points(self) -> bool:
+        """True when the set holds marker points (position-only data)."""
+        return any(bool(self.has_marker(m).any()) for m in self.marker_points)
+
+    def has_marker(self, marker: str) -> NDArray[np.bool_]:
+        """Which records saw ``marker``: boolean array of shape (N,)."""
+        if marker not in self.marker_points:
+            return np.zeros(self.n_records, dtype=bool)
+        return np.all(np.isfinite(self.marker_points[marker]), axis=1)
+
+    @property
+    def marker_frames(self) -> list[str]:
+        """Frames carrying a marker seen at least once, in the structure's frame order."""
+        used = {self.markers[m].frame for m in self.marker_points if self.has_marker(m).any()}
+        return [f for f in self.structure.frame_names if f in used]
+
+    def markers_on(self, frame: str) -> list[str]:
+        """Names of the markers on ``frame`` seen at least once."""
+        return [m for m in self.marker_points if self.markers[m].frame == frame and self.has_marker(m).any()]
+
     def subset(self, index: ArrayLike) -> MeasurementSet:
         """The records selected by ``index`` (integer indices or a boolean mask of shape (N,))."""
         idx = np.arange(self.n_records)[np.asarray(index)]
@@ -147,6 +224,8 @@ class MeasurementSet:
             {k: v[idx] for k, v in self.fit_rms.items()},
             dict(self.metadata),
             self.spec,
+            dict(self.markers),
+            {k: v[idx] for k, v in self.marker_points.items()},
         )
 
     @classmethod
@@ -160,8 +239,11 @@ class MeasurementSet:
         labels: Sequence[str] | None = None,
         metadata: Mapping[str, Any] | None = None,
         source: str = "<memory>",
+        markers: Mapping[str, Marker] | None = None,
+        marker_points: Mapping[str, ArrayLike] | None = None,
     ) -> MeasurementSet:
-        """Build a set from arrays (copies them). ``q``: (N, n); each pose array: (N, 4, 4)."""
+        """Build a set from arrays (copies them). ``q``: (N, n); each pose array: (N, 4, 4);
+        each marker's points: (N, 3) [m] in world."""
         return cls(
             structure,
             np.array(q, dtype=float),
@@ -170,6 +252,8 @@ class MeasurementSet:
             robot,
             list(labels or []),
             metadata=dict(metadata or {}),
+            markers=dict(markers or {}),
+            marker_points={k: np.array(v, dtype=float) for k, v in (marker_points or {}).items()},
         )
 
 
@@ -189,7 +273,7 @@ def measurements_from_json(
     robot: RobotSpec | None = None,
     base_dir: str | os.PathLike[str] | None = None,
 ) -> MeasurementSet:
-    """Parse a ``cpc2urdf/measurements@1`` document.
+    """Parse a ``cpc2urdf/measurements@1`` or ``@2`` (with markers) document.
 
     Args:
         doc: The parsed JSON document.
@@ -201,11 +285,17 @@ def measurements_from_json(
     Raises:
         InputFileError: Naming ``source``, the record index and the field: wrong format tag,
             unknown/missing joints, unknown frames, a record without poses or points, a
-            non-orthonormal matrix, NaN, unknown units, degenerate circle points.
+            non-orthonormal matrix, NaN, unknown units, degenerate circle points, a marker on a
+            link the robot does not have.
     """
     try:
-        d = require_format(doc, MEASUREMENTS_FORMAT, source)
-        allowed = {"format", "robot", "units", "records", *OPTIONAL_SECTIONS}
+        tag = doc.get("format") if isinstance(doc, Mapping) else None
+        if isinstance(doc, Mapping) and tag not in MEASUREMENTS_FORMATS:
+            raise InputFileError(source, f"format is {tag!r}, expected {MEASUREMENTS_FORMAT!r} (poses) or "
+                                 f"{MEASUREMENTS_FORMAT_2!r} (with markers)")
+        d = require_format(doc, MEASUREMENTS_FORMAT_2 if tag == MEASUREMENTS_FORMAT_2 else MEASUREMENTS_FORMAT, source)
+        version = 2 if tag == MEASUREMENTS_FORMAT_2 else 1
+        allowed = {"format", "robot", "units", "records", *OPTIONAL_SECTIONS} | ({"markers"} if version == 2 else set())
         unknown = set(d) - allowed
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
@@ -220,9 +310,10 @@ def measurements_from_json(
         records = d.get("records")
         if not isinstance(records, list) or not records:
             raise ValueError("'records' must be a non-empty list of records")
+        marker_defs = _marker_links(d.get("markers", {})) if version == 2 else {}
         if isinstance(robot, UrdfRobot):
-            robot = robot.restricted(_measured_links(records, robot))
-        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot))
+            robot = robot.restricted(_measured_links(records, robot, marker_defs))
+        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot), version)
         ms.spec = robot
         return ms
     except InputFileError as e:
@@ -266,14 +357,35 @@ class _FileNames:
         return next((m for m, f in self.frames.items() if f == name), None)
 
 
-def _measured_links(records: list[Any], robot: UrdfRobot) -> list[str]:
-    """The URDF links the records measure (``poses`` and ``points`` keys), in order of appearance.
+def _marker_links(section: Any) -> dict[str, Mapping[str, Any]]:
+    """The ``markers`` section's entries, checked for shape (links are checked against the robot later)."""
+    if not isinstance(section, Mapping) or not section:
+        raise ValueError("'markers' must be a non-empty object {marker name: {\"link\": ..., \"position\"?: [x, y, z]}}")
+    out: dict[str, Mapping[str, Any]] = {}
+    for name, m in section.items():
+        if not isinstance(m, Mapping) or not isinstance(m.get("link"), str):
+            raise ValueError(f"markers.{name} must be an object with a 'link' (the link the marker is fixed to)")
+        extra = set(m) - _MARKER_KEYS
+        if extra:
+            raise ValueError(f"markers.{name} has unknown keys {sorted(extra)}; expected some of {sorted(_MARKER_KEYS)}")
+        out[str(name)] = m
+    return out
+
+
+def _measured_links(records: list[Any], robot: UrdfRobot,
+                    markers: Mapping[str, Mapping[str, Any]] | None = None) -> list[str]:
+    """The URDF links the records measure (``poses`` and ``points`` keys, and the links of the
+    markers), in order of appearance.
 
     Raises:
-        ValueError: A key that is not a link of the URDF, naming the record.
+        ValueError: A key or a marker's link that is not a link of the URDF, naming it.
     """
     assert robot.tree is not None
     links: list[str] = []
+    for name, m in (markers or {}).items():
+        if not robot.tree.has_link(m["link"]):
+            raise ValueError(f"markers.{name}.link: {m['link']!r} is not a link of {robot.tree.source}")
+        links.append(m["link"])
     for i, rec in enumerate(records):
         for key in ("poses", "points"):
             named = rec.get(key) if isinstance(rec, Mapping) else None
@@ -293,8 +405,19 @@ def _parse_records(
     robot_ref: str | None,
     doc: Mapping[str, Any],
     names: _FileNames | None = None,
+    version: int = 1,
 ) -> MeasurementSet:
     names = names or _FileNames.of(None, s)
+    markers: dict[str, Marker] = {}
+    for mname, m in (_marker_links(doc["markers"]) if version == 2 and "markers" in doc else {}).items():
+        frame = _known_frame(s, names, m["link"], f"markers.{mname}.link").name
+        pos = m.get("position")
+        if pos is not None:
+            if not isinstance(pos, list) or len(pos) != 3:
+                raise ValueError(f"markers.{mname}.position must be [x, y, z] (file units, in the link's frame), got {pos!r}")
+            pos = tuple(finite_float(v, f"markers.{mname}.position[{c}]") * units.length for c, v in enumerate(pos))
+        markers[mname] = Marker(mname, frame, pos)
+    record_keys = _RECORD_KEYS_2 if version == 2 else _RECORD_KEYS
     file_joints = [names.joints[n] for n in s.joint_names]
 
     N, n = len(records), s.n_joints
@@ -302,6 +425,7 @@ def _parse_records(
     labels: list[str] = []
     poses: dict[str, NDArray[np.float64]] = {}
     points: dict[str, NDArray[np.float64]] = {}
+    marker_points: dict[str, NDArray[np.float64]] = {}
 
     def slot(store: dict[str, NDArray[np.float64]], name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
         if name not in store:
@@ -312,9 +436,9 @@ def _parse_records(
         where = f"records[{i}]"
         if not isinstance(rec, Mapping):
             raise ValueError(f"{where} must be an object with 'joints' and 'poses' and/or 'points'")
-        extra = set(rec) - _RECORD_KEYS
+        extra = set(rec) - record_keys
         if extra:
-            raise ValueError(f"{where} has unknown keys {sorted(extra)}; expected some of {sorted(_RECORD_KEYS)}")
+            raise ValueError(f"{where} has unknown keys {sorted(extra)}; expected some of {sorted(record_keys)}")
         label = rec.get("label", f"record {i}")
         if not isinstance(label, str):
             raise ValueError(f"{where}.label must be a string, got {label!r}")
@@ -348,8 +472,22 @@ def _parse_records(
             raise ValueError(f"{where}.poses must be an object {{frame name: pose}}")
         if not isinstance(rec_points, Mapping):
             raise ValueError(f"{where}.points must be an object {{plate name: [[x, y, z], ...]}}")
-        if not rec_poses and not rec_points:
-            raise ValueError(f"{where} has no 'poses' and no 'points': a record must measure at least one frame")
+        rec_markers = rec.get("markers", {})
+        if not isinstance(rec_markers, Mapping):
+            raise ValueError(f"{where}.markers must be an object {{marker name: [x, y, z] or null}}")
+        if not rec_poses and not rec_points and not rec_markers:
+            what = "no 'poses', 'points' or 'markers'" if version == 2 else "no 'poses' and no 'points'"
+            raise ValueError(f"{where} has {what}: a record must measure at least one frame")
+        for key, y in rec_markers.items():
+            if key not in markers:
+                raise ValueError(f"{where}.markers: unknown marker {key!r}; the 'markers' section names "
+                                 f"{', '.join(markers) or 'none'}")
+            if y is None:
+                continue
+            if not isinstance(y, list) or len(y) != 3:
+                raise ValueError(f"{where}.markers.{key} must be [x, y, z] or null, got {y!r}")
+            slot(marker_points, key, (3,))[i] = [
+                finite_float(v, f"{where}.markers.{key}[{c}]") * units.length for c, v in enumerate(y)]
         for key, obj in rec_poses.items():
             name = _known_frame(s, names, key, f"{where}.poses").name
             slot(poses, name, (4, 4))[i] = pose_from_json(obj, units, f"{where}.poses.{key}")
@@ -387,7 +525,8 @@ def _parse_records(
             rms[i] = registration_rms(T[i], layout, P[i])
         fit_rms[name] = rms
     metadata = {k: doc[k] for k in OPTIONAL_SECTIONS if k in doc}
-    return MeasurementSet(s, q, poses, source, robot_ref, labels, points, fit_rms, metadata)
+    return MeasurementSet(s, q, poses, source, robot_ref, labels, points, fit_rms, metadata,
+                          markers=markers, marker_points=marker_points)
 
 
 def _known_frame(s: RobotStructure, names: _FileNames, key: str, where: str) -> Any:
@@ -416,8 +555,8 @@ def load_measurements(path: str | os.PathLike[str], *, robot: RobotSpec | None =
 
 
 def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dict[str, Any]:
-    """The set as a ``cpc2urdf/measurements@1`` document in SI units (full precision); for a set
-    of a URDF robot (``ms.spec``), with the URDF's joint and link names.
+    """The set as a ``cpc2urdf/measurements@1`` document in SI units (full precision), or ``@2``
+    when it has markers; for a set of a URDF robot (``ms.spec``), with the URDF's joint and link names.
 
     Args:
         ms: The measurements.
@@ -446,11 +585,20 @@ def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dic
                                         for p in ms.points[f][i]]
         if pts:
             rec["points"] = pts
+        seen = {m: [float(v) for v in Y[i]] for m, Y in ms.marker_points.items() if ms.has_marker(m)[i]}
+        if seen:
+            rec["markers"] = seen
         records.append(rec)
-    doc: dict[str, Any] = {"format": MEASUREMENTS_FORMAT, "robot": ref, "units": {"length": "m", "angle": "rad"}}
+    version_2 = bool(ms.markers)
+    doc: dict[str, Any] = {"format": MEASUREMENTS_FORMAT_2 if version_2 else MEASUREMENTS_FORMAT, "robot": ref,
+                           "units": {"length": "m", "angle": "rad"}}
     for k in OPTIONAL_SECTIONS:
         if k in ms.metadata:
             doc[k] = ms.metadata[k]
+    if version_2:
+        doc["markers"] = {m.name: {"link": names.frames[m.frame],
+                                   **({"position": [float(v) for v in m.position]} if m.position is not None else {})}
+                          for m in ms.markers.values()}
     doc["records"] = records
     return doc
 
@@ -475,6 +623,9 @@ def save_measurements(ms: MeasurementSet, path: str | os.PathLike[str], *, robot
 
 __all__ = [
     "MEASUREMENTS_FORMAT",
+    "MEASUREMENTS_FORMATS",
+    "MEASUREMENTS_FORMAT_2",
+    "Marker",
     "MeasurementSet",
     "load_measurements",
     "measurements_from_json",

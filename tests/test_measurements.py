@@ -158,7 +158,8 @@ def _delete(path: list[Any]) -> Any:
 
 
 BAD_CASES = {
-    "wrong format": (_set(["format"], "cpc2urdf/measurements@2"), "expected 'cpc2urdf/measurements@1'"),
+    "wrong format": (_set(["format"], "cpc2urdf/measurements@3"), "expected 'cpc2urdf/measurements@1' (poses) or "
+                     "'cpc2urdf/measurements@2' (with markers)"),
     "unknown joint": (_set(["records", 0, "joints", "roll"], 0.1), "records[0].joints: unknown joint 'roll'"),
     "missing joint": (_delete(["records", 0, "joints", "tilt"]), "records[0].joints lacks ['tilt']"),
     "unknown frame": (_set(["records", 0, "poses", "plate_top"], {"xyz": [0, 0, 0], "quat_xyzw": [0, 0, 0, 1]}),

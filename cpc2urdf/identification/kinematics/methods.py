@@ -12,6 +12,10 @@ maximum-likelihood refinement (:mod:`refine`) from the closed form (:mod:`closed
 the nominal model placed in world (:func:`align_base`) when the records do not follow the
 one-joint-at-a-time protocol.
 
+Position-only data (marker points, ``cpc2urdf/measurements@2``) take the same names through
+:func:`identify`, which hands them to :func:`point_identify.identify_points` (circle-point start,
+point refinement, point consistency gate).
+
 The closed form and the refinement are imported inside the methods that run them: the CLI builds
 its parser from :data:`METHODS`, and scipy's optimiser should not slow down every command.
 """
@@ -222,6 +226,10 @@ def identify(
         raise Cpc2UrdfError(f"unknown identification method {method!r}; known: {', '.join(METHODS)}")
     if nominal is None and ms.spec is not None and ms.spec.nominal is not None:
         nominal = ms.spec.nominal_model()
+    if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)
+        from cpc2urdf.identification.kinematics.point_identify import identify_points
+
+        return identify_points(ms, method, nominal, accept_inconsistent=accept_inconsistent)
     check_data_suffice(ms)
     noise = Noise(*noise_from_metadata(ms.metadata))
     try:

@@ -11,6 +11,9 @@ robot (:class:`~cpc2urdf.errors.DegenerateDataError`):
 - a record in which several joints moved away from ``q0``;
 - a measured frame (a branch's end-effector) with no poses, or none at ``q0``;
 - a joint that moves no measured frame, or whose sweep has no pose of any frame it moves.
+
+A frame is measured in a record when the record has its pose or (position-only data,
+``cpc2urdf/measurements@2``) sees a marker fixed to it (:func:`frame_seen`).
 """
 
 from __future__ import annotations
@@ -131,6 +134,20 @@ def find_reference(q: NDArray[np.float64], joint_names: tuple[str, ...], labels:
     )
 
 
+def frame_seen(ms: MeasurementSet, frame: str) -> NDArray[np.bool_]:
+    """Records (N,) that measured ``frame``: its pose, or a marker fixed to it."""
+    seen = ms.has_pose(frame).copy()
+    for m in ms.markers_on(frame):
+        seen |= ms.has_marker(m)
+    return seen
+
+
+def seen_frames(ms: MeasurementSet) -> tuple[str, ...]:
+    """Frames with a pose or a seen marker, in the structure's frame order."""
+    have = set(ms.frames) | set(ms.marker_frames)
+    return tuple(f for f in ms.structure.frame_names if f in have)
+
+
 def _frames_below(structure: RobotStructure, frames: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
     below: dict[str, list[str]] = {j: [] for j in structure.joint_names}
     for f in frames:
@@ -163,7 +180,7 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
         raise DegenerateDataError(
             f"{ms.source}: frame {empty[0]!r} (a branch's end-effector) has no poses in any record"
         )
-    frames = tuple(ms.frames)
+    frames = seen_frames(ms)
     if not frames:
         raise DegenerateDataError(f"{ms.source}: no frame has a measured pose")
     for i, j in enumerate(s.joints):
@@ -183,7 +200,7 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
                 "record, so its axis cannot be identified"
             )
     for f in frames:
-        if not ms.has_pose(f)[list(reference)].any():
+        if not frame_seen(ms, f)[list(reference)].any():
             raise DegenerateDataError(
                 f"frame {f!r} has no pose at the reference configuration q0 (records "
                 f"{', '.join(ms.labels[r] for r in reference)}); every branch needs one"
@@ -198,7 +215,7 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
             )
         seen = np.zeros(len(q), dtype=bool)
         for f in below[j.name]:
-            seen |= ms.has_pose(f)
+            seen |= frame_seen(ms, f)
         if not seen[list(sweeps[j.name])].any():
             raise DegenerateDataError(
                 f"joint {j.name!r} was moved in {len(sweeps[j.name])} records but none of the frames it "
@@ -207,4 +224,5 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
     return Protocol(q0, reference, sweeps, frames, below)
 
 
-__all__ = ["READING_TOL", "Protocol", "find_reference", "joint_tolerances", "recognise_protocol"]
+__all__ = ["READING_TOL", "Protocol", "find_reference", "frame_seen", "joint_tolerances", "seen_frames",
+           "recognise_protocol"]

@@ -28,6 +28,7 @@ import time
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -175,7 +176,15 @@ def _max_tilt(chart: Parametrization, x: Array) -> float:
     return float(max(tilts)) if tilts else 0.0
 
 
-def _solve(problem: IdentificationProblem, x0: Array, max_nfev: int | None) -> OptimizeResult:
+class LeastSquaresProblem(Protocol):
+    """What the solver needs: weighted residuals and their Jacobian at chart coordinates ``x``."""
+
+    def residuals(self, x: Array) -> Array: ...
+
+    def jacobian(self, x: Array) -> Array: ...
+
+
+def _solve(problem: LeastSquaresProblem, x0: Array, max_nfev: int | None) -> OptimizeResult:
     # MINPACK's Levenberg-Marquardt: no BLAS-threaded SVD per step (trf's SVD of the 660 x 32
     # Jacobian costs 10-40x more on a loaded machine), and robust losses are folded into the
     # residuals (IdentificationProblem.robustified), so one solver serves both modes.
@@ -211,6 +220,9 @@ def _solve(problem: IdentificationProblem, x0: Array, max_nfev: int | None) -> O
             sol.nfev = total
             return sol
 
+
+# The solver, for the other problems of the package (position-only data, :mod:`point_refine`).
+solve_least_squares = _solve
 
 # ---- public API ----------------------------------------------------------------------------------
 
@@ -380,7 +392,9 @@ __all__ = [
     "STALL_DECREASE",
     "STALL_NFEV",
     "STALL_VARIANCE_FACTOR",
+    "LeastSquaresProblem",
     "Outlier",
     "RefinementResult",
     "refine",
+    "solve_least_squares",
 ]
