@@ -208,3 +208,106 @@ def test_check_urdf_refusing_is_bad_input(tmp_path: Path, capfd: pytest.CaptureF
     path.write_text(HEAD)
     assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 2
     _one_line(capfd, "check", path, "urdfdom's check_urdf cannot read it (Unknown geometry type)")
+
+
+# ---- a model identified from a user's URDF, against the URDF written back from it ----
+
+
+@pytest.fixture(scope="module")
+def tiago_written_back(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    """TIAGo with a plate (its URDF), the model identified from its head, and the calibrated
+    URDF written back from that model."""
+    from test_view_writeback import identified_tiago
+
+    from cpc2urdf.urdf_writeback import write_calibrated_urdf
+
+    folder = tmp_path_factory.mktemp("tiago_check")
+    urdf, model, model_file = identified_tiago(folder)
+    return urdf, model_file, write_calibrated_urdf(model, folder / "calibrated.urdf")
+
+
+def _edit_origin(text: str, joint: str, dx: float) -> str:
+    """``text`` with joint ``joint``'s origin moved by ``dx`` [m] along the parent's x."""
+    i = text.index(f'<joint name="{joint}"')
+    j = text.index("</joint>", i)
+    m = re.search(r'xyz="(\S+) ', text[i:j])
+    assert m is not None
+    x = float(m.group(1))
+    return text[:i] + text[i:j].replace(f'xyz="{m.group(1)} ', f'xyz="{x + dx!r} ', 1) + text[j:]
+
+
+def test_written_back_urdf_agrees_with_its_model(tiago_written_back: tuple[Path, Path, Path],
+                                                 capfd: pytest.CaptureFixture[str]) -> None:
+    """Every link on the calibrated paths (links by TIAGo's own names) by Pinocchio and yourdfpy
+    where the write-back plan puts it, to 1e-9, at random readings within the limits."""
+    from cpc2urdf.api import check_urdf
+    from cpc2urdf.tolerances import FK_AGREEMENT_TOL
+
+    _, model_file, calibrated = tiago_written_back
+    assert main(["check", str(calibrated), "--model", str(model_file), "-n", "20"]) == 0
+    cap = capfd.readouterr()
+    assert "7 links of the written-back URDF at 20 configurations" in cap.out
+    assert "result: all parsers agree" in cap.out and cap.err == "" and not NATIVE.search(cap.out)
+    report = check_urdf(calibrated, model_file, 20, seed=3)
+    assert report.ok and report.frames == ["base_footprint", "base_link", "torso_fixed_link", "torso_lift_link",
+                                           "head_1_link", "head_2_link", "calib_plate"]
+    fk = {p.parser: p for p in report.parsers if p.max_position_error is not None}
+    assert set(fk) == {"pinocchio", "yourdfpy"}
+    assert all(p.max_position_error < FK_AGREEMENT_TOL and p.max_rotation_error < FK_AGREEMENT_TOL for p in fk.values())
+
+
+def test_user_urdf_checks_against_itself(tiago_written_back: tuple[Path, Path, Path],
+                                         capfd: pytest.CaptureFixture[str]) -> None:
+    """The URDF as its own nominal model: every link reachable from the root (79 on TIAGo)."""
+    urdf, _, _ = tiago_written_back
+    assert main(["check", str(urdf), "--model", str(urdf), "-n", "3"]) == 0
+    assert "79 links of the written-back URDF" in capfd.readouterr().out
+
+
+@pytest.mark.parametrize(("joint", "named"), [
+    ("head_2_joint", "link 'head_2_link' below joint 'head_2_joint'"),  # calibrated: FK names the link
+    ("torso_fixed_joint", "joint 'torso_fixed_joint' (line"),  # folded into the model: the record names it
+])
+def test_a_millimetre_edit_is_a_discrepancy_naming_it(tiago_written_back: tuple[Path, Path, Path], tmp_path: Path,
+                                                       capfd: pytest.CaptureFixture[str], joint: str, named: str) -> None:
+    _, model_file, calibrated = tiago_written_back
+    edited = tmp_path / "edited.urdf"
+    edited.write_text(_edit_origin(calibrated.read_text(), joint, 1e-3))
+    assert main(["check", str(edited), "--model", str(model_file), "-n", "5"]) == 1
+    cap = capfd.readouterr()
+    assert named in cap.out and "result: DISCREPANCY" in cap.out and cap.err == ""
+    assert re.search(r"pinocchio\s+FAIL worst position 1\.000e-03 m", cap.out)
+
+
+def test_uncalibrated_urdf_and_missing_link_are_discrepancies(tiago_written_back: tuple[Path, Path, Path],
+                                                              tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    urdf, model_file, _ = tiago_written_back
+    assert main(["check", str(urdf), "--model", str(model_file), "-n", "3"]) == 1  # the user's own, not calibrated
+    assert "link 'torso_lift_link' below joint 'torso_lift_joint'" in capfd.readouterr().out
+    no_plate = tmp_path / "no_plate.urdf"
+    no_plate.write_text(urdf.read_text().replace('link name="calib_plate"', 'link name="calib_x"').replace(
+        'child link="calib_plate"', 'child link="calib_x"'))
+    assert main(["check", str(no_plate), "--model", str(model_file), "-n", "3"]) == 1
+    cap = capfd.readouterr()
+    assert "the model's frame 'calib_plate' is not a link of it" in cap.out and cap.err == ""
+
+
+def test_written_back_small_robot_with_every_awkward_joint(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """urdf_cases.SMALL: a prismatic joint with a non-unit axis, a continuous one along -z without
+    <origin>, a tilted revolute axis, two fixed joints to the marker, and floating and planar
+    joints off its path (Pinocchio keeps those at their neutral configuration)."""
+    import numpy as np
+    from urdf_cases import SMALL, write
+
+    from cpc2urdf.identification.simulation.truth import perturbed_model
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.urdf_robot import load_urdf_robot, urdf_source, with_urdf_source
+    from cpc2urdf.urdf_writeback import write_calibrated_urdf
+
+    nominal = load_urdf_robot(write(tmp_path, "small.urdf", SMALL), ["marker"]).nominal_model()
+    model = with_urdf_source(perturbed_model(nominal, np.random.default_rng(1), 1e-3, 0.01), urdf_source(nominal))
+    model_file = save_model(model, tmp_path / "model.json")
+    calibrated = write_calibrated_urdf(model, tmp_path / "calibrated.urdf")
+    assert main(["check", str(calibrated), "--model", str(model_file), "-n", "10"]) == 0
+    out = capfd.readouterr().out
+    assert "6 links of the written-back URDF" in out and "result: all parsers agree" in out

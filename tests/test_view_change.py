@@ -133,6 +133,8 @@ def test_shifted_tilt_colours_and_ghost() -> None:
     summary = build_view(vis, robot, ghost="iis_head", sweep=False)
     moved = {ln for ln, c in summary.link_changes.items() if c.displacement > 1e-9}
     assert moved == set(robot.links_below("tilt")) and set(FRAMES) <= moved
+    # Both in one world (their bases coincide): compared there, not re-aligned.
+    assert summary.ghost_anchor == "base" and not summary.ghost_aligned
     assert all(summary.link_changes[ln].displacement < 1e-12 for ln in set(robot.links) - moved)
     for ln in moved:
         c = summary.link_changes[ln]

@@ -1,7 +1,10 @@
 """``cpc2urdf check head.urdf --model MODEL``: three-parser FK cross-check of a URDF.
 
 Exit code 0 when Pinocchio and yourdfpy agree with the CPC model to 1e-9 m / 1e-9 rad at every
-frame and urdfdom parses the same tree; 1 on a discrepancy; 2 on bad input.
+frame and urdfdom parses the same tree; 1 on a discrepancy; 2 on bad input. For a model identified
+from a user's URDF (or that URDF itself), URDF is the written-back file: every link on the paths
+from its root to the model's frames is compared, by the URDF's own names, where the write-back puts
+it (:func:`cpc2urdf.validation.crosscheck.cross_check_writeback`).
 """
 
 from __future__ import annotations
@@ -16,7 +19,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="cross-check a URDF against its CPC model (Pinocchio, yourdfpy, urdfdom)",
         description="Compare the pose of every frame of URDF with the CPC model at N random "
         "configurations within the limits, with Pinocchio, yourdfpy and urdfdom's check_urdf. "
-        "Exit 0 all agree within 1e-9 m / 1e-9 rad, 1 discrepancy, 2 bad input.",
+        "For a model identified from your own URDF, URDF is the calibrated file export wrote back: "
+        "every link on the paths from its root to the measured links is compared, by your URDF's "
+        "link names, and every joint the model was built from must be as it recorded. "
+        "Exit 0 all agree within 1e-9 m / 1e-9 rad, 1 discrepancy (naming the first link off, "
+        "or the joint), 2 bad input.",
     )
     p.add_argument("urdf", help="URDF file")
     p.add_argument("--model", required=True, help="model file, robot spec or shipped robot name")

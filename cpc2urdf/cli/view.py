@@ -1,4 +1,4 @@
-"""``cpc2urdf view URDF_OR_MODEL [--target X Y Z] [--nominal OTHER] [--measurements FILE]
+"""``cpc2urdf view URDF_OR_MODEL [--target X Y Z] [--nominal [OTHER]] [--measurements FILE]
 [--package-path DIR ...] [--html OUT]``.
 
 Without ``--html`` the scene is served by meshcat on localhost: the URL is printed and the command
@@ -14,6 +14,8 @@ import math
 from typing import Any
 
 from cpc2urdf.errors import ConfigurationError, OutputError
+
+OWN_NOMINAL = ""  # --nominal without a value: the URDF the model was identified from
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -39,8 +41,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument(
         "--nominal",
         metavar="OTHER",
-        help="another model/URDF of the same robot (the nominal one), shown as a ghost; each link "
-        "is coloured by how far it moved from the ghost's link of the same name",
+        nargs="?",
+        const=OWN_NOMINAL,
+        help="another model/URDF of the same robot (the nominal one), shown as a ghost (placed as "
+        "--align says); each link is coloured by how far it moved from the ghost's link of the "
+        "same name. Without OTHER (after URDF_OR_MODEL): for a model identified from your URDF, "
+        "that URDF",
+    )
+    p.add_argument(
+        "--align",
+        choices=("auto", "base", "world"),
+        default="auto",
+        help="with --nominal: base = put the ghost's base link on the robot's and compare links "
+        "relative to it; world = compare in one world; auto (default) = base when the two bases "
+        "are 50 mm or 5 deg apart or more (different worlds: the rig, a gravity-aligned export, a "
+        "spec's origin), else world",
     )
     p.add_argument(
         "--keep-colours",
@@ -118,6 +133,7 @@ def parse_q(values: list[str] | None) -> dict[str, float] | list[float] | None:
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.view import load_view_robot, screenshot_html, write_view_html
+    from cpc2urdf.validation.view.robot import own_nominal
 
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
@@ -129,9 +145,11 @@ def run(args: argparse.Namespace) -> int:
         "cameras": tuple(args.cameras),
         "policy": args.policy,
         "change_colours": not args.keep_colours,
+        "align": args.align,
     }
-    if args.nominal:
-        options["ghost"] = load_view_robot(args.nominal, package_dirs=args.package_path)
+    if args.nominal is not None:
+        nominal = own_nominal(robot) if args.nominal == OWN_NOMINAL else args.nominal
+        options["ghost"] = load_view_robot(nominal, package_dirs=args.package_path)
     if args.measurements:
         from cpc2urdf.measurements import load_measurements
 

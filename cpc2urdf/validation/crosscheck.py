@@ -15,6 +15,15 @@ Either mount of :mod:`cpc2urdf.urdf` passes: the URDF's ``world`` -> ``base`` mu
 origin (``mount="base"``, the gravity-aligned world of ``cpc2urdf export``: poses compared relative
 to ``base``, i.e. the model's poses carried into that world). Anything else is a discrepancy.
 
+A model built from a user's URDF (it has a ``urdf`` section, :func:`cpc2urdf.urdf_robot.urdf_source`)
+is checked against the URDF written back from it (:func:`cross_check_writeback`): the links are the
+user's, named as in that URDF, so the compared ones are every link on the paths from its root to
+the model's frames, where :func:`cpc2urdf.urdf_origins.urdf_link_poses` puts them (in the root
+link's frame; the write-back plan is made on the checked file), the rest of the robot at 0. A
+fourth row, ``source``, compares every joint the model was built from with its record (a
+calibrated joint may differ only in its origin), so an edit of a joint folded into the model is
+named. The first link off, root first, is named with the joint above it.
+
 A URDF that does not parse is bad input, not a discrepancy: :func:`cpc2urdf.urdf_input.read_urdf`
 checks it before any parser sees it, and a parser that still cannot read it raises
 :class:`~cpc2urdf.errors.InputFileError` naming the file and the parser's first complaint. What the
@@ -42,6 +51,9 @@ from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import Array, rotation_error
 from cpc2urdf.urdf import T_BODY_OPTICAL, camera_body_names, link_name
 from cpc2urdf.urdf_input import read_urdf
+from cpc2urdf.urdf_origins import WritebackPlan, plan_for_tree, urdf_link_poses
+from cpc2urdf.urdf_robot import UrdfSource, urdf_source
+from cpc2urdf.urdf_tree import UrdfTree, parse_urdf_tree
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot, UnsupportedJointError
 
 LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
@@ -52,7 +64,8 @@ class ParserReport:
     """What one parser saw.
 
     Attributes:
-        parser: ``"pinocchio"``, ``"yourdfpy"`` or ``"urdfdom"``.
+        parser: ``"pinocchio"``, ``"yourdfpy"`` or ``"urdfdom"`` (and ``"source"``, the record
+            of a model built from a URDF, :func:`cross_check_writeback`).
         ok: True when everything it can check agrees within tolerance.
         max_position_error: Worst frame position discrepancy [m], None if it gives no poses.
         max_rotation_error: Worst frame rotation discrepancy [rad], None if it gives no poses.
@@ -71,13 +84,14 @@ class ParserReport:
 
 @dataclass
 class CrossCheckReport:
-    """The result of :func:`cross_check`."""
+    """The result of :func:`cross_check` (``compared``: what :attr:`frames` are, for the text)."""
 
     urdf: str
     n_configurations: int
     frames: list[str]
     parsers: list[ParserReport]
     tolerance: float = FK_AGREEMENT_TOL
+    compared: str = "frames"
 
     @property
     def ok(self) -> bool:
@@ -95,11 +109,13 @@ class CrossCheckReport:
 
     def format(self) -> str:
         lines = [
-            f"cross-check of {self.urdf}: {len(self.frames)} frames at {self.n_configurations} "
+            f"cross-check of {self.urdf}: {len(self.frames)} {self.compared} at {self.n_configurations} "
             f"configurations, tolerance {self.tolerance:g} m / {self.tolerance:g} rad"
         ]
         for p in self.parsers:
-            if p.max_position_error is None:
+            if p.parser == "source":
+                err = "the joints and links the model depends on, against its record"
+            elif p.max_position_error is None:
                 err = "no poses (parse + tree only)"
             else:
                 err = (
@@ -236,17 +252,11 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     return rep
 
 
-def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
-    """FK of every compared frame with yourdfpy vs the CPC model.
-
-    Raises:
-        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
-            yourdfpy cannot load it).
-    """
+def _load_yourdfpy(urdf_path: str) -> Any:
+    """``yourdfpy.URDF`` of the file, without meshes; :class:`InputFileError` if it cannot."""
     import yourdfpy
 
     read_urdf(urdf_path)
-    rep = ParserReport("yourdfpy", True)
     with captured_output() as out:  # yourdfpy logs its parse problems; they are not our output
         try:
             robot = yourdfpy.URDF.load(
@@ -259,6 +269,18 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     if failure is not None:
         said = (str(failure).strip() or out.text.strip() or type(failure).__name__).splitlines()[0]
         raise InputFileError(urdf_path, f"yourdfpy cannot read it ({said})") from failure
+    return robot
+
+
+def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
+    """FK of every compared frame with yourdfpy vs the CPC model.
+
+    Raises:
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+            yourdfpy cannot load it).
+    """
+    rep = ParserReport("yourdfpy", True)
+    robot = _load_yourdfpy(urdf_path)
     s = model.structure
     names = list(robot.actuated_joint_names)
     missing = [n for n in s.joint_names if n not in names]
@@ -308,20 +330,20 @@ def check_urdfdom_executable() -> str | None:
     return str(cand) if cand.is_file() else None
 
 
-def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
-    """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's.
+def _urdfdom_edges(urdf_path: str, rep: ParserReport) -> set[tuple[str, str]] | None:
+    """The (parent, child) link edges urdfdom's ``check_urdf`` prints, or None (and ``rep``
+    failed) when ``check_urdf`` is not installed.
 
     Raises:
         InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
             ``check_urdf`` refuses it).
     """
     read_urdf(urdf_path)
-    rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
     exe = check_urdfdom_executable()
     if exe is None:
         rep.ok = False
         rep.problems.append("check_urdf not found (it ships with the 'pin' package)")
-        return rep
+        return None
     proc = subprocess.run(
         [exe, urdf_path], capture_output=True, text=True, errors="replace", timeout=60,
         env={**os.environ, "LC_ALL": "C"},
@@ -346,6 +368,20 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
         if stack:
             edges.add((stack[-1][1], m.group(2)))
         stack.append((depth, m.group(2)))
+    return edges
+
+
+def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
+    """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's.
+
+    Raises:
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+            ``check_urdf`` refuses it).
+    """
+    rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
+    edges = _urdfdom_edges(urdf_path, rep)
+    if edges is None:
+        return rep
     s = model.structure
     bodies = _bodies_in(model, {child for _, child in edges})
     expected = {("world", BASE)}
@@ -361,10 +397,242 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
     return rep
 
 
+# ---- a model built from a user's URDF: the written-back file, links by the URDF's own names ----
+
+
+def _unit(v: object) -> Array:
+    """``v`` scaled to length 1 (a zero vector, as fixed joints may write, stays zero)."""
+    a = np.asarray(v, dtype=float)
+    n = float(np.linalg.norm(a))
+    return a / n if n > 0.0 else a
+
+
+def _source_problems(tree: UrdfTree, source: UrdfSource, calibrated: set[str]) -> list[str]:
+    """Every joint the model's constants were derived from that the file has changed: a
+    calibrated joint in anything but its origin, any other joint on the paths in anything."""
+    out = []
+    if tree.root != source.root:
+        out.append(f"root link is {tree.root!r}, the model's URDF has {source.root!r}")
+    for name, then in source.kinematics.items():
+        j = tree.joints.get(name)
+        if j is None:
+            out.append(f"joint {name!r}, which the model was built from, is missing")
+            continue
+        now = j.kinematics()
+        # write-back changes a calibrated joint's origin, and its <axis> only to the unit vector
+        free = ("xyz", "rpy", "axis") if name in calibrated else ()
+        changed = [k for k in then if k not in free and now.get(k) != then[k]]
+        if name in calibrated and not np.allclose(_unit(now["axis"]), _unit(then["axis"]), rtol=0.0, atol=LIMIT_TOL):
+            changed.append("axis")
+        if changed:
+            k = changed[0]
+            out.append(f"joint {name!r} (line {j.line}): {k} is {now.get(k)}, the model was built from {then[k]}")
+    return out
+
+
+def _writeback_plan(model: CPCModel, tree: UrdfTree, source: UrdfSource, rep: ParserReport) -> WritebackPlan | None:
+    """The write-back plan of ``model`` on the checked file, or None with the reason in ``rep``."""
+    try:
+        plan = plan_for_tree(model, tree, source)
+    except InputFileError as e:  # the file lacks a link or joint the model needs: a discrepancy
+        rep.problems.append(str(e))
+        rep.ok = False
+        return None
+    rep.problems.extend(_source_problems(tree, source, {c.joint.name for c in plan.changes}))
+    rep.ok = not rep.problems
+    return plan
+
+
+def _urdf_q(model: CPCModel, source: UrdfSource, q: Array) -> dict[str, float]:
+    """Readings ``q`` (model joint order, shape (n,)) keyed by URDF joint name."""
+    return {source.joints[n]: float(v) for n, v in zip(model.structure.joint_names, q, strict=True)}
+
+
+def _urdf_limit_problems(model: CPCModel, source: UrdfSource, limits: dict[str, tuple[float, float]]) -> list[str]:
+    """The model's joints whose limits in the file (``{URDF joint: (lower, upper)}``, continuous
+    joints left out) differ from the model's."""
+    out = []
+    for j in model.structure.joints:
+        u = source.joints[j.name]
+        if u in limits:
+            lo, hi = limits[u]
+            if abs(lo - j.lower) > LIMIT_TOL or abs(hi - j.upper) > LIMIT_TOL:
+                out.append(f"joint {u!r} limits [{lo}, {hi}] != [{j.lower}, {j.upper}]")
+    return out
+
+
+def _worst_link(rep: ParserReport, plan: WritebackPlan, errors: dict[str, tuple[float, float]]) -> None:
+    """:func:`_worst`, and the first link from the root that is off, with the joint above it:
+    where the file and the model part (every link below it follows)."""
+    _worst(rep, errors)
+    for link in plan.placements:  # root first
+        dp, dr = errors[link]
+        if dp > FK_AGREEMENT_TOL or dr > FK_AGREEMENT_TOL:
+            j = plan.tree.parent_joint(link)
+            above = f" below joint {j.name!r} (line {j.line})" if j is not None else ""
+            rep.problems.append(f"link {link!r}{above} is {dp:.3e} m, {dr:.3e} rad from where the model puts it")
+            return
+
+
+def _pinocchio_of(urdf_path: str) -> pin.Model:
+    """Pinocchio's model of the whole file, whatever its joints off the calibrated paths
+    (floating, planar: a user's URDF may have them; they stay at their neutral configuration).
+
+    Raises:
+        InputFileError: Pinocchio cannot read the file (its first complaint).
+    """
+    text = read_urdf(urdf_path)
+    with captured_output() as out:  # urdfdom's own complaints are not the message
+        try:
+            model = pin.buildModelFromXML(text)
+        except (RuntimeError, ValueError) as e:
+            failure: Exception | None = e
+        else:
+            failure = None
+    said = out.error_lines()
+    if failure is not None or said:
+        why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
+        raise InputFileError(urdf_path, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})")
+    return model
+
+
+def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:
+    """FK by Pinocchio of every link of ``plan`` (the paths from the root to the model's frames)
+    in the written-back URDF, against :func:`~cpc2urdf.urdf_origins.urdf_link_poses`; the other
+    joints of the file at Pinocchio's neutral configuration.
+
+    Raises:
+        InputFileError: Pinocchio cannot read the URDF.
+    """
+    rep = ParserReport("pinocchio", True, note="links by the URDF's names, in its root link's frame")
+    pmodel = _pinocchio_of(urdf_path)
+    source = plan.source
+    slots: dict[str, tuple[int, bool]] = {}  # URDF joint -> (index in q, continuous: (cos, sin))
+    limits = {}
+    for u in source.joints.values():
+        if not pmodel.existJointName(u):
+            rep.problems.append(f"joint {u!r} missing")
+            continue
+        jid = pmodel.getJointId(u)
+        joint = pmodel.joints[jid]
+        if joint.nv != 1 or joint.nq not in (1, 2):
+            rep.problems.append(f"joint {u!r} is {joint.shortname()}, expected revolute, continuous or prismatic")
+            continue
+        slots[u] = (joint.idx_q, joint.nq == 2)
+        if joint.nq == 1:
+            limits[u] = (float(pmodel.lowerPositionLimit[joint.idx_q]), float(pmodel.upperPositionLimit[joint.idx_q]))
+    rep.problems.extend(_urdf_limit_problems(model, source, limits))
+    links = list(plan.placements)
+    rep.problems.extend(f"link {ln!r} missing" for ln in links if not pmodel.existFrame(ln, pin.FrameType.BODY))
+    if rep.problems:
+        rep.ok = False
+        return rep
+    fids = {ln: pmodel.getFrameId(ln, pin.FrameType.BODY) for ln in links}
+    data = pmodel.createData()
+    got = {ln: np.empty((len(Q), 4, 4)) for ln in links}
+    qp = pin.neutral(pmodel)
+    for k, q in enumerate(Q):
+        for u, v in _urdf_q(model, source, q).items():
+            i, continuous = slots[u]
+            if continuous:
+                qp[i], qp[i + 1] = np.cos(v), np.sin(v)
+            else:
+                qp[i] = v
+        pin.framesForwardKinematics(pmodel, data, qp)
+        for ln in links:
+            got[ln][k] = data.oMf[fids[ln]].homogeneous
+    _worst_link(rep, plan, {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()})
+    return rep
+
+
+def check_yourdfpy_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:
+    """:func:`check_pinocchio_writeback` with yourdfpy (poses relative to the root link).
+
+    Raises:
+        InputFileError: yourdfpy cannot load the URDF.
+    """
+    rep = ParserReport("yourdfpy", True, note="links by the URDF's names, in its root link's frame")
+    robot = _load_yourdfpy(urdf_path)
+    source = plan.source
+    rep.problems.extend(f"joint {u!r} missing" for u in source.joints.values() if u not in robot.joint_map)
+    limits = {}
+    for u in source.joints.values():
+        uj = robot.joint_map.get(u)
+        if uj is not None and uj.type != "continuous":
+            lim = uj.limit
+            limits[u] = (_or_zero(None if lim is None else lim.lower), _or_zero(None if lim is None else lim.upper))
+    rep.problems.extend(_urdf_limit_problems(model, source, limits))
+    links = list(plan.placements)
+    rep.problems.extend(f"link {ln!r} missing" for ln in links if ln not in robot.link_map)
+    if rep.problems:
+        rep.ok = False
+        return rep
+    root = plan.tree.root
+    got = {ln: np.empty((len(Q), 4, 4)) for ln in links}
+    for k, q in enumerate(Q):
+        robot.update_cfg(_urdf_q(model, source, q))
+        for ln in links:
+            got[ln][k] = robot.get_transform(frame_to=ln, frame_from=root)
+    _worst_link(rep, plan, {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()})
+    return rep
+
+
+def check_urdfdom_writeback(urdf_path: str, plan: WritebackPlan) -> ParserReport:
+    """urdfdom's ``check_urdf``: the file parses and has every parent -> child edge of the
+    plan's links (the rest of the robot is the user's and not compared).
+
+    Raises:
+        InputFileError: ``check_urdf`` refuses the URDF.
+    """
+    rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
+    edges = _urdfdom_edges(urdf_path, rep)
+    if edges is None:
+        return rep
+    expected = set()
+    for link in plan.placements:
+        j = plan.tree.parent_joint(link)
+        if j is not None:
+            expected.add((j.parent, link))
+    if not expected <= edges:
+        rep.ok = False
+        rep.problems.append(f"link tree lacks {sorted(expected - edges)}")
+    return rep
+
+
+def cross_check_writeback(model: CPCModel, path: str, Q: Array) -> CrossCheckReport:
+    """:func:`cross_check` of a model built from a user's URDF against a URDF written back from
+    it (:mod:`cpc2urdf.urdf_writeback`): every link on the paths from the root to the model's
+    frames (the measured links, cameras, and every link between) where
+    :func:`~cpc2urdf.urdf_origins.urdf_link_poses` puts it, in the root link's frame, by
+    Pinocchio and yourdfpy; urdfdom's tree has those links; and every joint the model depends on
+    is as the model recorded it (a calibrated joint may differ only in its origin), the row
+    ``source``.
+
+    Raises:
+        InputFileError: The URDF does not parse (any of the three parsers).
+    """
+    tree = parse_urdf_tree(read_urdf(path), path)
+    source = urdf_source(model)
+    assert source is not None
+    src = ParserReport("source", True, note=f"the joints {os.path.basename(source.path)} gave the model")
+    plan = _writeback_plan(model, tree, source, src)
+    if plan is None:
+        urdfdom = ParserReport("urdfdom", True, note="check_urdf prints no poses")
+        _urdfdom_edges(path, urdfdom)
+        skipped = [ParserReport(p, False, problems=["no reference poses (see 'source')"])
+                   for p in ("pinocchio", "yourdfpy")]
+        return CrossCheckReport(path, len(Q), [], [*skipped, urdfdom, src], compared="links of the written-back URDF")
+    reports = [check_pinocchio_writeback(model, path, Q, plan), check_yourdfpy_writeback(model, path, Q, plan),
+               check_urdfdom_writeback(path, plan), src]
+    return CrossCheckReport(path, len(Q), list(plan.placements), reports, compared="links of the written-back URDF")
+
+
+
 def cross_check(
     model: CPCModel, urdf_path: str | os.PathLike[str], n: int = 100, seed: int = 0
 ) -> CrossCheckReport:
-    """Compare ``urdf_path`` with ``model`` using Pinocchio, yourdfpy and urdfdom.
+    """Compare ``urdf_path`` with ``model`` using Pinocchio, yourdfpy and urdfdom (a model built
+    from a user's URDF: :func:`cross_check_writeback`, the module docstring).
 
     Args:
         model: The CPC model the URDF should describe.
@@ -381,6 +649,8 @@ def cross_check(
     path = os.fspath(urdf_path)
     text = read_urdf(path)
     Q = sample_configurations(model, n, seed)
+    if urdf_source(model) is not None:
+        return cross_check_writeback(model, path, Q)
     reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
     links = {el.get("name") for el in ET.fromstring(text).iter("link")}
     return CrossCheckReport(path, len(Q), _compared_frames(model, _bodies_in(model, links)), reports)
@@ -391,9 +661,13 @@ __all__ = [
     "CrossCheckReport",
     "ParserReport",
     "check_pinocchio",
+    "check_pinocchio_writeback",
     "check_urdfdom",
     "check_urdfdom_executable",
+    "check_urdfdom_writeback",
     "check_yourdfpy",
+    "check_yourdfpy_writeback",
     "cross_check",
+    "cross_check_writeback",
     "sample_configurations",
 ]

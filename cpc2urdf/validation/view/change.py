@@ -141,7 +141,11 @@ def _css(rgba: Sequence[float]) -> str:
 
 
 def legend_html(
-    changes: Mapping[str, LinkChange], ghost: str, unmatched: Sequence[str] = (), top: int = 5
+    changes: Mapping[str, LinkChange],
+    ghost: str,
+    unmatched: Sequence[str] = (),
+    top: int = 5,
+    anchor: str | None = None,
 ) -> str:
     """The legend of the change colours, as an HTML block for the static page: the scale, the
     rule, and the ``top`` links that moved most.
@@ -151,6 +155,8 @@ def legend_html(
         ghost: What the nominal model is (its source), as the legend names it.
         unmatched: Links of the calibrated robot the nominal model does not have (grey).
         top: How many of the most moved links to list.
+        anchor: The link the ghost was aligned on (poses compared relative to it), or None
+            (compared in one world).
     """
     ranked = sorted(changes.values(), key=lambda c: -c.displacement)[:top]
     stops = [(0.0, GREEN_RGBA), (0.5, YELLOW_RGBA), (1.0, RED_RGBA)]
@@ -167,9 +173,14 @@ def legend_html(
         if unmatched
         else ""
     )
+    aligned = (
+        f"relative to link {html.escape(anchor)} (the ghost aligned on it)"
+        if anchor is not None
+        else "in one world"
+    )
     return f"""<div id="cpc2urdf-legend">
 <div><b>How far calibration moved each link</b> (vs {html.escape(ghost)}, links matched by name,
-same joint readings; the nominal model is the translucent blue ghost)</div>
+same joint readings, {aligned}; the nominal model is the translucent blue ghost)</div>
 <div class="bar" style="background: linear-gradient(to right, {gradient})"></div>
 <div class="ticks"><span>&le; {1e3 * CHANGE_GREEN:g} mm</span><span>3.2 mm</span>
 <span>&ge; {1e3 * CHANGE_RED:g} mm</span></div>

@@ -135,7 +135,10 @@ def static_view_html(robot: ViewRobot | RobotSource, **options: Any) -> tuple[st
     summary = build_view(vis, robot, **options)
     if summary.link_changes and summary.ghost is not None:
         vis.window.overlay = legend_html(
-            summary.link_changes, os.path.basename(summary.ghost), summary.unmatched_links
+            summary.link_changes,
+            os.path.basename(summary.ghost),
+            summary.unmatched_links,
+            anchor=summary.ghost_anchor if summary.ghost_aligned else None,
         )
     return vis.static_html(), summary
 

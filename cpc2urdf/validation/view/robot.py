@@ -15,8 +15,12 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import ModelMetadata
+from cpc2urdf.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf import camera_body_names
+from cpc2urdf.urdf_origins import writeback_plan
+from cpc2urdf.urdf_robot import urdf_source
+from cpc2urdf.urdf_writeback import calibrated_urdf_text
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 from cpc2urdf.validation.view.meshes import PackageDirs, VisualMeshes, visual_geometry
 
@@ -40,6 +44,9 @@ class ViewRobot:
             (:func:`~cpc2urdf.validation.view.meshes.visual_geometry`); None: the
             :class:`PinocchioRobot`'s own (built with ``visuals=True``).
         meshes: What the visuals are made of (how many meshes, which files).
+        written_back: For a model identified from a user's URDF, that model: the robot is the
+            URDF written back from it (:func:`written_back_robot`), in the URDF's root link's
+            frame and names; else None.
     """
 
     pinocchio: PinocchioRobot
@@ -49,6 +56,7 @@ class ViewRobot:
     metadata: ModelMetadata = field(default_factory=ModelMetadata)
     visuals: pin.GeometryModel | None = None
     meshes: VisualMeshes = field(default_factory=lambda: VisualMeshes(0, ()))
+    written_back: CPCModel | None = None
 
     @property
     def name(self) -> str:
@@ -156,6 +164,21 @@ class ViewRobot:
                 out.append(f.name)
         return tuple(out)
 
+    def links_above(self, link: str) -> tuple[str, ...]:
+        """The links from the root down to ``link`` (``link`` left out), root first.
+
+        Raises:
+            UnknownNameError: The robot has no such link.
+        """
+        frames = self.model.frames
+        i = self.pinocchio.frame_id(link, pin.FrameType.BODY)
+        out = []
+        while i != 0:
+            i = int(frames[i].parentFrame)
+            if frames[i].type == pin.FrameType.BODY:
+                out.append(str(frames[i].name))
+        return tuple(out[::-1])
+
     def frame(self, name: str) -> str:
         """``name`` if the robot has a link of that name, else :class:`UnknownNameError`."""
         if name not in self.links:
@@ -186,17 +209,72 @@ def load_view_robot(source: RobotSource, *, package_dirs: PackageDirs = ()) -> V
             (:class:`~cpc2urdf.validation.view.meshes.UnresolvedMeshError`) a mesh that does not
             resolve or cannot be read, naming the link and the mesh path.
     """
-    robot = PinocchioRobot.load(source, continuous_as_revolute=True)
-    return view_robot(robot, package_dirs=package_dirs)
+    if not isinstance(source, CPCModel) and is_urdf_ref(source):
+        return view_robot(
+            PinocchioRobot.load(source, continuous_as_revolute=True), package_dirs=package_dirs
+        )
+    label = None if isinstance(source, CPCModel) else os.fspath(source)
+    model = source if isinstance(source, CPCModel) else load_model(os.fspath(source))
+    if urdf_source(model) is not None:  # the user's own URDF, calibrated
+        return view_robot(
+            written_back_robot(model, label), package_dirs=package_dirs, written_back=model
+        )
+    return view_robot(PinocchioRobot.from_model(model, source=label), package_dirs=package_dirs)
 
 
-def view_robot(robot: PinocchioRobot, *, package_dirs: PackageDirs = ()) -> ViewRobot:
+def own_nominal(robot: ViewRobot) -> str:
+    """The nominal model of ``robot`` when none is named (``view MODEL --nominal``): the URDF a
+    model identified from a user's URDF was built from.
+
+    Raises:
+        ConfigurationError: ``robot`` is not such a model (name the nominal model instead).
+    """
+    source = None if robot.written_back is None else urdf_source(robot.written_back)
+    if source is None:
+        raise ConfigurationError(
+            f"{robot.source}: --nominal without OTHER is the URDF a model was identified from, and "
+            "this is not a model identified from a URDF; name the nominal model (--nominal OTHER)"
+        )
+    return source.path
+
+
+def written_back_robot(model: CPCModel, label: str | None = None) -> PinocchioRobot:
+    """The robot of a model built from a user's URDF: that URDF with the model's calibrated
+    origins (:func:`~cpc2urdf.urdf_writeback.calibrated_urdf_text`, in memory), so every one of
+    its meshes sits on its calibrated link; meshes resolve from the source URDF's folder. Its
+    names are the URDF's (not the model's, which may differ: :class:`~cpc2urdf.urdf_robot.NameMap`),
+    so it carries no :attr:`~PinocchioRobot.cpc_model`; :func:`view_robot` takes the model.
+
+    Raises:
+        InputFileError: The source URDF cannot be read or changed where the model depends on it
+            (:func:`~cpc2urdf.urdf_origins.writeback_plan`), or Pinocchio refuses the text.
+    """
+    plan = writeback_plan(model)
+    name = label if label is not None else f"<model {model.structure.name}>"
+    return PinocchioRobot.from_urdf(
+        calibrated_urdf_text(plan),
+        source=f"{name} (written back into {plan.source.path})",
+        continuous_as_revolute=True,
+        path=plan.source.path,
+    )
+
+
+def view_robot(
+    robot: PinocchioRobot, *, package_dirs: PackageDirs = (), written_back: CPCModel | None = None
+) -> ViewRobot:
     """The :class:`ViewRobot` of a loaded robot: its visuals (meshes resolved through
     ``package_dirs``, :func:`~cpc2urdf.validation.view.meshes.visual_geometry`), display limits,
-    and the kinds and metadata of the CPC model it came from, if any."""
+    and the kinds and metadata of the CPC model it came from, if any (``written_back``: the
+    model of a user's URDF that ``robot`` is the written-back URDF of,
+    :func:`written_back_robot`)."""
     kinds: dict[str, str] = {}
     metadata = ModelMetadata()
-    if robot.cpc_model is not None:
+    source = None if written_back is None else urdf_source(written_back)
+    if written_back is not None and source is not None:
+        # a model of a user's URDF names its frames after that URDF's links
+        kinds = {source.urdf_link(f.name): f.kind for f in written_back.structure.frames}
+        metadata = written_back.metadata
+    elif robot.cpc_model is not None:
         # a cpc2urdf model says what each frame is; its camera *body* links carry no triad of their own
         kinds = {f.name: f.kind for f in robot.cpc_model.structure.frames}
         kinds |= {body: "frame" for body in camera_body_names(robot.cpc_model.structure).values()}
@@ -208,7 +286,15 @@ def view_robot(robot: PinocchioRobot, *, package_dirs: PackageDirs = ()) -> View
     links = robot.links
     kinds = {**{ln: kind_from_name(ln) for ln in links if kind_from_name(ln) != "frame"}, **kinds}
     visuals, meshes = visual_geometry(robot, package_dirs)
-    return ViewRobot(robot, lo, hi, kinds, metadata, visuals, meshes)
+    return ViewRobot(robot, lo, hi, kinds, metadata, visuals, meshes, written_back)
 
 
-__all__ = ["RobotSource", "ViewRobot", "kind_from_name", "load_view_robot", "view_robot"]
+__all__ = [
+    "RobotSource",
+    "ViewRobot",
+    "kind_from_name",
+    "load_view_robot",
+    "own_nominal",
+    "view_robot",
+    "written_back_robot",
+]

@@ -6,8 +6,10 @@ target and optical rays, a ghost model, measured plate positions, and a joint sw
 - with a target: a sphere at ``p_world``, the head in the gaze solution, and a ray along each
   camera's optical (z) axis, as long as the distance to the point of the axis nearest the target;
 - with another model (e.g. the nominal one): ``/meshcat/ghost``, the same links in the same
-  joint readings, translucent; each link of the head is then coloured by how far calibration
-  moved it from the ghost's link of the same name (:mod:`.change`: green < 1 mm, yellow, red
+  joint readings, translucent; in the robot's world if both are in one world, else placed so
+  that its base link sits on the robot's (:func:`ghost_alignment`: a model in the rig's world
+  and its gravity-aligned export compare link by link relative to the base); each link of the
+  head is then coloured by how far calibration moved it from the ghost's link of the same name (:mod:`.change`: green < 1 mm, yellow, red
   >= 10 mm; grey: no such link in the ghost) and the ghost is blue, or, with
   ``change_colours=False``, the head keeps its URDF colours and the ghost is green;
 - with measurements: each measured plate origin (small dark sphere) and a bar from it to the
@@ -19,7 +21,9 @@ target and optical rays, a ghost model, measured plate positions, and a joint sw
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import meshcat
@@ -31,9 +35,11 @@ from meshcat.commands import SetAnimation
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.errors import InputFileError
+from cpc2urdf.errors import ConfigurationError, InputFileError
 from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.transforms import Array
+from cpc2urdf.model import BASE
+from cpc2urdf.transforms import Array, inverse, rotation_error
+from cpc2urdf.urdf_robot import urdf_source
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
 from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
 from cpc2urdf.validation.view.change import (
@@ -68,6 +74,9 @@ MIN_VISIBLE_RESIDUAL = 0.02  # [m]: the longest residual bar is drawn at least t
 SWEEP_FRACTION = 0.4  # each joint sweeps +-40 % of its range around the shown configuration
 SWEEP_KEYS = 20  # keyframes per joint
 SWEEP_FPS = 10  # [1/s]
+ALIGN_MODES = ("auto", "base", "world")  # how a ghost is placed (ghost_alignment)
+SAME_WORLD_DISTANCE = 0.05  # [m]: two anchors (bases) closer than this and ...
+SAME_WORLD_ANGLE = math.radians(5.0)  # [rad]: ... turned less than this are in one world
 
 
 def gaze_configuration(
@@ -106,6 +115,7 @@ def build_view(
     sweep: bool = True,
     upright: bool = True,
     change_colours: bool = True,
+    align: str = "auto",
 ) -> ViewSummary:
     """Draw the head (and target, ghost, measurements) into a meshcat visualizer.
 
@@ -128,12 +138,16 @@ def build_view(
         change_colours: With a ghost, colour each link by how far it moved from the ghost's
             link of the same name (:mod:`cpc2urdf.validation.view.change`; the numbers are in
             :attr:`ViewSummary.link_changes`); False keeps the URDF colours.
+        align: How the ghost is placed: ``"auto"``, ``"base"`` or ``"world"``
+            (:func:`ghost_alignment`; :attr:`ViewSummary.alignment` says what was done).
 
     Raises:
         UnknownNameError: A camera or measured frame, or a joint, the robot does not have.
         ConfigurationError: A bad configuration or target (shape, NaN, limits).
         InputFileError: The robot or ghost cannot be loaded, or joints differ between them.
     """
+    if align not in ALIGN_MODES:
+        raise ConfigurationError(f"align must be one of {', '.join(ALIGN_MODES)}, got {align!r}")
     robot = robot if isinstance(robot, ViewRobot) else load_view_robot(robot)
     p_target = _parse_target(target)
     q0 = robot.q_from(q)
@@ -163,12 +177,18 @@ def build_view(
     summary.meshes = robot.meshes
     T_links = robot.link_poses(q0)
     ghost_robot = None
+    T_align = np.eye(4)  # the ghost's world -> the robot's (ghost_alignment)
     colours: dict[str, tuple[float, float, float, float]] = {}
     if ghost is not None:
         ghost_robot = ghost if isinstance(ghost, ViewRobot) else load_view_robot(ghost)
+        _check_ghost(ghost_robot, robot)
         summary.ghost = ghost_robot.source
+        placed = ghost_alignment(robot, ghost_robot, q0, align)
+        T_align = placed.T_align
+        summary.ghost_anchor, summary.ghost_offset = placed.anchor, placed.offset
+        summary.ghost_aligned = placed.aligned
         if change_colours:
-            colours = _change_colours(robot, ghost_robot, q0, T_links, visuals, summary)
+            colours = _change_colours(robot, ghost_robot, q0, T_links, visuals, summary, T_align)
     for v in visuals:
         node = head[v.link][v.name]
         node.set_object(v.geometry, material(colours.get(v.link, v.rgba)))
@@ -186,14 +206,19 @@ def build_view(
 
     if ghost_robot is not None:
         _draw_ghost(
-            vis["ghost"], ghost_robot, robot, q0, CHANGE_GHOST_RGBA if colours else GHOST_RGBA
+            vis["ghost"],
+            ghost_robot,
+            robot,
+            q0,
+            CHANGE_GHOST_RGBA if colours else GHOST_RGBA,
+            T_align,
         )
 
     if measurements is not None:
         points.extend(_draw_measurements(vis["measurements"], robot, measurements, summary))
 
     if sweep:
-        _sweep(vis, robot, q0, ghost_robot)
+        _sweep(vis, robot, q0, ghost_robot, T_align)
     eyes = [T_links[c][:3, 3] for c in cameras if c in T_links]
     if p_target is not None and eyes:
         forward = p_target - np.mean(eyes, axis=0)
@@ -224,6 +249,64 @@ def _draw_target(
         head[c]["ray"].set_transform(T)
 
 
+@dataclass(frozen=True)
+class GhostPlacement:
+    """Where the ghost is drawn and compared (:func:`ghost_alignment`).
+
+    Attributes:
+        T_align: Takes the ghost's world to the robot's, shape (4, 4).
+        anchor: The link both have to align on, or None.
+        offset: ``T_r T_g^-1`` of the anchor (the ghost's world in the robot's), shape (4, 4).
+        aligned: True when ``T_align`` is ``offset`` (links compared relative to the anchor),
+            False when it is the identity (compared in one world).
+    """
+
+    T_align: Array
+    anchor: str | None
+    offset: Array
+    aligned: bool
+
+
+def ghost_alignment(
+    robot: ViewRobot, ghost: ViewRobot, q: Array, align: str = "auto"
+) -> GhostPlacement:
+    """Where the ghost is drawn and compared: a :class:`GhostPlacement`.
+
+    Two descriptions of one robot need not share a world: a model lives in the measuring rig's
+    world, a spec's nominal model at the origin, ``export`` roots a ``world`` gravity-aligned at
+    the base, a user's URDF its own root link. The anchor is ``base`` when both have it
+    (cpc2urdf's models and URDFs), else the robot's root link if the ghost has it (a user's URDF
+    and its written-back copy), else None. ``align``:
+
+    - ``"base"``: the ghost's anchor is put on the robot's; links compared relative to it;
+    - ``"world"``: the worlds are taken as one (``T_align`` identity);
+    - ``"auto"``: as ``"base"`` when the anchors are :data:`SAME_WORLD_DISTANCE` or
+      :data:`SAME_WORLD_ANGLE` apart or more (different worlds: calibration does not move a base
+      that far), else as ``"world"`` (one world, e.g. a calibrated model and the true one in the
+      rig: the honest comparison, which a base-aligned one would bend by the base's own error).
+
+    Both anchors are fixed links, so nothing depends on ``q`` (shape (n,), the robot's readings).
+
+    Raises:
+        ConfigurationError: ``align`` is none of the three.
+    """
+    if align not in ALIGN_MODES:
+        raise ConfigurationError(f"align must be one of {', '.join(ALIGN_MODES)}, got {align!r}")
+    anchor = BASE if BASE in robot.links and BASE in ghost.links else robot.links[0]
+    if anchor not in ghost.links:
+        return GhostPlacement(np.eye(4), None, np.eye(4), False)
+    T_r = robot.link_poses(q)[anchor]
+    T_g = ghost.link_poses(_ghost_q(ghost, robot, q))[anchor]
+    offset = T_r @ inverse(T_g)
+    far = bool(
+        np.linalg.norm(offset[:3, 3]) >= SAME_WORLD_DISTANCE
+        or rotation_error(offset[:3, :3], np.eye(3)) >= SAME_WORLD_ANGLE
+    )
+    if align == "base" or (align == "auto" and far):
+        return GhostPlacement(offset, anchor, offset, True)
+    return GhostPlacement(np.eye(4), anchor, offset, False)
+
+
 def _check_ghost(ghost: ViewRobot, robot: ViewRobot) -> None:
     """:class:`InputFileError` if the ghost lacks joints of ``robot`` (it cannot be posed alike)."""
     missing = [j for j in robot.joint_names if j not in ghost.joint_names]
@@ -241,17 +324,23 @@ def _change_colours(
     T_links: dict[str, Array],
     visuals: list[Visual],
     summary: ViewSummary,
+    T_align: Array,
 ) -> dict[str, tuple[float, float, float, float]]:
     """Link name -> the colour of how far it moved from ``ghost``'s link of that name at
-    ``robot``'s readings ``q`` (shape (n,)); fills :attr:`ViewSummary.link_changes` and
-    :attr:`ViewSummary.unmatched_links`."""
-    _check_ghost(ghost, robot)
+    ``robot``'s readings ``q`` (shape (n,)), the ghost carried into the robot's world by
+    ``T_align`` (shape (4, 4), :func:`ghost_alignment`); fills :attr:`ViewSummary.link_changes`
+    and :attr:`ViewSummary.unmatched_links`."""
     points: dict[str, list[Array]] = {}
     for v in visuals:
         points.setdefault(v.link, []).append(v.corners_link())
-    changes = link_changes(T_links, ghost.link_poses(_ghost_q(ghost, robot, q)), points)
+    T_ghost = {ln: T_align @ T for ln, T in ghost.link_poses(_ghost_q(ghost, robot, q)).items()}
+    # Aligned on a link, the links above it (a rig or gravity 'world') are where each model's
+    # world is, not a part of the robot: not compared, drawn in their own colours.
+    aligned_on = summary.ghost_anchor if summary.ghost_aligned else None
+    above = set(robot.links_above(aligned_on)) if aligned_on is not None else set()
+    changes = link_changes({ln: T for ln, T in T_links.items() if ln not in above}, T_ghost, points)
     summary.link_changes = changes
-    summary.unmatched_links = tuple(ln for ln in robot.links if ln not in changes)
+    summary.unmatched_links = tuple(ln for ln in robot.links if ln not in changes and ln not in above)
     colours = {ln: change_rgba(c.displacement) for ln, c in changes.items()}
     colours.update({ln: UNMATCHED_RGBA for ln in summary.unmatched_links})
     return colours
@@ -263,9 +352,11 @@ def _draw_ghost(
     robot: ViewRobot,
     q: Array,
     rgba: tuple[float, float, float, float] = GHOST_RGBA,
+    T_align: Array | None = None,
 ) -> None:
     """``ghost`` translucent in colour ``rgba`` at ``robot``'s readings ``q`` (shape (n,)),
-    joint by joint by name.
+    joint by joint by name, carried into the robot's world by ``T_align`` (shape (4, 4),
+    :func:`ghost_alignment`; default identity).
 
     Raises:
         InputFileError: The ghost lacks joints of ``robot``.
@@ -277,8 +368,9 @@ def _draw_ghost(
         node = vis[v.link][v.name]
         node.set_object(v.geometry, material(rgba))
         node.set_transform(v.T_link_visual)
+    M = np.eye(4) if T_align is None else T_align
     for link, T in ghost.link_poses(q_ghost).items():
-        vis[link].set_transform(T)
+        vis[link].set_transform(M @ T)
 
 
 def _ghost_q(ghost: ViewRobot, robot: ViewRobot, q: Array) -> Array:
@@ -296,24 +388,40 @@ def _draw_measurements(
     vis: meshcat.Visualizer, robot: ViewRobot, ms: MeasurementSet, summary: ViewSummary
 ) -> list[Array]:
     """Measured plate origins and bars to the model's predictions into ``vis``; fills the
-    residual statistics of ``summary``; returns the measured points [m] (world), each (3,)."""
+    residual statistics of ``summary``; returns the measured points [m] (world), each (3,).
+
+    For a model identified from a user's URDF (drawn as the written-back URDF, in its root
+    link's frame) the measurements name the model's joints and frames: they are mapped to the
+    URDF's, the robot's other joints stay where they are shown, and the measured poses (in the
+    rig's world) are carried into the root link's frame by ``T_world_base^-1``.
+    """
+    model = robot.written_back
+    source = None if model is None else urdf_source(model)
     names = list(ms.structure.joint_names)
-    missing = [j for j in robot.joint_names if j not in names]
+    T_shown_world = np.eye(4)
+    link_of = {f: f for f in ms.poses}
+    needed = list(robot.joint_names)
+    if model is not None and source is not None:
+        names = [source.joints.get(n, n) for n in names]
+        link_of = {f: source.urdf_link(f) for f in ms.poses}
+        T_shown_world = inverse(model.T_world_base())
+        needed = [source.joints[n] for n in model.structure.joint_names]
+    missing = [j for j in needed if j not in names]
     if missing:
         raise InputFileError(
             getattr(ms, "source", "<measurements>"),
             f"lacks joints {missing} of robot {robot.name!r}",
         )
-    cols = [names.index(j) for j in robot.joint_names]
+    shown = dict(summary.q)
     measured, predicted = [], []
     for frame, poses in ms.poses.items():
-        robot.frame(frame)
+        link = robot.frame(link_of[frame])
         for i in range(len(ms.q)):
             if np.all(np.isfinite(poses[i])):
-                measured.append(poses[i][:3, 3])
-                predicted.append(
-                    robot.link_poses(np.asarray(ms.q[i], dtype=float)[cols])[frame][:3, 3]
-                )
+                measured.append((T_shown_world @ poses[i])[:3, 3])
+                reading = {**shown, **dict(zip(names, np.asarray(ms.q[i], dtype=float).tolist(), strict=True))}
+                q = np.array([reading[j] for j in robot.joint_names])
+                predicted.append(robot.link_poses(q)[link][:3, 3])
     if not measured:
         return []
     P_m, P_p = np.array(measured), np.array(predicted)
@@ -338,7 +446,13 @@ def _draw_measurements(
     return list(P_m)
 
 
-def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobot | None) -> None:
+def _sweep(
+    vis: meshcat.Visualizer,
+    robot: ViewRobot,
+    q0: Array,
+    ghost: ViewRobot | None,
+    T_align: Array | None = None,
+) -> None:
     """One joint at a time: q0 -> q0 - a -> q0 + a -> q0 (a = SWEEP_FRACTION of the range, clamped
     to the limits), so the animation starts and ends at the shown configuration.
 
@@ -349,10 +463,10 @@ def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobo
     anim = meshcat.animation.Animation(default_framerate=SWEEP_FPS)
     s = np.sin(np.linspace(0.0, 2.0 * np.pi, SWEEP_KEYS + 1))
     last = SWEEP_KEYS * robot.n_joints
-    models = [(robot, vis["head"])]
+    models = [(robot, vis["head"], np.eye(4))]
     if ghost is not None:
-        models.append((ghost, vis["ghost"]))
-    for model, node in models:
+        models.append((ghost, vis["ghost"], np.eye(4) if T_align is None else T_align))
+    for model, node, M in models:
         data = model.model.createData()
         keys: dict[str, dict[int, Array]] = {}
         for i, joint in enumerate(robot.joint_names):
@@ -366,10 +480,8 @@ def _sweep(vis: meshcat.Visualizer, robot: ViewRobot, q0: Array, ghost: ViewRobo
                 q[i] = np.clip(q0[i] + a * sk, robot.lower[i], robot.upper[i])
                 pin.framesForwardKinematics(model.model, data, _ghost_q(model, robot, q))
                 for link, f in zip(below, frames, strict=True):
-                    keys.setdefault(link, {})[SWEEP_KEYS * i + k] = np.array(
-                        data.oMf[f].homogeneous
-                    )
-        rest = model.link_poses(_ghost_q(model, robot, q0))
+                    keys.setdefault(link, {})[SWEEP_KEYS * i + k] = M @ data.oMf[f].homogeneous
+        rest = {ln: M @ T for ln, T in model.link_poses(_ghost_q(model, robot, q0)).items()}
         for link, by_frame in keys.items():
             by_frame[0] = by_frame[last] = rest[link]
             times = sorted(by_frame)
@@ -418,4 +530,9 @@ __all__ = [
     "TARGET_RGBA",
     "build_view",
     "gaze_configuration",
+    "ghost_alignment",
+    "ALIGN_MODES",
+    "GhostPlacement",
+    "SAME_WORLD_ANGLE",
+    "SAME_WORLD_DISTANCE",
 ]

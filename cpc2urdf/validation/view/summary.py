@@ -38,6 +38,12 @@ class ViewSummary:
             moved each link, link name -> :class:`~cpc2urdf.validation.view.change.LinkChange`
             (:mod:`cpc2urdf.validation.view.change`); empty otherwise.
         unmatched_links: Links of the robot the ghost does not have (drawn grey).
+        ghost_anchor: The link both have to align on (``base``, or the robot's root link;
+            :func:`~cpc2urdf.validation.view.scene.ghost_alignment`), or None.
+        ghost_offset: ``T_r T_g^-1`` of the anchor: the ghost's world in the robot's, shape
+            (4, 4) (identity when both describe the same world).
+        ghost_aligned: Whether the ghost was put on the anchor (links compared relative to it);
+            False: compared in one world.
         meshes: What the robot's visuals are made of (mesh count, files, triangles).
     """
 
@@ -57,6 +63,9 @@ class ViewSummary:
     cameras: tuple[str, ...] = DEFAULT_CAMERAS
     link_changes: dict[str, LinkChange] = field(default_factory=dict)
     unmatched_links: tuple[str, ...] = ()
+    ghost_anchor: str | None = None
+    ghost_offset: Array = field(default_factory=lambda: np.eye(4))
+    ghost_aligned: bool = False
     meshes: VisualMeshes | None = None
 
     def largest_changes(self, n: int = 5) -> list[LinkChange]:
@@ -80,6 +89,20 @@ class ViewSummary:
         x, y = float(d @ right) / depth / tan_u, float(d @ cam_up) / depth / tan_v
         return 0.5 * width * (1.0 + x), 0.5 * height * (1.0 - y)
 
+    def alignment(self) -> str:
+        """How the ghost is placed, in words (:attr:`ghost_anchor`, :attr:`ghost_offset`)."""
+        if self.ghost_anchor is None:
+            return "none (no link in common to align on); compared in one world"
+        T = self.ghost_offset
+        d = float(np.linalg.norm(T[:3, 3]))
+        angle = math.degrees(
+            math.acos(max(-1.0, min(1.0, 0.5 * (float(np.trace(T[:3, :3])) - 1.0))))
+        )
+        apart = f"{self.ghost_anchor!r} {1e3 * d:.4g} mm, {angle:.4g} deg apart"
+        if self.ghost_aligned:
+            return f"on link {self.ghost_anchor!r}, poses compared relative to it (the worlds' {apart})"
+        return f"none, compared in one world ({apart})"
+
     def format(self) -> str:
         """A few lines for a terminal."""
         lines = [f"robot {self.robot}: " + ", ".join(f"{k}={v:.6g}" for k, v in self.q.items())]
@@ -94,6 +117,8 @@ class ViewSummary:
             )
         if self.meshes is not None and self.meshes.n_meshes:
             lines.append(self.meshes.format())
+        if self.ghost:
+            lines.append(f"ghost aligned: {self.alignment()}")
         if self.ghost and self.link_changes:
             lines.append(f"ghost: {self.ghost} (translucent blue, same joint readings)")
             d = np.array([c.displacement for c in self.link_changes.values()])
