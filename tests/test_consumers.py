@@ -8,16 +8,13 @@ What each consumer prints while loading is captured at the file-descriptor level
 (:func:`cpc2urdf.native_output.captured_output`: urdfdom's and PyBullet's C++ ``b3Warning`` lines,
 MuJoCo's compiler warnings) together with Python warnings and log records, and must be empty.
 
-PyBullet's link-frame items of ``getLinkState`` (4, 5) carry its own ~1e-7 error (it shows the
-same on its bundled KUKA model; see ../shared/reviews/urdf-consumers.md); its centre-of-mass items
-(0, 1) are exact, so the link frame is taken from them and the ``<inertial><origin>`` written in
-the file: ``T_world_link = T_world_com inv(T_link_inertial)``.
+How each consumer is loaded, and how its poses are read (PyBullet's from its exact
+centre-of-mass items), is in ``consumer_checks.py``, shared with ``test_real_robots.py``.
 """
 
 from __future__ import annotations
 
 import logging
-import subprocess
 import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterator
@@ -26,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from consumer_checks import CONSUMER_TOL, CONSUMERS, LOADERS, fk_disagreement, links, load_pinocchio
 
 from cpc2urdf.cli import main
 from cpc2urdf.identification.kinematics.methods import identify
@@ -36,16 +34,10 @@ from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import save_model
 from cpc2urdf.native_output import captured_output
 from cpc2urdf.robot_ref import load_model, load_robot
-from cpc2urdf.transforms import Array, matrix_from_rpy, rotation_error
 from cpc2urdf.urdf import camera_body_names, write_urdf
-from cpc2urdf.validation.crosscheck import check_urdfdom_executable, cross_check
+from cpc2urdf.validation.crosscheck import cross_check
 
-CONSUMER_TOL = 1e-12  # [m] and [rad]: every consumer's pose of every link vs Pinocchio's
 N_CONFIGURATIONS = 12  # seeded, plus both limit corners
-CONSUMERS = ("pinocchio", "yourdfpy", "check_urdf", "mujoco", "pybullet")
-Poses = dict[str, Array]
-# (FK by joint name, what it printed while loading, how to let it go)
-Loaded = tuple[Callable[[dict[str, float]], Poses] | None, str, Callable[[], None]]
 
 
 # ---- the URDFs -------------------------------------------------------------------------------
@@ -108,128 +100,6 @@ def quiet(caplog: pytest.LogCaptureFixture) -> Iterator[Callable[[], str]]:
         yield lambda: "\n".join([str(w.message) for w in caught] + [r.getMessage() for r in caplog.records])
 
 
-def _links(path: Path) -> list[str]:
-    return [el.get("name", "") for el in ET.parse(path).getroot().iter("link")]
-
-
-def _inertial_origins(path: Path) -> dict[str, Array]:
-    """``T_link_inertial`` (4, 4) of every link, from the file's ``<inertial><origin>``."""
-    out = {}
-    for link in ET.parse(path).getroot().iter("link"):
-        T = np.eye(4)
-        origin = link.find("inertial/origin")
-        if origin is not None:
-            T[:3, :3] = matrix_from_rpy([float(v) for v in origin.get("rpy", "0 0 0").split()])
-            T[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
-        out[link.get("name", "")] = T
-    return out
-
-
-def _pinocchio(path: Path) -> Loaded:
-    import pinocchio as pin
-
-    with captured_output() as out:
-        model = pin.buildModelFromUrdf(str(path))
-        for kind in (pin.GeometryType.VISUAL, pin.GeometryType.COLLISION):
-            pin.buildGeomFromUrdf(model, str(path), kind)
-    data = model.createData()
-    body = {f.name: i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY}
-
-    def fk(q: dict[str, float]) -> Poses:
-        qp = np.zeros(model.nq)
-        for name, v in q.items():
-            qp[model.idx_qs[model.getJointId(name)]] = v
-        pin.framesForwardKinematics(model, data, qp)
-        return {link: data.oMf[i].homogeneous.copy() for link, i in body.items()}
-
-    return fk, out.text, lambda: None
-
-
-def _yourdfpy(path: Path) -> Loaded:
-    import yourdfpy
-
-    with captured_output() as out:
-        robot = yourdfpy.URDF.load(str(path))
-        assert robot.validate()
-    root = robot.base_link
-
-    def fk(q: dict[str, float]) -> Poses:
-        robot.update_cfg(q)
-        return {link: robot.get_transform(frame_to=link, frame_from=root) for link in robot.link_map}
-
-    return fk, out.text, lambda: None
-
-
-def _check_urdf(path: Path) -> Loaded:
-    exe = check_urdfdom_executable()
-    assert exe is not None, "check_urdf ships with the 'pin' package"
-    proc = subprocess.run([exe, str(path)], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0 and "Successfully Parsed XML" in proc.stdout
-    said = [ln for ln in proc.stdout.splitlines() if ln.strip().lower().startswith(("error", "warn"))]
-    return None, proc.stderr + "\n".join(said), lambda: None
-
-
-def _mujoco(path: Path) -> Loaded:
-    import mujoco
-
-    with captured_output() as out:
-        model = mujoco.MjModel.from_xml_path(str(path))
-    data = mujoco.MjData(model)
-    bodies = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, i): i for i in range(model.nbody)}
-
-    def fk(q: dict[str, float]) -> Poses:
-        data.qpos[:] = 0.0
-        for name, v in q.items():
-            data.qpos[model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]] = v
-        mujoco.mj_kinematics(model, data)
-        out = {}
-        for link, i in bodies.items():
-            T = np.eye(4)
-            T[:3, :3] = data.xmat[i].reshape(3, 3)
-            T[:3, 3] = data.xpos[i]
-            out[link] = T
-        return out
-
-    return fk, out.text, lambda: None
-
-
-def _pybullet(path: Path) -> Loaded:
-    with captured_output():
-        import pybullet as pb  # prints its build time on import
-
-        client = pb.connect(pb.DIRECT)
-    with captured_output() as out:
-        body = pb.loadURDF(str(path), useFixedBase=True, physicsClientId=client)
-    root = pb.getBodyInfo(body, physicsClientId=client)[0].decode()
-    joint, child = {}, {}
-    for j in range(pb.getNumJoints(body, physicsClientId=client)):
-        info = pb.getJointInfo(body, j, physicsClientId=client)
-        joint[info[1].decode()] = j
-        child[info[12].decode()] = j
-    T_link_inertial = _inertial_origins(path)
-
-    def pose(pos: Any, quat: Any) -> Array:
-        T = np.eye(4)
-        T[:3, :3] = np.array(pb.getMatrixFromQuaternion(quat)).reshape(3, 3)
-        T[:3, 3] = pos
-        return T
-
-    def fk(q: dict[str, float]) -> Poses:
-        for name, v in q.items():
-            pb.resetJointState(body, joint[name], v, physicsClientId=client)
-        out = {root: pose(*pb.getBasePositionAndOrientation(body, physicsClientId=client))}
-        for link, j in child.items():
-            st = pb.getLinkState(body, j, computeForwardKinematics=True, physicsClientId=client)
-            out[link] = pose(st[0], st[1]) @ np.linalg.inv(T_link_inertial[link])  # items 0/1: exact
-        return out
-
-    return fk, out.text, lambda: pb.disconnect(physicsClientId=client)
-
-
-LOADERS = {"pinocchio": _pinocchio, "yourdfpy": _yourdfpy, "check_urdf": _check_urdf, "mujoco": _mujoco,
-           "pybullet": _pybullet}
-
-
 def _configurations(model: CPCModel) -> list[dict[str, float]]:
     s = model.structure
     rng = np.random.default_rng(7)
@@ -255,15 +125,9 @@ def test_loads_silently_and_agrees_on_every_link(
         assert not list(tmp_path.iterdir())
         if fk is None:  # check_urdf exposes no poses (its tree is checked by cpc2urdf check below)
             return
-        reference, _, _ = _pinocchio(path)
-        links = _links(path)
-        for q in _configurations(model):
-            ref, got = reference(q), fk(q)
-            assert set(links) <= set(got), f"{consumer} lacks links {sorted(set(links) - set(got))}"
-            for link in links:
-                dp = float(np.linalg.norm(got[link][:3, 3] - ref[link][:3, 3]))
-                dr = float(rotation_error(ref[link][:3, :3], got[link][:3, :3]))
-                assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, f"{consumer} {case} {link}: {dp:.2e} m, {dr:.2e} rad at {q}"
+        reference, _, _ = load_pinocchio(path, geometry=False)
+        dp, dr, where = fk_disagreement(fk, reference, links(path), _configurations(model))
+        assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, f"{consumer} {case}: {dp:.2e} m, {dr:.2e} rad, {where}"
     finally:
         close()
 

@@ -295,3 +295,67 @@ def test_an_occasional_hidden_circle_is_recorded_not_fatal():
     view = exp.measured.metadata["provenance"]["view"]
     assert view["hidden_circle_sightings"] == 1
     assert len(view["problems"]) == 1 and "hidden from the" in view["problems"][0]
+
+
+# ---- a URDF robot: simulate --measure -------------------------------------------------------
+
+
+def test_cli_urdf_robot_names_its_measured_links_and_round_trips(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """``simulate robot.urdf --measure LINK``: records read only the joints on the paths to the link,
+    in the URDF's names; ``identify`` then ``export`` write the URDF back, and its plate is where
+    the simulated truth puts it at the held-out configurations (within the fit's noise)."""
+    from urdf_cases import TIAGO_HEAD, pinocchio_poses, tiago_with_plate
+
+    from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
+    from cpc2urdf.robot_ref import load_model as load
+    from cpc2urdf.urdf_robot import urdf_source
+
+    urdf = tiago_with_plate(tmp_path)
+    out = tmp_path / "sim"
+    assert main(["simulate", str(urdf), "--measure", "calib_plate", "-o", str(out), "--M", "5", "--heldout", "5",
+                 "--range", "head_1_joint=-20:20", "--seed", "3"]) == 0
+    doc = json.loads((out / "measurements.json").read_text())
+    assert doc["robot"] == "../tiago_plate.urdf"
+    assert all(set(r["joints"]) == set(TIAGO_HEAD) and set(r["poses"]) == {"calib_plate"} for r in doc["records"])
+    head_1 = [r["joints"]["head_1_joint"] for r in doc["records"]]
+    assert max(head_1) == pytest.approx(math.radians(20)) and min(head_1) == pytest.approx(math.radians(-20))
+    assert main(["identify", str(out / "measurements.json"), "-o", str(tmp_path / "model.json")]) == 0
+    assert main(["export", str(tmp_path / "model.json"), "-o", str(tmp_path / "calibrated.urdf")]) == 0
+    capsys.readouterr()
+    model, truth = load(tmp_path / "model.json"), load(out / "truth.json")
+    assert urdf_source(model) is not None and urdf_source(truth) is not None
+    held = load_measurements(out / "heldout.json")
+    names = dict(urdf_source(model).joints)  # type: ignore[union-attr]
+    errors = []
+    for q, T_true in zip(held.q, held.poses["calib_plate"], strict=True):
+        readings = {names[n]: float(v) for n, v in zip(model.structure.joint_names, q, strict=True)}
+        T = model.T_world_base() @ pinocchio_poses(tmp_path / "calibrated.urdf", readings, ["calib_plate"])["calib_plate"]
+        errors.append(np.linalg.norm(T[:3, 3] - T_true[:3, 3]))
+    predicted = predicted_position_std(model, held.q, ["calib_plate"])["calib_plate"]
+    assert np.sqrt(np.mean(np.square(errors))) <= 2.0 * np.sqrt(np.mean(predicted**2))  # as test_real_robots
+
+
+@pytest.mark.parametrize(("measure", "message"), [
+    (None, "name the links the rig measures with --measure"),
+    (["nope"], "no link 'nope' (a measured link)"),
+    (["head_2_link"], "measured link 'head_2_link' is moved by joint 'head_2_joint' (revolute, line"),
+    (["base_footprint"], "link 'base_footprint' is the root of the tree"),
+])
+def test_cli_urdf_measured_links_are_checked_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], measure: list[str] | None, message: str
+) -> None:
+    from urdf_cases import tiago_with_plate
+
+    urdf = tiago_with_plate(tmp_path)
+    out = tmp_path / "sim"
+    assert main(["simulate", str(urdf), "-o", str(out), *(["--measure", *measure] if measure else [])]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_cli_measure_needs_a_urdf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "iis_head", "--measure", "plate_left", "-o", str(tmp_path / "x")]) == 2
+    assert "--measure names links of a URDF robot; 'iis_head' is not a URDF" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()

@@ -3,6 +3,12 @@
 Writes ``DIR/measurements.json`` (the one-joint-at-a-time protocol with noise),
 ``DIR/truth.json`` (the true robot as a model file) and ``DIR/heldout.json`` (random
 configurations inside the calibration range with their true poses). See docs/measurements.md.
+
+A URDF robot needs ``--measure LINK [LINK ...]``: the links the rig measures (plate, marker or
+camera links on fixed joints, docs/urdf.md). The records then read only the joints on the paths
+from the root to them, in the URDF's names, and ``cpc2urdf identify`` / ``export`` write the
+calibrated URDF back. A link that is not in the URDF, is its root or is moved by a joint directly
+is refused in one line before anything is written.
 """
 
 from __future__ import annotations
@@ -11,6 +17,10 @@ import argparse
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cpc2urdf.spec import RobotSpec
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -22,7 +32,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "placed ~1.5 m in front of a 600 mm-baseline rig. Writes DIR/measurements.json, "
         "DIR/truth.json and DIR/heldout.json. Same seed, same files.",
     )
-    p.add_argument("robot", help="shipped robot name (e.g. iis_head) or robot spec/model file with nominal geometry")
+    p.add_argument("robot", help="shipped robot name (e.g. iis_head), robot spec/model file with nominal geometry, "
+                   "or a URDF (then name the measured links with --measure)")
+    p.add_argument("--measure", nargs="+", metavar="LINK", default=None,
+                   help="URDF robot: the links the rig measures (plate, marker or camera links, each on a fixed "
+                   "joint); the records have readings for the joints on the paths from the root to them only")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--M", type=int, default=9, help="values per joint over its calibration range (default 9)")
@@ -50,11 +64,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run)
 
 
-def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float, float]]:
+def _parse_ranges(items: list[str], spec: RobotSpec) -> dict[str, tuple[float, float]]:
+    """``--range`` values by joint, [m]/[rad] (a URDF robot's joints by their URDF names)."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.model import RobotStructure
+    from cpc2urdf.urdf_robot import UrdfRobot
 
-    assert isinstance(structure, RobotStructure)
+    structure = spec.structure
     out: dict[str, tuple[float, float]] = {}
     for item in items:
         name, sep, rest = item.partition("=")
@@ -67,10 +82,33 @@ def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float,
                 raise ValueError
         except ValueError:
             raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
+        if isinstance(spec, UrdfRobot):
+            name = spec.cpc_joint(name) or name
         j = structure.joint(name)
         scale = 1e-3 if j.type == "prismatic" else math.pi / 180
         out[name] = (lo * scale, hi * scale)
     return out
+
+
+def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> RobotSpec:
+    """The robot to simulate: a URDF's sub-tree of the ``--measure`` links (its measured plates).
+
+    Raises:
+        ConfigurationError: ``--measure`` with a robot that is not a URDF, or a URDF without it.
+        InputFileError: A link that is not in the URDF, is its root, or is moved by a joint
+            directly (:func:`cpc2urdf.urdf_robot.urdf_robot` names it).
+    """
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.urdf_robot import UrdfRobot
+
+    if not isinstance(spec, UrdfRobot):
+        if measure is not None:
+            raise ConfigurationError(f"--measure names links of a URDF robot; {ref!r} is not a URDF (its plates are measured)")
+        return spec
+    if measure is None:
+        raise ConfigurationError(f"{ref}: name the links the rig measures with --measure LINK [LINK ...] "
+                                 "(plate, marker or camera links, each on a fixed joint)")
+    return spec.restricted(measure)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.identification.vision.stereo import StereoRig
     from cpc2urdf.measurements import measurements_to_json
     from cpc2urdf.model_file import model_to_json
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.robot_ref import load_robot, looks_like_path
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():
@@ -93,10 +131,10 @@ def run(args: argparse.Namespace) -> int:
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
             raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
-    spec = load_robot(args.robot)
+    spec = _measured_robot(load_robot(args.robot), args.robot, args.measure)
     # A robot file is referred to relative to DIR, so the files can move together.
     text = str(args.robot)
-    is_path = "/" in text or text.endswith(".json")
+    is_path = looks_like_path(text)
     ref = os.path.relpath(os.path.abspath(text), os.path.abspath(out)) if is_path else text
     rig = StereoRig.verged(baseline=args.baseline_mm / 1000, distance=args.distance_mm / 1000, focal_px=args.focal_px)
     exp = simulate_experiment(
@@ -111,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         geometry_error_r=math.radians(args.geometry_error_deg),
         n_heldout=args.heldout,
         rig=rig,
-        ranges=_parse_ranges(args.range, spec.structure),
+        ranges=_parse_ranges(args.range, spec),
         require_view=not args.allow_out_of_view,
         robot_ref=ref,
         show_progress=(args.M * spec.structure.n_joints + args.heldout) > 5000,

@@ -1,5 +1,10 @@
 """Simulated stage-1 experiments (Shih et al. sec. 4.1 protocol, sec. 6 / Fig. 10 noise).
 
+A URDF robot is simulated as the sub-tree of its measured links
+(:meth:`~cpc2urdf.urdf_robot.UrdfRobot.restricted`; ``cpc2urdf simulate robot.urdf --measure
+LINK``): its records read only the joints on the paths to them, and its sets carry the robot, so
+that their files use the URDF's joint and link names and identification writes back into it.
+
 A "true" robot is the nominal model plus seeded random geometric errors (a real head is not its
 drawing, :mod:`~cpc2urdf.identification.simulation.truth`). It is placed in front of a stereo rig
 (world = the rig's left camera frame) so that both cameras see every circle of both plates over
@@ -58,6 +63,7 @@ from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.progress import progress
 from cpc2urdf.spec import RobotSpec
+from cpc2urdf.urdf_robot import UrdfRobot
 
 DEFAULT_HELDOUT = 50
 OCCLUDED_VIEWS_MAX = 0.05  # [-]: share of (configuration, plate) views with a hidden circle tolerated
@@ -153,7 +159,10 @@ def simulate_experiment(
         raise ConfigurationError(f"robot {s.name!r} has no frame of kind 'plate' to measure")
     rig = rig or StereoRig.verged()
     r = calibration_ranges(s, ranges)
-    q, labels = protocol_configurations(r, M, s.joint_names)
+    # Files about a URDF robot name its joints as the URDF does (labels, provenance).
+    file_names = [spec.names.urdf_joint(n) if isinstance(spec, UrdfRobot) and spec.names else n
+                  for n in s.joint_names]
+    q, labels = protocol_configurations(r, M, file_names)
     rng_geometry, rng_noise, rng_heldout = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
 
     # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
@@ -189,7 +198,7 @@ def simulate_experiment(
         "seed": seed,
         "M": M,
         "protocol": "one joint at a time from q0 (Shih et al. sec. 4.1)",
-        "calibration_ranges": {n: [float(a), float(b)] for n, (a, b) in zip(s.joint_names, r, strict=True)},
+        "calibration_ranges": {n: [float(a), float(b)] for n, (a, b) in zip(file_names, r, strict=True)},
         "geometry_error": {"sigma_t_m": geometry_error_t, "sigma_r_rad": geometry_error_r},
         "rig": rig.to_json(),
         "view": {"min_margin_px": view.min_margin_px, "max_view_angle_rad": view.max_view_angle,
@@ -203,15 +212,20 @@ def simulate_experiment(
 
         for f, P in points.items():
             fit_rms[f] = registration_rms(poses[f], np.array(s.frame(f).layout), P)
+    # A URDF robot goes with its sets: their files use the URDF's joint and link names, and
+    # identification starts from (and writes back into) that URDF. A spec robot's sets stay as
+    # they were (its names are the file's; identify's nominal is the caller's choice).
+    keep = spec if isinstance(spec, UrdfRobot) else None
     measured = MeasurementSet(s, q, poses, "<simulated>", ref, labels, points, fit_rms,
                               {"description": f"simulated stage-1 measurements of {s.name}",
-                               "noise": noise_doc, "provenance": provenance})
+                               "noise": noise_doc, "provenance": provenance}, keep)
     held_true = truth.fk(q_held, frames) if n_heldout else {f: np.empty((0, 4, 4)) for f in frames}
     heldout = MeasurementSet(
         s, q_held.reshape(-1, s.n_joints), held_true, "<simulated heldout>", ref,
         [f"heldout {i}" for i in range(n_heldout)],
         metadata={"description": f"held-out configurations of {s.name} with TRUE poses (no noise)",
                   "noise": {"model": "none"}, "provenance": {**provenance, "seed_stream": "heldout"}},
+        spec=keep,
     )
     truth = truth.with_params(metadata=nominal.metadata.replace(provenance=Provenance(
         method="simulated truth", robot=ref,
