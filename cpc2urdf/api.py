@@ -20,7 +20,7 @@ described in ``docs/architecture.md``.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +34,7 @@ from cpc2urdf.identification.handeye.stage2 import with_camera_frame
 from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
 from cpc2urdf.identification.kinematics.methods import identify as _identify
 from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
+from cpc2urdf.marker_csv import load_marker_csv as _load_marker_csv
 from cpc2urdf.measurements import MeasurementSet, load_measurements
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import save_model
@@ -59,6 +60,36 @@ from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, wr
 
 PathLike = str | os.PathLike[str]
 
+
+
+def load_marker_csv(
+    points_csv: PathLike,
+    robot: RobotRef,
+    markers: Mapping[str, str],
+    *,
+    joints_csv: PathLike | None = None,
+    known_positions: Mapping[str, Sequence[float]] | None = None,
+    length: str | None = None,
+    angle: str | None = None,
+    noise_sigma_p: float | None = None,
+) -> MeasurementSet:
+    """A tracker's CSV export (``docs/measurements.md``, position-only data) as measurements for
+    :func:`identify`.
+
+    Args:
+        points_csv: One row per configuration and marker: ``config,marker,x,y,z[,<joint>...]``.
+        robot: The robot (shipped name, spec, or URDF path).
+        markers: The link each marker is fixed to, ``{marker: link}``.
+        joints_csv: The joint readings, ``config,<joint>...``, when they are not in ``points_csv``.
+        known_positions: Markers whose position on their link is known [file units]; the others
+            are identified.
+        length, angle: The files' units when no ``# units:`` header states them (``mm``, ``deg``...).
+        noise_sigma_p: The instrument's noise per coordinate [m], if known.
+    """
+    return _load_marker_csv(points_csv, load_robot(robot), markers,
+                 robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
+                 joints_csv=joints_csv, known_positions=known_positions,
+                 length=length, angle=angle, noise_sigma_p=noise_sigma_p)
 
 
 def identify(
@@ -223,6 +254,8 @@ def check_urdf(
     parse of the tree, at ``configurations`` seeded random readings (``cpc2urdf check``).
 
     ``report.ok`` is True when all agree within :data:`cpc2urdf.tolerances.FK_AGREEMENT_TOL`.
+    For a model identified from a user's URDF, ``urdf`` is the written-back file: every link on the
+    calibrated paths is compared by the URDF's own link names (``cross_check_writeback``).
     """
     if configurations < 1:
         raise ConfigurationError(f"configurations must be at least 1, got {configurations}")
@@ -266,6 +299,7 @@ def write_view(
     ghost: CPCModel | RobotRef | None = None,
     package_dirs: Sequence[PathLike] = (),
     change_colours: bool = True,
+    align: str = "auto",
 ) -> ViewSummary:
     """A self-contained meshcat page of the robot (``cpc2urdf view --html``).
 
@@ -278,6 +312,10 @@ def write_view(
             coloured by how far calibration moved it from the ghost's (legend in the page).
         package_dirs: Folders where ``package://NAME/...`` mesh paths are looked up first.
         change_colours: Colour links by their change from ``ghost`` (else keep URDF colours).
+        align: Where the ghost is put: ``"world"`` (both models in one world), ``"base"`` (on the
+            robot's base link), or ``"auto"`` (on the base only when the two worlds differ by at
+            least 50 mm or 5 degrees, e.g. a model in the rig's world against its gravity-aligned
+            export). The page's legend says which was used.
     """
 
     def view_robot(ref: CPCModel | RobotRef) -> ViewRobot:
@@ -285,7 +323,8 @@ def write_view(
         return load_view_robot(src, package_dirs=tuple(os.fspath(p) for p in package_dirs))
 
     return write_view_html(path, view_robot(robot), target=target, q=q,
-                           ghost=None if ghost is None else view_robot(ghost), change_colours=change_colours)
+                           ghost=None if ghost is None else view_robot(ghost), change_colours=change_colours,
+                           align=align)
 
 
 __all__ = [
@@ -313,6 +352,7 @@ __all__ = [
     "gaze_solver",
     "identify",
     "load_handeye_poses",
+    "load_marker_csv",
     "load_measurements",
     "load_model",
     "load_robot",
