@@ -7,14 +7,44 @@ CLI contract is one line and exit code 2, returned by ``main`` rather than raise
 from __future__ import annotations
 
 import argparse
-from typing import NoReturn
+import re
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+# What argparse takes for a negative number rather than an option: its own pattern knows only
+# -1 and -1.5, so "--target -1e-3 0 1" was "expected 3 arguments"; exponents, -inf and -nan too
+# (the last two are then refused as not finite by the command, naming the option).
+NEGATIVE_NUMBER = re.compile(r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)$", re.IGNORECASE)
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """``argparse.ArgumentParser`` whose usage errors are one line on stderr and exit code 2."""
+    """``argparse.ArgumentParser`` whose usage errors are one line on stderr and exit code 2, and
+    which reads ``-1e-3`` as a negative number (argparse alone takes it for an unknown option)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+    def parse_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> Any:  # type: ignore[override]
+        """As argparse's, but an unrecognised argument is named by the sub-command it was given to
+        (``cpc2urdf demo: error: unrecognized arguments: --fast``, not ``cpc2urdf: error: ...``)."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            _innermost(self, parsed).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
+
+
+def _innermost(parser: argparse.ArgumentParser, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+    """The sub-command parser (``cpc2urdf demo``) that ``parsed`` was parsed with, or ``parser``."""
+    while True:
+        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        name = getattr(parsed, sub.dest, None) if sub is not None and sub.dest != argparse.SUPPRESS else None
+        if sub is None or name not in sub.choices:
+            return parser
+        parser = sub.choices[name]
 
 
 def exit_code(e: SystemExit) -> int:
@@ -24,4 +54,4 @@ def exit_code(e: SystemExit) -> int:
     return 0 if e.code is None else 2
 
 
-__all__ = ["OneLineParser", "exit_code"]
+__all__ = ["NEGATIVE_NUMBER", "OneLineParser", "exit_code"]

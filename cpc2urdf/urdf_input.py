@@ -17,7 +17,7 @@ expected, e.g. ``head.urdf: joint 'pan': origin xyz 'nan 0 0' is not finite (lin
   inertials with a mass and the six inertia values;
 - every number of an origin, axis, limit, safety controller, calibration, dynamics, mimic, mass,
   inertia, shape or colour: a decimal number (the grammar C's ``strtod`` and Python's ``float``
-  read alike), finite, and as many as the attribute takes.
+  read alike), finite, and as many as the attribute takes; shape sizes and masses not negative.
 
 Frames and units are the URDF's own (m, rad); nothing here changes the file.
 """
@@ -55,6 +55,9 @@ NUMBERS: dict[str, dict[str, int]] = {
     "mesh": {"scale": 3},
     "color": {"rgba": 4},
 }
+# Sizes and masses: a negative one describes no body (urdfdom and Pinocchio read it without a word).
+NON_NEGATIVE = frozenset({("box", "size"), ("cylinder", "radius"), ("cylinder", "length"), ("sphere", "radius"),
+                          ("mass", "value")})
 # The URDF elements below a link, joint or material; others (<gazebo>, ...) are no parser's business here.
 URDF_ELEMENTS = frozenset({"visual", "collision", "inertial", "geometry", "material", "texture", *NUMBERS})
 _DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
@@ -151,7 +154,12 @@ class _Checker:
         owner (a link, joint or material, ``depth`` 0) and ``el``: ``"visual 'v' "``."""
         for attr, n in NUMBERS.get(el.tag, {}).items():
             if attr in el.attrib:
+                found = len(self.problems)
                 self.number(owner, f"{path}{el.tag} {attr}", el.attrib[attr], n, el)
+                if (el.tag, attr) in NON_NEGATIVE and len(self.problems) == found and any(
+                    float(v) < 0 for v in el.attrib[attr].split()
+                ):
+                    self.add(owner, f"{path}{el.tag} {attr} {_quote(el.attrib[attr])} is negative", el)
         below = f"{path}{el.tag}{' ' + _quote(el.attrib['name']) if 'name' in el.attrib else ''} " if depth else ""
         for child in el.children:
             if child.tag in URDF_ELEMENTS:

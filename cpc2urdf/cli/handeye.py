@@ -58,6 +58,7 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
     """The model --model names (checked against the poses before solving), or None."""
     from cpc2urdf.api import camera_mount, load_model
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import check_output_path
 
     if (args.model is None) != (args.output is None):
         raise ConfigurationError("--model and -o/--output go together (the model to extend and where to write it)")
@@ -65,6 +66,7 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
         return None
     if args.method == "all":
         raise ConfigurationError("--model needs one --method (not 'all') to decide which X to store")
+    check_output_path(args.output)  # before the solve, not after it
     model = load_model(args.model)
     camera_mount(model, data, camera=args.camera, hand=args.hand)
     return model

@@ -47,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from cpc2urdf.api import identify, load_measurements, load_robot, save_model
+    from cpc2urdf.fileio import check_output_path
 
+    check_output_path(args.output)  # a bad -o is refused before the identification, not after it
     ms = load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
     start = time.perf_counter()
     model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent)

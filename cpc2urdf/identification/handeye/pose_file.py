@@ -106,12 +106,33 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
         for key in ("camera", "hand"):
             if key in d and not isinstance(d[key], str):
                 raise ValueError(f"'{key}' must be a string, got {d[key]!r}")
+        _refuse_copies(H, C)
         return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""), source,
                             noise)
     except InputFileError:
         raise
     except ValueError as e:
         raise InputFileError(source, str(e)) from e
+
+
+def _refuse_copies(H: list[Array], C: list[Array]) -> None:
+    """A record whose two poses repeat an earlier record's to the last digit is a copy (a file
+    concatenated with itself, a line pasted twice): a measurement taken again differs in its noise,
+    and a copy would count one pose twice in the solve."""
+    first: dict[bytes, int] = {}
+    copies: list[tuple[int, int]] = []
+    for i, (h, c) in enumerate(zip(H, C, strict=True)):
+        key = np.concatenate([h.ravel(), c.ravel()]).tobytes()
+        if key in first:
+            copies.append((i, first[key]))
+        else:
+            first[key] = i
+    if copies:
+        i, j = copies[0]
+        more = f" (and {len(copies) - 1} more copies)" if len(copies) > 1 else ""
+        raise ValueError(f"records[{i}] repeats records[{j}] to the last digit (T_base_hand and T_camera_target)"
+                         f"{more}: a copied record, not a new measurement; remove the "
+                         f"{len(copies)} {'copy' if len(copies) == 1 else 'copies'}")
 
 
 def load_handeye_poses(path: str | os.PathLike[str]) -> HandEyePoses:

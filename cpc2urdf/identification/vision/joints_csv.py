@@ -31,6 +31,7 @@ from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
 
 Array = NDArray[np.float64]
 
+LIMIT_SLACK = 1e-9  # [m] or [rad]: a reading this far outside its joint's limits is still accepted, as in measurement files
 _HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.-]*)\s*(?:\[\s*([A-Za-z]+)\s*\])?\s*$")
 
 
@@ -54,7 +55,8 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
 
     Raises:
         InputFileError: Naming the file, the row and the column: missing/unknown/duplicate
-            columns, a unit that does not fit the joint, a non-number, a duplicate record.
+            columns, a unit that does not fit the joint, a non-number, a reading outside its
+            joint's limits, a duplicate record.
     """
     p = Path(path)
     text = read_text_file(p, "a CSV file", encoding="utf-8-sig")
@@ -110,6 +112,12 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
                 raise InputFileError(p, f"row {k} (record {rec}): {n} must be a number, got {d[n]!r}") from None
             if not math.isfinite(v):
                 raise InputFileError(p, f"row {k} (record {rec}): {n} must be finite, got {d[n]!r}")
+            j = structure.joint(n)
+            if not (j.lower - LIMIT_SLACK <= v * factor[n] <= j.upper + LIMIT_SLACK):
+                unit = scales[names.index(n)] or ("m" if j.type == "prismatic" else "rad")
+                lo, hi = j.lower / factor[n], j.upper / factor[n]
+                raise InputFileError(p, f"row {k} (record {rec}): {n} = {d[n]} {unit} is outside the joint limits "
+                                        f"[{lo:.6g}, {hi:.6g}] {unit} (wrong units?)")
             q.append(v * factor[n])
         records.append(rec)
         labels.append(d.get("label") or rec)

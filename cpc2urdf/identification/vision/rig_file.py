@@ -28,6 +28,8 @@ problem raises :class:`cpc2urdf.errors.InputFileError` naming the file and the k
 from __future__ import annotations
 
 import os
+import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +95,7 @@ def _open(path: Path) -> cv2.FileStorage:
             path, f"nested more than {RIG_MAX_DEPTH} levels deep; a rig file holds matrices "
             "(K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)"
         )
+    _refuse_duplicate_keys(text, path)
     # OpenCV's YAML parser insists on the "%YAML:1.0" header; hand-written files often lack it.
     if path.suffix.lower() in (".yaml", ".yml") and not text.lstrip().startswith("%YAML"):
         text = "%YAML:1.0\n---\n" + text
@@ -105,6 +108,22 @@ def _open(path: Path) -> cv2.FileStorage:
     if not fs.isOpened():
         raise InputFileError(path, "cannot open as an OpenCV FileStorage file (YAML/XML/JSON)")
     return fs
+
+
+_TOP_LEVEL_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_.-]*)\s*:")
+
+
+def _refuse_duplicate_keys(text: str, path: Path) -> None:
+    """A YAML key written twice at the top level (OpenCV keeps one of them silently)."""
+    seen: dict[str, int] = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        m = _TOP_LEVEL_KEY.match(line)
+        if m is None:
+            continue
+        key = m.group(1)
+        if key in seen:
+            raise InputFileError(path, f"duplicate key {key!r} (lines {seen[key]} and {number})")
+        seen[key] = number
 
 
 def _node(fs: cv2.FileStorage, key: str, path: Path, *, required: bool = True) -> tuple[str, cv2.FileNode | None]:
@@ -250,13 +269,16 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
     return StereoRig(arrays["K1"], arrays["D1"], arrays["K2"], arrays["D2"], arrays["R"], T, size)
 
 
-def save_rig(rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m") -> Path:
+def save_rig(
+    rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m", extra: Sequence[tuple[str, Any]] = ()
+) -> Path:
     """Write ``rig`` as an OpenCV FileStorage YAML file, atomically.
 
     Args:
         rig: The rig.
         path: Output file (``.yaml``/``.yml``).
         units: Unit of ``T`` in the file (``m``, ``cm`` or ``mm``), also written as ``units``.
+        extra: More (name, matrix or string) entries after those, e.g. ``rms`` (readers ignore them).
 
     Raises:
         OutputError: The folder does not exist or cannot be written.
@@ -272,6 +294,7 @@ def save_rig(rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m") 
         ("T", (np.asarray(rig.T, dtype=np.float64) / LENGTH_UNITS[units]).reshape(3, 1)),
         ("image_size", np.array([[rig.image_size[0], rig.image_size[1]]], dtype=np.int32)),
         ("units", units),
+        *extra,
     ])
 
 
@@ -336,12 +359,16 @@ def load_camera(path: str | os.PathLike[str]) -> tuple[Array, Array, tuple[int, 
     return K, D, size
 
 
-def save_camera(K: Array, D: Array, image_size: tuple[int, int], path: str | os.PathLike[str]) -> Path:
-    """Write one camera's intrinsics (``K``, ``D``, ``image_size``) as FileStorage YAML, atomically."""
+def save_camera(
+    K: Array, D: Array, image_size: tuple[int, int], path: str | os.PathLike[str], *, extra: Sequence[tuple[str, Any]] = ()
+) -> Path:
+    """Write one camera's intrinsics (``K``, ``D``, ``image_size``) as FileStorage YAML, atomically;
+    ``extra`` (name, matrix or string) entries follow (e.g. the calibration's ``rms``)."""
     return _write_filestorage(path, [
         ("K", np.asarray(K, dtype=np.float64)),
         ("D", np.asarray(D, dtype=np.float64).reshape(1, -1)),
         ("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32)),
+        *extra,
     ])
 
 
