@@ -195,7 +195,8 @@ def test_bad_rig_joints_and_folders(experiment: tuple[Path, RenderedExperiment],
     assert "unit [deg] does not fit a prismatic joint" in run()
     (d / "joints.csv").write_text("record,table_x,table_y,pan,tilt,vergence_left,vergence_right,zoom\n")
     assert "unknown joint column 'zoom'" in run()
-    (d / "joints.csv").write_text("record,table_x,table_y,pan,tilt,vergence_left,vergence_right\n0000,1,2,x,4,5,6\n")
+    # table_x, table_y inside their limits (read before pan): only pan is wrong
+    (d / "joints.csv").write_text("record,table_x,table_y,pan,tilt,vergence_left,vergence_right\n0000,0.1,0.2,x,4,5,6\n")
     assert "row 2 (record 0000): pan must be a number" in run()
     shutil.rmtree(d / "right")
     assert "missing sub-folder right/" in run()

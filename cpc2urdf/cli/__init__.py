@@ -28,6 +28,7 @@ COMMANDS = (
     "study",
     "simulate",
     "measure",
+    "calibrate",
     "identify",
     "accuracy",
     "handeye",

@@ -5,6 +5,9 @@ Stage 1 (stereo rig looking at the head's plates)::
     cpc2urdf measure IMAGES_DIR --rig rig.yaml [--joints joints.csv] [--robot iis_head] \\
         -o measurements.json [--on-error skip|skip-record|stop]
 
+Either stage can use standard boards instead of the circle plates and the 25-disk target
+(``--board``: chessboard, ChArUco, asymmetric circle grid; ``docs/images.md``).
+
 Stage 2 (the head's cameras looking at the 25-disk target), hand poses from an identified model::
 
     cpc2urdf measure IMAGES_DIR --stage2 --model identified.json [--camera NAME=intrinsics.yaml ...] \\
@@ -21,6 +24,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cpc2urdf.identification.vision.boards import Board
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -42,6 +49,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    "record, or stop (exit 2); skips are listed on stderr and in the output")
     p.add_argument("--no-bias-correction", action="store_true",
                    help="do not remove the ellipse-centre offset of the circles' images")
+    p.add_argument("--board", action="append", default=[], metavar="[FRAME=]FILE",
+                   help="a standard board (cpc2urdf/board@1: chessboard, ChArUco, circle grid; docs/images.md) "
+                   "instead of the default circle plates / 25-disk target: with --stage2 one FILE, the target; "
+                   "stage 1 FRAME=FILE per plate frame (several plates: ChArUco boards with distinct marker ids)")
     g1 = p.add_argument_group("stage 1 (stereo rig)")
     g1.add_argument("--rig", help="stereo rig file: OpenCV FileStorage YAML with K1 D1 K2 D2 R T")
     g1.add_argument("--robot", default="iis_head", help="shipped robot name or spec file (default iis_head)")
@@ -77,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError("stage 1 needs --rig rig.yaml (or pass --stage2 for the head cameras)")
     rig = load_rig(args.rig)
     spec = load_robot(args.robot)
+    boards = _plate_boards(args.board, [f.name for f in spec.structure.frames if f.kind == "plate"])
     check_output_path(args.output)
     res = measure_stereo_images(
-        args.images, rig, spec.structure, joints=args.joints, on_error=args.on_error,
+        args.images, rig, spec.structure, joints=args.joints, on_error=args.on_error, boards=boards,
         correct_bias=not args.no_bias_correction, robot_ref=args.robot, show_progress=True,
     )
     ms = res.measurements
@@ -116,19 +128,30 @@ def _run_stage2(args: argparse.Namespace) -> int:
         if not files:
             raise ConfigurationError(
                 f"no camera found: expected {images}/<camera>/ image folders with {images}/<camera>.yaml "
-                f"intrinsics for cameras {', '.join(HAND_OF_CAMERA)}, or --camera NAME=FILE"
+                f"intrinsics for cameras {', '.join(HAND_OF_CAMERA)}, or --camera NAME=FILE (no intrinsics? "
+                f"cpc2urdf calibrate camera {images}/<camera> --board BOARD -o {images}/<camera>.yaml)"
             )
     for c in files:  # write_handeye_files needs each camera's hand frame in the model
         if c not in HAND_OF_CAMERA:
             raise ConfigurationError(f"no hand frame known for camera {c!r}; known: {sorted(HAND_OF_CAMERA)}")
         model.structure.frame(HAND_OF_CAMERA[c])
     cams = {c: HeadCamera(*load_camera(f)) for c, f in files.items()}
+    board = None
+    if args.board:
+        from cpc2urdf.identification.vision.board_file import load_board
+
+        if len(args.board) > 1 or "=" in args.board[0]:
+            raise ConfigurationError(f"--stage2 takes one --board FILE (the target), got {' '.join(args.board)}")
+        board = load_board(args.board[0])
+        if board.pose_ambiguity:
+            raise ConfigurationError(f"{args.board[0]}: {board.pose_ambiguity}, so it gives no unique target pose; "
+                                     "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard")
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: --stage2 writes one file per camera into a folder; this is a file")
     if not out.exists() and not out.parent.is_dir():
         raise OutputError(f"{out}: parent folder {out.parent} does not exist")
-    res = measure_head_images(images, cams, model.structure, joints=args.joints, on_error=args.on_error,
+    res = measure_head_images(images, cams, model.structure, joints=args.joints, on_error=args.on_error, board=board,
                               correct_bias=not args.no_bias_correction, show_progress=True)
     if not out.exists():
         out.mkdir()
@@ -140,3 +163,24 @@ def _run_stage2(args: argparse.Namespace) -> int:
         print(f"skipped {len(res.problems)} images (see stderr)")
     _report(res.problems)
     return 0
+
+
+def _plate_boards(items: list[str], plates: list[str]) -> dict[str, Board] | None:
+    """``--board FRAME=FILE`` (or one ``FILE`` for a robot with one plate) -> frame -> board."""
+    if not items:
+        return None
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.vision.board_file import load_board
+
+    out: dict[str, Board] = {}
+    for item in items:
+        frame, sep, f = item.rpartition("=")
+        if not sep:
+            if len(plates) != 1:
+                raise ConfigurationError(f"--board {item}: the robot has plates {', '.join(plates)}; "
+                                         "say which one with --board FRAME=FILE")
+            frame = plates[0]
+        if frame in out:
+            raise ConfigurationError(f"--board: two boards for {frame}")
+        out[frame] = load_board(f)
+    return out

@@ -1,6 +1,7 @@
 """Stage-2 measurements from images: the head cameras' images of the target -> target poses.
 
-The head's own cameras photograph the 25-disk target (Shih et al. sec. 5). The folder layout
+The head's own cameras photograph the 25-disk target (Shih et al. sec. 5), or a standard board
+(chessboard, ChArUco, asymmetric circle grid: ``board=``). The folder layout
 (``docs/images.md``)::
 
     IMAGES_DIR/
@@ -26,6 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
+from cpc2urdf.identification.vision.board_poses import BoardPose, board_pose
+from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
     RecordError,
@@ -35,7 +38,7 @@ from cpc2urdf.identification.vision.image_folders import (
     report_problem,
 )
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv
-from cpc2urdf.identification.vision.plate_poses import target_pose
+from cpc2urdf.identification.vision.plate_poses import TargetPose, target_pose
 from cpc2urdf.identification.vision.targets import PlateDesign, target_design
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.progress import progress_checked
@@ -84,6 +87,7 @@ def measure_head_images(
     *,
     joints: str | Path | None = None,
     design: PlateDesign | None = None,
+    board: Board | None = None,
     on_error: str = "skip",
     correct_bias: bool = True,
     show_progress: bool = False,
@@ -97,6 +101,8 @@ def measure_head_images(
         structure: The robot (for the joint columns).
         joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
         design: The target (default :func:`~cpc2urdf.identification.vision.targets.target_design`).
+        board: A standard board as the target instead (:mod:`~cpc2urdf.identification.vision.boards`;
+            OpenCV's detector, :func:`~cpc2urdf.identification.vision.board_poses.board_pose`).
         on_error: ``"skip"``/``"skip-record"`` (the image) or ``"stop"``.
         correct_bias: Remove the ellipse-centre offset before the final solvePnP.
         show_progress: Progress bar on stderr.
@@ -104,8 +110,12 @@ def measure_head_images(
     Raises:
         InputFileError, DetectionError, DegenerateDataError: as
             :func:`~cpc2urdf.identification.vision.measure_stereo.measure_stereo_images`.
+        ConfigurationError: A board that gives no unique pose (symmetric circle grid).
     """
     check_on_error(on_error)
+    if board is not None and board.pose_ambiguity:
+        raise ConfigurationError(f"{board.name}: {board.pose_ambiguity}, so it gives no unique target pose; "
+                                 "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard")
     root = Path(images_dir)
     if not root.is_dir():
         raise InputFileError(root, "no such images folder")
@@ -116,6 +126,7 @@ def measure_head_images(
             raise InputFileError(root, f"missing sub-folder {c}/ for camera {c}")
     table = read_joints_csv(joints or root / "joints.csv", structure)
     design = design or target_design()
+    target = board.name if board is not None else design.name
     problems: list[str] = []
     out_l: dict[str, list[str]] = {c: [] for c in cameras}
     out_q: dict[str, list[Array]] = {c: [] for c in cameras}
@@ -130,25 +141,29 @@ def measure_head_images(
             path = find_image(root / c, rec)
             try:
                 if path is None:
-                    raise RecordError(f"{c}/{rec}.*", design.name, "no image file")
+                    raise RecordError(f"{c}/{rec}.*", target, "no image file")
                 img = read_grey(path)
             except InputFileError as e:
-                report_problem(RecordError(e.path, design.name, e.problem), on_error, problems)
+                report_problem(RecordError(e.path, target, e.problem), on_error, problems)
                 continue
             except RecordError as e:
                 report_problem(e, on_error, problems)
                 continue
             if (img.shape[1], img.shape[0]) != tuple(cam.image_size):
-                report_problem(RecordError(str(path), design.name, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
+                report_problem(RecordError(str(path), target, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
                                       f"{cam.image_size[0]} x {cam.image_size[1]}"), on_error, problems)
                 continue
-            r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
+            r: TargetPose | BoardPose | DetectionError
+            if board is not None:
+                r = board_pose(img, cam.K, cam.D, board, image_name=str(path))
+            else:
+                r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
             if isinstance(r, DetectionError):
                 report_problem(r, on_error, problems)
                 continue
             out_l[c].append(table.labels[i])
             out_q[c].append(table.q[i])
-            out_T[c].append(r.T_camera_target)
+            out_T[c].append(r.T_camera_board if isinstance(r, BoardPose) else r.T_camera_target)
             out_r[c].append(r.reprojection_rms)
         for c in cameras:
             if len(out_T[c]) < 3:

@@ -18,13 +18,15 @@ policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
+from cpc2urdf.identification.vision.board_poses import stereo_board_pose
+from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
     IMAGE_EXTENSIONS,
@@ -67,6 +69,7 @@ def measure_stereo_images(
     *,
     joints: str | Path | None = None,
     designs: Sequence[PlateDesign] | None = None,
+    boards: Mapping[str, Board] | None = None,
     on_error: str = "skip",
     correct_bias: bool = True,
     robot_ref: str | None = None,
@@ -80,6 +83,11 @@ def measure_stereo_images(
         structure: The robot (joint names, plate frames and their layouts).
         joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
         designs: Plate designs (default :func:`~cpc2urdf.identification.vision.targets.robot_plate_designs`).
+        boards: Standard boards as the plates instead: plate frame -> board
+            (:func:`check_plate_boards`); each is measured by
+            :func:`~cpc2urdf.identification.vision.board_poses.stereo_board_pose` (the corners both
+            cameras see, triangulated, and the board registered to them). The measurement file then
+            has no ``points`` (they are the board's corners, not the spec's layout).
         on_error: ``"skip"`` (the plate), ``"skip-record"`` or ``"stop"`` (module docstring).
         correct_bias: Remove the ellipse-centre offset (:mod:`~cpc2urdf.identification.vision.plate_poses`).
         robot_ref: Robot reference for the measurement file.
@@ -99,15 +107,16 @@ def measure_stereo_images(
         if not (root / sub).is_dir():
             raise InputFileError(root, f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)")
     table = read_joints_csv(joints or root / "joints.csv", structure)
-    designs = list(designs or robot_plate_designs(structure.frames))
-    if not designs:
+    plate_boards = check_plate_boards(boards, structure) if boards else None
+    designs = [] if plate_boards else list(designs or robot_plate_designs(structure.frames))
+    if not designs and not plate_boards:
         raise ConfigurationError(f"robot {structure.name!r} has no plate frames with a circle layout")
     if tuple(rig.image_size) == (0, 0):
         raise ConfigurationError("the rig has no image size")
-    names = [d.name for d in designs]
+    names = list(plate_boards) if plate_boards else [d.name for d in designs]
     N = len(table.records)
     poses = {n: np.full((N, 4, 4), np.nan) for n in names}
-    points = {n: np.full((N, d.n_circles, 3), np.nan) for n, d in zip(names, designs, strict=True)}
+    points = {d.name: np.full((N, d.n_circles, 3), np.nan) for d in designs}
     fit = {n: np.full(N, np.nan) for n in names}
     problems: list[str] = []
     details: dict[tuple[str, str], StereoPlatePose] = {}
@@ -136,8 +145,13 @@ def measure_stereo_images(
                     break
             if len(imgs) != 2:
                 continue
-            result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
-                                        correct_bias=correct_bias)
+            result: dict[str, StereoPlatePose | DetectionError]
+            if plate_boards:
+                result = {n: stereo_board_pose(imgs[0][0], imgs[1][0], rig, b, names=(imgs[0][1], imgs[1][1]))
+                          for n, b in plate_boards.items()}
+            else:
+                result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
+                                            correct_bias=correct_bias)
             failed = [r for r in result.values() if isinstance(r, DetectionError)]
             for err in failed:
                 report_problem(err, on_error, problems)
@@ -148,7 +162,8 @@ def measure_stereo_images(
                 if isinstance(r, DetectionError):
                     continue
                 poses[n][i] = r.T_world_plate
-                points[n][i] = r.p_world
+                if n in points:
+                    points[n][i] = r.p_world
                 fit[n][i] = r.fit_rms
                 details[(rec, n)] = r
         keep = np.array([any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool)
@@ -160,7 +175,7 @@ def measure_stereo_images(
     idx = np.flatnonzero(keep)
     ms = MeasurementSet(
         structure, table.q[idx], {n: poses[n][idx] for n in names}, str(root), robot_ref,
-        [table.labels[i] for i in idx], {n: points[n][idx] for n in names}, {n: fit[n][idx] for n in names},
+        [table.labels[i] for i in idx], {n: p[idx] for n, p in points.items()}, {n: fit[n][idx] for n in names},
         {
             "description": f"stage-1 measurements of {structure.name} from stereo images in {root}",
             "provenance": {
@@ -170,6 +185,7 @@ def measure_stereo_images(
                 "records_measured": int(keep.sum()),
                 "ellipse_bias_corrected": bool(correct_bias),
                 "plate_designs": {d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index} for d in designs},
+                **({"plate_boards": {n: b.to_json() for n, b in plate_boards.items()}} if plate_boards else {}),
                 "rig": rig.to_json(),
                 "skipped": problems[:200],
             },
@@ -178,4 +194,33 @@ def measure_stereo_images(
     return ImageMeasurement(ms, problems, details)
 
 
-__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "measure_stereo_images"]
+def check_plate_boards(boards: Mapping[str, Board], structure: RobotStructure) -> dict[str, Board]:
+    """Boards as stage-1 plates: plate frame -> board, each named after its frame.
+
+    Raises:
+        ConfigurationError: A frame the robot does not have; a board without a unique pose
+            (:attr:`Board.pose_ambiguity`); several boards that the detector cannot tell apart
+            (two boards in one image must be ChArUco boards with disjoint marker ids).
+    """
+    known = [f.name for f in structure.frames]
+    out: dict[str, Board] = {}
+    for frame, b in boards.items():
+        if frame not in known:
+            raise ConfigurationError(f"board {b.name}: robot {structure.name!r} has no frame {frame!r} (frames: {', '.join(known)})")
+        if b.pose_ambiguity:
+            raise ConfigurationError(f"board {b.name} for {frame}: {b.pose_ambiguity}, so it gives no unique plate pose")
+        out[frame] = replace(b, name=frame)
+    if len(out) > 1:
+        items = list(boards.values())
+        if any(b.kind != "charuco" for b in items):
+            raise ConfigurationError("several plates need boards the detector can tell apart in one image: ChArUco boards "
+                                     "with disjoint marker ids (first_marker_id); chessboards and circle grids all look alike")
+        spans = sorted((b.dictionary, b.first_marker_id, b.first_marker_id + b.n_markers, b.name) for b in items)
+        for a, c in zip(spans, spans[1:], strict=False):
+            if a[0] == c[0] and c[1] < a[2]:
+                raise ConfigurationError(f"boards {a[3]} and {c[3]} share marker ids of {a[0]} ({c[1]}..{a[2] - 1}); "
+                                         "give each plate's board its own first_marker_id")
+    return out
+
+
+__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "check_plate_boards", "measure_stereo_images"]
