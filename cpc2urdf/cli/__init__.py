@@ -27,6 +27,7 @@ COMMANDS = (
     "bench",
     "study",
     "simulate",
+    "plan",
     "measure",
     "calibrate",
     "identify",

@@ -13,6 +13,7 @@ STUDIES: dict[str, tuple[str, str]] = {
     "fig11": ("cpc2urdf.studies.fig11", "Shih et al. Fig. 11: positioning error vs M and noise"),
     "gate": ("cpc2urdf.studies.gate", "stage-1 consistency gate: clean data passed, mistakes named, over seeded trials"),
     "crb": ("cpc2urdf.studies.crb", "closed form and refinement vs the Cramér-Rao bound (M = 9, 0.5 mm)"),
+    "plan": ("cpc2urdf.studies.plan", "experiment planning: predicted vs observed held-out error, optimal plans vs protocol"),
     "images": ("cpc2urdf.studies.images", "image pipeline: centre, pose and identification errors from rendered images"),
     "boards": ("cpc2urdf.studies.boards", "standard boards: poses vs pixel noise, calibrateCamera/stereoCalibrate, both stages"),
     "free-configs": ("cpc2urdf.studies.free_configs", "refined held-out error: random configurations vs the one-joint protocol"),

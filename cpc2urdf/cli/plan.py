@@ -1,0 +1,150 @@
+"""``cpc2urdf plan ROBOT (--n N | --target-error MM) -o plan.json``: plan a stage-1 experiment.
+
+Chooses the configurations to measure that minimise the predicted held-out position error over a
+task region (I-optimal, greedy + Fedorov exchange over candidates the rig can see), predicts the
+accuracy before any measurement, and compares with D-optimal selection and the paper's
+one-joint-at-a-time protocol. Writes ``plan.json`` (``cpc2urdf/plan@1``), ``plan.csv`` (joints CSV
+to send to the robot) and ``plan.png`` (predicted error vs N). See docs/planning.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy is imported inside run (fast `cpc2urdf --help`)
+    import numpy as np
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "plan",
+        help="plan the configurations to measure and predict the accuracy (before measuring)",
+        description="Plan a stage-1 experiment: N configurations (or the fewest reaching --target-error) that the "
+        "rig can measure, chosen to minimise the predicted held-out position error over the task region "
+        "(Cramér-Rao bound at the nominal model); compared with D-optimal selection and the paper's "
+        "one-joint-at-a-time protocol. Writes PLAN.json, PLAN.csv (joints to send to the robot) and PLAN.png.",
+    )
+    p.add_argument("robot", help="shipped robot name, robot spec/model file or URDF (with --measure)")
+    p.add_argument("-o", "--output", required=True, metavar="PLAN.json", help="plan file (PLAN.csv and PLAN.png next to it)")
+    size = p.add_mutually_exclusive_group(required=True)
+    size.add_argument("--n", type=int, help="configurations to plan")
+    size.add_argument("--target-error", type=float, metavar="MM",
+                      help="plan the fewest configurations whose predicted RMS position error over the task region is <= MM")
+    p.add_argument("--measure", nargs="+", metavar="LINK", default=[],
+                   help="the measured frames: a URDF's links carrying the calibration targets (as for simulate), or a "
+                   "spec's frames (default: the spec's plates)")
+    p.add_argument("--rig", metavar="RIG.yaml", help="stereo rig file (default: the paper's 600 mm rig at 1.5 m)")
+    p.add_argument("--sigma-mm", type=float, default=0.5, help="pose noise: std of each translation entry [mm] (default 0.5)")
+    p.add_argument("--sigma-deg", type=float, default=0.5, help="pose noise: std of the rotation error angle [deg] (default 0.5)")
+    p.add_argument("--one-joint", action="store_true",
+                   help="keep the one-joint-at-a-time structure the closed form needs (q0 plus single-joint moves)")
+    p.add_argument("--task-region", default="calibration", metavar="calibration|limits|TASK.csv",
+                   help="where the robot must be accurate: the calibration ranges (default), the joint limits, or a "
+                   "joints CSV of task configurations")
+    p.add_argument("--range", action="append", default=[], metavar="JOINT=LO:HI",
+                   help="calibration range of a joint in mm or deg (repeatable; default: the spec's)")
+    p.add_argument("--candidates", type=int, default=500, help="candidate configurations (default 500)")
+    p.add_argument("--grid", action="store_true", help="grid candidates instead of random ones")
+    p.add_argument("--seed", type=int, default=0, help="seed of the candidates (default 0)")
+    p.add_argument("--curve", metavar="N,N,...",
+                   help="plan sizes of the predicted-error curve (default: the protocol's joints*M+1 for M = 2, 3, 5, 9, "
+                   "and the plan's N)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.planning.outputs import (
+        output_paths,
+        plan_robot,
+        robot_for_plan,
+        write_plan_outputs,
+    )
+    from cpc2urdf.robot_ref import load_robot
+
+    output_paths(args.output)  # a bad -o is refused before the work
+    for flag in ("sigma_mm", "sigma_deg"):
+        v = getattr(args, flag)
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
+    if args.n is not None and args.n < 1:
+        raise ConfigurationError(f"--n must be at least 1, got {args.n}")
+    if args.target_error is not None and not (math.isfinite(args.target_error) and args.target_error > 0):
+        raise ConfigurationError(f"--target-error must be a positive number of mm, got {args.target_error}")
+    if args.candidates < 1:
+        raise ConfigurationError(f"--candidates must be at least 1, got {args.candidates}")
+    curve_ns = None
+    if args.curve:
+        try:
+            curve_ns = [int(v) for v in args.curve.split(",")]
+        except ValueError:
+            raise ConfigurationError(f"--curve {args.curve!r}: expected plan sizes like 13,19,31") from None
+        if min(curve_ns) < 1:
+            raise ConfigurationError(f"--curve {args.curve!r}: plan sizes must be >= 1")
+    spec = load_robot(args.robot)
+    structure = robot_for_plan(spec, args.measure).structure
+    rig = None
+    if args.rig:
+        from cpc2urdf.identification.vision.rig_file import load_rig
+
+        rig = load_rig(args.rig)
+    task: str | np.ndarray = args.task_region
+    if args.task_region not in ("calibration", "limits"):
+        from cpc2urdf.identification.vision.joints_csv import read_joints_csv
+
+        task = read_joints_csv(args.task_region, structure).q
+    out = plan_robot(
+        spec, robot_ref=str(args.robot), measured=args.measure or None, rig=rig,
+        sigma_t=args.sigma_mm / 1000, sigma_r=math.radians(args.sigma_deg),
+        ranges=_parse_ranges(args.range, structure), n=args.n,
+        target_error=None if args.target_error is None else args.target_error / 1000,
+        one_joint=args.one_joint, task_region=task, n_candidates=args.candidates, grid=args.grid, seed=args.seed,
+        curve_ns=curve_ns,
+    )
+    paths = write_plan_outputs(out, args.output)
+    pred = out.result.prediction
+    print(f"plan: {len(out.result.q)} configurations ({out.result.strategy}"
+          f"{', one joint at a time' if out.result.one_joint else ''}); predicted RMS error over the task region: "
+          f"{_mm(pred.position_rms)} position, {_deg(pred.orientation_rms)} orientation; "
+          f"{pred.rank} of {pred.n_params} parameters determined")
+    for line in pred.free_combinations:
+        print(f"  undetermined: {line}")
+    same = [c for c in out.result.curve if c.n == len(out.result.q)]
+    for c in same:
+        print(f"  {c.strategy:>10} at N = {c.n}: {_mm(c.position_rms)}")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float, float]]:
+    """``--range JOINT=LO:HI`` values (mm or deg) by joint, [m]/[rad]."""
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.model import RobotStructure
+
+    assert isinstance(structure, RobotStructure)
+    out: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, sep, rest = item.partition("=")
+        lo_s, sep2, hi_s = rest.partition(":")
+        try:
+            if not sep or not sep2:
+                raise ValueError
+            lo, hi = float(lo_s), float(hi_s)
+            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+                raise ValueError
+        except ValueError:
+            raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
+        j = structure.joint(name)
+        scale = 1e-3 if j.type == "prismatic" else math.pi / 180
+        out[name] = (lo * scale, hi * scale)
+    return out
+
+
+def _mm(v: float) -> str:
+    return f"{v * 1e3:.3f} mm" if math.isfinite(v) else "undetermined"
+
+
+def _deg(v: float) -> str:
+    return f"{math.degrees(v):.3f} deg" if math.isfinite(v) else "undetermined"

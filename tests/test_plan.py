@@ -1,0 +1,244 @@
+"""Experiment planning (issue 17): prediction, optimal selection, plan files and the command."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpc2urdf.cli import main
+from cpc2urdf.errors import ConfigurationError, InputFileError
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.protocol import recognise_protocol
+from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
+from cpc2urdf.identification.planning.experiment import heldout_errors, simulate_plan
+from cpc2urdf.identification.planning.information import task_sensitivity
+from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
+from cpc2urdf.identification.planning.optimal import select
+from cpc2urdf.identification.planning.plan import (
+    Planner,
+    candidate_configurations,
+    make_plan,
+    task_configurations,
+)
+from cpc2urdf.identification.planning.plan_file import load_plan
+from cpc2urdf.identification.planning.prediction import predict_plan
+from cpc2urdf.identification.simulation.design import protocol_q
+from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.robot_ref import load_robot
+
+
+@pytest.fixture(scope="module")
+def setup() -> MeasuringSetup:
+    return measuring_setup(load_robot("iis_head").nominal_model())
+
+
+@pytest.fixture(scope="module")
+def planner(setup: MeasuringSetup) -> Planner:
+    return Planner(setup, candidate_configurations(setup, 120, seed=3), task_configurations(setup, n=40))
+
+
+def test_prediction_is_the_cramer_rao_bound_propagated_to_the_task(setup: MeasuringSetup) -> None:
+    q = protocol_q(setup.nominal, 3)
+    q_task = task_configurations(setup, n=30)
+    pred = predict_plan(setup, q, q_task)
+    chart, C = cramer_rao_covariance(setup.nominal, q, setup.frames, setup.sigma_t, setup.sigma_r)
+    np.testing.assert_allclose(pred.covariance, C, rtol=1e-8, atol=1e-8 * np.abs(C).max())
+    # Propagation by finite differences of the frames' positions along each parameter.
+    x0 = np.zeros(chart.n_params)
+    h = 1e-7
+    G = []
+    for k in range(chart.n_params):
+        x = x0.copy()
+        x[k] = h
+        Tp = chart.model_from_vector(x).fk(q_task, setup.frames)
+        Tm = chart.model_from_vector(-x).fk(q_task, setup.frames)
+        G.append(np.stack([(Tp[f][:, :3, 3] - Tm[f][:, :3, 3]) / (2 * h) for f in setup.frames], axis=1))
+    Gfd = np.stack(G, axis=-1)  # (N, F, 3, P)
+    ms = np.einsum("nfip,pq,nfiq->nf", Gfd, C, Gfd).mean()
+    assert pred.position_rms == pytest.approx(math.sqrt(ms), rel=1e-5)
+    assert pred.rank == pred.n_params == 32 and not pred.free_combinations
+    assert pred.position_rms_per_frame.keys() == set(setup.frames)
+
+
+def test_a_plan_that_never_moves_a_joint_names_what_it_leaves_free(setup: MeasuringSetup) -> None:
+    q = protocol_q(setup.nominal, 3)
+    pan = setup.nominal.structure.joint_names.index("pan")
+    q = q[np.isclose(q[:, pan], q[0, pan])]  # pan never moves
+    pred = predict_plan(setup, q, task_configurations(setup, n=10))
+    assert pred.rank < pred.n_params
+    assert any(name.startswith("pan.") for name in pred.undetermined)
+    assert pred.free_combinations and math.isinf(pred.position_rms)
+
+
+def test_woodbury_gains_are_the_direct_criterion_differences(planner: Planner) -> None:
+    from cpc2urdf.identification.planning.optimal import _gains
+
+    Jc, A = planner.Jc, planner.task.A_p
+    M = np.einsum("kmp,kmq->pq", Jc[:10], Jc[:10])
+    Minv = np.linalg.inv(M)
+    direct_i = [np.trace(A @ Minv) - np.trace(A @ np.linalg.inv(M + J.T @ J)) for J in Jc[10:20]]
+    direct_d = [np.linalg.slogdet(M + J.T @ J)[1] - np.linalg.slogdet(M)[1] for J in Jc[10:20]]
+    np.testing.assert_allclose(_gains(Minv, Jc[10:20], A, "I"), direct_i, rtol=1e-7)
+    np.testing.assert_allclose(_gains(Minv, Jc[10:20], A, "D"), direct_d, rtol=1e-7)
+
+
+def test_exchange_against_brute_force(planner: Planner) -> None:
+    A = planner.task.A_p
+    for first in (0, 9, 18):
+        Jc = planner.Jc[first:first + 9]
+        info = np.einsum("kmp,kmq->kpq", Jc, Jc)
+        for criterion in ("I", "D"):
+            values = sorted(
+                float(np.trace(np.linalg.solve(info[list(c)].sum(0), A))) if criterion == "I"
+                else float(-np.linalg.slogdet(info[list(c)].sum(0))[1])
+                for c in itertools.combinations(range(9), 4)
+            )
+            sel = select(Jc, 4, criterion=criterion, A=A)
+            greedy = select(Jc, 4, criterion=criterion, A=A, exchange=False)
+            assert sel.value <= greedy.value
+            # Fedorov exchange is a local search: it may stop one swap short of the global optimum.
+            # The ridge (RIDGE = 1e-9 of the information's scale) moves the values by < 1e-4 (relative).
+            if criterion == "I":
+                assert values[0] * (1 - 1e-4) <= sel.value <= 1.05 * values[0]
+            else:  # D-efficiency (det M / det M_best)^(1/P) of at least 0.99
+                assert values[0] - 1e-4 <= sel.value <= values[0] - 32 * math.log(0.99)
+
+
+def test_optimal_plans_are_measurable_and_beat_the_protocol(setup: MeasuringSetup, planner: Planner) -> None:
+    n = 19
+    q_i, _ = planner.design("I-optimal", n)
+    q_p, _ = planner.design("protocol", n)
+    assert setup.measurable(q_i).all()
+    assert not setup.problems(q_i, [str(i) for i in range(n)])
+    assert planner.predict(q_i).position_rms < 0.7 * planner.predict(q_p).position_rms
+    with pytest.raises(ConfigurationError, match="protocol has 6 M \\+ 1"):
+        planner.design("protocol", 20)
+
+
+def test_one_joint_plan_keeps_the_protocol_structure(setup: MeasuringSetup) -> None:
+    res = make_plan(setup, n=13, q_task=task_configurations(setup, n=30), one_joint=True, n_candidates=60,
+                    curve_ns=[13])
+    ms = MeasurementSet.from_arrays(setup.nominal.structure, res.q, setup.nominal.fk(res.q, setup.frames))
+    proto = recognise_protocol(ms)
+    assert proto is not None
+    assert res.labels[0] == "q0" and setup.measurable(res.q).all()
+    assert {c.strategy for c in res.curve} == {"I-optimal", "D-optimal", "protocol"}
+
+
+def test_noise_free_plan_is_identified_exactly(setup: MeasuringSetup, planner: Planner) -> None:
+    q, labels = planner.design("I-optimal", 13)
+    q_task = task_configurations(setup, n=20)
+    exp = simulate_plan(setup, q, labels, seed=2, noise="none", q_heldout=q_task)
+    e = heldout_errors(exp, load_robot("iis_head").nominal_model())
+    assert e.start == "nominal"
+    assert e.position.max() < 1e-8 and e.angle.max() < 1e-8
+
+
+def test_smallest_n_reaches_the_target_and_one_fewer_does_not(planner: Planner) -> None:
+    target = 0.4e-3
+    n = planner.smallest_n(target)
+    assert planner.predict(planner.design("I-optimal", n)[0]).position_rms <= target
+    assert planner.predict(planner.design("I-optimal", n - 1)[0]).position_rms > target
+    with pytest.raises(ConfigurationError, match="not reached"):
+        planner.smallest_n(1e-6)
+
+
+def test_task_sensitivity_matches_the_chart(setup: MeasuringSetup) -> None:
+    chart = Parametrization(setup.nominal, setup.frames)
+    q = task_configurations(setup, n=5)
+    t = task_sensitivity(chart, q, setup.frames)
+    assert t.A_p.shape == (32, 32) and np.allclose(t.A_p, t.A_p.T)
+    assert np.trace(t.A_p) == pytest.approx(np.sum(t.G_p**2) / (5 * 2))
+
+
+def test_cli_writes_plan_csv_png_and_the_plan_loads(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cpc2urdf.identification.vision.joints_csv import read_joints_csv
+
+    out = tmp_path / "plan.json"
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "-o", str(out)]) == 0
+    assert "predicted RMS error" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "cpc2urdf/plan@1" and len(doc["configurations"]) == 13
+    assert (tmp_path / "plan.png").read_bytes()[:4] == b"\x89PNG"
+    s = load_robot("iis_head").structure
+    plan = load_plan(out, s)
+    table = read_joints_csv(tmp_path / "plan.csv", s)
+    np.testing.assert_allclose(table.q, plan.q, atol=1e-9)
+    assert plan.q.shape == (13, 6) and plan.sigma_t == pytest.approx(0.5e-3)
+    assert doc["prediction"]["position_rms_mm"] > 0 and doc["prediction"]["rank"] == 32
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--n", "0"], "--n must be at least 1"),
+        (["--target-error", "-1"], "--target-error must be a positive"),
+        (["--n", "5", "--sigma-mm", "nan"], "--sigma-mm must be a positive"),
+        (["--n", "5", "--measure", "nope"], "'nope' is not a frame"),
+        (["--n", "5", "--rig", "missing.yaml"], "missing.yaml"),
+        (["--n", "5", "--range", "pan=1"], "--range"),
+        (["--n", "5", "--curve", "a"], "--curve"),
+        (["--n", "5", "--task-region", "missing.csv"], "missing.csv"),
+    ],
+)
+def test_cli_bad_input_one_line_exit_2_nothing_written(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        argv: list[str], message: str) -> None:
+    out = tmp_path / "plan.json"
+    assert main(["plan", "iis_head", *argv, "--candidates", "30", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_load_plan_refuses_bad_files(tmp_path: Path) -> None:
+    s = load_robot("iis_head").structure
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "-o", str(tmp_path / "p.json")]) == 0
+    doc = json.loads((tmp_path / "p.json").read_text())
+    bad = tmp_path / "bad.json"
+    for change, message in (
+        (lambda d: d.update(format="cpc2urdf/plan@9"), "format"),
+        (lambda d: d["configurations"][2].update(q=[1, 2]), r"configurations\[2\].q must be a list of 6"),
+        (lambda d: d["joints"][0].update(name="other"), "do not match robot"),
+        (lambda d: d["configurations"][0]["q"].__setitem__(2, 1e4), "outside its limits"),
+        (lambda d: d["setup"].update(T_world_base=[[1, 0, 0, 0]] * 4), "not a rigid transform"),
+    ):
+        d = json.loads(json.dumps(doc))
+        change(d)
+        bad.write_text(json.dumps(d))
+        with pytest.raises(InputFileError, match=message):
+            load_plan(bad, s)
+
+
+def test_tiago_urdf_plan_through_the_cli(tmp_path: Path) -> None:
+    from urdf_cases import tiago_with_plate
+
+    urdf = tiago_with_plate(tmp_path)
+    out = tmp_path / "tiago_plan.json"
+    argv = ["plan", str(urdf), "--measure", "calib_plate", "--n", "10", "--candidates", "40", "--curve", "10"]
+    assert main([*argv, "-o", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["measured_frames"] == ["calib_plate"] and doc["prediction"]["rank"] == 16
+    assert [j["name"] for j in doc["joints"]] == ["torso_lift", "head_1", "head_2"]
+    assert [j["urdf_joint"] for j in doc["joints"]] == ["torso_lift_joint", "head_1_joint", "head_2_joint"]
+    assert doc["urdf"]["measured_links"] == ["calib_plate"]
+    assert main(["plan", str(urdf), "--n", "10", "-o", str(tmp_path / "x.json")]) == 2  # no --measure
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_a_plan_file_is_simulated_where_the_plan_put_the_robot(tmp_path: Path) -> None:
+    from cpc2urdf.identification.planning.experiment import simulate_from_plan
+
+    out = tmp_path / "p.json"
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "-o", str(out)]) == 0
+    spec = load_robot("iis_head")
+    plan = load_plan(out, spec.structure)
+    exp = simulate_from_plan(spec.nominal_model(), plan, seed=4, noise="none", n_heldout=5)
+    np.testing.assert_allclose(exp.measured.q, plan.q)
+    assert exp.measured.n_records == 13 and exp.heldout.n_records == 5
+    e = heldout_errors(exp, spec.nominal_model())
+    assert e.position.max() < 1e-8
