@@ -34,6 +34,8 @@ from cpc2urdf.identification.handeye.stage2 import with_camera_frame
 from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
 from cpc2urdf.identification.kinematics.methods import identify as _identify
 from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
+from cpc2urdf.identification.planning.outputs import DEFAULT_CANDIDATES, PlanOutputs, plan_robot
+from cpc2urdf.identification.planning.plan_file import LoadedPlan, load_plan
 from cpc2urdf.marker_csv import load_marker_csv as _load_marker_csv
 from cpc2urdf.measurements import MeasurementSet, load_measurements
 from cpc2urdf.model import CPCModel
@@ -263,6 +265,40 @@ def check_urdf(
     return cross_check(m, urdf, configurations, seed)
 
 
+def plan_experiment(
+    robot: RobotRef,
+    *,
+    n: int | None = None,
+    target_error_mm: float | None = None,
+    measure: Sequence[str] | None = None,
+    sigma_mm: float = 0.5,
+    sigma_deg: float = 0.5,
+    one_joint: bool = False,
+    task_region: str | ArrayLike = "calibration",
+    candidates: int = DEFAULT_CANDIDATES,
+    seed: int = 0,
+) -> PlanOutputs:
+    """The I-optimal measurement plan for ``robot`` and its predicted accuracy (``cpc2urdf plan``).
+
+    Exactly one of ``n`` (configurations to measure) and ``target_error_mm`` (the smallest plan
+    whose predicted held-out RMS position error over the task region reaches it) is given.
+    Returns the plan (``.result``: configurations, prediction, the curve per strategy) and the texts
+    of its files (``.doc`` for ``plan.json``, ``.csv_text``, ``.png``); nothing is written.
+
+    Args:
+        robot: Shipped name, spec or URDF path (a URDF needs ``measure``).
+        measure: The measured links of a URDF (default: the spec's plates).
+        sigma_mm, sigma_deg: The pose noise of the measuring rig.
+        one_joint: Keep the one-joint-at-a-time structure the closed form needs.
+        task_region: ``"calibration"`` (the calibration ranges), ``"limits"`` or task configurations (N, n) [SI].
+        candidates: Size of the seeded candidate set.
+    """
+    return plan_robot(load_robot(robot), robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
+                      measured=measure, sigma_t=sigma_mm / 1000, sigma_r=np.radians(sigma_deg), n=n,
+                      target_error=None if target_error_mm is None else target_error_mm / 1000,
+                      one_joint=one_joint, task_region=task_region, n_candidates=candidates, seed=seed)
+
+
 def gaze_solver(
     robot: CPCModel | RobotRef,
     cameras: Sequence[str] = DEFAULT_CAMERAS,
@@ -339,7 +375,9 @@ __all__ = [
     "GazeSolver",
     "HandEyePoses",
     "HandEyeResult",
+    "LoadedPlan",
     "MeasurementSet",
+    "PlanOutputs",
     "RobotSpec",
     "ViewSummary",
     "accuracy",
@@ -350,10 +388,12 @@ __all__ = [
     "export_urdf",
     "fixate",
     "gaze_solver",
+    "plan_experiment",
     "identify",
     "load_handeye_poses",
     "load_marker_csv",
     "load_measurements",
+    "load_plan",
     "load_model",
     "load_robot",
     "save_model",
