@@ -29,6 +29,7 @@ COMMANDS = (
     "simulate",
     "plan",
     "measure",
+    "bag",
     "calibrate",
     "identify",
     "accuracy",
