@@ -94,6 +94,35 @@ def load_marker_csv(
                  length=length, angle=angle, noise_sigma_p=noise_sigma_p)
 
 
+def measurements_from_bag(
+    bag: PathLike,
+    poses: Mapping[str, str],
+    *,
+    robot: RobotRef = "iis_head",
+    joint_topic: str = "/joint_states",
+    sync_tolerance: float = 0.02,
+    rest_window: float = 0.1,
+) -> MeasurementSet:
+    """Stage-1 measurements from a ROS bag (``cpc2urdf bag --pose``): joint states paired with pose
+    topics by header stamps (``docs/bags.md``); samples taken while a joint moved are skipped.
+
+    Args:
+        bag: A rosbag1 ``.bag`` file or a rosbag2 folder.
+        poses: ``{frame: "topic"}`` (PoseStamped, TransformStamped) or ``{frame: "topic:parent:child"}`` (tf).
+        robot: Shipped name, spec or URDF path.
+        joint_topic: The ``sensor_msgs/JointState`` topic.
+        sync_tolerance: Largest gap [s] between a pose and the joint state paired with it.
+        rest_window: Every joint reading within this time [s] of a sample must agree with it (0: off).
+    """
+    from cpc2urdf.identification.vision.bags import PoseTopic, SyncRule
+    from cpc2urdf.identification.vision.bags import measurements_from_bag as _from_bag
+
+    topics = [PoseTopic.parse(f"{frame}={topic}") for frame, topic in poses.items()]
+    rule = SyncRule(sync_tolerance=sync_tolerance, rest_window=rest_window)
+    ref = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot"
+    return _from_bag(bag, load_robot(robot), topics, robot_ref=ref, joint_topic=joint_topic, rule=rule).measurements
+
+
 def identify(
     measurements: MeasurementSet | PathLike,
     method: str = DEFAULT_METHOD,
@@ -396,6 +425,7 @@ __all__ = [
     "load_plan",
     "load_model",
     "load_robot",
+    "measurements_from_bag",
     "save_model",
     "solve_handeye",
     "write_view",
