@@ -10,7 +10,9 @@ import json
 import math
 import os
 import re
+import shutil
 import tempfile
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -274,33 +276,116 @@ def check_output_path(path: str | os.PathLike[str]) -> Path:
     return p
 
 
-def write_atomic(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` to ``path`` atomically (temp file in the same folder, then rename).
+def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> Path:
+    """Write ``data`` (text, UTF-8; or bytes) to ``path`` atomically (temp file in the same
+    folder, then rename). The file gets the mode a plain ``open()`` would give it.
 
     Raises:
         OutputError: The folder does not exist or is not writable, or the path is a folder.
     """
     p = check_output_path(path)
+    tmp = _temp_copy(p, data)
+    try:
+        os.replace(tmp, p)
+    except OSError as e:
+        _unlink(tmp)
+        raise OutputError(f"{p}: cannot write ({e.strerror})") from e
+    return p
+
+
+def write_all_atomic(files: Mapping[str | os.PathLike[str], str | bytes]) -> list[Path]:
+    """Write several files all or nothing: every one to a temp file first, then rename them.
+
+    If writing or renaming any of them fails, none of the new files is left: the temp files are
+    removed, files already renamed into place are removed again or, where a file of that name
+    existed before, the old file is put back.
+
+    Args:
+        files: Path -> content (text, UTF-8; or bytes).
+
+    Returns:
+        The paths, in the order given.
+
+    Raises:
+        OutputError: As :func:`write_atomic`, naming the file that failed; or a path given twice.
+    """
+    paths = [check_output_path(f) for f in files]
+    if len({os.path.abspath(p) for p in paths}) != len(paths):
+        raise OutputError(f"{', '.join(map(str, paths))}: a file is named twice")
+    temps: list[str] = []
+    backups: dict[Path, str | None] = {}  # target -> hard link to the file it replaces (None: new file)
+    try:
+        for p, data in zip(paths, files.values(), strict=True):
+            temps.append(_temp_copy(p, data))
+        for p, tmp in zip(paths, temps, strict=True):
+            backups[p] = _backup(p)
+            try:
+                os.replace(tmp, p)
+            except OSError as e:
+                raise OutputError(f"{p}: cannot write ({e.strerror})") from e
+    except BaseException:
+        for tmp in temps:
+            _unlink(tmp)
+        for p, old in backups.items():
+            if old is None:
+                _unlink(str(p))
+            else:
+                try:
+                    os.replace(old, p)
+                except OSError:
+                    pass
+        raise
+    for old in backups.values():
+        if old is not None:
+            _unlink(old)
+    return paths
+
+
+def _temp_copy(p: Path, data: str | bytes) -> str:
+    """``data`` in a new temp file next to ``p`` with the mode ``open()`` would give ``p``."""
     folder = p.parent if str(p.parent) else Path(".")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
     except OSError as e:
         raise OutputError(f"{p}: cannot write ({e.strerror})") from e
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
         # mkstemp creates 0600; give the file the mode a plain open() would have given it.
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, p)
     except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _unlink(tmp)
         raise OutputError(f"{p}: cannot write ({e.strerror})") from e
-    return p
+    except BaseException:
+        _unlink(tmp)
+        raise
+    return tmp
+
+
+def _backup(p: Path) -> str | None:
+    """A second name of the file at ``p`` (to put it back), or None if there is none."""
+    if not p.exists():
+        return None
+    folder = p.parent if str(p.parent) else Path(".")
+    name = str(folder / f".{p.name}.{uuid.uuid4().hex[:12]}.old")
+    try:
+        os.link(p, name)  # fails if the name exists: never touches another file
+    except OSError:
+        try:  # a file system without hard links
+            shutil.copy2(p, name)
+        except OSError as e:
+            _unlink(name)
+            raise OutputError(f"{p}: cannot write ({e.strerror})") from e
+    return name
+
+
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
 
 
 def dumps(doc: Any) -> str:
@@ -344,6 +429,7 @@ __all__ = [
     "read_json",
     "read_text_file",
     "require_format",
+    "write_all_atomic",
     "write_atomic",
     "write_json",
 ]

@@ -4,6 +4,7 @@ and the checks of input and output paths, each refused as one line naming the fi
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from cpc2urdf.fileio import (
     check_output_path,
     read_json,
     read_text_file,
+    write_all_atomic,
     write_atomic,
 )
 from cpc2urdf.model_file import model_to_json
@@ -149,3 +151,49 @@ def test_the_cli_refuses_such_files_with_one_line_and_writes_nothing(tmp_path: P
     err = cap.err.strip().splitlines()
     assert len(err) == 1 and f"{bad}: {expected}" in err[0] and "Traceback" not in cap.err, cap.err
     assert cap.out == "" and not out.exists()
+
+
+# ---- atomic writes -------------------------------------------------------------------------------
+
+
+def _mode(p: Path) -> int:
+    return p.stat().st_mode & 0o777
+
+
+def test_atomic_writes_get_the_mode_open_gives_text_or_bytes(tmp_path: Path) -> None:
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")  # what open() gives under this umask (0644 under the usual 022)
+    text = write_atomic(tmp_path / "a.json", "{}\n")
+    data = write_atomic(tmp_path / "a.png", b"\x89PNG\r\n\x00")
+    both = write_all_atomic({tmp_path / "b.json": "{}\n", tmp_path / "b.png": b"\x00\x01"})
+    for p in (text, data, *both):
+        assert _mode(p) == _mode(plain), p
+    assert data.read_bytes() == b"\x89PNG\r\n\x00" and text.read_text() == "{}\n"
+    assert both[1].read_bytes() == b"\x00\x01"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.png", "b.json", "b.png", "plain.txt"]
+
+
+def test_write_all_leaves_none_of_the_new_files_when_the_last_rename_fails(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    old = tmp_path / "plan.json"
+    old.write_text("old plan\n")
+    paths = [old, tmp_path / "plan.csv", tmp_path / "plan.png"]
+    real = os.replace
+
+    def failing(src: str, dst: str | os.PathLike[str]) -> None:
+        if Path(dst) == paths[-1] and str(src).endswith(".tmp"):
+            raise OSError(28, "No space left on device")
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing)
+    with pytest.raises(OutputError, match=r"plan\.png: cannot write \(No space left on device\)"):
+        write_all_atomic({paths[0]: "new plan\n", paths[1]: "csv\n", paths[2]: b"png"})
+    # The file that existed is the old one again; the others were not created; no temp files.
+    assert old.read_text() == "old plan\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["plan.json"]
+
+
+def test_write_all_refuses_a_bad_path_before_writing_any(tmp_path: Path) -> None:
+    with pytest.raises(OutputError, match="does not exist"):
+        write_all_atomic({tmp_path / "a.json": "x", tmp_path / "no" / "b.csv": "y"})
+    assert not list(tmp_path.iterdir())

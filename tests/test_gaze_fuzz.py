@@ -307,3 +307,107 @@ def test_tracking_through_camera_centres_and_far_away():
                 assert np.all(np.isfinite(tr.pointing_error)) and np.all(tr.pointing_error <= math.pi)
                 v = np.abs(np.diff(np.vstack([solver.home, tr.q]), axis=0)) / dt
                 assert np.all(v <= vmax * (1 + 1e-12)), policy
+
+
+# ---- every head shape, through the compiled batch solver (issue 15) ---------------------------
+
+SHAPE_FAST_CUBE = 300  # cube targets per head shape by default
+SHAPE_FAST_CONFIGS = 4  # configurations whose special targets are solved, by default
+
+
+def _shape_cases(solver: GazeSolver, rng: np.random.Generator, n_cube: int, n_configs: int) -> list[tuple[np.ndarray | None, np.ndarray]]:
+    """``[(q_current or None, targets (k, 3))]``: cube targets from the middle of the limits, then
+    per configuration its special targets (camera centres and near them, on and behind each
+    optical axis, 1e-9..1e6 m and astronomically far)."""
+    comp, chain = solver.compiled, solver.chain
+    R, o = comp._fk(comp.home_u)
+    centre = o[: len(solver.cameras)].mean(axis=0)
+    out: list[tuple[np.ndarray | None, np.ndarray]] = [(None, centre + rng.uniform(-CUBE_HALF, CUBE_HALF, (n_cube, 3)))]
+    lo, hi = chain.lower, chain.upper
+    for k in range(n_configs):
+        u = comp.home_u if k == 0 else lo + (hi - lo) * rng.random(chain.m)
+        if k > 1:
+            at = rng.random(chain.m) < 0.25
+            u = np.where(at, np.where(rng.random(chain.m) < 0.5, hi, lo), u)
+        q = chain.q_from_u(u)
+        q = np.clip(q, solver.lower, solver.upper)
+        R, o = comp._fk(chain.u_from_q(q), comp.b_for(q))
+        pts = []
+        for c in range(len(o)):
+            pts.append(o[c])
+            pts += [o[c] + r * _unit(rng, 1)[0] for r in (1e-15, 1e-12, 1e-9, 1e-6, 1e-3)]
+            pts += [o[c] + t * R[c][:, 2] for t in (-1.0, -1e-3, 1e-9, 1e-3, 0.05, 0.5, 3.0, 1e3)]
+        pts += [o[0] + r * v for r, v in zip(np.geomspace(1e-9, 1e6, 16), _unit(rng, 16), strict=True)]
+        pts += [o[0] + r * v for r, v in zip(np.geomspace(1e7, 1e300, 4), _unit(rng, 4), strict=True)]
+        pts += [np.array([1.7e308, -1.7e308, 0.0])]
+        out.append((q, np.array(pts)))
+    return out
+
+
+@pytest.mark.parametrize("shape", ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal", "iis_calibrated"])
+def test_every_head_shape_answers_every_finite_target(shape, tmp_path):
+    """The compiled solver's contract on every head shape: an answer for every finite target,
+    finite and inside the limits, joints it may not move where they were, statuses consistent
+    with the pointing errors, and those errors confirmed by Pinocchio's FK (not the compiled
+    one) for targets 1e-3..1e7 m from the cameras."""
+    import pinocchio as pin
+    from gaze_heads import head_case
+
+    solver = head_case(shape, tmp_path).solver
+    n = os.environ.get("CPC2URDF_GAZE_FUZZ_TARGETS")
+    n_cube, n_configs = (SHAPE_FAST_CUBE, SHAPE_FAST_CONFIGS) if n is None else (int(n), FULL_CONFIGS // 4)
+    rng = np.random.default_rng(SEED)
+    chain = solver.chain
+    data = solver.robot.model.createData()
+    axes = chain.solve_cameras.tolist()
+    fids = [solver.robot.frame_id(c) for c in solver.cameras]
+    total = 0
+    for qc, P in _shape_cases(solver, rng, n_cube, n_configs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
+                b = solver.solve_many(P, qc)
+        total += len(P)
+        assert np.all(np.isfinite(b.q)), shape
+        assert np.all(b.q >= solver.lower) and np.all(b.q <= solver.upper), shape
+        ref = solver.home if qc is None else qc
+        still = np.abs(chain.robot_A).sum(axis=1) == 0
+        assert np.all(b.q[:, still] == ref[still]), shape
+        assert np.all(np.isfinite(b.pointing_error)) and np.all(b.pointing_error >= 0) and np.all(b.pointing_error <= math.pi)
+        assert np.array_equal(b.reachable, b.pointing_error.max(axis=1) <= b.tolerance)
+        assert np.array_equal(b.reachable, b.status == 0)
+        # the reported errors against Pinocchio's FK of the answers
+        for i in range(len(P)):
+            pin.framesForwardKinematics(solver.robot.model, data, b.q[i])
+            T = [data.oMf[f] for f in fids]
+            for s, c in enumerate(axes):
+                if c < len(fids):
+                    o, z = T[c].translation, T[c].rotation[:, 2]
+                else:
+                    o = 0.5 * (T[0].translation + T[1].translation)
+                    z = T[0].rotation[:, 2] + T[1].rotation[:, 2]
+                    z = z / np.linalg.norm(z)
+                d = P[i] - o
+                if np.abs(d).max() < FK_MAX_DISTANCE and np.linalg.norm(d) > 1e-3:
+                    e = math.atan2(np.linalg.norm(np.cross(z, d)), z @ d)
+                    assert abs(e - b.pointing_error[i, s]) < FK_TOL, (shape, P[i].tolist(), e, b.pointing_error[i, s])
+    assert total >= n_cube + 35 * n_configs  # every class is there
+
+
+@pytest.mark.parametrize("shape", ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal"])
+def test_every_head_shape_exact_on_reachable_targets(shape, tmp_path):
+    """Fixatable targets (sampled in-limit readings, tests/gaze_heads.py): every one fixated
+    inside the limits, exact to GAZE_POINTING_TOL on yourdfpy's FK. 100 per head by default;
+    10,000 in the full fuzz (``CPC2URDF_GAZE_FUZZ_TARGETS`` set)."""
+    from gaze_heads import head_case, pointing_errors, yourdfpy_axes
+
+    case = head_case(shape, tmp_path)
+    n = 100 if os.environ.get("CPC2URDF_GAZE_FUZZ_TARGETS") is None else 10_000
+    P, _ = case.reachable_targets(n, seed=SEED)
+    b = case.solver.solve_many(P)
+    assert b.reachable.all(), (shape, b.counts())
+    assert np.all(b.q >= case.solver.lower) and np.all(b.q <= case.solver.upper)
+    O, Z = yourdfpy_axes(case, b.q)
+    err = pointing_errors(O, Z, P)
+    assert err.max() < GAZE_POINTING_TOL, (shape, float(err.max()))
+    print(f"{shape}: {n} targets, worst {err.max():.3g} rad on yourdfpy, median iterations {np.median(b.iterations):.0f}")

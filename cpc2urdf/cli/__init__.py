@@ -36,6 +36,7 @@ COMMANDS = (
     "handeye",
     "view",
     "gaze",
+    "reach",
 )
 
 

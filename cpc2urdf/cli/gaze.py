@@ -9,12 +9,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
 # cpc2urdf.validation.gaze.
 POLICIES = ("cyclopean", "min-motion", "eyes-only", "use-table")
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
 DEFAULT_VIEWING_DISTANCE = 0.6  # [m]
+# argparse reads "-1.7e308" as an option (its own pattern has no exponent): numbers, inf and nan
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -26,6 +29,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "iis_head). Prints the readings, reachability and residuals; moves nothing. Exit code "
         "0 fixated, 1 unreachable, 2 bad input.",
     )
+    p._negative_number_matcher = NEGATIVE_NUMBER  # --target -1 -2e3 0
     p.add_argument("head", metavar="URDF_OR_MODEL", help=".urdf file, model file, robot spec or shipped robot name")
     p.add_argument("--target", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="target in world [m]")
     p.add_argument("--policy", choices=POLICIES, default="cyclopean", help="redundancy policy (default cyclopean)")
@@ -43,7 +47,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help=f"use-table policy: cyclopean point to target [m] (default {DEFAULT_VIEWING_DISTANCE})",
     )
     p.add_argument(
-        "--cameras", nargs=2, default=list(DEFAULT_CAMERAS), metavar=("LEFT", "RIGHT"), help="camera optical frames"
+        "--camera",
+        "--cameras",
+        dest="cameras",
+        nargs="+",
+        default=list(DEFAULT_CAMERAS),
+        metavar="FRAME",
+        help="one camera optical frame (look-at) or two (left right: binocular, or a rigid pair) "
+        f"(default {' '.join(DEFAULT_CAMERAS)})",
+    )
+    p.add_argument(
+        "--joints",
+        nargs="+",
+        metavar="JOINT",
+        help="the joints that may move (default: every joint on the paths to the cameras)",
     )
     p.add_argument("--json", action="store_true", help="print the solution as JSON (SI units)")
     p.set_defaults(run=run)
@@ -52,15 +69,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import gaze_solver
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.validation.gaze import solver_for
 
     if not (math.isfinite(args.viewing_distance) and args.viewing_distance > 0):
         raise ConfigurationError(f"--viewing-distance must be a positive number of metres, got {args.viewing_distance}")
-    solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
+    if len(args.cameras) > 2:
+        raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
+    if args.joints:
+        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints)
+    else:
+        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
     sol = solver.solve(args.target, args.q_current, args.policy)
     if args.json:
         print(json.dumps(sol.to_json(), indent=2))
         return 0 if sol.reachable else 1
-    t = ", ".join(f"{v:.4f}" for v in sol.target)
+    t = ", ".join(f"{v:.10g}" for v in sol.target)
     print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")
     kinds = solver.joint_kinds
     for name, v in sol.joints.items():
@@ -68,8 +91,11 @@ def run(args: argparse.Namespace) -> int:
         flag = "  (at limit)" if name in sol.at_limit else ""
         print(f"  {name:16s} {shown}{flag}")
     e, m = sol.pointing_error, sol.miss_distance
-    print(f"pointing error: left {e[0]:.3g} rad, right {e[1]:.3g} rad")
-    print(f"miss distance:  left {m[0]:.3g} m, right {m[1]:.3g} m")
-    fix = "none (axes parallel)" if sol.fixation_point is None else "(" + ", ".join(f"{v:.4f}" for v in sol.fixation_point) + ") m"
-    print(f"fixation point: {fix}; vergence {math.degrees(sol.vergence):.4f} deg")
+    if len(e) == 2:
+        print(f"pointing error: left {e[0]:.3g} rad, right {e[1]:.3g} rad")
+        print(f"miss distance:  left {m[0]:.3g} m, right {m[1]:.3g} m")
+        fix = "none (axes parallel)" if sol.fixation_point is None else "(" + ", ".join(f"{v:.10g}" for v in sol.fixation_point) + ") m"
+        print(f"fixation point: {fix}; vergence {math.degrees(sol.vergence):.4f} deg")
+    else:
+        print(f"pointing error: {e[0]:.3g} rad; miss distance {m[0]:.3g} m")
     return 0 if sol.reachable else 1

@@ -1,7 +1,25 @@
-"""Benchmark: the gaze solver vs a generic bounded least-squares IK on the same Pinocchio model.
+"""Benchmark: the gaze solver per head shape, against one Pinocchio FK + two frame Jacobians
+and against a generic bounded least-squares IK on the same model, in one run.
 
-Targets are built *independently of the solver*, from the CPC model's own forward kinematics
-(:meth:`cpc2urdf.model.CPCModel.fk`), so a target is reachable by construction:
+Per head (:data:`HEADS`: the IIS-head nominal and calibrated, TIAGo and TALOS from
+example-robot-data; ``--urdf FILE --camera ...`` adds any other), it reports:
+
+- ``kin``: the median time of one Pinocchio forward kinematics plus two frame Jacobians from
+  Python, measured before and after the solves; every time below is also given as a ratio to it;
+- median and p99 time of one ``solve`` per reachable target, the success on them (fixated, or
+  answered with the head's own disparity on a head that cannot fixate exactly), and the
+  unreachable targets' median over the reachable one;
+- the reference (:func:`scipy.optimize.least_squares`, trust-region reflective, bounds as
+  bounds) on the same residual (per solved axis ``u - e_z``) with Pinocchio frame Jacobians, each
+  target right after ours (so both see the same load); the ratio of the medians;
+- batch throughput (targets/s of one ``solve_many`` over all the targets, best of 3);
+- the 1 kHz tracking loop (:class:`~cpc2urdf.validation.gaze.tracking.GazeTracker`, smooth
+  pursuit and minimum-jerk saccades) on heads with two independent eyes: the p99 of one step
+  against its 1 ms deadline, by the wall clock and by this thread's CPU time.
+
+Targets are built *independently of the solver*. On the IIS-heads from the CPC model's own
+forward kinematics (:meth:`cpc2urdf.model.CPCModel.fk`), so a target is reachable by
+construction:
 
 - sample neck and left-eye readings uniformly inside the limits (table at home);
 - nominal head: sample the right eye too; the two optical axes are coplanar, so they meet at a
@@ -11,17 +29,18 @@ Targets are built *independently of the solver*, from the CPC model's own forwar
   distance between the two axes over the right eye's range, and keep the meeting point under the
   same conditions.
 
+On other heads (:func:`generic_reachable_targets`) from sampled readings through Pinocchio: a
+point 0.3-3 m along the one solved axis, or where two solved axes meet.
+
 The calibrated IIS-head is the nominal one with every joint's and frame's CPC constants perturbed
 (seeded; 0.1 deg, 0.5 mm) and then the right camera trimmed in pitch (a rotation about its own x
 axis) so that both optical axes meet at a point straight ahead at the home posture: the vertical
 alignment every stereo head gets when mounted. Without the trim, a random perturbation often
 leaves no fixable point in front of the cameras at all (the two eyes' planes cross behind them).
 
-The reference IK is :func:`scipy.optimize.least_squares` (trust-region reflective, joint limits
-as bounds) on the same residual (per eye ``u - e_z``) with Pinocchio frame Jacobians, started
-from the same geometric guess; the comparison is speed at equal success.
-
-    cpc2urdf bench gaze [--targets 2000] [--seed 0] [--json out.json]
+    cpc2urdf bench gaze [--targets 2000] [--unreachable 200] [--reference 300] [--track-seconds 4]
+                        [--heads nominal calibrated tiago talos] [--urdf FILE --camera FRAME ...]
+                        [--seed 0] [--json out.json]
 """
 
 from __future__ import annotations
@@ -29,6 +48,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -45,6 +65,17 @@ Array = NDArray[np.float64]
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 MIN_DISTANCE = 0.15  # [m]: targets closer than this to a camera are not generated
 MAX_DISTANCE = 5.0  # [m]
+# the real robot heads in example-robot-data: URDF (under its robots/ folder) and camera frame
+REAL_HEADS = {
+    "tiago": ("tiago_description/robots/tiago.urdf", ("xtion_rgb_optical_frame",)),
+    "talos": ("talos_data/robots/talos_reduced.urdf", ("rgbd_rgb_optical_frame",)),
+}
+HEADS = ("nominal", "calibrated", *REAL_HEADS)  # nominal: the IIS-head; calibrated: calibrated_iis_head(seed)
+TRACK_DT = 1e-3  # [s]: the tracking loop's period
+TRACK_DEADLINE = TRACK_DT  # [s]: a tracking step must end within its period
+TRACK_RADIUS = 0.05  # [m]: the tracked target circles this far about a reachable target
+TRACK_HOLD = 1.0  # [s]: then jumps to the next one (a saccade)
+TRACK_POOL = 200  # reachable targets the tracked target's centres are chosen from
 PERTURB_ANGLE = math.radians(0.1)  # [rad]: std of the random rotation of each CPC transform
 PERTURB_LENGTH = 0.5e-3  # [m]: std of the random translation of each CPC transform
 
@@ -307,77 +338,596 @@ def _reference_solver(solver: GazeSolver) -> Callable[[Array, Array], tuple[Arra
     return solve
 
 
-def run_benchmark(n: int = 2000, seed: int = 0, heads: tuple[str, ...] = ("nominal", "calibrated")) -> dict[str, Any]:
-    """Solve ``n`` reachable targets per head with both methods; times and success rates.
+def _finite_home(lower: Array, upper: Array) -> Array:
+    """The middle of every joint's limits, 0 for a joint without finite limits, shape (n,)."""
+    limited = np.isfinite(lower) & np.isfinite(upper)
+    return np.where(limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0)
 
-    Returns:
-        ``{head: {"median_us", "p99_us", "success", "reference_median_us", "reference_success",
-        "ratio", "iterations_median"}}``.
+
+class SolvedAxes:
+    """The optical axes a solver points (``chain.solve_cameras``), by Pinocchio on a copy of the
+    solver's model: the camera frames, and for a rigid pair solved on its cyclopean axis a frame
+    added at the midpoint of the centres, z along the sum of the optical axes (it is rigid, so
+    placed once at home). Used for targets and the reference, not by the solver."""
+
+    def __init__(self, solver: GazeSolver) -> None:
+        import pinocchio as pin
+
+        self.pin = pin
+        chain = solver.chain
+        model = pin.Model(solver.model)
+        fids = [model.getFrameId(c) for c in solver.cameras]
+        self.home: Array = _finite_home(solver.lower, solver.upper)
+        self.frames: list[int] = []
+        for c in chain.solve_cameras.tolist():
+            if c < len(fids):
+                self.frames.append(fids[c])
+                continue
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, self.home)
+            T0, T1 = data.oMf[fids[0]], data.oMf[fids[1]]
+            z = T0.rotation[:, 2] + T1.rotation[:, 2]
+            z /= np.linalg.norm(z)
+            x = T1.translation - T0.translation
+            x -= (x @ z) * z
+            x /= np.linalg.norm(x)
+            M = pin.SE3(np.column_stack([x, np.cross(z, x), z]), 0.5 * (T0.translation + T1.translation))
+            jid = model.frames[fids[0]].parentJoint
+            self.frames.append(model.addFrame(pin.Frame("bench_cyclopean", jid, data.oMi[jid].actInv(M), pin.FrameType.OP_FRAME)))
+        self.model = model
+        self.data = model.createData()
+        self.chain = chain
+
+    def axes(self, Q: Array) -> tuple[Array, Array]:
+        """Centres (N, S, 3) [m] and unit optical axes (N, S, 3) (world) at readings Q (N, n)."""
+        pin, model, data = self.pin, self.model, self.data
+        O = np.empty((len(Q), len(self.frames), 3))
+        Z = np.empty_like(O)
+        for i, q in enumerate(Q):
+            pin.framesForwardKinematics(model, data, q)
+            for s, f in enumerate(self.frames):
+                O[i, s], Z[i, s] = data.oMf[f].translation, data.oMf[f].rotation[:, 2]
+        return O, Z
+
+    def residual(self, q: Array, p: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        """Per solved axis ``u - e_z`` (``u`` the unit target direction in its frame), shape (3S,),
+        and its Jacobian by the readings (3S, n): ``dp_cam = -v + [p_cam]x w`` from the LOCAL
+        frame Jacobian, ``du = (I - u u^T) dp_cam / |p_cam|``."""
+        pin, model, data = self.pin, self.model, self.data
+        if jacobian:
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+        else:
+            pin.framesForwardKinematics(model, data, q)
+        r, J = [], []
+        for f in self.frames:
+            pc = data.oMf[f].actInv(p)
+            d = float(np.linalg.norm(pc))
+            u = pc / d
+            r.append(u - np.array([0.0, 0.0, 1.0]))
+            if jacobian:
+                Jl = pin.getFrameJacobian(model, data, f, pin.LOCAL)
+                skew = np.array([[0.0, -pc[2], pc[1]], [pc[2], 0.0, -pc[0]], [-pc[1], pc[0], 0.0]])
+                dp = -Jl[:3] + skew @ Jl[3:]
+                J.append((np.eye(3) - np.outer(u, u)) @ dp / d)
+        return np.concatenate(r), (np.vstack(J) if jacobian else None)
+
+
+def generic_reachable_targets(axes: SolvedAxes, n: int, seed: int = 0) -> tuple[Array, Array]:
+    """``n`` targets (world) [m], shape (n, 3), that readings sampled inside the bounds of the
+    solver's unknowns fixate, and those readings (n, n_joints): one solved axis, a point on it
+    0.3-3 m ahead; two, the meeting point of axes that meet (to 1e-12 m) 0.15-5 m ahead of both.
+
+    Raises:
+        DegenerateDataError: Fewer than ``n`` after 200 rounds (two axes that seldom meet).
     """
-    from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.tolerances import GAZE_POINTING_TOL
-    from cpc2urdf.validation.gaze import GazeSolver
+    rng = np.random.default_rng(seed)
+    chain = axes.chain
+    lo, hi = chain.lower, chain.upper
+    P: list[Array] = []
+    Qs: list[Array] = []
+    for _round in range(200):
+        if len(P) >= n:
+            break
+        k = 2 * (n - len(P)) + 16
+        U = rng.uniform(lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo), (k, chain.m))
+        Q = chain.q_from_u(U)
+        O, Z = axes.axes(Q)
+        if O.shape[1] == 1:
+            pts = O[:, 0] + rng.uniform(0.3, 3.0, k)[:, None] * Z[:, 0]
+            ok = np.ones(k, dtype=bool)
+        else:
+            w = O[:, 0] - O[:, 1]
+            b = np.einsum("ij,ij->i", Z[:, 0], Z[:, 1])
+            d, e = np.einsum("ij,ij->i", Z[:, 0], w), np.einsum("ij,ij->i", Z[:, 1], w)
+            den = np.where(1.0 - b * b > 1e-12, 1.0 - b * b, np.nan)
+            s, t = (b * e - d) / den, (e - b * d) / den
+            p0, p1 = O[:, 0] + s[:, None] * Z[:, 0], O[:, 1] + t[:, None] * Z[:, 1]
+            pts = 0.5 * (p0 + p1)
+            with np.errstate(invalid="ignore"):
+                ok = (np.linalg.norm(p0 - p1, axis=1) < 1e-12) & (s > 0.15) & (s < 5.0) & (t > 0.15) & (t < 5.0)
+        P += list(pts[ok])
+        Qs += list(Q[ok])
+    if len(P) < n:
+        raise DegenerateDataError(f"only {len(P)} of {n} targets found where the solved axes meet in front")
+    return np.array(P[:n]), np.array(Qs[:n])
 
-    results: dict[str, Any] = {}
-    for head in heads:
-        model = load_model("iis_head") if head == "nominal" else calibrated_iis_head(seed)
-        solver = GazeSolver.from_model(model)
-        P, _ = reachable_targets(model, n, seed)
-        times = np.empty(n)
-        ok = np.zeros(n, dtype=bool)
-        iters = np.empty(n)
-        for i, p in enumerate(P):
-            t0 = time.perf_counter()
-            sol = solver.solve(p)
-            times[i] = time.perf_counter() - t0
-            ok[i] = sol.reachable
-            iters[i] = sol.iterations
+
+def generic_unreachable_targets(solver: GazeSolver, n: int, seed: int = 0) -> Array:
+    """``n`` targets behind the head (world) [m], shape (n, 3): within 15 deg of straight back
+    from the head frame's origin (:func:`~cpc2urdf.validation.gaze.reach.head_frame`), 0.5-3 m
+    away. Behind a pan-tilt head whose pan cannot turn round; the benchmark reports how many the
+    solver fixates all the same."""
+    from cpc2urdf.validation.gaze.reach import head_frame
+
+    frame = head_frame(solver)
+    rng = np.random.default_rng(seed)
+    d = rng.uniform(0.5, 3.0, n)
+    a = np.radians(15.0) * np.sqrt(rng.random(n))
+    phi = rng.uniform(0.0, 2.0 * math.pi, n)
+    dirs = np.column_stack([-np.cos(a), np.sin(a) * np.cos(phi), np.sin(a) * np.sin(phi)])
+    return frame.to_world(d[:, None] * dirs)
+
+
+def _generic_reference_solver(axes: SolvedAxes) -> Callable[[Array, Array], tuple[Array, int]]:
+    """scipy least_squares over the solver's unknowns (its coupling and bounds), on
+    :meth:`SolvedAxes.residual`."""
+    from scipy.optimize import least_squares
+
+    chain = axes.chain
+    A, b = chain.robot_A, chain.robot_b
+    lo, hi = chain.lower, chain.upper
+
+    def solve(p: Array, q0: Array) -> tuple[Array, int]:
+        def fun(u: Array) -> Array:
+            return axes.residual(A @ u + b, p, False)[0]
+
+        def jac(u: Array) -> Array:
+            J = axes.residual(A @ u + b, p, True)[1]
+            assert J is not None
+            return J @ A
+
+        u0 = np.clip(chain.u_from_q(q0), lo + 1e-12, hi - 1e-12)
+        res = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        return A @ res.x + b, int(res.nfev)
+
+    return solve
+
+
+def kinematics_call_us(solver: GazeSolver, n: int = 2000, seed: int = 0) -> float:
+    """Median time [us] of one Pinocchio forward kinematics plus two frame Jacobians (the
+    cameras', LOCAL) from Python, on its own ``Data``, at ``n`` seeded in-limit readings: the
+    unit the solve times are given in."""
+    import pinocchio as pin
+
+    model = solver.model
+    data = model.createData()
+    cams = list(solver.cameras)
+    f0, f1 = model.getFrameId(cams[0]), model.getFrameId(cams[-1])
+    rng = np.random.default_rng(seed)
+    lo, hi = solver.lower, solver.upper
+    limited = np.isfinite(lo) & np.isfinite(hi)
+    span = np.where(limited, hi - lo, 2.0 * math.pi)  # an unlimited joint: any turn
+    Q = np.where(limited, lo, -math.pi) + span * rng.random((n, solver.n))
+    local = pin.LOCAL
+    times = np.empty(n)
+    clock = time.perf_counter
+    for i, q in enumerate(Q):
+        t0 = clock()
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        pin.getFrameJacobian(model, data, f0, local)
+        pin.getFrameJacobian(model, data, f1, local)
+        times[i] = clock() - t0
+    return float(np.median(times) * 1e6)
+
+
+def _solve_times(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool_], Array]:
+    """Time [s], reachable flag and iterations of one ``solve`` per target (the latency a caller
+    sees)."""
+    n = P.shape[0]
+    times = np.empty(n)
+    ok = np.zeros(n, dtype=bool)
+    iters = np.empty(n)
+    clock = time.perf_counter
+    for i, p in enumerate(P):
+        t0 = clock()
+        sol = solver.solve(p)
+        times[i] = clock() - t0
+        ok[i] = sol.reachable
+        iters[i] = sol.iterations
+    return times, ok, iters
+
+
+def _reference_run(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool_], Array, str]:
+    """scipy ``least_squares`` on every target of ``P``, each right after one ``solve`` of ours
+    (so that both see the same load on a shared machine): the reference's time [s] and success,
+    our time [s] on the same targets, and where the reference starts.
+
+    On a head with the two-eye Python solver the reference starts from the solver's own start
+    (``initial_guess``) on the fixation residual with its free joints (:func:`_reference_solver`);
+    on others from the middle of the limits over the solver's unknowns
+    (:func:`_generic_reference_solver`)."""
+    from cpc2urdf.tolerances import GAZE_POINTING_TOL
+
+    n = P.shape[0]
+    times = np.empty(n)
+    ours = np.empty(n)
+    ok = np.zeros(n, dtype=bool)
+    clock = time.perf_counter
+    if _has_python_solver(solver):
         ref = _reference_solver(solver)
-        m_ref = min(n, 300)
-        rtimes = np.empty(m_ref)
-        rok = np.zeros(m_ref, dtype=bool)
-        for i, p in enumerate(P[:m_ref]):
-            t0 = time.perf_counter()
+        for i, p in enumerate(P):
+            t0 = clock()
+            solver.solve(p)
+            t1 = clock()
             q0 = solver.initial_guess(p)
             q, _ = ref(p, q0)
-            rtimes[i] = time.perf_counter() - t0
+            times[i], ours[i] = clock() - t1, t1 - t0
             st = solver.evaluate(q, p, jacobian=False)
             err = [math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam]
-            rok[i] = max(err) <= GAZE_POINTING_TOL
-        results[head] = {
-            "targets": n,
-            "median_us": float(np.median(times) * 1e6),
-            "p99_us": float(np.percentile(times, 99) * 1e6),
-            "success": float(ok.mean()),
-            "iterations_median": float(np.median(iters)),
-            "reference_targets": m_ref,
-            "reference_median_us": float(np.median(rtimes) * 1e6),
-            "reference_p99_us": float(np.percentile(rtimes, 99) * 1e6),
-            "reference_success": float(rok.mean()),
-            "ratio": float(np.median(rtimes) / np.median(times[:m_ref])),  # same targets
+            ok[i] = max(err) <= GAZE_POINTING_TOL
+        return times, ok, ours, "the solver's own start (initial_guess)"
+    axes = SolvedAxes(solver)
+    gref = _generic_reference_solver(axes)
+    for i, p in enumerate(P):
+        t0 = clock()
+        solver.solve(p)
+        t1 = clock()
+        q, _ = gref(p, axes.home)
+        times[i], ours[i] = clock() - t1, t1 - t0
+        O, Z = axes.axes(q[None, :])
+        d = p - O[0]
+        e = np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))
+        ok[i] = bool(np.max(e) <= GAZE_POINTING_TOL)
+    return times, ok, ours, "the middle of the limits"
+
+
+def _batch_throughput(solver: GazeSolver, P: Array, repeats: int = 3) -> tuple[float, str]:
+    """Targets per second of one batch solve of ``P`` (best of ``repeats``), and the path used:
+    ``"solve_many"`` or ``"loop"`` (one ``solve`` per target, where the solver has no batch entry)."""
+    from cpc2urdf.validation.gaze.reach import solve_batch
+
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        solve_batch(solver, P)
+        best = min(best, time.perf_counter() - t0)
+    path = "solve_many" if hasattr(solver, "solve_many") else "loop"
+    return float(P.shape[0] / best), path
+
+
+def tracking_targets(lower: Array, upper: Array, P: Array, Q: Array, seconds: float, dt: float = TRACK_DT) -> Array:
+    """A 1 kHz target trajectory through reachable targets ``P`` (world) [m], shape (T, 3): it
+    circles (:data:`TRACK_RADIUS`, one turn per second) about one of them, and every
+    :data:`TRACK_HOLD` s jumps to circle about the next, so that saccades start.
+
+    Only targets whose readings ``Q`` (shape (N, n)) lie in the middle half of every joint's
+    range (``lower``, ``upper``, shape (n,); unlimited joints pass) are used, so that the circle
+    about them stays reachable.
+
+    Raises:
+        DegenerateDataError: None of ``P`` is that far inside the limits.
+    """
+    lo, hi = lower, upper
+    with np.errstate(invalid="ignore"):
+        inside = (Q >= lo + 0.25 * (hi - lo)) & (Q <= hi - 0.25 * (hi - lo))
+    inner = np.all(inside | ~np.isfinite(hi - lo), axis=1)
+    P = P[inner]
+    if P.shape[0] == 0:
+        raise DegenerateDataError(
+            "no reachable target has readings in the middle half of every joint's range; "
+            "use more --targets for the tracking run"
+        )
+    T = max(1, int(round(seconds / dt)))
+    t = np.arange(T) * dt
+    k = (t // TRACK_HOLD).astype(int) % P.shape[0]
+    w = 2.0 * math.pi
+    offset = TRACK_RADIUS * np.stack([np.cos(w * t), np.sin(w * t), np.zeros_like(t)], axis=1)
+    return P[k] + offset
+
+
+def _tracking_step_times(solver: GazeSolver, targets: Array) -> tuple[Array, Array, int, float]:
+    """Wall and CPU time [s] of every :meth:`GazeTracker.step` over ``targets`` (minimum-jerk
+    saccades on, the URDF speed limits), the number of saccade samples and the largest pointing
+    error [rad] of the commanded readings where locked on. The CPU time (this thread's) leaves
+    out the time the process waited for a core."""
+    from cpc2urdf.validation.gaze.tracking import GazeTracker, SaccadeRule
+
+    tracker = GazeTracker(solver, TRACK_DT, saccades=SaccadeRule())
+    wall = np.empty(targets.shape[0])
+    cpu = np.empty(targets.shape[0])
+    saccade = 0
+    worst = 0.0
+    clock, cpu_clock = time.perf_counter, time.thread_time
+    for i, p in enumerate(targets):
+        c0 = cpu_clock()
+        t0 = clock()
+        s = tracker.step_checked(p)
+        wall[i] = clock() - t0
+        cpu[i] = cpu_clock() - c0
+        saccade += s.saccade
+        if s.locked:
+            worst = max(worst, float(np.max(s.pointing_error)))
+    return wall, cpu, saccade, worst
+
+
+@dataclass
+class BenchHead:
+    """A head of the benchmark: its solver, and the CPC model of an IIS-head (whose targets come
+    from :func:`reachable_targets` / :func:`unreachable_targets`), else None (generic targets)."""
+
+    name: str
+    solver: GazeSolver
+    model: CPCModel | None = None
+
+
+def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
+    """The URDF path and camera of a real robot head in example-robot-data."""
+    import sysconfig
+    from pathlib import Path
+
+    from cpc2urdf.errors import InputFileError
+
+    rel, cams = REAL_HEADS[name]
+    path = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots" / rel
+    if not path.is_file():
+        raise InputFileError(path, f"no such file (head {name!r} needs example-robot-data: pip install example-robot-data)")
+    return str(path), cams
+
+
+def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()) -> BenchHead:
+    """The head ``name`` (:data:`HEADS`), or with ``urdf`` any URDF and its ``cameras``."""
+    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.validation.gaze import GazeSolver
+    from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+
+    if urdf is not None:
+        robot = PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
+        return BenchHead(name, GazeSolver(robot, cameras))
+    if name in ("nominal", "calibrated"):
+        model = load_model("iis_head") if name == "nominal" else calibrated_iis_head(seed)
+        return BenchHead(name, GazeSolver.from_model(model), model)
+    if name in REAL_HEADS:
+        path, cams = _real_urdf(name)
+        return BenchHead(name, GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams))
+    from cpc2urdf.errors import ConfigurationError
+
+    raise ConfigurationError(f"unknown head {name!r}; expected one of {', '.join(HEADS)}")
+
+
+def _has_python_solver(solver: GazeSolver) -> bool:
+    """Whether ``solver`` has the two-eye Python solver (tracking, its own start for the reference)."""
+    from cpc2urdf.errors import ConfigurationError
+
+    try:
+        return solver.head is not None
+    except ConfigurationError:
+        return False
+
+
+def run_head(
+    head: BenchHead,
+    n: int = 2000,
+    seed: int = 0,
+    *,
+    unreachable: int = 200,
+    reference: int = 300,
+    track_seconds: float = 4.0,
+) -> dict[str, Any]:
+    """Every number of ``cpc2urdf bench gaze`` for one head (see :func:`run_benchmark`)."""
+    from cpc2urdf.validation.gaze.reach import solve_batch
+
+    solver = head.solver
+    python_solver = _has_python_solver(solver)
+    axes = SolvedAxes(solver)
+    if head.model is not None:
+        P, Q = reachable_targets(head.model, n, seed)
+        U = unreachable_targets(head.model, unreachable, seed) if unreachable else np.zeros((0, 3))
+    else:
+        P, Q = generic_reachable_targets(axes, n, seed)
+        U = generic_unreachable_targets(solver, unreachable, seed) if unreachable else np.zeros((0, 3))
+    solver.solve(P[0])  # warm up: first-call costs (caches, compiled code)
+    solve_batch(solver, P[:2])
+    kin = [kinematics_call_us(solver, seed=seed)]
+    times, ok, iters = _solve_times(solver, P)
+    statuses = solve_batch(solver, P).status
+    utimes, uok, _ = _solve_times(solver, U)
+    m_ref = min(n, reference)
+    rtimes, rok, otimes, reference_start = _reference_run(solver, P[:m_ref])
+    rate, path = _batch_throughput(solver, np.concatenate([P, U]))
+    track: dict[str, Any] = {}
+    if python_solver:
+        # centres for the tracked target: a pool of TRACK_POOL reachable targets at least
+        Pt, Qt = (P, Q) if n >= TRACK_POOL else (
+            reachable_targets(head.model, TRACK_POOL, seed + 1) if head.model is not None
+            else generic_reachable_targets(axes, TRACK_POOL, seed + 1)
+        )
+        ttimes, tcpu, n_saccade, track_err = _tracking_step_times(
+            solver, tracking_targets(solver.lower, solver.upper, Pt, Qt, track_seconds)
+        )
+        track = {
+            "track_steps": int(ttimes.size),
+            "track_saccade_steps": int(n_saccade),
+            "track_locked_error_max_rad": track_err,
+            "track_median_us": float(np.median(ttimes) * 1e6),
+            "track_p99_us": float(np.percentile(ttimes, 99) * 1e6),
+            "track_max_us": float(np.max(ttimes) * 1e6),
+            "track_over_deadline": int(np.sum(ttimes > TRACK_DEADLINE)),
+            "track_cpu_p99_us": float(np.percentile(tcpu, 99) * 1e6),
+            "track_cpu_max_us": float(np.max(tcpu) * 1e6),
+            "track_cpu_over_deadline": int(np.sum(tcpu > TRACK_DEADLINE)),
         }
+    kin.append(kinematics_call_us(solver, seed=seed + 1))
+    kin_us = float(np.median(kin))
+    median_us = float(np.median(times) * 1e6)
+    p99_us = float(np.percentile(times, 99) * 1e6)
+    u_median = float(np.median(utimes) * 1e6) if utimes.size else None  # None: no unreachable targets
+    disparity = float(np.mean(statuses == "disparity"))
+    r: dict[str, Any] = {
+        "kind": str(solver.kind) if hasattr(solver, "kind") else "binocular",
+        "targets": n,
+        "kin_us": kin_us,
+        "median_us": median_us,
+        "p99_us": p99_us,
+        "median_kin": median_us / kin_us,
+        "p99_kin": p99_us / kin_us,
+        "success": float(ok.mean()),
+        "disparity": disparity,
+        "iterations_median": float(np.median(iters)),
+        "unreachable_targets": int(U.shape[0]),
+        "unreachable_fixated": int(uok.sum()),
+        "unreachable_median_us": u_median,
+        "unreachable_ratio": None if u_median is None else u_median / median_us,
+        "reference_targets": m_ref,
+        "reference_start": reference_start,
+        "reference_median_us": float(np.median(rtimes) * 1e6),
+        "reference_p99_us": float(np.percentile(rtimes, 99) * 1e6),
+        "reference_success": float(rok.mean()),
+        "ratio": float(np.median(rtimes) / np.median(otimes)),  # same targets, interleaved
+        "batch_targets": int(P.shape[0] + U.shape[0]),
+        "batch_targets_per_s": rate,
+        "batch_path": path,
+        **track,
+    }
+    r["aims"] = {
+        "median_le_10_kin": r["median_kin"] <= 10.0,
+        "p99_le_40_kin": r["p99_kin"] <= 40.0,
+        "unreachable_le_5_reachable": u_median is not None and r["unreachable_ratio"] <= 5.0,
+        "success_100": r["success"] + r["disparity"] == 1.0,
+        "ge_100x_scipy": r["ratio"] >= 100.0,
+        "batch_ge_100k_per_s": rate >= 100_000.0,
+        "track_p99_within_deadline": bool(track) and r["track_p99_us"] <= TRACK_DEADLINE * 1e6,
+    }
+    return r
+
+
+def run_benchmark(
+    n: int = 2000,
+    seed: int = 0,
+    heads: tuple[str, ...] = HEADS,
+    *,
+    unreachable: int = 200,
+    reference: int = 300,
+    track_seconds: float = 4.0,
+    urdf: str | None = None,
+    cameras: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """Every number of ``cpc2urdf bench gaze``, per head, in one run.
+
+    Args:
+        n: Reachable targets per head (IIS-heads: :func:`reachable_targets`; others:
+            :func:`generic_reachable_targets`).
+        seed: Seed of the targets and of the calibrated head's errors.
+        heads: Names from :data:`HEADS`.
+        unreachable: Unreachable targets per head (:func:`unreachable_targets`,
+            :func:`generic_unreachable_targets`).
+        reference: How many of the reachable targets the scipy reference solves.
+        track_seconds: Length of the 1 kHz tracking run [s] (heads with two independent eyes).
+        urdf: Also this URDF (named by its file stem), with ``cameras``.
+        cameras: The camera frames of ``urdf``.
+
+    Returns:
+        ``{head: {...}}``: the kinematics unit ``kin_us`` (one FK + two frame Jacobians, measured
+        before and after the solves), ``median_us``/``p99_us`` and as ratios to it
+        (``median_kin``, ``p99_kin``), ``success`` (fixated) and ``disparity`` (answered with the
+        head's own disparity) on reachable targets, ``iterations_median``,
+        ``unreachable_median_us`` and ``unreachable_ratio`` (to the reachable median), the
+        scipy reference's ``reference_median_us``/``reference_success`` and ``ratio`` (its
+        median over ours on the same targets), ``batch_targets_per_s`` and ``batch_path``,
+        ``track_p99_us``/``track_max_us``/``track_over_deadline`` (steps over
+        :data:`TRACK_DEADLINE`; wall clock, and ``track_cpu_*`` this thread's CPU time), and
+        ``aims`` (the issue's aims, each True/False).
+    """
+    import os
+
+    names = list(heads)
+    if urdf is not None:
+        names.append(os.path.splitext(os.path.basename(urdf))[0])
+    results: dict[str, Any] = {}
+    for name in names:
+        is_urdf = urdf is not None and name == names[-1] and name not in heads
+        head = bench_head(name, seed, urdf if is_urdf else None, cameras)
+        results[name] = run_head(
+            head, n, seed, unreachable=unreachable, reference=reference, track_seconds=track_seconds
+        )
     return results
+
+
+def _ratio(x: float | None) -> str:
+    return f"{'n/a':>9s}" if x is None else f"{x:8.1f}x"
+
+
+def format_table(res: dict[str, Any]) -> str:
+    """The table ``cpc2urdf bench gaze`` prints: one row per head; times as ratios to one FK +
+    two frame Jacobians (``kin``), the issue's aims under the header."""
+    head = (
+        f"{'head':13s} {'kind':12s} {'kin us':>7s} {'median':>9s} {'p99':>9s} {'unreach':>9s} {'success':>8s} "
+        f"{'iters':>5s} {'vs scipy':>9s} {'batch/s':>9s} {'track p99':>10s} {'cpu p99':>8s} {'over 1ms':>8s}"
+    )
+    aims = (
+        f"{'aim':13s} {'':12s} {'':>7s} {'<=10x':>9s} {'<=40x':>9s} {'<=5x':>9s} {'1.0':>8s} {'':>5s} "
+        f"{'>=100x':>9s} {'>=100000':>9s} {'<=1000us':>10s} {'':>8s} {'0':>8s}"
+    )
+    lines = [head, aims]
+    for name, r in res.items():
+        success = r["success"] + r["disparity"]
+        track = (
+            f"{r['track_p99_us']:8.0f}us {r['track_cpu_p99_us']:6.0f}us {r['track_over_deadline']:8d}"
+            if "track_p99_us" in r else f"{'n/a':>10s} {'n/a':>8s} {'n/a':>8s}"
+        )
+        lines.append(
+            f"{name:13s} {r['kind']:12s} {r['kin_us']:7.2f} {r['median_kin']:8.1f}x {r['p99_kin']:8.1f}x "
+            f"{_ratio(r['unreachable_ratio'])} {success:8.4f} {r['iterations_median']:5.0f} "
+            f"{r['ratio']:8.1f}x {r['batch_targets_per_s']:9.0f} {track}"
+        )
+    lines.append(
+        "kin: one Pinocchio FK + two frame Jacobians [us], this run; median/p99: one solve per reachable "
+        "target, over kin; unreach: unreachable median over reachable median; success: fixated, or "
+        "answered with the head's disparity; vs scipy: least_squares median over ours, same targets; "
+        "batch/s: "
+        + ", ".join(f"{n} via {r['batch_path']}" for n, r in res.items())
+        + "; track: one 1 kHz step (solve + pursuit/saccade), wall and CPU time"
+    )
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf bench gaze``: print the table (and optionally write JSON)."""
+    from cpc2urdf.errors import ConfigurationError
+
     parser = OneLineParser(prog="cpc2urdf bench gaze", description=__doc__.split("\n")[0])
     parser.add_argument("--targets", type=int, default=2000, help="reachable targets per head (default 2000)")
+    parser.add_argument("--unreachable", type=int, default=200, help="unreachable targets per head (default 200)")
+    parser.add_argument("--reference", type=int, default=300, help="targets the scipy reference solves (default 300)")
+    parser.add_argument("--track-seconds", type=float, default=4.0, help="length of the 1 kHz tracking run [s] (default 4)")
+    parser.add_argument("--heads", nargs="+", choices=HEADS, default=list(HEADS), help="heads (default all)")
+    parser.add_argument("--urdf", help="also this head (a URDF file; named by its file stem), with --camera")
+    parser.add_argument("--camera", nargs="+", default=[], metavar="FRAME", help="--urdf: its one or two camera frames")
     parser.add_argument("--seed", type=int, default=0, help="seed of targets and calibration errors")
     parser.add_argument("--json", help="also write the numbers to this JSON file")
     args = parser.parse_args(argv)
-    if args.targets < 1:
-        from cpc2urdf.errors import ConfigurationError
+    if (args.urdf is None) != (not args.camera):
+        raise ConfigurationError("--urdf and --camera go together: a URDF file and its one or two camera frames")
+    if args.targets < 1 or args.reference < 1 or args.unreachable < 0:
+        raise ConfigurationError("--targets and --reference must be at least 1, --unreachable at least 0")
+    if not (math.isfinite(args.track_seconds) and args.track_seconds >= TRACK_DT):
+        raise ConfigurationError(f"--track-seconds must be at least {TRACK_DT:g} s, got {args.track_seconds}")
+    if args.json:
+        from cpc2urdf.fileio import check_output_path
 
-        raise ConfigurationError("--targets must be at least 1")
-    res = run_benchmark(args.targets, args.seed)
-    print(f"{'head':12s} {'median us':>10s} {'p99 us':>10s} {'success':>8s} {'iters':>6s} "
-          f"{'ref median us':>14s} {'ref success':>11s} {'ratio':>7s}")
-    for head, r in res.items():
-        print(
-            f"{head:12s} {r['median_us']:10.1f} {r['p99_us']:10.1f} {r['success']:8.4f} {r['iterations_median']:6.0f} "
-            f"{r['reference_median_us']:14.1f} {r['reference_success']:11.4f} {r['ratio']:7.1f}"
-        )
+        check_output_path(args.json)
+    res = run_benchmark(
+        args.targets,
+        args.seed,
+        tuple(args.heads),
+        unreachable=args.unreachable,
+        reference=args.reference,
+        track_seconds=args.track_seconds,
+        urdf=args.urdf,
+        cameras=tuple(args.camera),
+    )
+    print(format_table(res))
     if args.json:
         from cpc2urdf.fileio import write_json
 
@@ -387,17 +937,33 @@ def main(argv: list[str] | None = None) -> int:
 
 __all__ = [
     "CAMERAS",
+    "HEADS",
+    "REAL_HEADS",
+    "BenchHead",
+    "SolvedAxes",
+    "TRACK_DEADLINE",
+    "TRACK_DT",
+    "TRACK_HOLD",
+    "TRACK_POOL",
+    "TRACK_RADIUS",
     "MAX_DISTANCE",
     "MIN_DISTANCE",
     "PERTURB_ANGLE",
     "PERTURB_LENGTH",
     "axis_distance",
     "axis_meeting",
+    "bench_head",
+    "generic_reachable_targets",
+    "generic_unreachable_targets",
     "calibrated_iis_head",
     "eyes_coplanar",
+    "format_table",
+    "kinematics_call_us",
     "main",
     "reachable_targets",
     "run_benchmark",
+    "run_head",
     "too_close_targets",
+    "tracking_targets",
     "unreachable_targets",
 ]

@@ -59,6 +59,8 @@ Frames: ``T_world_x`` is the pose of ``x`` in ``world``; points carry their fram
 
 from __future__ import annotations
 
+from cpc2urdf.validation.gaze.batch import BATCH_STATUSES, CompiledGaze, GazeBatch
+from cpc2urdf.validation.gaze.chain import Coupling, HeadChain, build_chain
 from cpc2urdf.validation.gaze.fixation import (
     MIN_TARGET_DISTANCE,
     NULL_EIGENVALUE,
@@ -84,6 +86,7 @@ from cpc2urdf.validation.gaze.policies import (
 )
 from cpc2urdf.validation.gaze.result import (
     STATUS_BEHIND,
+    STATUS_DISPARITY,
     STATUS_FIXATED,
     STATUS_LIMITS,
     STATUS_NO_SOLUTION,
@@ -96,6 +99,7 @@ from cpc2urdf.validation.gaze.tracking import Trajectory
 
 __all__ = [
     "BACKTRACKS",
+    "BATCH_STATUSES",
     "CONVERGED_RESIDUAL",
     "CONVERGED_STEP",
     "DEFAULT_CAMERAS",
@@ -113,16 +117,22 @@ __all__ = [
     "STALL_RESIDUAL",
     "STATUSES",
     "STATUS_BEHIND",
+    "STATUS_DISPARITY",
     "STATUS_FIXATED",
     "STATUS_LIMITS",
     "STATUS_NO_SOLUTION",
     "STATUS_TOO_CLOSE",
     "TABLE_TIE_WEIGHT",
+    "CompiledGaze",
+    "Coupling",
     "FixationState",
+    "GazeBatch",
     "GazeHead",
     "GazeSolution",
     "GazeSolver",
+    "HeadChain",
     "Trajectory",
+    "build_chain",
     "solver_for",
     "target_point",
 ]

@@ -175,33 +175,50 @@ class GazeHead:
         """
         if q is None:
             return None
-        if isinstance(q, Mapping):
-            unknown = set(q) - set(self.joint_names)
-            if unknown:
-                raise UnknownNameError("joint", sorted(unknown)[0], self.joint_names)
-            missing = [n for n in self.joint_names if n not in q]
-            if missing:
-                raise ConfigurationError(f"q_current lacks joints {missing}")
-            q = [q[n] for n in self.joint_names]
-        try:
-            qa = np.asarray(q, dtype=float)
-        except (TypeError, ValueError) as e:
-            raise ConfigurationError(f"q_current must be {self.n} numbers, got {q!r}") from e
-        if qa.shape != (self.n,):
-            raise ConfigurationError(
-                f"q_current must have shape ({self.n},) for joints {list(self.joint_names)}, got shape {qa.shape}"
-            )
-        if not np.all(np.isfinite(qa)):
-            raise ConfigurationError(f"q_current must be finite, got {qa.tolist()}")
-        tol = 1e-9
-        bad = np.flatnonzero((qa < self.lower - tol) | (qa > self.upper + tol))
-        if bad.size:
-            i = int(bad[0])
-            raise ConfigurationError(
-                f"q_current: joint {self.joint_names[i]!r} reading {qa[i]:.9g} outside its limits "
-                f"[{self.lower[i]:.9g}, {self.upper[i]:.9g}]"
-            )
-        return np.clip(qa, self.lower, self.upper)
+        return check_readings(self.joint_names, self.lower, self.upper, q)
+
+    @staticmethod
+    def check_readings(robot: PinocchioRobot, q: ArrayLike | Mapping[str, float]) -> Array:
+        """:meth:`check_q` on any robot (its joints and limits)."""
+        return check_readings(robot.joint_names, robot.lower, robot.upper, q)
 
 
-__all__ = ["DEFAULT_CAMERAS", "GazeHead", "Index"]
+def check_readings(
+    joint_names: Sequence[str], lower: Array, upper: Array, q: ArrayLike | Mapping[str, float]
+) -> Array:
+    """Readings ``q`` (shape (n,) in ``joint_names`` order, or ``{joint: reading}`` naming every
+    joint) as an array inside ``lower``..``upper`` (1e-9 slack, then clipped).
+
+    Raises:
+        UnknownNameError: A joint not in ``joint_names``.
+        ConfigurationError: Missing joints, the wrong shape, NaN/inf, or a reading outside its
+            limits.
+    """
+    n = len(joint_names)
+    if isinstance(q, Mapping):
+        unknown = set(q) - set(joint_names)
+        if unknown:
+            raise UnknownNameError("joint", sorted(unknown)[0], tuple(joint_names))
+        missing = [j for j in joint_names if j not in q]
+        if missing:
+            raise ConfigurationError(f"q_current lacks joints {missing}")
+        q = [q[j] for j in joint_names]
+    try:
+        qa = np.asarray(q, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ConfigurationError(f"q_current must be {n} numbers, got {q!r}") from e
+    if qa.shape != (n,):
+        raise ConfigurationError(f"q_current must have shape ({n},) for joints {list(joint_names)}, got shape {qa.shape}")
+    if not np.all(np.isfinite(qa)):
+        raise ConfigurationError(f"q_current must be finite, got {qa.tolist()}")
+    tol = 1e-9
+    bad = np.flatnonzero((qa < lower - tol) | (qa > upper + tol))
+    if bad.size:
+        i = int(bad[0])
+        raise ConfigurationError(
+            f"q_current: joint {joint_names[i]!r} reading {qa[i]:.9g} outside its limits [{lower[i]:.9g}, {upper[i]:.9g}]"
+        )
+    return np.clip(qa, lower, upper)
+
+
+__all__ = ["DEFAULT_CAMERAS", "GazeHead", "Index", "check_readings"]

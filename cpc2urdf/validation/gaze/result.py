@@ -24,7 +24,8 @@ STATUS_LIMITS = "joint_limits"  # the best in-limit configuration does not fixat
 STATUS_BEHIND = "behind"  # an eye would have to look away from the target
 STATUS_TOO_CLOSE = "too_close"  # the target is closer to the cameras than their baseline
 STATUS_NO_SOLUTION = "no_solution"  # no limit active, yet the two eyes cannot both fixate
-STATUSES = (STATUS_FIXATED, STATUS_LIMITS, STATUS_BEHIND, STATUS_TOO_CLOSE, STATUS_NO_SOLUTION)
+STATUS_DISPARITY = "disparity"  # the head's eyes cannot fixate exactly: the policy's posture, residual split
+STATUSES = (STATUS_FIXATED, STATUS_LIMITS, STATUS_BEHIND, STATUS_TOO_CLOSE, STATUS_NO_SOLUTION, STATUS_DISPARITY)
 
 
 @dataclass(frozen=True)
@@ -38,9 +39,10 @@ class GazeSolution:
             :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL` (which implies in front of the cameras).
         status: One of :data:`STATUSES`: ``"fixated"`` or why not.
         pointing_error: Angle between each optical axis and the direction to the target [rad],
-            shape (2,) (left, right).
+            shape (2,) (left, right) on two eyes; shape (1,) on a one-camera head or a rigid pair
+            (its cyclopean axis, or the master eye).
         miss_distance: Distance from the target to each optical ray (half-line in front of the
-            camera) [m], shape (2,).
+            camera) [m], same shape.
         fixation_point: Midpoint of the closest points of the two optical axes (world) [m],
             shape (3,), or None when the axes are parallel.
         vergence: Angle between the two optical axes [rad].
@@ -69,24 +71,37 @@ class GazeSolution:
         return {n: float(v) for n, v in zip(self.joint_names, self.q, strict=True)}
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict (SI units)."""
+        """A JSON-ready dict (SI units); a value beyond the float range (the miss distance of a
+        target beyond ~1e308 m) is written as null, never as ``Infinity``."""
+        names = ("left", "right") if len(self.pointing_error) == 2 else tuple(f"axis{k}" for k in range(len(self.pointing_error)))
         return {
             "target": self.target.tolist(),
             "policy": self.policy,
             "reachable": self.reachable,
             "status": self.status,
             "joints": self.joints,
-            "pointing_error_rad": {"left": float(self.pointing_error[0]), "right": float(self.pointing_error[1])},
-            "miss_distance_m": {"left": float(self.miss_distance[0]), "right": float(self.miss_distance[1])},
-            "fixation_point": None if self.fixation_point is None else self.fixation_point.tolist(),
-            "vergence_rad": self.vergence,
+            "pointing_error_rad": {k: _finite(v) for k, v in zip(names, self.pointing_error.tolist(), strict=True)},
+            "miss_distance_m": {k: _finite(v) for k, v in zip(names, self.miss_distance.tolist(), strict=True)},
+            "fixation_point": None if self.fixation_point is None else [_finite(v) for v in self.fixation_point.tolist()],
+            "vergence_rad": _finite(self.vergence),
             "at_limit": list(self.at_limit),
             "iterations": self.iterations,
         }
 
 
+def _finite(v: float) -> float | None:
+    """``v``, or None when it is not finite (JSON has no inf)."""
+    return float(v) if math.isfinite(v) else None
+
+
 def solution_from_state(
-    head: GazeHead, p: Array, q: Array, iterations: int, policy: str, st: FixationState
+    head: GazeHead,
+    p: Array,
+    q: Array,
+    iterations: int,
+    policy: str,
+    st: FixationState,
+    tol: float = GAZE_POINTING_TOL,
 ) -> GazeSolution:
     """The :class:`GazeSolution` of readings ``q`` (shape (n,)) for target ``p`` (world) [m],
     shape (3,), from its fixation state ``st``: pointing errors, miss distances, the joints at a
@@ -98,12 +113,12 @@ def solution_from_state(
     fix = closest_point(st.origins, st.axes)
     (a0, a1, a2), (b0, b1, b2) = st.axes
     vergence = math.acos(max(-1.0, min(1.0, a0 * b0 + a1 * b1 + a2 * b2)))
-    tol = 1e-12
+    at = 1e-12
     at_limit = tuple(
         n for n, v, lo, hi in zip(head.joint_names, q.tolist(), head.lower_list, head.upper_list, strict=True)
-        if v <= lo + tol or v >= hi - tol
+        if v <= lo + at or v >= hi - at
     )
-    reachable = errs[0] <= GAZE_POINTING_TOL and errs[1] <= GAZE_POINTING_TOL
+    reachable = errs[0] <= tol and errs[1] <= tol
     if reachable:
         status = STATUS_FIXATED
     elif any(not (ux or uy or uz) for ux, uy, uz, _ in st.u):
@@ -132,13 +147,64 @@ def solution_from_state(
     )
 
 
+def solution_from_compiled(
+    robot_names: tuple[str, ...],
+    lower: Array,
+    upper: Array,
+    p: Array,
+    q: Array,
+    poses: list[tuple[Array, Array]],
+    errors: Array,
+    status: str,
+    iterations: int,
+    policy: str,
+) -> GazeSolution:
+    """The :class:`GazeSolution` of a compiled solve: readings ``q`` (n,), the solved axes'
+    ``poses`` (rotation (3, 3), centre (3,) in world) and pointing ``errors`` (S,) [rad] for
+    target ``p``, with the compiled status (``fixated`` iff every error is within the tolerance)."""
+    miss = []
+    for R, o in poses:
+        d = p - o
+        big = float(np.abs(d).max())
+        f = math.ldexp(1.0, -math.frexp(big)[1]) if big > 1e150 else 1.0
+        x, y, z = (R.T @ (d * f)).tolist()
+        miss.append((math.hypot(x, y) if z >= 0 else math.hypot(x, y, z)) / f)
+    fix = None
+    vergence = 0.0
+    if len(poses) == 2:
+        fix = closest_point([o.tolist() for _, o in poses], [R[:, 2].tolist() for R, _ in poses])
+        a, b = poses[0][0][:, 2], poses[1][0][:, 2]
+        vergence = math.acos(max(-1.0, min(1.0, float(a @ b))))
+    tol = 1e-12
+    at_limit = tuple(
+        n for n, v, lo, hi in zip(robot_names, q.tolist(), lower.tolist(), upper.tolist(), strict=True)
+        if v <= lo + tol or v >= hi - tol
+    )
+    return GazeSolution(
+        q=q,
+        joint_names=robot_names,
+        reachable=status == STATUS_FIXATED,
+        status=status,
+        pointing_error=np.asarray(errors, dtype=float).copy(),
+        miss_distance=np.array(miss),
+        fixation_point=fix,
+        vergence=vergence,
+        at_limit=at_limit,
+        iterations=int(iterations),
+        policy=policy,
+        target=p.copy(),
+    )
+
+
 __all__ = [
     "STATUSES",
+    "STATUS_DISPARITY",
     "STATUS_BEHIND",
     "STATUS_FIXATED",
     "STATUS_LIMITS",
     "STATUS_NO_SOLUTION",
     "STATUS_TOO_CLOSE",
     "GazeSolution",
+    "solution_from_compiled",
     "solution_from_state",
 ]

@@ -24,8 +24,17 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
+from cpc2urdf.validation.gaze.chain import (
+    KIND_BINOCULAR,
+    Coupling,
+    HeadChain,
+    build_chain,
+    home_readings,
+)
 from cpc2urdf.validation.gaze.fixation import (
     FixationState,
     evaluate_fixation,
@@ -45,7 +54,11 @@ from cpc2urdf.validation.gaze.policies import (
     check_policy,
     free_joints,
 )
-from cpc2urdf.validation.gaze.result import GazeSolution, solution_from_state
+from cpc2urdf.validation.gaze.result import (
+    GazeSolution,
+    solution_from_compiled,
+    solution_from_state,
+)
 from cpc2urdf.validation.gaze.tracking import Trajectory, track
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -84,19 +97,53 @@ class GazeSolver:
         cameras: Sequence[str] = DEFAULT_CAMERAS,
         *,
         viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+        joints: Sequence[str] | None = None,
+        coupling: Coupling | None = None,
+        rigid: str = "cyclopean",
+        tolerance: float | None = None,
     ) -> None:
         robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf)
         if robot.cpc_model is not None:
             for name in cameras:
                 robot.cpc_model.structure.frame(name)  # UnknownNameError with the model's frame names
-        head = GazeHead(robot, cameras)
-        self.head = head
+        self.robot = robot
+        self.cameras = tuple(cameras)
+        self.joint_names = robot.joint_names
+        self.joint_kinds = dict(zip(robot.joint_names, robot.joint_kinds, strict=True))
+        self.n = robot.n_joints
+        # The compiled solver: every head shape (one camera, two eyes, a rigid pair, couplings).
+        self.chain: HeadChain = build_chain(robot, self.cameras, joints, coupling, rigid)
+        self.compiled = CompiledGaze(self.chain, tolerance)
+        # The Python solver with its four policies: two independent eyes, every joint free.
+        self._head: GazeHead | None = None
+        if self.chain.kind == KIND_BINOCULAR and joints is None and coupling is None and self._neck_and_eyes():
+            self._legacy(GazeHead(robot, self.cameras), viewing_distance)
+        else:
+            self.lower = robot.lower.copy()
+            self.upper = robot.upper.copy()
+            self.velocity_limit = robot.velocity_limit.copy()
+            self.home = home_readings(robot)
+            self.baseline = self.compiled.baseline
+            self.redundant = False
+            self.model = robot.model
+            self.data = robot.model.createData()
+        # the cyclopean policy of a head that cannot fixate exactly: the compiled near-null
+        # posture over neck and eyes (the table stays, as in the Python solver's policy)
+        self._posture: CompiledGaze | None = None
+        if self._head is not None and self.compiled.disparity_head:
+            free = self._free_joints["cyclopean"]
+            self._posture = CompiledGaze(
+                build_chain(robot, self.cameras, [self.joint_names[i] for i in free]), tolerance
+            )
+
+    def _neck_and_eyes(self) -> bool:
+        """Whether every robot joint has finite limits (the Python solver's assumption)."""
+        return bool(np.all(np.isfinite(self.robot.lower)) and np.all(np.isfinite(self.robot.upper)))
+
+    def _legacy(self, head: GazeHead, viewing_distance: float) -> None:
+        self._head = head
         self.model = head.model
         self.data = head.data
-        self.cameras = head.cameras
-        self.joint_names = head.joint_names
-        self.joint_kinds = head.joint_kinds
-        self.n = head.n
         self.lower = head.lower
         self.upper = head.upper
         self.velocity_limit = head.velocity_limit
@@ -109,6 +156,57 @@ class GazeSolver:
         self._fixed_joints = {policy: np.setdiff1d(np.arange(self.n), free) for policy, free in self._free_joints.items()}
         left, right = head.camera_poses(head.home)
         self._centre: Array = 0.5 * (left[:3, 3] + right[:3, 3])  # cyclopean point at home (world) [m]
+
+    @property
+    def head(self) -> GazeHead:
+        """The two-eye :class:`GazeHead` of the Python solver (its four policies, tracking).
+
+        Raises:
+            ConfigurationError: A head of another shape (one camera, a rigid pair, stated joints or
+                a coupling): only the compiled solver (:meth:`solve`, :meth:`solve_many`) serves it.
+        """
+        if self._head is None:
+            raise ConfigurationError(
+                f"head {self.robot.name!r} ({self.chain.kind}, cameras {list(self.cameras)}) has only the compiled "
+                "solver: solve() with the cyclopean or min-motion policy, and solve_many()"
+            )
+        return self._head
+
+    @property
+    def kind(self) -> str:
+        """The head's shape: ``"look-at"``, ``"binocular"`` or ``"rigid-stereo"``."""
+        return self.chain.kind
+
+    @property
+    def disparity_head(self) -> bool:
+        """Whether the head's two eyes cannot fixate exactly (their optical axes do not sweep one
+        plane): :meth:`disparity_report` says by how much."""
+        return self.compiled.disparity_head
+
+    def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, object]:
+        """The pointing error the head cannot remove over a workspace ahead
+        (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.disparity_report`)."""
+        return (self._posture or self.compiled).disparity_report(n, seed)
+
+    def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
+        """Every target (rows of ``targets`` (N, 3), world [m]) through the compiled loop, from
+        ``q_current`` (shape (n,); None: the middle of the limits); joints the head may not move
+        stay at ``q_current``. See :class:`~cpc2urdf.validation.gaze.batch.GazeBatch`.
+
+        Raises:
+            ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
+        """
+        qc = self.check_q(q_current)
+        return (self._posture or self.compiled).solve_many(targets, qc)
+
+    def check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
+        """Readings ``q_current`` as an in-limit array of shape (n,), or None
+        (:meth:`GazeHead.check_q`)."""
+        if self._head is not None:
+            return self._head.check_q(q)
+        if q is None:
+            return None
+        return GazeHead.check_readings(self.robot, q)
 
     @classmethod
     def from_model(
@@ -135,15 +233,20 @@ class GazeSolver:
     @property
     def viewing_distance(self) -> float:
         """Preferred distance [m] from the cyclopean point to the target (``"use-table"``)."""
+        self.head  # noqa: B018 (ConfigurationError on a head without the Python solver)
         return self._engine.viewing_distance
 
     @viewing_distance.setter
     def viewing_distance(self, value: float) -> None:
+        self.head  # noqa: B018
         self._engine.viewing_distance = float(value)
 
     def free_joints(self, policy: str) -> Index:
-        """Indices (into ``q``) of the joints ``policy`` lets move."""
+        """Indices (into ``q``) of the joints ``policy`` lets move (on a head with only the
+        compiled solver: the joints it may move, whatever the policy)."""
         check_policy(policy)
+        if self._head is None:
+            return np.flatnonzero(np.abs(self.chain.robot_A).sum(axis=1) > 0)
         return self._free_joints[policy]
 
     def evaluate(self, q: Array, p_world: Array, jacobian: bool = True) -> FixationState:
@@ -196,14 +299,43 @@ class GazeSolver:
         """
         check_policy(policy)
         p = target_point(p_world)
-        qc = self.head.check_q(q_current)
+        qc = self.check_q(q_current)
         return self.solve_checked(p, qc, policy, q_start, max_iterations)
 
     def solve_checked(
         self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
     ) -> GazeSolution:
         """:meth:`solve` on a checked target ``p`` and checked in-limit readings ``qc`` (or None):
-        the entry of :meth:`track`, which does not re-check the readings it produced itself."""
+        the entry of :meth:`track`, which does not re-check the readings it produced itself.
+
+        The compiled solver answers on a head of another shape than two independent eyes, and
+        for the cyclopean policy on a head that cannot fixate exactly (:attr:`disparity_head`);
+        the Python solver otherwise."""
+        if self._head is None or (self._posture is not None and policy == "cyclopean"):
+            return self._solve_compiled(p, qc, policy)
+        return self._solve_python(p, qc, policy, q_start, max_iterations)
+
+    def _solve_compiled(self, p: Array, qc: Array | None, policy: str) -> GazeSolution:
+        if policy not in ("cyclopean", "min-motion"):
+            raise ConfigurationError(
+                f"policy {policy!r} needs two independent eyes with every joint free; this head "
+                f"({self.chain.kind}) takes cyclopean or min-motion"
+            )
+        comp = self._posture or self.compiled
+        batch = comp.solve_many(p[None, :], qc)
+        q = batch.q[0]
+        chain = comp.chain
+        R, o = comp._fk(chain.u_from_q(q), comp.b_for(qc))
+        cams = chain.solve_cameras.tolist()
+        poses = [(R[c], o[c]) for c in cams]
+        return solution_from_compiled(
+            self.joint_names, self.lower, self.upper, p, q, poses, batch.pointing_error[0],
+            batch.status_of(0), int(batch.iterations[0]), policy,
+        )
+
+    def _solve_python(
+        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
+    ) -> GazeSolution:
         q_ref = self.home.copy() if qc is None else qc
         free = self._free_joints[policy]
         p_solve = self._solved_target(p)
@@ -305,10 +437,18 @@ def solver_for(
     cameras: Sequence[str] = DEFAULT_CAMERAS,
     *,
     viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+    joints: Sequence[str] | None = None,
+    coupling: Coupling | None = None,
+    rigid: str = "cyclopean",
+    tolerance: float | None = None,
 ) -> GazeSolver:
     """A solver for a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot name
-    or a :class:`~cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`)."""
-    return GazeSolver(PinocchioRobot.load(ref), cameras, viewing_distance=viewing_distance)
+    or a :class:`~cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`; ``continuous`` joints off
+    the cameras' paths, e.g. a mobile base's wheels, are read as unlimited revolute ones)."""
+    return GazeSolver(
+        PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, viewing_distance=viewing_distance,
+        joints=joints, coupling=coupling, rigid=rigid, tolerance=tolerance,
+    )
 
 
 __all__ = ["FAR_TARGET", "RETRIES", "GazeSolver", "solver_for"]

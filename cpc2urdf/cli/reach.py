@@ -1,0 +1,94 @@
+"""``cpc2urdf reach ROBOT -o region.png``: draw where a head's cameras can fixate.
+
+Exit codes: 0 the region was drawn, 2 bad input (one line, nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+# Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
+# cpc2urdf.validation.gaze.reach.
+DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
+DEFAULT_RANGE = (0.2, 3.0)  # [m]
+DEFAULT_SAMPLES = (16, 37, 25)
+GRID_KINDS = ("shell", "box")
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = subparsers.add_parser(
+        "reach",
+        help="draw the reachable region of a head: where its cameras can fixate a target",
+        description="Solve gaze for a grid of targets in front of a head (a .urdf file, a model "
+        "file, a robot spec or a shipped robot name) and draw which ones are fixated, and why the "
+        "others are not (disparity, joint limits, behind, too close), as a PNG. The grid lies in "
+        "the head frame: the cameras' mid-point at the middle of every joint's limits, x along "
+        "the mean optical axis, z up. shell (default): distances NEAR..FAR, azimuth +-90 deg, "
+        "elevation +-60 deg; box: forward NEAR..FAR, lateral +-FAR, vertical +-FAR/2. Exit code "
+        "0 drawn, 2 bad input.",
+    )
+    p.add_argument("robot", metavar="ROBOT", help=".urdf file, model file, robot spec or shipped robot name")
+    p.add_argument(
+        "--camera",
+        nargs="+",
+        default=list(DEFAULT_CAMERAS),
+        metavar="FRAME",
+        help=f"camera optical frames (default {' '.join(DEFAULT_CAMERAS)})",
+    )
+    p.add_argument(
+        "--range",
+        nargs=2,
+        type=float,
+        default=list(DEFAULT_RANGE),
+        metavar=("NEAR", "FAR"),
+        help=f"distances of the grid [m] (default {DEFAULT_RANGE[0]:g} {DEFAULT_RANGE[1]:g})",
+    )
+    p.add_argument("--grid", choices=GRID_KINDS, default="shell", help="grid shape (default shell)")
+    p.add_argument(
+        "--samples",
+        nargs=3,
+        type=int,
+        default=list(DEFAULT_SAMPLES),
+        metavar=("D", "A", "E"),
+        help="samples per axis: distance, azimuth, elevation (box: forward, lateral, vertical); "
+        f"default {' '.join(str(k) for k in DEFAULT_SAMPLES)}",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="REGION.png", help="the PNG to write")
+    p.add_argument("--json", metavar="REGION.json", help="also write every target's point, status and error")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from cpc2urdf.api import gaze_solver
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import check_output_path, dumps, write_all_atomic
+    from cpc2urdf.validation.gaze.reach import (
+        check_grid_args,
+        make_grid,
+        reachable_region,
+        region_figure_png,
+    )
+
+    if Path(args.output).suffix.lower() != ".png":
+        raise ConfigurationError(f"-o {args.output}: the region is drawn as PNG, expected a .png path")
+    check_grid_args(args.range[0], args.range[1], args.samples)
+    check_output_path(args.output)
+    if args.json:
+        check_output_path(args.json)
+    solver = gaze_solver(args.robot, tuple(args.camera))
+    grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
+    region = reachable_region(solver, grid)
+    # render both outputs before writing either: a failure leaves nothing behind
+    png = region_figure_png(region, title=Path(args.robot).name)
+    files: dict[str, str | bytes] = {args.output: png}
+    if args.json:
+        doc = {"format": "cpc2urdf/reach@1", "robot": str(args.robot), "cameras": list(solver.cameras), **region.to_json()}
+        files[args.json] = dumps(doc)
+    write_all_atomic(files)
+    counts = region.counts()
+    total = region.points.shape[0]
+    parts = ", ".join(f"{n} {c.replace('_', ' ')}" for c, n in counts.items() if n)
+    print(f"{args.output}: {total} targets ({args.grid} grid): {parts}")
+    return 0

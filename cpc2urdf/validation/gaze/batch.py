@@ -1,0 +1,283 @@
+"""Many targets at once through the compiled loop: :class:`CompiledGaze` and :class:`GazeBatch`.
+
+:class:`CompiledGaze` holds a head's :class:`~cpc2urdf.validation.gaze.chain.HeadChain`, its
+table of starts (seeded samples of the unknowns, each with its cyclopean centre and axis; eyes
+and prismatic joints at home) and whether it can fixate exactly (:meth:`CompiledGaze.disparity_report`).
+:meth:`CompiledGaze.solve_many` runs :func:`~cpc2urdf.validation.gaze.kernels.solve_batch` over
+every target (numba ``prange``).
+
+The policy (priority 2, in the near-null space of the pointing error): the posture nearest the
+reference readings (``q_current``, or the middle of the limits) in a weighted metric where one
+radian of a joint shared by both cameras (the neck) costs 1, of an eye joint
+:data:`~cpc2urdf.validation.gaze.chain.EYE_WEIGHT` and one metre of a prismatic joint
+:data:`~cpc2urdf.validation.gaze.chain.PRISMATIC_WEIGHT`: the neck turns to face the target and
+the eyes stay near their middle (the cyclopean axis faces the target), the table stays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze import kernels
+from cpc2urdf.validation.gaze.chain import KIND_BINOCULAR, HeadChain
+
+BATCH_STATUSES = ("fixated", "joint_limits", "behind", "too_close", "no_solution", "disparity")
+TABLE_SIZE = 256  # starts in the table
+TABLE_SEED = 0
+N_STARTS = 3  # starts tried per target at most (a further one only if undecided)
+BATCH_MAX_ITERATIONS = 60
+EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
+NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
+FAR_TARGET = 1e15  # [m]: beyond this, a target is solved for by its direction
+PARALLEL_FROM = 64  # targets: fewer are solved in the calling thread (no thread launch)
+
+
+@dataclass(frozen=True)
+class GazeBatch:
+    """The answers of :meth:`CompiledGaze.solve_many` for N targets.
+
+    Attributes:
+        q: Readings [rad]/[m], shape (N, n), in ``joint_names`` order; inside the limits.
+        reachable: Pointing error of every solved axis within ``tolerance``, shape (N,).
+        pointing_error: Angle between each solved optical axis and the target [rad], shape
+            (N, S); the solved axes are ``axes`` (the cameras; for a rigid pair the cyclopean
+            axis or the master eye).
+        status: Code per target, shape (N,): an index into ``status_names``.
+        status_names: The names of the codes (:data:`BATCH_STATUSES`).
+        iterations: Gauss-Newton iterations per target, shape (N,).
+        joint_names: The robot's joints.
+        axes: Names of the solved axes.
+        tolerance: [rad] below which an axis counts as on the target.
+    """
+
+    q: Array
+    reachable: NDArray[np.bool_]
+    pointing_error: Array
+    status: NDArray[np.int8]
+    status_names: tuple[str, ...]
+    iterations: NDArray[np.int32]
+    joint_names: tuple[str, ...]
+    axes: tuple[str, ...]
+    tolerance: float
+
+    def status_of(self, i: int) -> str:
+        """The status name of target ``i``."""
+        return self.status_names[int(self.status[i])]
+
+    def counts(self) -> dict[str, int]:
+        """``{status name: number of targets}``."""
+        return {name: int(np.sum(self.status == k)) for k, name in enumerate(self.status_names)}
+
+
+class CompiledGaze:
+    """The compiled gaze solver of one head (see the module docstring).
+
+    Args:
+        chain: The head.
+        tolerance: [rad] pointing error below which an axis is on the target; None:
+            :data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL`.
+    """
+
+    def __init__(self, chain: HeadChain, tolerance: float | None = None) -> None:
+        self.chain = chain
+        self.ch = kernels.pack(chain)
+        self.tolerance = GAZE_POINTING_TOL if tolerance is None else float(tolerance)
+        self.sw = np.sqrt(chain.weight)
+        self.home_u = 0.5 * (chain.lower + chain.upper)
+        self._ws = kernels.workspace(chain)
+        self.S = len(chain.solve_cameras)
+        names = chain.cameras
+        self.axes: tuple[str, ...] = tuple(
+            names[c] if c < len(names) else "cyclopean" for c in chain.solve_cameras.tolist()
+        )
+        self._table()
+        self.baseline = self._baseline()
+        self.disparity_head = False
+        self.null_rel = EXACT_NULL
+        if chain.kind == KIND_BINOCULAR:
+            self.disparity_head = self._weak_direction() > 0.0
+            if self.disparity_head:
+                self.null_rel = NEAR_NULL
+
+    def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
+        ws = self._ws
+        kernels.fk(self.ch, np.ascontiguousarray(u, dtype=float), self.chain.b if b is None else b, *ws[:5])
+        return ws[3].copy(), ws[4].copy()
+
+    def _baseline(self) -> float:
+        if len(self.chain.cameras) < 2:
+            return 0.0
+        _, o = self._fk(self.home_u)
+        return float(np.linalg.norm(o[0] - o[1]))
+
+    def _table(self) -> None:
+        ch = self.chain
+        rng = np.random.default_rng(TABLE_SEED)
+        U = np.tile(self.home_u, (TABLE_SIZE, 1))
+        spread = [v for v in range(ch.m) if not ch.eye[v] and ch.weight[v] < 10.0]
+        for v in spread:
+            U[:, v] = rng.uniform(ch.lower[v], ch.upper[v], TABLE_SIZE)
+        O = np.empty((TABLE_SIZE, 3))
+        Z = np.empty((TABLE_SIZE, 3))
+        for g in range(TABLE_SIZE):
+            R, o = self._fk(U[g])
+            cams = ch.solve_cameras
+            O[g] = o[cams].mean(axis=0)
+            z = R[cams][:, :, 2].sum(axis=0)
+            Z[g] = z / max(float(np.linalg.norm(z)), 1e-300)
+        self.table_u, self.table_o, self.table_z = U, O, Z
+
+    def _weak_direction(self) -> float:
+        """The weak eigenvalue ratio of the pointing task at home with both eyes on the closest
+        point of their axes: 0 if the pointing task leaves an exact null space or is square,
+        else ``l_min / l_max`` of the non-null part (a binocular head that cannot fixate
+        exactly; its vertical disparity is :meth:`disparity_report`)."""
+        R, o = self._fk(self.home_u)
+        z0, z1 = R[0][:, 2], R[1][:, 2]
+        # a point ahead of both at 1 m
+        p = 0.5 * (o[0] + o[1]) + 1.0 * (z0 + z1) / max(float(np.linalg.norm(z0 + z1)), 1e-12)
+        ws = self._ws
+        kernels.residual(self.ch, self.home_u.copy(), self.chain.b, p, ws[7], ws[8], True, *ws[:7])
+        J = ws[8] / self.sw
+        sv = np.linalg.svd(J, compute_uv=False)
+        sv = sv[sv > 1e-7 * sv[0]]
+        # binocular pointing has rank 3 when the eyes sweep one plane (an exact null space for
+        # the 4th condition) and rank 4 otherwise: a weak 4th singular value is disparity
+        if len(sv) >= 4 and sv[3] < 1e-2 * sv[0] and self.chain.m > 3:
+            return float((sv[3] / sv[0]) ** 2)
+        return 0.0
+
+    def targets(self, targets: ArrayLike) -> tuple[Array, Array]:
+        """Checked targets (N, 3) and the points the iteration aims at (far ones pulled in
+        along their ray from the head's centre to :data:`FAR_TARGET`)."""
+        try:
+            P = np.array(targets, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ConfigurationError(f"targets must be an (N, 3) array [m], got {targets!r}") from e
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise ConfigurationError(f"targets must have shape (N, 3) [m], got shape {P.shape}")
+        if not np.all(np.isfinite(P)):
+            raise ConfigurationError("targets contain NaN or inf")
+        Ps = P.copy()
+        far = np.abs(P).max(axis=1) > FAR_TARGET if len(P) else np.zeros(0, dtype=bool)
+        if np.any(far):
+            centre = self._centre()
+            d = P[far] - centre
+            d = d / np.abs(d).max(axis=1, keepdims=True)
+            Ps[far] = centre + FAR_TARGET * d / np.linalg.norm(d, axis=1, keepdims=True)
+        return np.ascontiguousarray(P), np.ascontiguousarray(Ps)
+
+    def _centre(self) -> Array:
+        _, o = self._fk(self.home_u)
+        return o[self.chain.solve_cameras].mean(axis=0)  # type: ignore[no-any-return]
+
+    def b_for(self, q_current: Array | None) -> Array:
+        """The chain's constant part ``b`` for readings ``q_current`` (shape (n,); None: the
+        middle of the limits): chain joints that may not move stay at their reading."""
+        ch = self.chain
+        if q_current is None:
+            return ch.b
+        held = np.abs(ch.A).sum(axis=1) == 0
+        b = ch.b.copy()
+        b[held] = q_current[ch.joint_index[held]]
+        return b
+
+    def solve_u(
+        self, P: Array, Ps: Array, U_ref: Array, b: Array
+    ) -> tuple[Array, Array, NDArray[np.int32], NDArray[np.int8]]:
+        """The compiled loop over checked targets: ``(U, errors, iterations, status)``."""
+        N = P.shape[0]
+        m = self.chain.m
+        U = np.empty((N, m))
+        E = np.empty((N, self.S))
+        it = np.empty(N, dtype=np.int32)
+        st = np.empty(N, dtype=np.int8)
+        if N:
+            run = kernels.solve_batch if N >= PARALLEL_FROM else kernels.solve_batch_serial
+            run(
+                self.ch, Ps, P, b, np.ascontiguousarray(U_ref), self.chain.lower, self.chain.upper, self.sw,
+                self.table_u, self.table_o, self.table_z, N_STARTS, self.null_rel, self.tolerance,
+                BATCH_MAX_ITERATIONS, self.disparity_head, self.baseline, U, E, it, st,
+            )
+        return U, E, it, st
+
+    def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
+        """Every target (rows of ``targets``, world [m]) from ``q_current`` (robot readings,
+        shape (n,) or (N, n); None: the middle of the limits): a :class:`GazeBatch`."""
+        P, Ps = self.targets(targets)
+        N = P.shape[0]
+        ch = self.chain
+        n = len(ch.robot.joint_names)
+        b = ch.b
+        if q_current is None:
+            U_ref = np.tile(self.home_u, (N, 1))
+        else:
+            Q = np.asarray(q_current, dtype=float)
+            if Q.shape != (n,) or not np.all(np.isfinite(Q)):
+                raise ConfigurationError(f"q_current must be {n} finite readings, got shape {Q.shape}")
+            U_ref = np.tile(ch.u_from_q(Q), (N, 1))
+            b = self.b_for(Q)
+        U, E, it, st = self.solve_u(P, Ps, U_ref, np.ascontiguousarray(b))
+        Qout = ch.q_from_u(U)
+        if q_current is not None:
+            still = np.abs(ch.robot_A).sum(axis=1) == 0
+            Qout[:, still] = np.asarray(q_current, dtype=float)[still]
+        return GazeBatch(
+            q=Qout,
+            reachable=st == kernels.S_FIXATED,
+            pointing_error=E,
+            status=st,
+            status_names=BATCH_STATUSES,
+            iterations=it,
+            joint_names=ch.robot.joint_names,
+            axes=self.axes,
+            tolerance=self.tolerance,
+        )
+
+    def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, Any]:
+        """The head's vertical disparity over a workspace ahead: targets 0.4-3 m in front of the
+        home cyclopean axis within 30 deg of it, each solved; the pointing error left (max over
+        the two eyes) [rad]: ``{"exact": bool, "median_rad", "p95_rad", "max_rad", "targets"}``.
+        A head that can fixate exactly reports ``exact`` True (and its errors at the rounding floor)."""
+        rng = np.random.default_rng(seed)
+        R, o = self._fk(self.home_u)
+        cams = self.chain.solve_cameras
+        c = o[cams].mean(axis=0)
+        z = R[cams][:, :, 2].sum(axis=0)
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        ang = np.radians(30.0) * np.sqrt(rng.uniform(0, 1, n))
+        phi = rng.uniform(0, 2 * math.pi, n)
+        dist = rng.uniform(0.4, 3.0, n)
+        d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y)
+        batch = self.solve_many(c + dist[:, None] * d)
+        e = batch.pointing_error.max(axis=1)
+        return {
+            "exact": not self.disparity_head,
+            "median_rad": float(np.median(e)),
+            "p95_rad": float(np.quantile(e, 0.95)),
+            "max_rad": float(e.max()),
+            "targets": n,
+            "statuses": batch.counts(),
+        }
+
+
+__all__ = [
+    "BATCH_STATUSES",
+    "EXACT_NULL",
+    "NEAR_NULL",
+    "N_STARTS",
+    "TABLE_SIZE",
+    "CompiledGaze",
+    "GazeBatch",
+]

@@ -1,0 +1,601 @@
+"""The compiled inner loop of the gaze solver (numba, ``cache=True``): FK, camera Jacobians,
+the pointing residual and the bounded, damped Gauss-Newton with the policy in the null space.
+
+Everything works on the flat arrays of :class:`~cpc2urdf.validation.gaze.chain.HeadChain`
+packed in one tuple ``ch`` (:func:`pack`). Unknowns ``u`` (shape (m,)); chain readings
+``q = A u + b``.
+
+Kinematics (as Pinocchio): ``T_world_j = T_world_parent * placement_j * M_j(q_j)`` with
+``M_j`` a rotation by ``q_j`` about ``axis_j`` (Rodrigues) or a translation ``q_j axis_j``;
+``T_world_cam = T_world_parent * placement_cam``. The world axis of joint ``j`` is
+``a_j = R_world_j axis_j``; a revolute joint moves a camera centre ``o`` by ``a_j x (o - p_j)``
+and turns it by ``a_j``, a prismatic one moves it by ``a_j``.
+
+Pointing residual per solved camera (as before): ``r = u - e_z`` with ``u`` the unit target
+direction in the camera frame, ``p_cam = R^T (p - o)``; ``|r| = 2 sin(err / 2)``. With the
+camera's world twist ``(v, w)``: ``d p_cam = R^T ((p - o) x w - v)`` and
+``d u = (I - u u^T) d p_cam / |p_cam|``.
+
+Step (task priority, Levenberg-Marquardt; unknowns scaled by the square root of the policy's
+weights so the secondary task is ``|x - x_ref|^2 / 2``): with ``J^T J = V diag(l) V^T`` over the
+free unknowns, the pointing task moves along the eigen-directions with ``l > cut``
+(``-v (v . J^T r) / (l + mu)``, ``mu = damping |r|^2``) and the policy along the others
+(``-gain v v^T (x - x_ref)``), the *near-null space* of the pointing error. ``cut`` is
+``null_rel * max(l)``: 1e-12 on heads that can fixate exactly (only the exact null space), larger
+on a binocular head that cannot (its weak direction, along which exact fixation would swing the
+neck and eyes far from the policy's posture, is left to the policy). Joints at a bound whose step
+points outward are held (active set); the step is capped and projected on the bounds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze.chain import HeadChain
+
+MIN_TARGET_DISTANCE = 1e-9  # [m]: closer to a camera centre, a target has no direction
+MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
+BACKTRACKS = 10  # step halvings per iteration
+SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
+POLICY_STEP_TOL = 1e-7  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
+DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
+STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
+EXACT_RESIDUAL = 1e-30  # [-]: |r|^2 below this is exact (pointing error ~1e-15 rad)
+AT_BOUND = 1e-12  # [rad]/[m]: an unknown this close to a bound is at it
+
+# status codes of the compiled solve (names in result.py's BATCH_STATUSES)
+S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
+
+
+def pack(chain: HeadChain) -> tuple:  # type: ignore[type-arg]
+    """The chain's arrays as the tuple the kernels take."""
+    return (
+        chain.parent,
+        chain.jtype,
+        chain.axis,
+        chain.R,
+        chain.t,
+        chain.A,
+        chain.b,
+        chain.cam_parent,
+        chain.cam_R,
+        chain.cam_t,
+        chain.anc,
+        chain.solve_cameras,
+    )
+
+
+@njit(cache=True)
+def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
+    """World rotation ``JR`` (K, 3, 3), origin ``Jp`` (K, 3) and axis ``Ja`` (K, 3) of every
+    chain joint, and rotation ``CR`` (C, 3, 3) and centre ``Co`` (C, 3) of every camera, at
+    unknowns ``u`` (chain readings ``A u + b``; ``b`` given per solve)."""
+    parent, jtype, axis, R, t, A, _, cam_parent, cam_R, cam_t = ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9]
+    K = parent.shape[0]
+    m = u.shape[0]
+    M0 = np.empty((3, 3))
+    for k in range(K):
+        q = b[k]
+        for v in range(m):
+            q += A[k, v] * u[v]
+        pk = parent[k]
+        # T0 = T_world_parent * placement
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for l in range(3):
+                    s += (JR[pk, i, l] if pk >= 0 else (1.0 if i == l else 0.0)) * R[k, l, j]
+                M0[i, j] = s
+            s = t[k, 0] * (JR[pk, i, 0] if pk >= 0 else (1.0 if i == 0 else 0.0))
+            s += t[k, 1] * (JR[pk, i, 1] if pk >= 0 else (1.0 if i == 1 else 0.0))
+            s += t[k, 2] * (JR[pk, i, 2] if pk >= 0 else (1.0 if i == 2 else 0.0))
+            Jp[k, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
+        ax, ay, az = axis[k, 0], axis[k, 1], axis[k, 2]
+        for i in range(3):
+            Ja[k, i] = M0[i, 0] * ax + M0[i, 1] * ay + M0[i, 2] * az
+        if jtype[k] == 0:
+            c, s = math.cos(q), math.sin(q)
+            C1 = 1.0 - c
+            r00 = c + ax * ax * C1
+            r01 = ax * ay * C1 - az * s
+            r02 = ax * az * C1 + ay * s
+            r10 = ay * ax * C1 + az * s
+            r11 = c + ay * ay * C1
+            r12 = ay * az * C1 - ax * s
+            r20 = az * ax * C1 - ay * s
+            r21 = az * ay * C1 + ax * s
+            r22 = c + az * az * C1
+            for i in range(3):
+                a0, a1, a2 = M0[i, 0], M0[i, 1], M0[i, 2]
+                JR[k, i, 0] = a0 * r00 + a1 * r10 + a2 * r20
+                JR[k, i, 1] = a0 * r01 + a1 * r11 + a2 * r21
+                JR[k, i, 2] = a0 * r02 + a1 * r12 + a2 * r22
+        else:
+            for i in range(3):
+                for j in range(3):
+                    JR[k, i, j] = M0[i, j]
+                Jp[k, i] += q * Ja[k, i]
+    C = cam_parent.shape[0]
+    for c in range(C):
+        pk = cam_parent[c]
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for l in range(3):
+                    s += (JR[pk, i, l] if pk >= 0 else (1.0 if i == l else 0.0)) * cam_R[c, l, j]
+                CR[c, i, j] = s
+            s = 0.0
+            for l in range(3):
+                s += (JR[pk, i, l] if pk >= 0 else (1.0 if i == l else 0.0)) * cam_t[c, l]
+            Co[c, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
+
+
+@njit(cache=True)
+def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
+    """World Jacobian ``Jc`` (6, K) of camera ``c`` by the chain readings: rows (v, w)."""
+    jtype, anc = ch[1], ch[10]
+    K = jtype.shape[0]
+    for k in range(K):
+        if not anc[c, k]:
+            for i in range(6):
+                Jc[i, k] = 0.0
+            continue
+        ax, ay, az = Ja[k, 0], Ja[k, 1], Ja[k, 2]
+        if jtype[k] == 0:
+            dx, dy, dz = Co[c, 0] - Jp[k, 0], Co[c, 1] - Jp[k, 1], Co[c, 2] - Jp[k, 2]
+            Jc[0, k] = ay * dz - az * dy
+            Jc[1, k] = az * dx - ax * dz
+            Jc[2, k] = ax * dy - ay * dx
+            Jc[3, k], Jc[4, k], Jc[5, k] = ax, ay, az
+        else:
+            Jc[0, k], Jc[1, k], Jc[2, k] = ax, ay, az
+            Jc[3, k], Jc[4, k], Jc[5, k] = 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
+    """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
+    its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
+    the target ``Pc`` (S, 4): ``p_cam`` and ``|p_cam|``. Returns ``|r|^2``."""
+    A, solve_cams = ch[5], ch[11]
+    fk(ch, u, b, JR, Jp, Ja, CR, Co)
+    S = solve_cams.shape[0]
+    K = A.shape[0]
+    m = A.shape[1]
+    rr = 0.0
+    for s in range(S):
+        c = solve_cams[s]
+        dx, dy, dz = p[0] - Co[c, 0], p[1] - Co[c, 1], p[2] - Co[c, 2]
+        x = CR[c, 0, 0] * dx + CR[c, 1, 0] * dy + CR[c, 2, 0] * dz
+        y = CR[c, 0, 1] * dx + CR[c, 1, 1] * dy + CR[c, 2, 1] * dz
+        z = CR[c, 0, 2] * dx + CR[c, 1, 2] * dy + CR[c, 2, 2] * dz
+        nrm = math.sqrt(x * x + y * y + z * z)
+        Pc[s, 0], Pc[s, 1], Pc[s, 2], Pc[s, 3] = x, y, z, nrm
+        if nrm >= MIN_TARGET_DISTANCE:
+            inv = 1.0 / nrm
+            ux, uy, uz = x * inv, y * inv, z * inv
+        else:  # on the camera centre: no direction (missed by pi), no gradient from this eye
+            inv, ux, uy, uz = 0.0, 0.0, 0.0, 0.0
+        r[3 * s], r[3 * s + 1], r[3 * s + 2] = ux, uy, uz - 1.0
+        rr += ux * ux + uy * uy + (uz - 1.0) * (uz - 1.0)
+        if not want_jac:
+            continue
+        camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc)
+        for v in range(m):
+            J[3 * s, v] = 0.0
+            J[3 * s + 1, v] = 0.0
+            J[3 * s + 2, v] = 0.0
+        for k in range(K):
+            # d(p - o) x w - v in world, then R^T, then the projector (I - u u^T) / |p_cam|
+            wx, wy, wz = Jc[3, k], Jc[4, k], Jc[5, k]
+            ex = dy * wz - dz * wy - Jc[0, k]
+            ey = dz * wx - dx * wz - Jc[1, k]
+            ez = dx * wy - dy * wx - Jc[2, k]
+            gx = CR[c, 0, 0] * ex + CR[c, 1, 0] * ey + CR[c, 2, 0] * ez
+            gy = CR[c, 0, 1] * ex + CR[c, 1, 1] * ey + CR[c, 2, 1] * ez
+            gz = CR[c, 0, 2] * ex + CR[c, 1, 2] * ey + CR[c, 2, 2] * ez
+            d = ux * gx + uy * gy + uz * gz
+            hx, hy, hz = (gx - d * ux) * inv, (gy - d * uy) * inv, (gz - d * uz) * inv
+            for v in range(m):
+                a = A[k, v]
+                if a != 0.0:
+                    J[3 * s, v] += hx * a
+                    J[3 * s + 1, v] += hy * a
+                    J[3 * s + 2, v] += hz * a
+    return rr
+
+
+@njit(cache=True)
+def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
+    """Eigen-decomposition of the symmetric ``H[:f, :f]`` (destroyed) by cyclic Jacobi
+    rotations: ``lam[:f]`` ascending, eigenvectors in the columns of ``V[:f, :f]``. Small ``f``
+    (the unknowns of a head): cheaper than a LAPACK call and allocation-free."""
+    for i in range(f):
+        for j in range(f):
+            V[i, j] = 1.0 if i == j else 0.0
+    for _ in range(50):
+        off = 0.0
+        diag = 0.0
+        for i in range(f):
+            diag += H[i, i] * H[i, i]
+            for j in range(i + 1, f):
+                off += H[i, j] * H[i, j]
+        if off <= 1e-34 * diag or off == 0.0:
+            break
+        for a in range(f):
+            for c in range(a + 1, f):
+                hac = H[a, c]
+                if hac == 0.0:
+                    continue
+                theta = (H[c, c] - H[a, a]) / (2.0 * hac)
+                tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                cs = 1.0 / math.sqrt(tt * tt + 1.0)
+                sn = tt * cs
+                for k in range(f):
+                    hka, hkc = H[k, a], H[k, c]
+                    H[k, a] = cs * hka - sn * hkc
+                    H[k, c] = sn * hka + cs * hkc
+                for k in range(f):
+                    hak, hck = H[a, k], H[c, k]
+                    H[a, k] = cs * hak - sn * hck
+                    H[c, k] = sn * hak + cs * hck
+                for k in range(f):
+                    vka, vkc = V[k, a], V[k, c]
+                    V[k, a] = cs * vka - sn * vkc
+                    V[k, c] = sn * vka + cs * vkc
+    for i in range(f):
+        lam[i] = H[i, i]
+    for i in range(1, f):  # insertion sort, ascending
+        j = i
+        while j > 0 and lam[j - 1] > lam[j]:
+            lam[j - 1], lam[j] = lam[j], lam[j - 1]
+            for k in range(f):
+                V[k, j - 1], V[k, j] = V[k, j], V[k, j - 1]
+            j -= 1
+
+
+@njit(cache=True)
+def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws):  # type: ignore[no-untyped-def]
+    """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2)."""
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial = ws
+    m = u.shape[0]
+    M = r.shape[0]
+    rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
+    it = 0
+    while it < max_it:
+        it += 1
+        # gradient in scaled unknowns: g = J_x^T r, J_x = J / sw
+        for v in range(m):
+            s = 0.0
+            for i in range(M):
+                s += J[i, v] * r[i]
+            g[v] = s / sw[v]
+        for v in range(m):
+            free[v] = True
+        for _ in range(m + 1):  # active set: hold unknowns at a bound that the step pushes out
+            f = 0
+            for v in range(m):
+                if free[v]:
+                    idx[f] = v
+                    f += 1
+            for v in range(m):
+                dx[v] = 0.0
+            if f > 0:
+                for a in range(f):
+                    for c in range(a, f):
+                        s = 0.0
+                        for i in range(M):
+                            s += J[i, idx[a]] * J[i, idx[c]]
+                        s /= sw[idx[a]] * sw[idx[c]]
+                        H[a, c] = s
+                        H[c, a] = s
+                jacobi_eigh(H, f, lam, V)
+                cut = null_rel * max(lam[f - 1], 1e-300)
+                mu = DAMPING * rr
+                for e in range(f):
+                    if lam[e] > cut:
+                        s = 0.0
+                        for a in range(f):
+                            s += V[a, e] * g[idx[a]]
+                        s = -s / (lam[e] + mu)
+                    else:
+                        s = 0.0
+                        for a in range(f):
+                            va = idx[a]
+                            s += V[a, e] * sw[va] * (u[va] - u_ref[va])
+                        s = -gain * s
+                    for a in range(f):
+                        dx[idx[a]] += V[a, e] * s
+            changed = False
+            for v in range(m):
+                if free[v]:
+                    du = dx[v] / sw[v]
+                    if (u[v] <= lower[v] + AT_BOUND and du < 0.0) or (u[v] >= upper[v] - AT_BOUND and du > 0.0):
+                        free[v] = False
+                        changed = True
+            if not changed:
+                break
+        big = 0.0
+        for v in range(m):
+            big = max(big, abs(dx[v] / sw[v]))
+        scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+        if big * scale < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
+            break
+        allowance = 0.0  # the policy's null-space move may raise |r|^2 to second order
+        if gain > 0.0:
+            for v in range(m):
+                d = dx[v] / sw[v] * scale
+                allowance += d * d
+            allowance = min(allowance, 1.0) * 1e-2 * min(1.0, gain)
+        accepted = False
+        for _ in range(BACKTRACKS):
+            for v in range(m):
+                trial[v] = min(max(u[v] + scale * dx[v] / sw[v], lower[v]), upper[v])
+            rr_new = residual(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
+            if rr_new <= rr + allowance * scale * scale or rr_new <= EXACT_RESIDUAL:
+                accepted = True
+                break
+            scale *= 0.5
+        if not accepted:
+            break
+        moved = 0.0
+        for v in range(m):
+            moved = max(moved, abs(trial[v] - u[v]))
+            u[v] = trial[v]
+        rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
+        if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
+            break
+    return it, rr
+
+
+@njit(cache=True)
+def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
+    return (
+        np.empty((K, 3, 3)),
+        np.empty((K, 3)),
+        np.empty((K, 3)),
+        np.empty((C, 3, 3)),
+        np.empty((C, 3)),
+        np.empty((6, K)),
+        np.empty((S, 4)),
+        np.empty(3 * S),
+        np.empty((3 * S, m)),
+        np.empty(3 * S),
+        np.empty((3 * S, m)),
+        np.empty(m),
+        np.empty((m, m)),
+        np.empty((m, m)),
+        np.empty(m),
+        np.empty(m, dtype=np.int64),
+        np.empty(m, dtype=np.bool_),
+        np.empty(m),
+        np.empty(m),
+    )
+
+
+@njit(cache=True)
+def pointing_error(x, y, z):  # type: ignore[no-untyped-def]
+    """Angle [rad] between the optical axis and a target at ``(x, y, z)`` in the camera frame
+    (scaled first: no overflow for any finite coordinates); pi on the centre."""
+    big = max(abs(x), abs(y), abs(z))
+    if big == 0.0 or not big < np.inf:
+        return math.pi if big == 0.0 else math.atan2(math.hypot(x, y), z)
+    if big < MIN_TARGET_DISTANCE:
+        return math.pi
+    x, y, z = x / big, y / big, z / big
+    return math.atan2(math.sqrt(x * x + y * y), z)
+
+
+@njit(cache=True)
+def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it, disparity_head,
+              baseline, u_out, err_out, ws):  # type: ignore[no-untyped-def]
+    """One target: the policy phase, then pointing alone, from the best start of ``starts``
+    (rows, best first); a further start only if the answer is neither fixated nor decided by
+    geometry (behind, too close). Returns ``(iterations, status)``; ``u_out`` the readings,
+    ``err_out`` (S,) the solved cameras' pointing errors [rad] on ``p``."""
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6], ws[7], ws[8]
+    m = u_ref.shape[0]
+    S = err_out.shape[0]
+    solve_cams = ch[11]
+    u = np.empty(m)
+    best_rr = np.inf
+    total = 0
+    for k in range(starts.shape[0]):
+        for v in range(m):
+            u[v] = starts[k, v]
+        it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws)
+        # polish: pointing alone (same near-null space), to the rounding floor
+        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, 12, ws)
+        total += it1 + it2
+        if rr < best_rr:
+            best_rr = rr
+            for v in range(m):
+                u_out[v] = u[v]
+        if best_rr <= EXACT_RESIDUAL * 1e8:
+            break
+        # decided by geometry at this answer? (evaluated below on the best one)
+        residual(ch, u_out, b, p_solve, r, J, False, JR, Jp, Ja, CR, Co, Jc, Pc)
+        decided = False
+        for s in range(S):
+            if Pc[s, 2] <= 0.0 or Pc[s, 3] < baseline:
+                decided = True
+        if decided or disparity_head:
+            break
+    # the answer, judged on the target itself
+    fk(ch, u_out, b, JR, Jp, Ja, CR, Co)
+    fixated = True
+    behind = False
+    close = False
+    for s in range(S):
+        c = solve_cams[s]
+        dx, dy, dz = p[0] - Co[c, 0], p[1] - Co[c, 1], p[2] - Co[c, 2]
+        big = max(abs(dx), abs(dy), abs(dz))
+        if big > 1e150:  # scaled by a power of two: no overflow in the rotation
+            f = math.ldexp(1.0, -math.frexp(big)[1])
+            dx, dy, dz = dx * f, dy * f, dz * f
+        else:
+            f = 1.0
+        x = CR[c, 0, 0] * dx + CR[c, 1, 0] * dy + CR[c, 2, 0] * dz
+        y = CR[c, 0, 1] * dx + CR[c, 1, 1] * dy + CR[c, 2, 1] * dz
+        z = CR[c, 0, 2] * dx + CR[c, 1, 2] * dy + CR[c, 2, 2] * dz
+        e = pointing_error(x, y, z)
+        err_out[s] = e
+        dist = math.sqrt(x * x + y * y + z * z) / f
+        if e > tol:
+            fixated = False
+        if f == 1.0 and dist < MIN_TARGET_DISTANCE:
+            close = True
+        elif z <= 0.0:
+            behind = True
+        elif dist < baseline:
+            close = True
+    if fixated:
+        return total, S_FIXATED
+    if close:
+        return total, S_TOO_CLOSE
+    if behind:
+        return total, S_BEHIND
+    for v in range(m):
+        if lower[v] < upper[v] and (u_out[v] <= lower[v] + AT_BOUND or u_out[v] >= upper[v] - AT_BOUND):
+            return total, S_LIMITS
+    if disparity_head:
+        return total, S_DISPARITY
+    return total, S_NO_SOLUTION
+
+
+@njit(cache=True)
+def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws):  # type: ignore[no-untyped-def]
+    """The ``n_best`` starts (rows of ``out``) that best face target ``p``: ``u_ref`` and the
+    table entries (unknowns ``table_u`` (G, m), cyclopean centre ``table_o`` and axis
+    ``table_z`` (G, 3), world) ranked by the cosine of the angle between their axis and the
+    target direction, less a small cost of their distance (scaled) from ``u_ref``."""
+    JR, Jp, Ja, CR, Co = ws[0], ws[1], ws[2], ws[3], ws[4]
+    G, m = table_u.shape
+    solve_cams = ch[11]
+    S = solve_cams.shape[0]
+    fk(ch, u_ref, b, JR, Jp, Ja, CR, Co)
+    ox, oy, oz, zx, zy, zz = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for s in range(S):
+        c = solve_cams[s]
+        ox += Co[c, 0] / S
+        oy += Co[c, 1] / S
+        oz += Co[c, 2] / S
+        zx += CR[c, 0, 2]
+        zy += CR[c, 1, 2]
+        zz += CR[c, 2, 2]
+    top_s = np.full(n_best, -np.inf)  # the n_best best scores so far, best first
+    top_g = np.full(n_best, G)
+    for g in range(G + 1):
+        if g < G:
+            ox, oy, oz = table_o[g, 0], table_o[g, 1], table_o[g, 2]
+            zx, zy, zz = table_z[g, 0], table_z[g, 1], table_z[g, 2]
+        dx, dy, dz = p[0] - ox, p[1] - oy, p[2] - oz
+        big = max(abs(dx), abs(dy), abs(dz), 1e-300)
+        dx, dy, dz = dx / big, dy / big, dz / big
+        nd = math.sqrt(dx * dx + dy * dy + dz * dz)
+        nz = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
+        cosang = (dx * zx + dy * zy + dz * zz) / (nd * nz) if nd > 0 else 0.0
+        cost = 0.0
+        if g < G:
+            for v in range(m):
+                d = sw[v] * (table_u[g, v] - u_ref[v])
+                cost += d * d
+        sc = cosang - 0.01 * cost
+        if sc > top_s[n_best - 1]:
+            k = n_best - 1
+            while k > 0 and top_s[k - 1] < sc:
+                top_s[k] = top_s[k - 1]
+                top_g[k] = top_g[k - 1]
+                k -= 1
+            top_s[k] = sc
+            top_g[k] = g
+    for k in range(n_best):
+        g = top_g[k]
+        for v in range(m):
+            out[k, v] = u_ref[v] if g == G else table_u[g, v]
+
+
+@njit(cache=True, parallel=True)
+def solve_batch(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, table_z, n_starts, null_rel, tol,
+                max_it, disparity_head, baseline, U_out, E_out, it_out, st_out):  # type: ignore[no-untyped-def]
+    """:func:`solve_one` for every target (rows of ``P``), in parallel (numba ``prange``)."""
+    N = P.shape[0]
+    K = ch[0].shape[0]
+    C = ch[7].shape[0]
+    S = ch[11].shape[0]
+    m = lower.shape[0]
+    for i in prange(N):
+        ws = _workspace(K, C, S, m)
+        starts = np.empty((n_starts, m))
+        best_starts(ch, P_solve[i], b, U_ref[i], sw, table_u, table_o, table_z, n_starts, starts, ws)
+        u = np.empty(m)
+        e = np.empty(S)
+        it, st = solve_one(ch, P_solve[i], P[i], b, U_ref[i], lower, upper, sw, starts, null_rel, tol, max_it,
+                           disparity_head, baseline, u, e, ws)
+        for v in range(m):
+            U_out[i, v] = u[v]
+        for s in range(S):
+            E_out[i, s] = e[s]
+        it_out[i] = it
+        st_out[i] = st
+
+
+@njit(cache=True)
+def solve_batch_serial(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, table_z, n_starts, null_rel, tol,
+                max_it, disparity_head, baseline, U_out, E_out, it_out, st_out):  # type: ignore[no-untyped-def]
+    """:func:`solve_batch` in one thread: no thread launch for a few targets (:meth:`GazeSolver.solve`)."""
+    N = P.shape[0]
+    K = ch[0].shape[0]
+    C = ch[7].shape[0]
+    S = ch[11].shape[0]
+    m = lower.shape[0]
+    for i in range(N):
+        ws = _workspace(K, C, S, m)
+        starts = np.empty((n_starts, m))
+        best_starts(ch, P_solve[i], b, U_ref[i], sw, table_u, table_o, table_z, n_starts, starts, ws)
+        u = np.empty(m)
+        e = np.empty(S)
+        it, st = solve_one(ch, P_solve[i], P[i], b, U_ref[i], lower, upper, sw, starts, null_rel, tol, max_it,
+                           disparity_head, baseline, u, e, ws)
+        for v in range(m):
+            U_out[i, v] = u[v]
+        for s in range(S):
+            E_out[i, s] = e[s]
+        it_out[i] = it
+        st_out[i] = st
+
+
+def workspace(chain: HeadChain) -> tuple[Array, ...]:
+    """Scratch arrays of one solve on ``chain``."""
+    return _workspace(len(chain.parent), len(chain.cam_parent), len(chain.solve_cameras), chain.m)  # type: ignore[no-any-return]
+
+
+__all__ = [
+    "BACKTRACKS",
+    "DAMPING",
+    "EXACT_RESIDUAL",
+    "MAX_STEP",
+    "MIN_TARGET_DISTANCE",
+    "SECONDARY_GAIN",
+    "STEP_TOL",
+    "S_BEHIND",
+    "S_DISPARITY",
+    "S_FIXATED",
+    "S_LIMITS",
+    "S_NO_SOLUTION",
+    "S_TOO_CLOSE",
+    "best_starts",
+    "camera_jacobian",
+    "fk",
+    "pack",
+    "pointing_error",
+    "residual",
+    "solve_batch",
+    "solve_batch_serial",
+    "solve_one",
+    "workspace",
+]

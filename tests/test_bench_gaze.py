@@ -1,0 +1,122 @@
+"""``cpc2urdf bench gaze`` (cpc2urdf/studies/bench_gaze.py): a smoke run with tiny sizes (no
+timing assertions), and the pieces the numbers rest on: the generic targets are fixatable on an
+FK independent of Pinocchio (yourdfpy), and the generic reference's Jacobian is the residual's
+derivative (finite differences)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cpc2urdf.cli import main
+from cpc2urdf.studies.bench_gaze import (
+    REAL_HEADS,
+    SolvedAxes,
+    _real_urdf,
+    bench_head,
+    generic_reachable_targets,
+    tracking_targets,
+)
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+
+KEYS = (
+    "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",
+    "unreachable_ratio", "reference_median_us", "reference_success", "ratio", "batch_targets_per_s", "aims",
+)
+
+
+@pytest.fixture(scope="module")
+def tiago():
+    return bench_head("tiago")
+
+
+def test_bench_runs_tiny(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    argv = ["bench", "gaze", "--targets", "4", "--unreachable", "2", "--reference", "2", "--track-seconds", "0.02",
+            "--heads", "nominal", "tiago", "--json", str(out)]
+    assert main(argv) == 0
+    res = json.loads(out.read_text())
+    assert list(res) == ["nominal", "tiago"]
+    for r in res.values():
+        for key in KEYS:
+            assert key in r
+        assert r["kin_us"] > 0 and r["median_kin"] > 0 and r["ratio"] > 0 and r["batch_targets_per_s"] > 0
+        assert r["success"] + r["disparity"] == 1.0 and r["reference_success"] == 1.0
+        assert r["unreachable_fixated"] == 0
+    assert res["nominal"]["track_steps"] == 20 and res["nominal"]["track_saccade_steps"] >= 0
+    assert "track_steps" not in res["tiago"]  # one camera: no two-eye tracking
+    table = capsys.readouterr().out
+    assert "vs scipy" in table and "nominal" in table and "tiago" in table
+
+
+def test_bench_urdf_head(tmp_path, capsys):
+    path, cams = _real_urdf("talos")
+    out = tmp_path / "b.json"
+    argv = ["bench", "gaze", "--targets", "3", "--unreachable", "0", "--reference", "1", "--heads", "nominal",
+            "--track-seconds", "0.01", "--urdf", path, "--camera", *cams, "--json", str(out)]
+    assert main(argv) == 0
+    assert list(json.loads(out.read_text())) == ["nominal", "talos_reduced"]
+
+
+@pytest.mark.parametrize("argv", [["--urdf", "x.urdf"], ["--camera", "c"], ["--targets", "0"],
+                                  ["--track-seconds", "0"], ["--heads", "nope"]])
+def test_bench_bad_input(tmp_path, capsys, argv):
+    out = tmp_path / "b.json"
+    assert main(["bench", "gaze", *argv, "--json", str(out)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_generic_targets_fixatable_on_yourdfpy(tiago):
+    """The look-at targets lie on the camera's optical axis at the sampled readings, by yourdfpy."""
+    import yourdfpy
+
+    axes = SolvedAxes(tiago.solver)
+    P, Q = generic_reachable_targets(axes, 20, seed=1)
+    chain = tiago.solver.chain
+    assert np.all(Q[:, chain.joint_index] >= tiago.solver.lower[chain.joint_index])
+    path, (cam,) = _real_urdf("tiago")
+    robot = yourdfpy.URDF.load(path, load_meshes=False, build_collision_scene_graph=False)
+    names = tiago.solver.joint_names
+    order = [names.index(j) for j in robot.actuated_joint_names]
+    for p, q in zip(P, Q, strict=True):
+        robot.update_cfg(q[order])
+        T = robot.get_transform(frame_to=cam, frame_from=robot.base_link)
+        d = T[:3, :3].T @ (p - T[:3, 3])
+        assert np.arctan2(np.hypot(d[0], d[1]), d[2]) < GAZE_POINTING_TOL
+        assert 0.3 <= np.linalg.norm(d) <= 3.0
+
+
+def test_reference_jacobian_by_finite_differences(tiago):
+    axes = SolvedAxes(tiago.solver)
+    P, Q = generic_reachable_targets(axes, 3, seed=2)
+    rng = np.random.default_rng(0)
+    n = tiago.solver.n
+    movable = tiago.solver.chain.joint_index
+    for p, q in zip(P + 0.05 * rng.normal(size=P.shape), Q, strict=True):
+        r, J = axes.residual(q, p, True)
+        assert J is not None and J.shape == (3, n)
+        h = 1e-6
+        for k in movable:
+            dq = np.zeros(n)
+            dq[k] = h
+            fd = (axes.residual(q + dq, p, False)[0] - axes.residual(q - dq, p, False)[0]) / (2 * h)
+            np.testing.assert_allclose(J[:, k], fd, atol=1e-7)
+
+
+def test_tracking_targets_stay_inside():
+    lo, hi = np.array([0.0, -1.0, -np.inf]), np.array([1.0, 1.0, np.inf])
+    P = np.arange(12.0).reshape(4, 3)
+    Q = np.array([[0.5, 0.0, 7.0], [0.1, 0.0, 0.0], [0.6, 0.4, -3.0], [0.5, -0.9, 0.0]])
+    T = tracking_targets(lo, hi, P, Q, 2.5)
+    assert T.shape == (2500, 3)
+    # rows 1 and 3 lie outside the middle half of a limited joint: the centres cycle rows 0 and 2
+    for k, centre in enumerate((P[0], P[2], P[0])):
+        d = np.linalg.norm(T[1000 * k : 1000 * (k + 1)] - centre, axis=1)
+        np.testing.assert_allclose(d, 0.05, atol=1e-12)
+
+
+def test_real_heads_known():
+    assert set(REAL_HEADS) == {"tiago", "talos"}

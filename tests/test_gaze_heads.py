@@ -1,0 +1,215 @@
+"""The compiled gaze solver on every head shape (tests/gaze_heads.py): kinematics against
+Pinocchio and finite differences, exact answers against yourdfpy, names and couplings checked,
+and the calibrated IIS-heads answered with the policy's posture (status ``disparity``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from gaze_heads import HEAD_SHAPES, head_case, pointing_errors, yourdfpy_axes
+
+from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.urdf import write_urdf
+from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels
+from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+
+N_TARGETS = 200
+N_YOURDFPY = 25
+
+
+@pytest.fixture(scope="module", params=HEAD_SHAPES)
+def case(request, tmp_path_factory):
+    return head_case(request.param, tmp_path_factory.mktemp(request.param))
+
+
+def test_compiled_kinematics_match_pinocchio_and_finite_differences(case):
+    solver = case.solver
+    comp, chain = solver.compiled, solver.chain
+    robot = solver.robot
+    data = robot.model.createData()
+    rng = np.random.default_rng(0)
+    fids = [robot.frame_id(c) for c in case.cameras]
+    ws = kernels.workspace(chain)
+    for _ in range(5):
+        u = rng.uniform(chain.lower, chain.upper)
+        R, o = comp._fk(u)
+        q = chain.q_from_u(u)
+        pin.framesForwardKinematics(robot.model, data, q)
+        for c, fid in enumerate(fids):
+            assert np.abs(data.oMf[fid].rotation - R[c]).max() < 1e-12
+            assert np.abs(data.oMf[fid].translation - o[c]).max() < 1e-12
+        # the residual's Jacobian against central differences
+        p = o[: len(fids)].mean(axis=0) + 1.3 * R[0][:, 2] + rng.normal(0, 0.2, 3)
+        r, J = ws[7], ws[8]
+        kernels.residual(comp.ch, u, chain.b, p, r, J, True, *ws[:7])
+        J = J.copy()
+        Jfd = np.empty_like(J)
+        for v in range(chain.m):
+            h = np.zeros(chain.m)
+            h[v] = 1e-6
+            a, b = np.empty_like(r), np.empty_like(r)
+            kernels.residual(comp.ch, u + h, chain.b, p, a, ws[10], False, *ws[:7])
+            kernels.residual(comp.ch, u - h, chain.b, p, b, ws[10], False, *ws[:7])
+            Jfd[:, v] = (a - b) / 2e-6
+        assert np.abs(J - Jfd).max() < 1e-7 * max(1.0, np.abs(J).max())
+
+
+def test_reachable_targets_exact_on_independent_fk(case):
+    """Seeded fixatable targets: every one answered exactly inside the limits (a calibrated
+    binocular head: the policy's posture with the residual named ``disparity``)."""
+    solver = case.solver
+    P, Q_made = case.reachable_targets(N_TARGETS, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
+            batch = solver.solve_many(P)
+    assert batch.q.shape == (N_TARGETS, solver.n)
+    assert np.all(batch.q >= solver.lower) and np.all(batch.q <= solver.upper)
+    names = [batch.status_names[s] for s in batch.status]
+    if solver.disparity_head:
+        assert set(names) <= {"disparity", "joint_limits"}
+        assert names.count("disparity") > 0.95 * N_TARGETS
+        return
+    assert batch.reachable.all(), f"{case.name}: {dict(zip(*np.unique(names, return_counts=True), strict=True))}"
+    assert batch.pointing_error.max() < GAZE_POINTING_TOL
+    pick = np.random.default_rng(0).choice(N_TARGETS, N_YOURDFPY, replace=False)
+    O, Z = yourdfpy_axes(case, batch.q[pick])
+    err = pointing_errors(O, Z, P[pick])
+    assert err.max() < GAZE_POINTING_TOL, f"{case.name}: yourdfpy {err.max():.3g} rad"
+    assert np.allclose(err, batch.pointing_error[pick], atol=1e-12)
+    # solve() gives the same answer as solve_many
+    sol = solver.solve(P[0], policy="min-motion" if solver._head is not None else "cyclopean")
+    assert sol.reachable
+
+
+def test_unreachable_targets_answered_in_limits(case):
+    """Targets behind and far off: every one answered with in-limit readings, never fixated
+    unless the pointing error says so; statuses from the table."""
+    solver = case.solver
+    rng = np.random.default_rng(3)
+    R, o = solver.compiled._fk(solver.compiled.home_u)
+    c = o[solver.chain.solve_cameras].mean(axis=0)
+    d = rng.normal(size=(100, 3))
+    P = np.vstack([c + rng.uniform(0.2, 20, (100, 1)) * d / np.linalg.norm(d, axis=1, keepdims=True),
+                   c + np.array([[0, 0, 1e6], [0, 0, -1e6], [1e300, 0, 0], [-1.7e308, 0, 0]])])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
+            batch = solver.solve_many(P)
+    assert np.all(np.isfinite(batch.q)) and np.all(batch.q >= solver.lower) and np.all(batch.q <= solver.upper)
+    assert np.all(np.isfinite(batch.pointing_error)) and np.all(batch.pointing_error <= math.pi)
+    assert np.array_equal(batch.reachable, batch.pointing_error.max(axis=1) <= batch.tolerance)
+    assert set(np.unique(batch.status)) <= set(range(len(BATCH_STATUSES)))
+    sol = solver.solve(P[-1])
+    text = json.dumps(sol.to_json(), allow_nan=False)  # finite JSON even at -1.7e308 m
+    assert "Infinity" not in text
+
+
+def test_names_and_couplings_are_checked(tmp_path):
+    robot = PinocchioRobot.load("iis_head")
+    with pytest.raises(UnknownNameError, match="nope"):
+        GazeSolver(robot, ("camera_left_optical", "nope"))
+    with pytest.raises(UnknownNameError, match="no_joint"):
+        GazeSolver(robot, ("camera_left_optical",), joints=["pan", "no_joint"])
+    with pytest.raises(ConfigurationError, match="one or two"):
+        GazeSolver(robot, ("camera_left_optical", "camera_right_optical", "camera_left_optical"))
+    with pytest.raises(SpecError, match="vergence_left"):
+        GazeSolver(robot, ("camera_left_optical", "camera_right_optical"),
+                   coupling=Coupling.version_vergence("vergence_left", "vergence_right", (-3.0, 3.0), (0.0, 0.5)))
+    with pytest.raises(ConfigurationError, match="rigid"):
+        GazeSolver(robot, ("camera_left_optical",), rigid="nope")
+    # a joint that moves no camera
+    path = write_urdf(load_model("iis_head"), tmp_path / "h.urdf")
+    s = GazeSolver(path, ("camera_left_optical",), joints=["pan", "tilt", "vergence_left"])
+    assert s.kind == "look-at" and s.chain.variables == ("pan", "tilt", "vergence_left")
+    with pytest.raises(ConfigurationError, match="vergence_right"):
+        GazeSolver(path, ("camera_left_optical",), joints=["pan", "vergence_right"])
+    # joints that may not move stay at q_current
+    q = s.home.copy()
+    q[0] = 0.1
+    b = s.solve_many([[-0.6, -0.6, 0.7]], q_current=q)
+    assert b.q[0, 0] == 0.1 and b.q[0, 5] == q[5] and b.reachable[0]
+    with pytest.raises(ConfigurationError, match="shape"):
+        s.solve_many(np.zeros((2, 2)))
+    with pytest.raises(ConfigurationError, match="NaN"):
+        s.solve_many([[0.0, np.nan, 1.0]])
+
+
+def test_rigid_pair_master_eye(tmp_path):
+    case = head_case("stereo_pan_tilt", tmp_path)
+    for eye, k in (("left", 0), ("right", 1)):
+        s = GazeSolver(case.urdf, case.cameras, rigid=eye)
+        assert s.compiled.axes == (case.cameras[k],)
+        p = np.array([2.0, 0.7, 1.5])
+        b = s.solve_many([p])
+        assert b.reachable[0]
+        R, o = s.compiled._fk(s.chain.u_from_q(b.q[0]))
+        d = p - o[k]
+        assert math.atan2(np.linalg.norm(np.cross(R[k][:, 2], d)), R[k][:, 2] @ d) < GAZE_POINTING_TOL
+
+
+def _facing(solver, d):
+    """The point ``d`` [m] straight ahead of ``solver``'s cameras at home (on the cyclopean axis)."""
+    left, right = solver.camera_poses(solver.home)
+    c = 0.5 * (left[:3, 3] + right[:3, 3])
+    z = left[:3, 2] + right[:3, 2]
+    return c + d * z / np.linalg.norm(z)
+
+
+def _faces_ahead(cal, nominal, label):
+    """Targets straight ahead of ``cal``'s cameras (0.8, 1.5, 3 m): pan/tilt within 3 deg of the
+    nominal head's answer for its own straight-ahead target, nothing at a limit, status
+    disparity (or fixated), and the pointing error within 1.05x of the best the eyes can do
+    with the neck at that posture (bounded least squares over the eyes, scipy)."""
+    from scipy.optimize import least_squares
+
+    for d in (0.8, 1.5, 3.0):
+        p = _facing(cal, d)
+        a, n = cal.solve(p), nominal.solve(_facing(nominal, d))
+        assert a.status in ("disparity", "fixated") and not a.at_limit, (label, d, a.status, a.at_limit)
+        assert np.degrees(np.abs(a.q[2:4] - n.q[2:4])).max() < 3.0, (label, d, np.degrees(a.q[2:4]), np.degrees(n.q[2:4]))
+
+        def res(e, q=a.q, p=p):
+            qq = q.copy()
+            qq[4:] = e
+            return cal.evaluate(qq, p, jacobian=False).r
+
+        best = least_squares(res, a.q[4:], bounds=(cal.lower[4:], cal.upper[4:]), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        qb = a.q.copy()
+        qb[4:] = best.x
+        best_rms = math.sqrt(cal.evaluate(qb, p, jacobian=False).rr / 2)
+        ours = math.sqrt(cal.evaluate(a.q, p, jacobian=False).rr / 2)
+        assert ours <= 1.05 * best_rms + 1e-12, (label, d, ours, best_rms)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_calibrated_head_faces_targets_ahead(seed):
+    """Calibrated IIS-heads (seeded): targets ahead answered with pan/tilt within a few degrees
+    of the nominal head's answer, the pointing error within 1.05x of the best the eyes can do
+    with the neck at that posture (bounded least squares over the eyes), nothing at a limit,
+    status ``disparity``."""
+    nominal = GazeSolver.from_model(load_model("iis_head"))
+    cal = GazeSolver.from_model(calibrated_iis_head(seed))
+    assert cal.disparity_head and not nominal.disparity_head
+    _faces_ahead(cal, nominal, seed)
+    rep = cal.disparity_report(60)
+    assert not rep["exact"] and 0 < rep["median_rad"] <= rep["max_rad"] < 0.05
+
+
+def test_demo_head_disparity(demo_run):
+    """The demo's calibrated IIS-head: its disparity stated, targets ahead faced."""
+    d, code, _ = demo_run
+    assert code == 0
+    cal = GazeSolver(d / "head.urdf")
+    assert cal.disparity_head
+    _faces_ahead(cal, GazeSolver.from_model(load_model("iis_head")), "demo")
+    rep = cal.disparity_report(60)
+    assert not rep["exact"] and rep["median_rad"] > GAZE_POINTING_TOL

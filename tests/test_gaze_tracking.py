@@ -1,0 +1,214 @@
+"""Gaze tracking (cpc2urdf/validation/gaze/tracking.py): smooth pursuit and minimum-jerk saccades.
+
+The saccade's profile is checked against what defines minimum jerk, not against the formula the
+code uses: a degree-5 polynomial fitted to the commanded samples (numpy.polyfit) must reproduce
+them, with zero velocity and acceleration at both ends. Fixation after a saccade is checked with
+the CPC model's own FK (not Pinocchio, which the solver uses).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.studies.bench_gaze import calibrated_iis_head, eyes_coplanar, reachable_targets
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.validation.gaze import GazeSolver
+from cpc2urdf.validation.gaze.tracking import (
+    MIN_JERK_PEAK_ACCELERATION,
+    MIN_JERK_PEAK_VELOCITY,
+    GazeTracker,
+    SaccadeRule,
+    minimum_jerk,
+    track,
+)
+
+CAMERAS = ("camera_left_optical", "camera_right_optical")
+DT = 1e-3
+FAST = 4.0  # the tests' speed limits: the URDF's times this (shorter saccades, shorter tests)
+
+
+@pytest.fixture(scope="module")
+def heads():
+    return {}
+
+
+@pytest.fixture(params=["nominal", "calibrated"])
+def head(request, heads):
+    """Both heads (a test that needs only the nominal one is parametrized with ``head=["nominal"]``)."""
+    if request.param not in heads:
+        model = load_model("iis_head") if request.param == "nominal" else calibrated_iis_head(0)
+        heads[request.param] = (model, GazeSolver.from_model(model))
+    return heads[request.param]
+
+
+def _errors(model, Q, P):
+    """Pointing error of each eye [rad], shape (N, 2), from the CPC model's FK (not Pinocchio)."""
+    T = model.fk(np.atleast_2d(Q), CAMERAS)
+    out = []
+    for cam in CAMERAS:
+        R, o = T[cam][:, :3, :3], T[cam][:, :3, 3]
+        pc = np.einsum("nji,nj->ni", R, np.atleast_2d(P) - o)
+        out.append(np.arctan2(np.hypot(pc[:, 0], pc[:, 1]), pc[:, 2]))
+    return np.stack(out, axis=1)
+
+
+def _assert_on_answer(solver, model, tr, P, where):
+    """Samples ``where`` are the solver's answers for their targets, and point as the CPC model's
+    FK says; to within the tolerance where the head fixates exactly (nominal)."""
+    np.testing.assert_array_equal(tr.q[where], tr.q_goal[where])
+    Q, Pw = tr.q[where][::25], P[where][::25]
+    err = _errors(model, Q, Pw)
+    np.testing.assert_allclose(tr.pointing_error[where][::25], err, rtol=1e-6, atol=1e-11)
+    if eyes_coplanar(model):
+        assert tr.reachable[where].all() and np.all(err < GAZE_POINTING_TOL)
+
+
+def _two_targets(model):
+    """Two reachable targets whose readings are well inside the limits, about 25 deg of pan apart."""
+    P, Q = reachable_targets(model, 400, seed=3)
+    s = model.structure
+    lo, hi = s.lower, s.upper
+    inner = np.all((Q >= lo + 0.2 * (hi - lo)) & (Q <= hi - 0.2 * (hi - lo)), axis=1)
+    P, Q = P[inner], Q[inner]
+    ip = s.joint_index("pan")
+    gap = np.abs(np.abs(Q[:, None, ip] - Q[None, :, ip]) - math.radians(25.0))
+    i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    assert abs(Q[j, ip] - Q[i, ip]) > math.radians(20.0)
+    return P[i], P[j]
+
+
+def test_minimum_jerk_profile_function():
+    s = np.linspace(0.0, 1.0, 100_001)
+    f, df, ddf = minimum_jerk(s)
+    assert f[0] == 0.0 and f[-1] == 1.0
+    assert df[0] == df[-1] == ddf[0] == ddf[-1] == 0.0
+    h = s[1] - s[0]
+    assert np.max(np.abs(np.gradient(f, h)[1:-1] - df[1:-1])) < 1e-8  # derivatives by finite differences
+    assert np.max(np.abs(np.gradient(df, h)[1:-1] - ddf[1:-1])) < 1e-7
+    np.testing.assert_allclose(df, df[::-1], atol=1e-12)  # a symmetric bell
+    assert np.all(np.diff(df[: s.size // 2 + 1]) >= 0) and np.all(np.diff(df[s.size // 2 :]) <= 0)
+    assert df.max() == pytest.approx(MIN_JERK_PEAK_VELOCITY, abs=1e-12)
+    assert np.abs(ddf).max() == pytest.approx(MIN_JERK_PEAK_ACCELERATION, abs=1e-8)
+    assert np.abs(ddf[np.argmax(ddf)] - minimum_jerk((3 - math.sqrt(3)) / 6)[2]) < 1e-8
+
+
+@pytest.mark.parametrize(
+    "head, max_acceleration", [("nominal", None), ("calibrated", None), ("nominal", 40.0)], indirect=["head"]
+)
+def test_saccade_is_minimum_jerk_and_locks_on(head, max_acceleration):
+    """Static target A, then B: one saccade, min-jerk, within the limits, ending exactly at the answer."""
+    model, solver = head
+    A, B = _two_targets(model)
+    hold = 20
+    after = 60
+    P = np.vstack([np.repeat(A[None], hold, axis=0), np.repeat(B[None], 600, axis=0)])
+    rule = SaccadeRule(max_acceleration=max_acceleration)
+    q0 = solver.solve(A).q
+    vmax = FAST * solver.velocity_limit
+    tr = track(solver, P, DT, vmax, q_current=q0, saccades=rule)
+    # one saccade, starting when the target jumps
+    sac = np.flatnonzero(tr.saccade)
+    assert sac.size and sac[0] == hold and np.all(np.diff(sac) == 1)
+    N = sac.size
+    start, goal = tr.q[hold - 1], tr.q_goal[hold]
+    delta = goal - start
+    # the duration rule: the fewest samples within the velocity (and acceleration) limits
+    T = max(rule.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * np.abs(delta) / vmax)))
+    if max_acceleration is not None:
+        T = max(T, math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * np.abs(delta) / max_acceleration))))
+    assert N == math.ceil(T / DT - 1e-9)
+    # ends exactly at the solver's answer for the target at its onset
+    assert np.array_equal(tr.q[sac[-1]], goal)
+    # a quintic through the samples, with zero velocity and acceleration at both ends
+    t = np.arange(N + 1) * DT
+    seg = tr.q[hold - 1 : sac[-1] + 1]
+    k = int(np.argmax(np.abs(delta)))
+    poly = np.polynomial.Polynomial.fit(t, seg[:, k], 5)
+    assert np.max(np.abs(poly(t) - seg[:, k])) < 1e-9 * abs(delta[k])
+    scale_v, scale_a = abs(delta[k]) / t[-1], abs(delta[k]) / t[-1] ** 2
+    for end in (0.0, t[-1]):
+        assert abs(poly.deriv(1)(end)) < 1e-6 * scale_v
+        assert abs(poly.deriv(2)(end)) < 1e-5 * scale_a
+    # a symmetric bell of sampled velocity, never over the limit anywhere in the trajectory
+    v = np.diff(seg, axis=0) / DT
+    np.testing.assert_allclose(v, v[::-1], atol=1e-9 * np.max(np.abs(v)))
+    v_all = np.abs(np.diff(np.vstack([q0, tr.q]), axis=0)) / DT
+    assert np.all(v_all <= vmax * (1 + 1e-12))
+    if max_acceleration is None:  # the shortest such saccade: the limiting joint nearly at its speed limit
+        assert np.max(np.abs(v) / vmax) > 0.98
+    else:
+        a = np.abs(np.diff(seg, n=2, axis=0)) / DT**2
+        assert np.all(a <= max_acceleration * (1 + 1e-9))
+        assert a.max() > 0.95 * max_acceleration  # here the acceleration limit sets the duration
+    # then the eyes lock on B (pursuit of a still target): on the solver's answer, whose pointing
+    # error the CPC model's FK confirms (below the tolerance where the head can fixate exactly)
+    rest = slice(sac[-1] + 1, sac[-1] + 1 + after)
+    assert tr.locked[rest].all() and not tr.saccade[sac[-1] + 1 :].any()
+    _assert_on_answer(solver, model, tr, P, rest)
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_saccade_then_pursuit_of_a_moving_target(head):
+    """A target circling about A, then about B: a saccade, then smooth pursuit locks on again."""
+    model, solver = head
+    A, B = _two_targets(model)
+    t = np.arange(700) * DT
+    centre = np.where((t < 0.1)[:, None], A, B)
+    w = 2 * math.pi
+    P = centre + 0.03 * np.stack([np.cos(w * t), np.sin(w * t), np.zeros_like(t)], axis=1)
+    vmax = FAST * solver.velocity_limit
+    tr = track(solver, P, DT, vmax, saccades=SaccadeRule())
+    v = np.abs(np.diff(tr.q, axis=0)) / DT
+    assert np.all(v <= vmax * (1 + 1e-12))
+    sac = np.flatnonzero(tr.saccade)
+    assert sac.size and sac[0] == 100 and np.all(np.diff(sac) == 1)
+    # a saccade is ballistic: afterwards pursuit catches up and stays locked on the moving target
+    tail = slice(sac[-1] + 150, None)
+    assert tr.q.shape[0] - (sac[-1] + 150) >= 100
+    assert tr.locked[tail].all()
+    _assert_on_answer(solver, model, tr, P, tail)
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_without_saccades_pursuit_only(head):
+    """saccades=None: the velocity-limited pursuit, never a saccade; the tracker's steps are track()."""
+    model, solver = head
+    A, B = _two_targets(model)
+    P = np.vstack([np.repeat(A[None], 20, axis=0), np.repeat(B[None], 200, axis=0)])
+    q0 = solver.solve(A).q
+    tr = track(solver, P, DT, q_current=q0)
+    assert not tr.saccade.any()
+    step = solver.velocity_limit * DT
+    d = np.abs(np.diff(np.vstack([q0, tr.q]), axis=0))
+    assert np.all(d <= step * (1 + 1e-12))
+    assert np.any(np.isclose(d[20:], step).any(axis=1))  # the jump is caught up at the limit
+    tracker = GazeTracker(solver, DT, q_current=q0)
+    Q = np.array([tracker.step(p).q for p in P])
+    np.testing.assert_array_equal(Q, tr.q)
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_bad_input(head):
+    _, solver = head
+    P = np.zeros((3, 3)) + [0.0, 0.0, 1.0]
+    for rule in (
+        SaccadeRule(threshold=-1.0),
+        SaccadeRule(threshold=math.nan),
+        SaccadeRule(min_duration=-0.1),
+        SaccadeRule(max_acceleration=0.0),
+        SaccadeRule(max_acceleration=(1.0, 2.0)),
+        SaccadeRule(max_acceleration=math.inf),
+    ):
+        with pytest.raises(ConfigurationError, match="saccade"):
+            track(solver, P, DT, saccades=rule)
+    with pytest.raises(ConfigurationError, match="max_velocity"):
+        track(solver, P, DT, max_velocity=[1.0, 2.0])
+    with pytest.raises(ConfigurationError, match="dt"):
+        GazeTracker(solver, 0.0)
+    with pytest.raises(ConfigurationError, match="target"):
+        GazeTracker(solver, DT).step([0.0, math.nan, 1.0])
