@@ -58,6 +58,9 @@ from cpc2urdf.validation.gaze import (
     GazeSolver,
     solver_for,
 )
+from cpc2urdf.validation.gaze.chain import Coupling
+from cpc2urdf.validation.gaze.reach import Region, make_grid
+from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
 from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
 
 PathLike = str | os.PathLike[str]
@@ -333,17 +336,47 @@ def gaze_solver(
     cameras: Sequence[str] = DEFAULT_CAMERAS,
     *,
     viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+    joints: Sequence[str] | None = None,
+    coupling: Coupling | None = None,
+    rigid: str = "cyclopean",
+    tolerance: float | None = None,
 ) -> GazeSolver:
     """A gaze solver (``cpc2urdf gaze``) for a model, model file, robot spec, shipped robot or
     URDF path, pointing the optical axes of ``cameras``.
 
     Args:
         robot: The head.
-        cameras: Its two camera optical frames (REP-103).
+        cameras: One or two camera optical frames (REP-103). One camera: look-at; two on
+            independent eyes: binocular fixation; two rigidly coupled: see ``rigid``.
         viewing_distance: Distance [m] at which the start's grid looks for the target.
+        joints: The joints allowed to move (default: every joint on the cameras' paths); the
+            others stay at ``q_current``.
+        coupling: A stated linear coupling of the joints (e.g. ``Coupling.version_vergence``);
+            URDF ``<mimic>`` joints are coupled without it.
+        rigid: For two rigidly coupled cameras: ``"cyclopean"`` (the mid axis through the target)
+            or the name of the master camera.
+        tolerance: Pointing error [rad] below which a target counts as fixated (default
+            :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL`).
     """
     ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
-    return solver_for(ref, cameras, viewing_distance=viewing_distance)
+    return solver_for(ref, cameras, viewing_distance=viewing_distance, joints=joints,
+                      coupling=coupling, rigid=rigid, tolerance=tolerance)
+
+
+def reachable_region(
+    robot: CPCModel | RobotRef,
+    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    *,
+    grid: str = "shell",
+    near: float = 0.2,
+    far: float = 3.0,
+    samples: Sequence[int] = (16, 37, 25),
+) -> Region:
+    """Where a head's cameras can fixate (``cpc2urdf reach``): a grid of targets in front of it
+    (``grid`` ``"shell"`` or ``"box"``, ``near``-``far`` [m] from the cameras), each solved by the
+    batch solver and sorted into fixated, disparity-limited, joint limits, behind or too close."""
+    solver = gaze_solver(robot, cameras)
+    return _reachable_region(solver, make_grid(solver, grid, near, far, samples))
 
 
 def fixate(
@@ -407,6 +440,8 @@ __all__ = [
     "LoadedPlan",
     "MeasurementSet",
     "PlanOutputs",
+    "Region",
+    "Coupling",
     "RobotSpec",
     "ViewSummary",
     "accuracy",
@@ -418,6 +453,7 @@ __all__ = [
     "fixate",
     "gaze_solver",
     "plan_experiment",
+    "reachable_region",
     "identify",
     "load_handeye_poses",
     "load_marker_csv",
