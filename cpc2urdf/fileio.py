@@ -15,9 +15,11 @@ import tempfile
 import uuid
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from cpc2urdf.errors import InputFileError, OutputError
+
+_PathT = TypeVar("_PathT", bound="str | os.PathLike[str]")
 
 
 def read_text_file(path: str | os.PathLike[str], expected: str, encoding: str = "utf-8") -> str:
@@ -293,7 +295,7 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes) -> Path:
     return p
 
 
-def write_all_atomic(files: Mapping[str | os.PathLike[str], str | bytes]) -> list[Path]:
+def write_all_atomic(files: Mapping[_PathT, str | bytes]) -> list[Path]:
     """Write several files all or nothing: every one to a temp file first, then rename them.
 
     If writing or renaming any of them fails, none of the new files is left: the temp files are

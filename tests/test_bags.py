@@ -28,12 +28,13 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import bag as cli_bag
 from cpc2urdf.cli import main
+from cpc2urdf.errors import InputFileError
 from cpc2urdf.identification.handeye import stage2 as s2
 from cpc2urdf.identification.handeye.head_images import write_handeye_files
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 from cpc2urdf.identification.simulation.images import RenderedExperiment, render_experiment
 from cpc2urdf.identification.simulation.simulate import simulate_experiment
-from cpc2urdf.identification.vision import bags
+from cpc2urdf.identification.vision import bag_images, bags
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
 from cpc2urdf.identification.vision.measure_head import HeadImageMeasurement
 from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
@@ -289,6 +290,33 @@ def test_target_poses_give_the_direct_handeye_files(tmp_path: Path, capsys: pyte
              "message 1 in 'camera_link'; every pose of camera_left_optical must be expressed in one frame")
 
 
+def test_target_poses_outside_the_joint_limits_are_refused_before_writing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """As for --pose and --image: a reading outside the limits (pan 1 rad past its upper limit in
+    one sample) is refused naming the sample and the joint, and no pose file is written."""
+    model = load_model("iis_head")
+    model_file = save_model(model, tmp_path / "model.json")
+    s = model.structure
+    q = np.tile(0.5 * (s.lower + s.upper), (3, 1))
+    q[:, 0] += np.array([0.0, 0.05, 0.1])  # three configurations
+    pan = s.joint_names.index("pan")
+    q[1, pan] = s.upper[pan] + 1.0
+    T = np.eye(4)
+    T[2, 3] = 1.0  # the target 1 m in front of the camera
+    times = [T0 + i * (REST + MOVE) + POSE_OFFSET for i in range(len(q))]
+    msgs = joint_stream(q) + [("/left/target_pose", "geometry_msgs/msg/PoseStamped", t,
+                               _pose_stamped(t, T, "camera_left_optical")) for t in times]
+    bag = write_bag(tmp_path / "limits", msgs)
+    out = tmp_path / "out"
+    _refused(capsys, ["bag", str(bag), "--model", str(model_file), "--target", "camera_left_optical=/left/target_pose",
+                      "-o", str(out)], out,
+             f"limits: t=1700000002.503000000: pan = {s.upper[pan] + 1.0:.6g} is outside the joint limits "
+             f"[{s.lower[pan]:.6g}, {s.upper[pan]:.6g}] (m or rad)")
+    # The library refuses it too (the API's route), not only the command.
+    with pytest.raises(InputFileError, match="pan = .* is outside the joint limits"):
+        bags.target_poses_from_bag(bag, model, [bags.PoseTopic.parse("camera_left_optical=/left/target_pose")])
+
+
 # ---- bad input: one line, exit 2, nothing written ------------------------------------------------------
 
 
@@ -361,11 +389,12 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> RenderedExperiment:
     return render_experiment(tmp_path_factory.mktemp("render") / "images", M=2, n_heldout=1, seed=2, supersample=2)
 
 
-def _image_msgs(exp: RenderedExperiment, records: list[int], q: np.ndarray) -> list[Msg]:
-    """Left images as raw mono8 ``Image``, right ones as PNG ``CompressedImage``, 2 ms apart."""
+def _image_msgs(exp: RenderedExperiment, records: list[int], q: np.ndarray, times: list[int] | None = None) -> list[Msg]:
+    """Left images as raw mono8 ``Image``, right ones as PNG ``CompressedImage``, 2 ms apart
+    (at ``times`` [ns], default: inside the rest period of configuration i)."""
     out: list[Msg] = []
     for i, r in enumerate(records):
-        t = T0 + i * (REST + MOVE) + POSE_OFFSET
+        t = T0 + i * (REST + MOVE) + POSE_OFFSET if times is None else times[i]
         left = cv2.imread(str(exp.folder / "left" / f"{r:04d}.png"), cv2.IMREAD_UNCHANGED)
         h, w = left.shape
         out.append(("/rig/left/image_raw", "sensor_msgs/msg/Image", t, TS.types["sensor_msgs/msg/Image"](
@@ -430,13 +459,32 @@ def test_raw_image_encodings(encoding: str, bigendian: int) -> None:
     data[:, : row.shape[1]] = row
     msg = TS.types["sensor_msgs/msg/Image"](header=_header(T0), height=5, width=7, encoding=encoding,
                                             is_bigendian=bigendian, step=step, data=data.reshape(-1))
-    got = bags._image_from_msg(msg, "m", Path("b"))
+    got = bag_images.image_from_msg(msg, "m", Path("b"))
     want = img.astype(img.dtype.newbyteorder("="))
     if encoding == "rgb8":
         want = want[..., ::-1]
     elif encoding == "rgba8":
         want = want[..., [2, 1, 0, 3]]
     np.testing.assert_array_equal(got, want.squeeze(axis=2) if ch == 1 else want)
+
+
+def test_image_bag_skipped_samples_are_numbered_as_the_bag_has_them(rendered: RenderedExperiment,
+                                                                    tmp_path: Path) -> None:
+    """Sample 0 lacks its right image, sample 1 is taken while the robot moves: the skip list
+    names them 0 and 1 (one numbering over the bag's samples), and the other two are written."""
+    records = [0, 3, 8]
+    q = rendered.measured.q[records]
+    msgs = [m for m in _image_msgs(rendered, records, q) if not (m[0].endswith("compressed") and m[2] < T0 + SEC)]
+    msgs += _image_msgs(rendered, [0], q[:1], times=[T0 + REST + MOVE // 2])  # while moving from q0 to q1
+    bag = write_bag(tmp_path / "img", joint_stream(q) + msgs)
+    res = bags.image_folder_from_bag(bag, SPEC, [bags.ImageTopic.parse(a) for a in IMAGE_ARGS[1::2]],
+                                     tmp_path / "out")
+    skipped = res.samples.skipped
+    assert len(skipped) == 2, skipped
+    assert skipped[0].startswith("sample 0 (t=1700000000.503000000: /rig/left/image_raw message 0): no image of right")
+    assert skipped[1].startswith("sample 1 (t=1700000001.501000000: ") and "joints not at rest" in skipped[1], skipped
+    assert res.records == ["0000", "0001"] and res.samples.labels == ["t=1700000002.504000000", "t=1700000004.504000000"]
+    np.testing.assert_array_equal(read_joints_csv(tmp_path / "out" / "joints.csv", SPEC.structure).q, q[1:])
 
 
 def test_image_bag_bad_input_leaves_no_folder(rendered: RenderedExperiment, tmp_path: Path,

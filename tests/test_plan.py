@@ -226,6 +226,27 @@ def test_tiago_urdf_plan_through_the_cli(tmp_path: Path) -> None:
     assert [j["name"] for j in doc["joints"]] == ["torso_lift", "head_1", "head_2"]
     assert [j["urdf_joint"] for j in doc["joints"]] == ["torso_lift_joint", "head_1_joint", "head_2_joint"]
     assert doc["urdf"]["measured_links"] == ["calib_plate"]
+    # plan.csv goes to the robot: the URDF's joint names (its /joint_states names), read back
+    # with the robot's name mapping as the same configurations as plan.json.
+    from cpc2urdf.identification.vision.joints_csv import read_joints_csv, urdf_joint_columns
+
+    header = (tmp_path / "tiago_plan.csv").read_text().splitlines()[0]
+    assert header == "record,label,torso_lift_joint[mm],head_1_joint[deg],head_2_joint[deg]"
+    robot = load_robot(str(urdf)).restricted(["calib_plate"])
+    assert urdf_joint_columns(robot) == {"torso_lift_joint": "torso_lift", "head_1_joint": "head_1",
+                                         "head_2_joint": "head_2"}
+    plan = load_plan(out, robot.structure)
+    table = read_joints_csv(tmp_path / "tiago_plan.csv", robot.structure, aliases=urdf_joint_columns(robot))
+    np.testing.assert_allclose(table.q, plan.q, atol=1e-9)
+    # The URDF's names in --range (as simulate takes them) and the CSV as a task region.
+    lim = math.degrees(robot.structure.joint("head_1").upper)
+    again = tmp_path / "again.json"
+    assert main([*argv, "--range", f"head_1_joint=-{lim / 2:g}:{lim / 2:g}", "--task-region",
+                 str(tmp_path / "tiago_plan.csv"), "-o", str(again)]) == 0
+    doc2 = json.loads(again.read_text())
+    assert doc2["task_region"] == {"kind": "configurations", "n": 10}
+    head_1 = np.array([c["q"][1] for c in doc2["configurations"]])
+    assert np.all(np.abs(head_1) <= lim / 2 + 1e-9)
     assert main(["plan", str(urdf), "--n", "10", "-o", str(tmp_path / "x.json")]) == 2  # no --measure
     assert not (tmp_path / "x.json").exists()
 
@@ -242,3 +263,49 @@ def test_a_plan_file_is_simulated_where_the_plan_put_the_robot(tmp_path: Path) -
     assert exp.measured.n_records == 13 and exp.heldout.n_records == 5
     e = heldout_errors(exp, spec.nominal_model())
     assert e.position.max() < 1e-8
+
+
+def test_plan_files_get_one_mode_and_are_written_all_or_nothing(tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The PNG has the JSON's and CSV's mode (what open() gives), and an I/O failure on the last of
+    the three leaves none of them."""
+    import os
+
+    argv = ["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "-o"]
+    assert main([*argv, str(tmp_path / "plan.json")]) == 0
+    (tmp_path / "plain").write_text("x")
+    modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir()}
+    assert modes["plan.png"] == modes["plan.json"] == modes["plan.csv"] == modes["plain"]
+    real, calls = os.replace, []
+
+    def third_fails(src: str, dst: str | os.PathLike[str]) -> None:
+        if str(src).endswith(".tmp"):
+            calls.append(dst)
+            if len(calls) == 3:
+                raise OSError(28, "No space left on device")
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", third_fails)
+    out = tmp_path / "new" / "plan.json"
+    out.parent.mkdir()
+    assert main([*argv, str(out)]) == 2
+    assert len(calls) == 3 and list(out.parent.iterdir()) == []
+
+
+def test_the_curve_is_in_mm_and_deg_whatever_the_file_units() -> None:
+    from cpc2urdf.identification.planning.outputs import plan_robot
+    from cpc2urdf.identification.planning.plan_file import plan_to_json
+    from cpc2urdf.units import Units
+
+    out = plan_robot(load_robot("iis_head"), robot_ref="iis_head", n=13, n_candidates=40, curve_ns=[13])
+    si = plan_to_json(out.result, out.setup, robot="iis_head", task_region={}, candidates={}, units=Units("m", "rad"))
+    assert si["units"] == {"length": "m", "angle": "rad"}
+    assert si["curve"] == out.doc["curve"] and si["prediction"] == out.doc["prediction"]
+    for c, p in zip(si["curve"], out.result.curve, strict=True):
+        assert c["position_rms_mm"] == pytest.approx(p.position_rms * 1e3, rel=1e-12)
+        assert c["orientation_rms_deg"] == pytest.approx(math.degrees(p.orientation_rms), rel=1e-12)
+    # the plan itself is a point of its own curve: same number in both sections
+    this = next(c for c in si["curve"] if c["strategy"] == out.result.strategy and c["n"] == 13)
+    assert this["position_rms_mm"] == pytest.approx(si["prediction"]["position_rms_mm"], rel=1e-9)
+    # the configurations follow the units
+    np.testing.assert_allclose(np.array([c["q"] for c in si["configurations"]]), out.result.q, atol=0)

@@ -44,7 +44,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    help="where the robot must be accurate: the calibration ranges (default), the joint limits, or a "
                    "joints CSV of task configurations")
     p.add_argument("--range", action="append", default=[], metavar="JOINT=LO:HI",
-                   help="calibration range of a joint in mm or deg (repeatable; default: the spec's)")
+                   help="calibration range of a joint in mm or deg (repeatable; a URDF robot's joints by their URDF "
+                   "or model names; default: the spec's)")
     p.add_argument("--candidates", type=int, default=500, help="candidate configurations (default 500)")
     p.add_argument("--grid", action="store_true", help="grid candidates instead of random ones")
     p.add_argument("--seed", type=int, default=0, help="seed of the candidates (default 0)")
@@ -55,6 +56,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.cli._ranges import parse_ranges
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.identification.planning.outputs import (
         output_paths,
@@ -84,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
         if min(curve_ns) < 1:
             raise ConfigurationError(f"--curve {args.curve!r}: plan sizes must be >= 1")
     spec = load_robot(args.robot)
-    structure = robot_for_plan(spec, args.measure).structure
+    robot = robot_for_plan(spec, args.measure)
+    structure = robot.structure
     rig = None
     if args.rig:
         from cpc2urdf.identification.vision.rig_file import load_rig
@@ -92,13 +95,13 @@ def run(args: argparse.Namespace) -> int:
         rig = load_rig(args.rig)
     task: str | np.ndarray = args.task_region
     if args.task_region not in ("calibration", "limits"):
-        from cpc2urdf.identification.vision.joints_csv import read_joints_csv
+        from cpc2urdf.identification.vision.joints_csv import read_joints_csv, urdf_joint_columns
 
-        task = read_joints_csv(args.task_region, structure).q
+        task = read_joints_csv(args.task_region, structure, aliases=urdf_joint_columns(robot)).q
     out = plan_robot(
         spec, robot_ref=str(args.robot), measured=args.measure or None, rig=rig,
         sigma_t=args.sigma_mm / 1000, sigma_r=math.radians(args.sigma_deg),
-        ranges=_parse_ranges(args.range, structure), n=args.n,
+        ranges=parse_ranges(args.range, robot), n=args.n,
         target_error=None if args.target_error is None else args.target_error / 1000,
         one_joint=args.one_joint, task_region=task, n_candidates=args.candidates, grid=args.grid, seed=args.seed,
         curve_ns=curve_ns,
@@ -116,30 +119,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {c.strategy:>10} at N = {c.n}: {_mm(c.position_rms)}")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
-
-
-def _parse_ranges(items: list[str], structure: object) -> dict[str, tuple[float, float]]:
-    """``--range JOINT=LO:HI`` values (mm or deg) by joint, [m]/[rad]."""
-    from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.model import RobotStructure
-
-    assert isinstance(structure, RobotStructure)
-    out: dict[str, tuple[float, float]] = {}
-    for item in items:
-        name, sep, rest = item.partition("=")
-        lo_s, sep2, hi_s = rest.partition(":")
-        try:
-            if not sep or not sep2:
-                raise ValueError
-            lo, hi = float(lo_s), float(hi_s)
-            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError
-        except ValueError:
-            raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
-        j = structure.joint(name)
-        scale = 1e-3 if j.type == "prismatic" else math.pi / 180
-        out[name] = (lo * scale, hi * scale)
-    return out
 
 
 def _mm(v: float) -> str:

@@ -2,11 +2,12 @@
 
 :func:`plan_robot` is the command's one call: robot reference -> setup -> plan -> file texts.
 :func:`write_plan_outputs` writes ``plan.json`` (``cpc2urdf/plan@1``, :mod:`plan_file`),
-``plan.csv`` (record, label, one column per joint in mm / deg: the layout
-:func:`~cpc2urdf.identification.vision.joints_csv.read_joints_csv` reads, so the same file can
-drive the robot and later name the images) and ``plan.png`` (predicted RMS position error vs N
+``plan.csv`` (record, label, one column per joint in mm / deg, a URDF robot's joints by the URDF's
+names: the layout :func:`~cpc2urdf.identification.vision.joints_csv.read_joints_csv` reads, so the
+same file can drive the robot and later name the images) and ``plan.png`` (predicted RMS position error vs N
 per strategy). Everything is computed and rendered in memory first; the three files are then
-written atomically, so bad input leaves no file at all.
+written all or nothing (temp files first, then renamed), so bad input or a failed write leaves
+none of them.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ import csv
 import io
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, OutputError
-from cpc2urdf.fileio import check_output_path, dumps, write_atomic
+from cpc2urdf.fileio import check_output_path, dumps, write_all_atomic
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
 from cpc2urdf.identification.planning.plan import (
     DEFAULT_CANDIDATES,
@@ -36,6 +36,7 @@ from cpc2urdf.identification.planning.plan import (
     task_configurations,
 )
 from cpc2urdf.identification.planning.plan_file import plan_to_json
+from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.spec import RobotSpec
@@ -135,17 +136,23 @@ def plan_robot(
     cand_doc = {"kind": "one-joint" if one_joint else ("grid" if grid else "random"),
                 "n": int(len(result.candidates.q)), "dropped_unmeasurable": result.candidates.dropped, "seed": seed}
     doc = plan_to_json(result, setup, robot=robot_ref, task_region=task_doc, candidates=cand_doc)
-    csv_text = joints_csv_text(nominal.structure, result.q, result.labels)
+    # The CSV goes to the robot: a URDF robot's joints by the URDF's names (its /joint_states names).
+    columns = {c: u for u, c in urdf_joint_columns(nominal).items()}
+    csv_text = joints_csv_text(nominal.structure, result.q, result.labels, columns)
     png = curve_png(result.curve, f"{nominal.structure.name}: predicted held-out error vs N", result)
     return PlanOutputs(result, setup, doc, csv_text, png)
 
 
-def joints_csv_text(structure: RobotStructure, q: ArrayLike, labels: Sequence[str]) -> str:
-    """A ``joints.csv`` (records ``0000``, ``0001``, ...; lengths in mm, angles in deg)."""
+def joints_csv_text(structure: RobotStructure, q: ArrayLike, labels: Sequence[str],
+                    columns: Mapping[str, str] | None = None) -> str:
+    """A ``joints.csv`` (records ``0000``, ``0001``, ...; lengths in mm, angles in deg; ``columns``:
+    joint name -> column name, e.g. a URDF's joint names)."""
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["record", "label"] + [f"{j.name}[{'mm' if j.type == 'prismatic' else 'deg'}]" for j in structure.joints])
+    col = columns or {}
+    w.writerow(["record", "label"] + [f"{col.get(j.name, j.name)}[{'mm' if j.type == 'prismatic' else 'deg'}]"
+                                      for j in structure.joints])
     scale = [LENGTH_UNITS["mm"] if j.type == "prismatic" else ANGLE_UNITS["deg"] for j in structure.joints]
     for i, (lab, row) in enumerate(zip(labels, qq, strict=True)):
         w.writerow([f"{i:04d}", lab] + [repr(round(float(v / s), 9)) for v, s in zip(row, scale, strict=True)])
@@ -197,27 +204,15 @@ def output_paths(plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
 
 
 def write_plan_outputs(out: PlanOutputs, plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
-    """Write ``plan.json``, ``plan.csv`` and ``plan.png`` (each atomically)."""
+    """Write ``plan.json``, ``plan.csv`` and ``plan.png``, all or nothing
+    (:func:`~cpc2urdf.fileio.write_all_atomic`)."""
     json_path, csv_path, png_path = output_paths(plan_path)
     try:
         text = dumps(out.doc)
     except ValueError as e:
         raise OutputError(f"{json_path}: refusing to write non-finite numbers ({e})") from e
-    _write_bytes(png_path, out.png)
-    write_atomic(csv_path, out.csv_text)
-    write_atomic(json_path, text)
+    write_all_atomic({json_path: text, csv_path: out.csv_text, png_path: out.png})
     return json_path, csv_path, png_path
-
-
-def _write_bytes(path: Path, data: bytes) -> None:
-    folder = path.parent if str(path.parent) else Path(".")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except OSError as e:
-        raise OutputError(f"{path}: cannot write ({e.strerror})") from e
 
 
 __all__ = ["PlanOutputs", "curve_png", "joints_csv_text", "output_paths", "plan_robot", "robot_for_plan",

@@ -2,8 +2,9 @@
 
 Written by ``cpc2urdf plan`` next to a ``joints.csv`` of the same configurations (the layout
 :func:`~cpc2urdf.identification.vision.joints_csv.read_joints_csv` reads) and read back by
-:func:`load_plan`. Lengths and angles are in the file's ``units`` (``mm`` and ``deg`` by default),
-except the rig, which is in SI like every rig file (:meth:`StereoRig.to_json`)::
+:func:`load_plan`. Joint values and ``T_world_base`` are in the file's ``units`` (``mm`` and ``deg``
+by default), the rig in SI like every rig file (:meth:`StereoRig.to_json`), and the accuracy fields
+(``prediction``, ``target_error_mm``, ``curve``) in mm / deg, as their names say::
 
     {
       "format": "cpc2urdf/plan@1",
@@ -24,7 +25,8 @@ except the rig, which is in SI like every rig file (:meth:`StereoRig.to_json`)::
     }
 
 For a URDF robot, each joint also carries its ``urdf_joint`` name and a ``urdf`` section names the
-file and the measured links; ``name`` (and the CSV's columns) are the model's joint names.
+file and the measured links; ``name`` is the model's joint name, and the CSV's columns are the
+URDF's names (what the robot's ``/joint_states`` calls its joints).
 ``T_world_base`` (translation in the file's length unit) is where the plan assumes the robot
 stands in the rig's world; the configurations were checked visible from there.
 """
@@ -55,7 +57,12 @@ PLAN_FORMAT = "cpc2urdf/plan@1"
 
 def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_region: dict[str, Any],
                  candidates: dict[str, Any], units: Units | None = None) -> dict[str, Any]:
-    """The plan file's content (SI inside, ``units`` in the file; default mm / deg)."""
+    """The plan file's content (SI inside, ``units`` in the file; default mm / deg).
+
+    ``units`` applies to the joints, the configurations and ``T_world_base``; the accuracy
+    fields (``prediction``, ``target_error_mm``, ``curve``) say their unit in their names and are
+    always mm / deg.
+    """
     from cpc2urdf.urdf_robot import urdf_source
 
     u = units or Units("mm", "deg")
@@ -65,11 +72,11 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
     T = setup.nominal.T_world_base().copy()
     T[:3, 3] /= u.length
 
-    def length(v: float) -> float | None:
-        return v / u.length if math.isfinite(v) else None
+    def mm(v: float) -> float | None:  # the curve, like the prediction, is in mm / deg whatever the units
+        return v * 1e3 if math.isfinite(v) else None
 
-    def angle(v: float) -> float | None:
-        return v / u.angle if math.isfinite(v) else None
+    def deg(v: float) -> float | None:
+        return math.degrees(v) if math.isfinite(v) else None
 
     return {
         "format": PLAN_FORMAT,
@@ -95,8 +102,8 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
         "candidates": candidates,
         "prediction": result.prediction.to_json(),
         "target_error_mm": None if result.target_error is None else result.target_error * 1e3,
-        "curve": [{"strategy": c.strategy, "n": c.n, "position_rms_mm": length(c.position_rms),
-                   "orientation_rms_deg": angle(c.orientation_rms)} for c in result.curve],
+        "curve": [{"strategy": c.strategy, "n": c.n, "position_rms_mm": mm(c.position_rms),
+                   "orientation_rms_deg": deg(c.orientation_rms)} for c in result.curve],
     }
 
 

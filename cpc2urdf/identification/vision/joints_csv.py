@@ -8,7 +8,9 @@ bracket: SI)::
     record,label,table_x[mm],table_y[mm],pan[deg],tilt[deg],vergence_left[deg],vergence_right[deg]
     0000,q0,500,250,90,30,45,45
 
-Lines starting with ``#`` and blank lines are ignored. See ``docs/images.md``.
+A URDF robot's joints may be named as in the URDF (``head_1_joint``, what ``/joint_states`` and
+``cpc2urdf plan`` use) or as in the model (``head_1``): :func:`urdf_joint_columns`. Lines starting
+with ``#`` and blank lines are ignored. See ``docs/images.md``.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import csv
 import io
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,8 +28,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.fileio import read_text_file, write_atomic
-from cpc2urdf.model import RobotStructure
+from cpc2urdf.model import CPCModel, RobotStructure
+from cpc2urdf.spec import RobotSpec
 from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
+from cpc2urdf.urdf_robot import UrdfRobot, urdf_source
 
 Array = NDArray[np.float64]
 
@@ -50,8 +54,15 @@ class JointTable:
     q: Array
 
 
-def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
+def read_joints_csv(path: str | Path, structure: RobotStructure, *,
+                    aliases: Mapping[str, str] | None = None) -> JointTable:
     """Read a ``joints.csv`` (see the module docstring); joint values in SI ([m], [rad]).
+
+    Args:
+        path: The file.
+        structure: The robot: one column per joint.
+        aliases: Other column names for its joints (column name -> joint name), e.g. a URDF
+            robot's own joint names (:func:`urdf_joint_columns`), which ``cpc2urdf plan`` writes.
 
     Raises:
         InputFileError: Naming the file, the row and the column: missing/unknown/duplicate
@@ -59,6 +70,7 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
             joint's limits, a duplicate record.
     """
     p = Path(path)
+    alias = {a: j for a, j in (aliases or {}).items() if j in structure.joint_names and a not in structure.joint_names}
     text = read_text_file(p, "a CSV file", encoding="utf-8-sig")
     rows = [r for r in csv.reader(io.StringIO(text)) if r and not (len(r) == 1 and not r[0].strip())]
     rows = [r for r in rows if not r[0].lstrip().startswith("#")]
@@ -76,17 +88,25 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
     if "record" not in names:
         raise InputFileError(p, "missing column 'record' (the image file name without extension)")
     joint_cols = [n for n in names if n not in ("record", "label")]
-    unknown = [n for n in joint_cols if n not in structure.joint_names]
+    unknown = [n for n in joint_cols if n not in structure.joint_names and n not in alias]
     if unknown:
-        raise InputFileError(p, f"unknown joint column {unknown[0]!r}; joints of {structure.name}: {', '.join(structure.joint_names)}")
-    missing = [n for n in structure.joint_names if n not in names]
+        also = f" (or {', '.join(alias)})" if alias else ""
+        raise InputFileError(p, f"unknown joint column {unknown[0]!r}; joints of {structure.name}: "
+                                f"{', '.join(structure.joint_names)}{also}")
+    column = {alias.get(n, n): n for n in joint_cols}  # joint -> its column
+    if len(column) != len(joint_cols):
+        twice = next(j for j in column if sum(alias.get(n, n) == j for n in joint_cols) > 1)
+        raise InputFileError(p, f"joint {twice!r} has two columns: "
+                                f"{' and '.join(n for n in joint_cols if alias.get(n, n) == twice)}")
+    missing = [n for n in structure.joint_names if n not in column]
     if missing:
-        raise InputFileError(p, f"missing joint column {missing[0]!r} (every joint needs a reading)")
+        raise InputFileError(p, f"missing joint column {next((a for a, j in alias.items() if j == missing[0]), missing[0])!r} "
+                                "(every joint needs a reading)")
     factor = {}
     for n, unit in zip(names, scales, strict=True):
         if n in ("record", "label"):
             continue
-        jt = structure.joint(n).type
+        jt = structure.joint(alias.get(n, n)).type
         table = LENGTH_UNITS if jt == "prismatic" else ANGLE_UNITS
         if unit is None:
             factor[n] = 1.0
@@ -105,14 +125,14 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
         if rec in records:
             raise InputFileError(p, f"row {k}: record {rec!r} appears twice")
         q = []
-        for n in structure.joint_names:
+        for j in structure.joints:
+            n = column[j.name]
             try:
                 v = float(d[n])
             except ValueError:
                 raise InputFileError(p, f"row {k} (record {rec}): {n} must be a number, got {d[n]!r}") from None
             if not math.isfinite(v):
                 raise InputFileError(p, f"row {k} (record {rec}): {n} must be finite, got {d[n]!r}")
-            j = structure.joint(n)
             if not (j.lower - LIMIT_SLACK <= v * factor[n] <= j.upper + LIMIT_SLACK):
                 unit = scales[names.index(n)] or ("m" if j.type == "prismatic" else "rad")
                 lo, hi = j.lower / factor[n], j.upper / factor[n]
@@ -130,11 +150,14 @@ def read_joints_csv(path: str | Path, structure: RobotStructure) -> JointTable:
 def write_joints_csv(
     path: str | Path, structure: RobotStructure, records: Sequence[str], q: ArrayLike,
     labels: Sequence[str] | None = None, *, length: str = "mm", angle: str = "deg",
+    columns: Mapping[str, str] | None = None,
 ) -> Path:
-    """Write a ``joints.csv`` atomically (lengths in ``length``, angles in ``angle``)."""
+    """Write a ``joints.csv`` atomically (lengths in ``length``, angles in ``angle``; ``columns``:
+    joint name -> column name, e.g. a URDF robot's own joint names)."""
     qq = np.asarray(q, dtype=float)
+    col = columns or {}
     head = ["record", "label"] + [
-        f"{j.name}[{length if j.type == 'prismatic' else angle}]" for j in structure.joints
+        f"{col.get(j.name, j.name)}[{length if j.type == 'prismatic' else angle}]" for j in structure.joints
     ]
     scale = [LENGTH_UNITS[length] if j.type == "prismatic" else ANGLE_UNITS[angle] for j in structure.joints]
     buf = io.StringIO()
@@ -146,4 +169,15 @@ def write_joints_csv(
     return write_atomic(path, buf.getvalue())
 
 
-__all__ = ["JointTable", "read_joints_csv", "write_joints_csv"]
+def urdf_joint_columns(robot: RobotSpec | CPCModel) -> dict[str, str]:
+    """A URDF robot's own joint names -> the model's (``head_1_joint`` -> ``head_1``), for the
+    joints of ``robot`` (a :class:`~cpc2urdf.urdf_robot.UrdfRobot` or a model made from a URDF);
+    empty for other robots. ``aliases`` of :func:`read_joints_csv`."""
+    joints = robot.structure.joint_names
+    if isinstance(robot, UrdfRobot) and robot.names is not None:
+        return {u: c for u, c in robot.names.joints.items() if c in joints and u != c}
+    src = urdf_source(robot) if isinstance(robot, CPCModel) else None
+    return {u: c for c, u in src.joints.items() if c in joints and u != c} if src is not None else {}
+
+
+__all__ = ["JointTable", "read_joints_csv", "urdf_joint_columns", "write_joints_csv"]
