@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_stage2(args)
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.identification.vision.rig_file import load_rig
     from cpc2urdf.measurements import save_measurements
@@ -93,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
     res = measure_stereo_images(
         args.images, rig, spec.structure, joints=args.joints, on_error=args.on_error, boards=boards,
         correct_bias=not args.no_bias_correction, robot_ref=args.robot, show_progress=True,
+        joint_aliases=urdf_joint_columns(spec),
     )
     ms = res.measurements
     path = save_measurements(ms, args.output)
@@ -109,6 +111,7 @@ def _run_stage2(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
     from cpc2urdf.identification.handeye.head_images import write_handeye_files
     from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA
+    from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
     from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.identification.vision.rig_file import load_camera
     from cpc2urdf.robot_ref import load_model
@@ -152,6 +155,7 @@ def _run_stage2(args: argparse.Namespace) -> int:
     if not out.exists() and not out.parent.is_dir():
         raise OutputError(f"{out}: parent folder {out.parent} does not exist")
     res = measure_head_images(images, cams, model.structure, joints=args.joints, on_error=args.on_error, board=board,
+                              joint_aliases=urdf_joint_columns(model),
                               correct_bias=not args.no_bias_correction, show_progress=True)
     if not out.exists():
         out.mkdir()

@@ -91,6 +91,7 @@ def measure_head_images(
     on_error: str = "skip",
     correct_bias: bool = True,
     show_progress: bool = False,
+    joint_aliases: Mapping[str, str] | None = None,
 ) -> HeadImageMeasurement:
     """Stage-2 target poses ``T_camera_target`` from the head cameras' images.
 
@@ -106,6 +107,8 @@ def measure_head_images(
         on_error: ``"skip"``/``"skip-record"`` (the image) or ``"stop"``.
         correct_bias: Remove the ellipse-centre offset before the final solvePnP.
         show_progress: Progress bar on stderr.
+        joint_aliases: Other names of the joint columns (a URDF's own joint names,
+            :func:`~cpc2urdf.identification.vision.joints_csv.urdf_joint_columns`).
 
     Raises:
         InputFileError, DetectionError, DegenerateDataError: as
@@ -124,7 +127,7 @@ def measure_head_images(
     for c in cameras:
         if not (root / c).is_dir():
             raise InputFileError(root, f"missing sub-folder {c}/ for camera {c}")
-    table = read_joints_csv(joints or root / "joints.csv", structure)
+    table = read_joints_csv(joints or root / "joints.csv", structure, aliases=joint_aliases)
     design = design or target_design()
     target = board.name if board is not None else design.name
     problems: list[str] = []

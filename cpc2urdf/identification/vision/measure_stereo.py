@@ -74,6 +74,7 @@ def measure_stereo_images(
     correct_bias: bool = True,
     robot_ref: str | None = None,
     show_progress: bool = False,
+    joint_aliases: Mapping[str, str] | None = None,
 ) -> ImageMeasurement:
     """Stage-1 measurements from stereo images of the plates.
 
@@ -92,6 +93,8 @@ def measure_stereo_images(
         correct_bias: Remove the ellipse-centre offset (:mod:`~cpc2urdf.identification.vision.plate_poses`).
         robot_ref: Robot reference for the measurement file.
         show_progress: Progress bar on stderr.
+        joint_aliases: Other names of the joint columns (a URDF's own joint names,
+            :func:`~cpc2urdf.identification.vision.joints_csv.urdf_joint_columns`).
 
     Raises:
         InputFileError: A missing folder or bad ``joints.csv``; with ``on_error="stop"`` also a
@@ -106,7 +109,7 @@ def measure_stereo_images(
     for sub in STEREO_FOLDERS:
         if not (root / sub).is_dir():
             raise InputFileError(root, f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)")
-    table = read_joints_csv(joints or root / "joints.csv", structure)
+    table = read_joints_csv(joints or root / "joints.csv", structure, aliases=joint_aliases)
     plate_boards = check_plate_boards(boards, structure) if boards else None
     designs = [] if plate_boards else list(designs or robot_plate_designs(structure.frames))
     if not designs and not plate_boards:
