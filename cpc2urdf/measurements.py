@@ -300,6 +300,8 @@ def measurements_from_json(
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
         units = Units.from_json(d.get("units"))
+        if "noise" in d:
+            _check_noise(d["noise"])
         if robot is None:
             if "robot" not in d:
                 raise ValueError("lacks 'robot' (a shipped robot name or a robot spec/model file path)")
@@ -355,6 +357,30 @@ class _FileNames:
     def frame(self, name: str) -> str | None:
         """The model frame a file's frame name stands for, or None."""
         return next((m for m, f in self.frames.items() if f == name), None)
+
+
+# The ``noise`` entries identification trusts (``noise_from_metadata``, ``marker_sigma``): SI units.
+NOISE_SIGMAS = {"sigma_t_m": "the std of each translation entry [m]",
+                "sigma_r_rad": "the std of the rotation error angle [rad]",
+                "sigma_p_m": "the std of each marker point coordinate [m]"}
+
+
+def _check_noise(section: Any) -> None:
+    """A stated noise is a positive number in SI units: a wrong one would silently turn the
+    covariance and the consistency gate into "noise unknown".
+
+    Raises:
+        ValueError: Naming ``noise.<key>`` and what is expected.
+    """
+    if not isinstance(section, Mapping):
+        raise ValueError(f"noise must be an object such as {{\"sigma_t_m\": 0.0005, \"sigma_r_rad\": 0.0087}}, "
+                         f"got {section!r}")
+    for key, meaning in NOISE_SIGMAS.items():
+        if key not in section:
+            continue
+        v = section[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v > 0):
+            raise ValueError(f"noise.{key}: expected a positive number, {meaning}, got {v!r}")
 
 
 def _marker_links(section: Any) -> dict[str, Mapping[str, Any]]:

@@ -177,6 +177,16 @@ BAD_CASES = {
                                                "points": {"plate_left": [[0, 0, k] for k in range(9)]}}),
                          "records[0].points.plate_left: the measured points are collinear"),
     "empty records": (_set(["records"], []), "'records' must be a non-empty list"),
+    "noise negative": (_set(["noise"], {"sigma_t_m": -5e-4, "sigma_r_rad": 0.0087}),
+                       "noise.sigma_t_m: expected a positive number, the std of each translation entry [m], got -0.0005"),
+    "noise zero": (_set(["noise"], {"sigma_t_m": 5e-4, "sigma_r_rad": 0}),
+                   "noise.sigma_r_rad: expected a positive number, the std of the rotation error angle [rad], got 0"),
+    "noise with a unit": (_set(["noise"], {"sigma_t_m": "0.5 mm"}), "noise.sigma_t_m: expected a positive number"),
+    "noise infinite": (_set(["noise"], {"sigma_p_m": float("inf")}), "noise.sigma_p_m: non-finite number Infinity"),
+    "noise marker negative": (_set(["noise"], {"sigma_p_m": -1e-4}),
+                              "noise.sigma_p_m: expected a positive number, the std of each marker point coordinate [m]"),
+    "noise true": (_set(["noise"], {"sigma_p_m": True}), "noise.sigma_p_m: expected a positive number"),
+    "noise not an object": (_set(["noise"], 0.0005), "noise must be an object"),
 }
 
 
@@ -202,3 +212,11 @@ def test_nan_in_a_file_is_refused(tmp_path: Path) -> None:
 def test_in_memory_document_names_its_source() -> None:
     with pytest.raises(InputFileError, match=r"^mine: records\[0\].joints lacks"):
         measurements_from_json(_bad(_delete(["records", 0, "joints", "pan"])), "mine")
+
+
+def test_a_stated_noise_is_kept_and_other_noise_entries_are_free(tmp_path: Path) -> None:
+    """Positive sigmas are read as written; entries other than the three sigmas (the model's name,
+    a pixel noise) stay free-form."""
+    noise = {"model": "fig10", "sigma_t_m": 5e-4, "sigma_r_rad": 0.0087, "pixel_sigma_px": 0, "note": "rig A"}
+    ms = load_measurements(_write(tmp_path, {**EXAMPLE, "noise": noise}))
+    assert ms.metadata["noise"] == noise

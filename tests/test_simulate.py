@@ -28,7 +28,7 @@ from cpc2urdf.identification.simulation.visibility import OCCLUSION_MARGIN_PX, c
 from cpc2urdf.identification.vision.render import PinholeView, hidden_circles
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import robot_plate_designs
-from cpc2urdf.measurements import load_measurements
+from cpc2urdf.measurements import load_measurements, save_measurements
 from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
 from cpc2urdf.model_file import save_model
 from cpc2urdf.robot_ref import load_model, load_robot
@@ -242,7 +242,7 @@ def test_cli_robot_file_is_referenced_relative_to_the_output(tmp_path: Path) -> 
         (["--robot-typo"], "unrecognized arguments"),
         (["--noise", "gauss"], "invalid choice: 'gauss'"),
         (["--M", "1"], "--M must be at least 2"),
-        (["--sigma-mm", "nan"], "sigma_t must be a finite number"),
+        (["--sigma-mm", "nan"], "--sigma-mm must be a finite number >= 0, got nan"),
         (["--range", "roll=0:10"], "unknown joint 'roll'"),
         (["--range", "pan=10"], "expected JOINT=LO:HI"),
         (["--range", "pan=0:180"], "the rig does not see plate_"),
@@ -359,3 +359,51 @@ def test_cli_measure_needs_a_urdf(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert main(["simulate", "iis_head", "--measure", "plate_left", "-o", str(tmp_path / "x")]) == 2
     assert "--measure names links of a URDF robot; 'iis_head' is not a URDF" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_cli_stereo_noise_on_a_urdf_names_the_urdf_link(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A URDF link carries no circle layout: ``--noise stereo`` is refused before the placement
+    search, naming the link as the URDF does (a ``*_link`` name keeps its suffix)."""
+    from urdf_cases import tiago_with_plate
+
+    urdf = tiago_with_plate(tmp_path)
+    urdf.write_text(urdf.read_text().replace("calib_plate", "calib_plate_link"))
+    out = tmp_path / "sim"
+    assert main(["simulate", str(urdf), "--measure", "calib_plate_link", "-o", str(out), "--noise", "stereo"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'calib_plate_link' has none" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("option", ["--sigma-mm", "--sigma-deg", "--pixel-sigma", "--geometry-error-mm",
+                                    "--geometry-error-deg", "--marker-sigma-mm"])
+@pytest.mark.parametrize("value", ["-0.5", "nan", "inf"])
+def test_cli_noise_options_are_named_as_typed(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                              option: str, value: str) -> None:
+    out = tmp_path / "sim"
+    assert main(["simulate", "iis_head", "-o", str(out), option, value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"{option} must be a finite number >= 0, got {float(value):g}") and "\n" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
+    (["--markers", "0"], "--markers must be at least 1"),
+])
+def test_cli_seed_and_markers_are_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                          argv: list[str], words: str) -> None:
+    assert main(["simulate", "iis_head", "-o", str(tmp_path / "sim"), *argv]) == 2
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "sim").exists()
+
+
+def test_zero_fig10_noise_is_written_as_no_noise_and_reads_back(tmp_path: Path) -> None:
+    """A file states only positive sigmas (the reader refuses others): zero Fig. 10 noise is
+    ``{"model": "none"}``, and a zero rotation sigma is left unstated."""
+    _, m, _ = simulate_experiment("iis_head", seed=1, M=2, sigma_t=0.0, sigma_r=0.0, n_heldout=1)
+    assert m.metadata["noise"] == {"model": "none"}
+    _, m, _ = simulate_experiment("iis_head", seed=1, M=2, sigma_t=1e-3, sigma_r=0.0, n_heldout=1)
+    assert m.metadata["noise"] == {"model": "fig10", "sigma_t_m": 1e-3}
+    save_measurements(m, tmp_path / "m.json", robot="iis_head")
+    assert load_measurements(tmp_path / "m.json").metadata["noise"] == {"model": "fig10", "sigma_t_m": 1e-3}

@@ -1,11 +1,14 @@
 """``cpc2urdf identify measurements.json -o model.json``: identify a robot's CPC model.
 
-Reads stage-1 measurements (``cpc2urdf/measurements@1``), runs an identification method
+Reads stage-1 measurements: frame poses (``cpc2urdf/measurements@1``) or marker points
+(``cpc2urdf/measurements@2``), or a tracker CSV export (``identify tracker.csv --robot R --marker
+m0=LINK ...``, read by :func:`cpc2urdf.marker_csv.load_marker_csv`, docs/measurements.md sec. 1b),
+at any configurations. It runs an identification method
 (``--method``, default ``refined``: the closed form of Shih et al. sec. 4.2, then maximum-likelihood
 refinement of every record, which reaches the Cramér-Rao bound (docs/refinement.md); the registry is
 :data:`cpc2urdf.identification.kinematics.methods.METHODS`) and writes a model file with the sections
-``provenance`` (method, data used, the consistency gate's verdict), ``residuals`` (per record and per
-branch) and ``notes``.
+``provenance`` (method, data used, the start the refinement used, the consistency gate's verdict),
+``residuals`` (per record and per branch or marker) and ``notes``.
 
 Data that cannot determine the robot (a joint never moved, too few distinct configurations, copied
 records), or that are inconsistent with the fit (residuals far above or below the file's stated
@@ -17,56 +20,115 @@ the model of inconsistent data with the diagnosis in its notes and provenance (d
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cpc2urdf.measurements import MeasurementSet
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
+    from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
 
     p = subparsers.add_parser(
         "identify",
-        help="identify the CPC model from one-joint-at-a-time measurements",
+        help="identify the CPC model from measured frame poses or marker points",
         description="Identify every CPC parameter of the robot from stage-1 measurements (plate "
-        "poses with joint readings, one joint moved at a time from q0) and write a model file "
-        "for 'cpc2urdf export'. Unmeasured frames (cameras) keep their nominal placement relative "
-        "to a measured plate on the same link, or are dropped if the robot has no nominal geometry.",
+        "poses or marker points with joint readings, at any configurations; moving one joint at a "
+        "time from q0 lets the closed form start the refinement, otherwise it starts from the "
+        "nominal model) and write a model file for 'cpc2urdf export'. Unmeasured frames (cameras) "
+        "keep their nominal placement relative to a measured plate on the same link, or are dropped "
+        "if the robot has no nominal geometry. A tracker CSV export (.csv) needs --robot and --marker.",
     )
-    p.add_argument("measurements", help="measurement file (cpc2urdf/measurements@1)")
+    p.add_argument("measurements", help="measurement file: cpc2urdf/measurements@1 (poses) or @2 (markers), "
+                   "or a tracker CSV export (.csv: config,marker,x,y,z[,joints...])")
     p.add_argument("-o", "--output", required=True, help="model file to write (atomically)")
     p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
                    help="identification method (default refined: closed form + maximum-likelihood "
                    "refinement with covariance; closed-form: Shih et al. sec. 4.2 only)")
-    p.add_argument("--robot", help="robot spec/model file or shipped name, instead of the file's 'robot'")
+    p.add_argument("--robot", help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
+                   "(required for a .csv)")
     p.add_argument("--accept-inconsistent", action="store_true",
                    help="keep the model even when the data are inconsistent with it (a fit far from the file's "
                    "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
                    "notes and provenance")
+    csv = p.add_argument_group("tracker CSV export (measurements ending in .csv)")
+    csv.add_argument("--marker", action="append", default=[], metavar="NAME=LINK",
+                     help="the link (a spec frame or URDF link) marker NAME is fixed to (repeat for each marker)")
+    csv.add_argument("--joints-csv", metavar="FILE", help="joint readings config,<joint>,... when the points file "
+                     "has no joint columns")
+    csv.add_argument("--units-length", choices=sorted(LENGTH_UNITS), help="length unit of the CSV if its "
+                     "'# units:' header does not say (default m)")
+    csv.add_argument("--units-angle", choices=sorted(ANGLE_UNITS), help="angle unit of the CSV if its "
+                     "'# units:' header does not say (default rad)")
     p.set_defaults(run=run)
 
 
+def _markers(items: list[str]) -> dict[str, str]:
+    """``--marker NAME=LINK`` values: marker name -> link."""
+    from cpc2urdf.errors import ConfigurationError
+
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, link = (t.strip() for t in item.partition("="))
+        if not sep or not name or not link:
+            raise ConfigurationError(f"--marker {item!r}: expected NAME=LINK (the link the marker is fixed to)")
+        if name in out:
+            raise ConfigurationError(f"--marker {name!r} is given twice ({out[name]!r} and {link!r})")
+        out[name] = link
+    return out
+
+
+def _read(args: argparse.Namespace) -> MeasurementSet:
+    """The measurement set: a measurement file, or a tracker CSV export with ``--robot`` and ``--marker``."""
+    from cpc2urdf.api import load_measurements, load_robot
+    from cpc2urdf.errors import ConfigurationError
+
+    csv_only = {"--marker": args.marker, "--joints-csv": args.joints_csv,
+                "--units-length": args.units_length, "--units-angle": args.units_angle}
+    if not str(args.measurements).lower().endswith(".csv"):
+        given = [k for k, v in csv_only.items() if v]
+        if given:
+            raise ConfigurationError(f"{given[0]} applies to a tracker CSV export (.csv); "
+                                     f"{args.measurements} is a measurement file")
+        return load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
+    from cpc2urdf.marker_csv import load_marker_csv
+
+    if not args.robot:
+        raise ConfigurationError(f"{args.measurements}: a tracker CSV export needs --robot (the robot the markers are on)")
+    if not args.marker:
+        raise ConfigurationError(f"{args.measurements}: a tracker CSV export needs --marker NAME=LINK for each marker "
+                                 "(the export does not say which link a marker is on)")
+    return load_marker_csv(args.measurements, load_robot(args.robot), _markers(args.marker), robot_ref=args.robot,
+                           joints_csv=args.joints_csv, length=args.units_length, angle=args.units_angle)
+
+
 def run(args: argparse.Namespace) -> int:
+    import math
     import time
 
-    from cpc2urdf.api import identify, load_measurements, load_robot, save_model
+    from cpc2urdf.api import identify, save_model
     from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.model_metadata import Provenance
 
     check_output_path(args.output)  # a bad -o is refused before the identification, not after it
-    ms = load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
+    ms = _read(args)
     start = time.perf_counter()
     model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent)
     elapsed = time.perf_counter() - start
-    import math
-
-    from cpc2urdf.model_metadata import Provenance
-
     prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
     meta = model.metadata.replace(provenance=prov)
     path = save_model(model.with_params(metadata=meta), args.output)
     count = prov.details.get("identified_parameters", {}).get("total")
     print(f"wrote {path}: {args.method} identification of {ms.structure.name!r} from {ms.n_records} records "
           f"in {elapsed * 1e3:.0f} ms" + (f", {count} independent parameters" if count else ""))
+    if "start" in prov.details:  # closed-form, circle-point or nominal
+        print(f"  start: {prov.details['start']}")
+    points_only = bool(ms.marker_points) and not ms.frames  # marker rows carry no rotation
     for f, r in (meta.residuals.per_frame if meta.residuals else {}).items():
+        rotation = "" if points_only else f", {math.degrees(r.rms_rotation_rad):.3f} deg rms"
         print(f"  {f}: fit residual rms {r.rms_translation_m * 1e3:.3f} mm (max "
-              f"{r.max_translation_m * 1e3:.3f} mm), {math.degrees(r.rms_rotation_rad):.3f} deg rms")
+              f"{r.max_translation_m * 1e3:.3f} mm){rotation}")
     for note in meta.notes:
         print(f"  note: {note}")
     consistency = prov.details.get("consistency", {})

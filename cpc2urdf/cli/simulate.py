@@ -3,6 +3,9 @@
 Writes ``DIR/measurements.json`` (the one-joint-at-a-time protocol with noise),
 ``DIR/truth.json`` (the true robot as a model file) and ``DIR/heldout.json`` (random
 configurations inside the calibration range with their true poses). See docs/measurements.md.
+``--markers K`` makes them position-only data (``cpc2urdf/measurements@2``): K seeded markers on
+each measured frame of the same true robot, their points with ``--marker-sigma-mm`` noise at the
+same configurations, and their true points in the held-out file.
 
 A URDF robot needs ``--measure LINK [LINK ...]``: the links the rig measures (plate, marker or
 camera links on fixed joints, docs/urdf.md). The records then read only the joints on the paths
@@ -20,6 +23,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from cpc2urdf.identification.simulation.simulate import Experiment
+    from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.spec import RobotSpec
 
 
@@ -61,6 +66,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--focal-px", type=float, default=1600.0, help="rig focal length [px], 1280x1024 images (default 1600)")
     p.add_argument("--allow-out-of-view", action="store_true",
                    help="do not fail when a plate leaves a camera's view (stereo noise then loses circles)")
+    p.add_argument("--markers", type=int, default=None, metavar="K",
+                   help="position-only data instead of poses: K markers at random 5-15 cm from each measured "
+                   "frame, their points measured with --marker-sigma-mm noise (a cpc2urdf/measurements@2 file; "
+                   "--noise and its sigmas then do not apply; the held-out file holds the markers' true points)")
+    p.add_argument("--marker-sigma-mm", type=float, default=0.1,
+                   help="--markers: std of each marker point coordinate [mm] (default 0.1)")
     p.set_defaults(run=run)
 
 
@@ -111,6 +122,32 @@ def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> Rob
     return spec.restricted(measure)
 
 
+def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[MeasurementSet, MeasurementSet]:
+    """The experiment as position-only data (``cpc2urdf/measurements@2``): ``k`` seeded random
+    markers on each measured frame of the true robot, their points at the protocol's configurations
+    with ``sigma_p`` [m] noise per coordinate, and their true points at the held-out ones."""
+    import dataclasses
+
+    import numpy as np
+
+    from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
+
+    truth, measured, heldout = exp
+    rng = np.random.default_rng([seed, 1])  # its own stream: the true robot and q stay those of the pose data
+    frames = [f for f in truth.structure.frame_names if f in measured.poses]
+    markers = place_markers_on(truth, {f: k for f in frames}, rng)
+    sets = []
+    for ms, sigma in ((measured, sigma_p), (heldout, 0.0)):
+        pts = simulate_markers(truth, markers, ms.q, sigma_p=sigma, rng=rng, robot=ms.robot)
+        noise = pts.metadata.get("noise", {"model": "none"})
+        kind = "marker points" if sigma else "TRUE marker points (no noise)"
+        metadata = {**ms.metadata, "noise": noise,
+                    "description": ms.metadata["description"].replace("measurements", kind)
+                    if sigma else f"held-out configurations of {truth.structure.name} with {kind}"}
+        sets.append(dataclasses.replace(pts, source=ms.source, labels=ms.labels, metadata=metadata, spec=ms.spec))
+    return sets[0], sets[1]
+
+
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
     from cpc2urdf.fileio import dumps, make_folder, write_atomic
@@ -130,7 +167,15 @@ def run(args: argparse.Namespace) -> int:
     for flag in ("baseline_mm", "distance_mm", "focal_px"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
-            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
+            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v:g}")
+    for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "geometry_error_mm", "geometry_error_deg", "marker_sigma_mm"):
+        v = getattr(args, flag)
+        if not (math.isfinite(v) and v >= 0):
+            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a finite number >= 0, got {v:g}")
+    if args.seed < 0:  # numpy's seed sequences take non-negative integers only
+        raise ConfigurationError(f"--seed must be a non-negative integer, got {args.seed}")
+    if args.markers is not None and args.markers < 1:
+        raise ConfigurationError(f"--markers must be at least 1 (markers per measured frame), got {args.markers}")
     spec = _measured_robot(load_robot(args.robot), args.robot, args.measure)
     # A robot file is referred to relative to DIR, so the files can move together.
     text = str(args.robot)
@@ -154,11 +199,14 @@ def run(args: argparse.Namespace) -> int:
         robot_ref=ref,
         show_progress=(args.M * spec.structure.n_joints + args.heldout) > 5000,
     )
+    measured, heldout = exp.measured, exp.heldout
+    if args.markers:
+        measured, heldout = _as_markers(exp, args.markers, args.marker_sigma_mm * 1e-3, args.seed)
     # Everything is computed before anything is written; each file is written atomically.
     texts = {
-        "measurements.json": dumps(measurements_to_json(exp.measured)),
+        "measurements.json": dumps(measurements_to_json(measured)),
         "truth.json": dumps(model_to_json(exp.truth)),
-        "heldout.json": dumps(measurements_to_json(exp.heldout)),
+        "heldout.json": dumps(measurements_to_json(heldout)),
     }
     make_folder(out)
     for name, t in texts.items():
@@ -166,9 +214,11 @@ def run(args: argparse.Namespace) -> int:
     view = exp.measured.metadata["provenance"]["view"]
     noise = {"fig10": f"fig10 noise {args.sigma_mm:g} mm / {args.sigma_deg:g} deg",
              "stereo": f"stereo noise {args.pixel_sigma:g} px", "none": "no noise"}[args.noise]
+    if args.markers:
+        noise = f"{len(measured.markers)} markers, point noise {args.marker_sigma_mm:g} mm"
     print(
-        f"wrote {out}/measurements.json ({exp.measured.n_records} records, {noise}), {out}/truth.json, "
-        f"{out}/heldout.json ({exp.heldout.n_records} records); plates {view['distance_range_m'][0]:.2f}-"
+        f"wrote {out}/measurements.json ({measured.n_records} records, {noise}), {out}/truth.json, "
+        f"{out}/heldout.json ({heldout.n_records} records); plates {view['distance_range_m'][0]:.2f}-"
         f"{view['distance_range_m'][1]:.2f} m from the rig, >= {view['min_margin_px']:.0f} px inside the images"
     )
     return 0

@@ -389,6 +389,9 @@ def main(argv: list[str]) -> int:
     if not 0.0 <= args.outliers < 0.5:
         raise Cpc2UrdfError(f"--outliers must be in [0, 0.5), got {args.outliers}")
     sigma_t, sigma_r = args.sigma_mm * 1e-3, math.radians(args.sigma_deg)
+    from cpc2urdf.robot_ref import load_robot
+
+    load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     out = make_folder(args.out)
     trials = [
         run_trial(args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers)

@@ -219,6 +219,9 @@ def main(argv: list[str]) -> int:
         raise Cpc2UrdfError(f"--M/--sigmas: {e}") from e
     if min(M_values) < 2 or args.trials < 1 or args.heldout < 1 or min(sigmas) < 0:
         raise Cpc2UrdfError("need M >= 2, --trials >= 1, --heldout >= 1 and sigmas >= 0")
+    from cpc2urdf.robot_ref import load_robot
+
+    load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     out = make_folder(args.out)
     result = run_study(M_values=M_values, sigmas_mm=sigmas, trials=args.trials, seed=args.seed,
                        n_heldout=args.heldout, robot=args.robot)

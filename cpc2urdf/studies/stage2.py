@@ -62,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     isolate stage 2: pixel noise -> solvePnP -> hand-eye.
     """
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS
     from cpc2urdf.identification.handeye.stage2 import DEFAULT_INTRINSICS, DEFAULT_TARGET_DISTANCE
     from cpc2urdf.identification.vision.targets import TARGET_COLS, TARGET_PITCH, TARGET_ROWS
 
@@ -71,11 +72,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=10, help="runs per noise level (default 10)")
     parser.add_argument("--noise", type=float, nargs="+", default=list(NOISE_LEVELS),
                         help="pixel noise levels [px] (default 0 0.05 0.1 0.2 0.5)")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS),
-                        help="hand-eye solvers (default tsai park_martin kronecker refined)")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=ALL_METHODS, metavar="METHOD",
+                        help=f"hand-eye solvers, some of {', '.join(ALL_METHODS)} (default {' '.join(METHODS)})")
     args = parser.parse_args(argv)
     if args.poses < 3 or args.seeds < 1:
         raise ConfigurationError("--poses must be >= 3 and --seeds >= 1")
+    bad = [v for v in args.noise if not (math.isfinite(v) and v >= 0)]
+    if bad:
+        raise ConfigurationError(f"--noise: pixel noise levels must be finite numbers >= 0 [px], got {bad[0]:g}")
     print(f"stage 2 on iis_head: {args.poses} configurations, {args.seeds} seeds, target "
           f"{TARGET_ROWS}x{TARGET_COLS} disks at {TARGET_PITCH * 1e3:.0f} mm pitch, "
           f"{DEFAULT_TARGET_DISTANCE:.1f} m ahead; f = {DEFAULT_INTRINSICS.fx:.0f} px")

@@ -157,6 +157,11 @@ def simulate_experiment(
     frames = measured_frames(s)
     if not frames:
         raise ConfigurationError(f"robot {s.name!r} has no frame of kind 'plate' to measure")
+    no_layout = [f for f in frames if s.frame(f).layout is None]
+    if noise == "stereo" and no_layout:  # refused before the placement search, in the file's names
+        name = spec.names.urdf_link(no_layout[0]) if isinstance(spec, UrdfRobot) and spec.names else no_layout[0]
+        raise ConfigurationError(f"stereo noise needs the circle layout of each measured plate, and {name!r} has none "
+                                 "(a URDF link carries no layout); use fig10 or no noise")
     rig = rig or StereoRig.verged()
     r = calibration_ranges(s, ranges)
     # Files about a URDF robot name its joints as the URDF does (labels, provenance).
@@ -188,9 +193,10 @@ def simulate_experiment(
     poses = {f: np.concatenate([p[0][f] for p in parts]) for f in frames}
     points = {f: np.concatenate([p[1][f] for p in parts]) for f in parts[0][1]}
 
-    noise_doc: dict[str, Any] = {"model": noise}
+    # A file states a noise as a positive number (a zero one is no noise in that part: not stated).
+    noise_doc: dict[str, Any] = {"model": noise if noise != "fig10" or sigma_t > 0 or sigma_r > 0 else "none"}
     if noise == "fig10":
-        noise_doc.update(sigma_t_m=sigma_t, sigma_r_rad=sigma_r)
+        noise_doc.update({k: v for k, v in (("sigma_t_m", sigma_t), ("sigma_r_rad", sigma_r)) if v > 0})
     elif noise == "stereo":
         noise_doc.update(pixel_sigma_px=pixel_sigma)
     provenance = {
