@@ -28,8 +28,8 @@ from cpc2urdf.identification.planning.plan import (
 from cpc2urdf.identification.planning.plan_file import load_plan
 from cpc2urdf.identification.planning.prediction import predict_plan
 from cpc2urdf.identification.simulation.design import protocol_q
-from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.robot_ref import load_robot
+from cpc2urdf.measurements import MeasurementSet, load_measurements
+from cpc2urdf.robot_ref import load_model, load_robot
 
 
 @pytest.fixture(scope="module")
@@ -309,3 +309,28 @@ def test_the_curve_is_in_mm_and_deg_whatever_the_file_units() -> None:
     assert this["position_rms_mm"] == pytest.approx(si["prediction"]["position_rms_mm"], rel=1e-9)
     # the configurations follow the units
     np.testing.assert_allclose(np.array([c["q"] for c in si["configurations"]]), out.result.q, atol=0)
+
+
+def test_simulate_measures_a_plan_and_identify_reaches_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``cpc2urdf plan`` → ``simulate --plan`` → ``identify``: the simulated records are exactly the
+    plan's configurations, noise-free data are identified exactly, and a bad plan is one line."""
+    plan = tmp_path / "plan.json"
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "120", "--curve", "13", "-o", str(plan)]) == 0
+    sim = tmp_path / "sim"
+    assert main(["simulate", "iis_head", "--plan", str(plan), "--noise", "none", "--heldout", "10",
+                 "-o", str(sim)]) == 0
+    loaded = load_plan(plan, load_robot("iis_head").structure)
+    ms = load_measurements(sim / "measurements.json")
+    np.testing.assert_allclose(ms.q, loaded.q, atol=1e-12)
+    model = tmp_path / "model.json"
+    assert main(["identify", str(sim / "measurements.json"), "-o", str(model)]) == 0
+    heldout = load_measurements(sim / "heldout.json")
+    fk = load_model(model).fk(heldout.q)
+    for frame, poses in heldout.poses.items():
+        assert np.abs(fk[frame][:, :3, 3] - poses[:, :3, 3]).max() < 1e-9
+    capsys.readouterr()
+    assert main(["simulate", "iis_head", "--plan", str(plan), "--noise", "stereo", "-o", str(tmp_path / "x")]) == 2
+    assert main(["simulate", "iis_head", "--plan", str(tmp_path / "none.json"), "-o", str(tmp_path / "y")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "stereo" in err[0] and "none.json" in err[1]
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()

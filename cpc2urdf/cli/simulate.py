@@ -48,9 +48,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--noise", choices=("fig10", "stereo", "none"), default="fig10",
                    help="fig10: Gaussian pose noise (Shih et al. Fig. 10); stereo: pixel noise -> "
                    "triangulation -> registration; none (default fig10)")
-    p.add_argument("--sigma-mm", type=float, default=0.5, help="fig10: std of each translation entry [mm] (default 0.5)")
-    p.add_argument("--sigma-deg", type=float, default=0.5,
-                   help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5)")
+    p.add_argument("--sigma-mm", type=float, default=None,
+                   help="fig10: std of each translation entry [mm] (default 0.5, or the plan's with --plan)")
+    p.add_argument("--sigma-deg", type=float, default=None,
+                   help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5, or the plan's)")
     p.add_argument("--pixel-sigma", type=float, default=0.15,
                    help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15)")
     p.add_argument("--geometry-error-mm", type=float, default=1.0,
@@ -66,6 +67,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--focal-px", type=float, default=1600.0, help="rig focal length [px], 1280x1024 images (default 1600)")
     p.add_argument("--allow-out-of-view", action="store_true",
                    help="do not fail when a plate leaves a camera's view (stereo noise then loses circles)")
+    p.add_argument("--plan", metavar="PLAN.json",
+                   help="measure the configurations of a plan (cpc2urdf plan) instead of the one-joint protocol, "
+                   "from where the plan put the robot, with the plan's rig and noise (unless --sigma-mm/--sigma-deg "
+                   "are given); --M, --range and the rig options then do not apply")
     p.add_argument("--markers", type=int, default=None, metavar="K",
                    help="position-only data instead of poses: K markers at random 5-15 cm from each measured "
                    "frame, their points measured with --marker-sigma-mm noise (a cpc2urdf/measurements@2 file; "
@@ -75,30 +80,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run)
 
 
-def _parse_ranges(items: list[str], spec: RobotSpec) -> dict[str, tuple[float, float]]:
-    """``--range`` values by joint, [m]/[rad] (a URDF robot's joints by their URDF names)."""
-    from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.urdf_robot import UrdfRobot
-
-    structure = spec.structure
-    out: dict[str, tuple[float, float]] = {}
-    for item in items:
-        name, sep, rest = item.partition("=")
-        lo_s, sep2, hi_s = rest.partition(":")
-        try:
-            if not sep or not sep2:
-                raise ValueError
-            lo, hi = float(lo_s), float(hi_s)
-            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError
-        except ValueError:
-            raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
-        if isinstance(spec, UrdfRobot):
-            name = spec.cpc_joint(name) or name
-        j = structure.joint(name)
-        scale = 1e-3 if j.type == "prismatic" else math.pi / 180
-        out[name] = (lo * scale, hi * scale)
-    return out
+DEFAULT_SIGMA_MM = 0.5  # Fig. 10
+DEFAULT_SIGMA_DEG = 0.5
 
 
 def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> RobotSpec:
@@ -148,9 +131,30 @@ def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[Mea
     return sets[0], sets[1]
 
 
+def _simulate_plan(args: argparse.Namespace, spec: RobotSpec, ref: str) -> Experiment:
+    """The experiment of ``--plan``: the plan's configurations, rig and placement (its noise unless
+    ``--sigma-mm``/``--sigma-deg`` are given on the command line)."""
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.planning.experiment import simulate_from_plan
+    from cpc2urdf.identification.planning.plan_file import load_plan
+
+    if args.noise == "stereo":
+        raise ConfigurationError("--plan simulates pose noise: use --noise fig10 or none, not stereo")
+    plan = load_plan(args.plan, spec.structure)
+    return simulate_from_plan(
+        spec.nominal_model(), plan, seed=args.seed, noise=args.noise,
+        sigma_t=None if args.sigma_mm is None else args.sigma_mm / 1000,
+        sigma_r=None if args.sigma_deg is None else math.radians(args.sigma_deg),
+        geometry_error_t=args.geometry_error_mm / 1000,
+        geometry_error_r=math.radians(args.geometry_error_deg),
+        n_heldout=args.heldout, require_view=not args.allow_out_of_view, robot_ref=ref,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
+    from cpc2urdf.cli._ranges import parse_ranges
     from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import dumps, make_folder, write_atomic
+    from cpc2urdf.fileio import dumps, make_folder, write_all_atomic
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
     from cpc2urdf.identification.vision.stereo import StereoRig
     from cpc2urdf.measurements import measurements_to_json
@@ -168,9 +172,13 @@ def run(args: argparse.Namespace) -> int:
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
             raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v:g}")
+    plan_noise = args.plan is not None
+    if not plan_noise:  # the protocol's defaults; with --plan, the plan's own noise unless given
+        args.sigma_mm = DEFAULT_SIGMA_MM if args.sigma_mm is None else args.sigma_mm
+        args.sigma_deg = DEFAULT_SIGMA_DEG if args.sigma_deg is None else args.sigma_deg
     for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "geometry_error_mm", "geometry_error_deg", "marker_sigma_mm"):
         v = getattr(args, flag)
-        if not (math.isfinite(v) and v >= 0):
+        if v is not None and not (math.isfinite(v) and v >= 0):
             raise ConfigurationError(f"--{flag.replace('_', '-')} must be a finite number >= 0, got {v:g}")
     if args.seed < 0:  # numpy's seed sequences take non-negative integers only
         raise ConfigurationError(f"--seed must be a non-negative integer, got {args.seed}")
@@ -181,24 +189,28 @@ def run(args: argparse.Namespace) -> int:
     text = str(args.robot)
     is_path = looks_like_path(text)
     ref = os.path.relpath(os.path.abspath(text), os.path.abspath(out)) if is_path else text
-    rig = StereoRig.verged(baseline=args.baseline_mm / 1000, distance=args.distance_mm / 1000, focal_px=args.focal_px)
-    exp = simulate_experiment(
-        spec,
-        seed=args.seed,
-        M=args.M,
-        noise=args.noise,
-        sigma_t=args.sigma_mm / 1000,
-        sigma_r=math.radians(args.sigma_deg),
-        pixel_sigma=args.pixel_sigma,
-        geometry_error_t=args.geometry_error_mm / 1000,
-        geometry_error_r=math.radians(args.geometry_error_deg),
-        n_heldout=args.heldout,
-        rig=rig,
-        ranges=_parse_ranges(args.range, spec),
-        require_view=not args.allow_out_of_view,
-        robot_ref=ref,
-        show_progress=(args.M * spec.structure.n_joints + args.heldout) > 5000,
-    )
+    if args.plan:
+        exp = _simulate_plan(args, spec, ref)
+    else:
+        rig = StereoRig.verged(baseline=args.baseline_mm / 1000, distance=args.distance_mm / 1000,
+                               focal_px=args.focal_px)
+        exp = simulate_experiment(
+            spec,
+            seed=args.seed,
+            M=args.M,
+            noise=args.noise,
+            sigma_t=args.sigma_mm / 1000,
+            sigma_r=math.radians(args.sigma_deg),
+            pixel_sigma=args.pixel_sigma,
+            geometry_error_t=args.geometry_error_mm / 1000,
+            geometry_error_r=math.radians(args.geometry_error_deg),
+            n_heldout=args.heldout,
+            rig=rig,
+            ranges=parse_ranges(args.range, spec),
+            require_view=not args.allow_out_of_view,
+            robot_ref=ref,
+            show_progress=(args.M * spec.structure.n_joints + args.heldout) > 5000,
+        )
     measured, heldout = exp.measured, exp.heldout
     if args.markers:
         measured, heldout = _as_markers(exp, args.markers, args.marker_sigma_mm * 1e-3, args.seed)
@@ -209,16 +221,20 @@ def run(args: argparse.Namespace) -> int:
         "heldout.json": dumps(measurements_to_json(heldout)),
     }
     make_folder(out)
-    for name, t in texts.items():
-        write_atomic(out / name, t)
+    write_all_atomic({out / name: t for name, t in texts.items()})
     view = exp.measured.metadata["provenance"]["view"]
-    noise = {"fig10": f"fig10 noise {args.sigma_mm:g} mm / {args.sigma_deg:g} deg",
+    stated = exp.measured.metadata.get("noise") or {}
+    sigma_mm = 1e3 * stated.get("sigma_t_m", 0.0)
+    sigma_deg = math.degrees(stated.get("sigma_r_rad", 0.0))
+    noise = {"fig10": f"fig10 noise {sigma_mm:g} mm / {sigma_deg:g} deg",
              "stereo": f"stereo noise {args.pixel_sigma:g} px", "none": "no noise"}[args.noise]
     if args.markers:
         noise = f"{len(measured.markers)} markers, point noise {args.marker_sigma_mm:g} mm"
-    print(
-        f"wrote {out}/measurements.json ({measured.n_records} records, {noise}), {out}/truth.json, "
-        f"{out}/heldout.json ({heldout.n_records} records); plates {view['distance_range_m'][0]:.2f}-"
-        f"{view['distance_range_m'][1]:.2f} m from the rig, >= {view['min_margin_px']:.0f} px inside the images"
-    )
+    where = ""
+    if "distance_range_m" in view:
+        where = (f"; plates {view['distance_range_m'][0]:.2f}-{view['distance_range_m'][1]:.2f} m from the rig, "
+                 f">= {view['min_margin_px']:.0f} px inside the images")
+    source = f", the configurations of {args.plan}" if args.plan else ""
+    print(f"wrote {out}/measurements.json ({measured.n_records} records{source}, {noise}), {out}/truth.json, "
+          f"{out}/heldout.json ({heldout.n_records} records){where}")
     return 0
