@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from cpc2urdf.cli import main
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
@@ -36,6 +37,11 @@ from cpc2urdf.model import CPCModel
 from cpc2urdf.model_file import save_model
 from cpc2urdf.transforms import inverse, rotation_error
 
+# "As accurate as from exact poses with the same noise": the image result is not worse than this
+# quantile of the reference (exact poses + the detector's measured pixel noise, the same pipeline)
+# over this many draws; were both the same distribution, it would be above it in 10 % of seeds.
+REFERENCE_DRAWS = 20
+REFERENCE_QUANTILE = 0.9
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 TARGET = {"format": "cpc2urdf/board@1", "kind": "charuco", "squares": [7, 5], "square_size": 30, "marker_size": 22,
           "dictionary": "DICT_5X5_100", "units": "mm"}
@@ -106,7 +112,9 @@ def test_stage2_board_images_to_handeye_files(truth: CPCModel, head: tuple[Path,
             e = np.concatenate([Rotation.from_matrix(Te[:3, :3] @ Ct[:3, :3].T).as_rotvec(), Te[:3, 3] - Ct[:3, 3]])
             cov = pnp_pose_covariance(DEFAULT_INTRINSICS.K, DEFAULT_INTRINSICS.D, Ct, P, sigma)
             m.append(e @ np.linalg.solve(cov, e) / 6)
-    assert np.mean(m) < 2.2, (sigma, m)  # 99.9 % quantile of chi2(72) / 72 is 1.6
+    # sum(6 m) is chi2(6 x 12 = 72) under the prediction: mean(m) below its 99.9 % quantile / 72, 1.59
+    # (measured 1.11)
+    assert np.mean(m) < chi2.ppf(0.999, 6 * len(m)) / (6 * len(m)), (sigma, m)
 
 
 def test_camera_frames_from_board_images_as_accurate_as_exact_poses_with_the_same_noise(
@@ -128,7 +136,7 @@ def test_camera_frames_from_board_images_as_accurate_as_exact_poses_with_the_sam
     P = board.object_points()
     # reference: the exact target poses' corners + Gaussian noise sigma, solvePnP, the same calibration
     ref = []
-    for k in range(5):
+    for k in range(REFERENCE_DRAWS):
         rng = np.random.default_rng(100 + k)
         poses = {}
         for cam in CAMERAS:
@@ -139,11 +147,10 @@ def test_camera_frames_from_board_images_as_accurate_as_exact_poses_with_the_sam
             poses[cam] = np.array(Ts)
         obs_k = Stage2Observations(obs.q, poses, {}, intr, sigma, obs.T_base_target)
         ref.append(camera_errors(calibrate_cameras(truth.without_frames(["camera"]), obs_k, "tsai")[0], truth, list(CAMERAS)))
-    for cam in CAMERAS:
-        med_t = float(np.median([r[cam][0] for r in ref]))
-        med_r = float(np.median([r[cam][1] for r in ref]))
-        # as accurate: not worse than twice the reference's median (its own 5 draws span ~3x)
-        assert from_images[cam][0] < 2 * med_t and from_images[cam][1] < 2 * med_r, (cam, from_images[cam], med_t, med_r)
+    for cam in CAMERAS:  # measured: left 2.6 mm / 0.0063 rad above ~70 % of the draws, right 1.4 mm / 0.0026 above 10 %
+        for i in (0, 1):  # position, rotation
+            draws = [r[cam][i] for r in ref]
+            assert from_images[cam][i] <= np.quantile(draws, REFERENCE_QUANTILE), (cam, i, from_images[cam], sorted(draws))
 
 
 @pytest.fixture(scope="module")
@@ -201,7 +208,8 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
         assert d.max() < 3 * pred_t and a.max() < 3 * pred_r, (f, sigma, d, pred_t, np.degrees(a), np.degrees(pred_r))
     assert "plate_boards" in json.dumps(ms.metadata["provenance"])
     # identification (closed form) from the board images is as accurate as from the exact poses of
-    # the same records and plates with the same pixel noise (5 draws)
+    # the same records and plates with the same pixel noise (REFERENCE_DRAWS draws; measured: 0.11 mm,
+    # above 10 % (plate_left) and 5 % (plate_right) of the draws)
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.validation.accuracy import accuracy
@@ -213,7 +221,7 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
 
     from_images = score(ms)
     ref = []
-    for k in range(5):
+    for k in range(REFERENCE_DRAWS):
         rk = np.random.default_rng(1000 + k)
         poses = {}
         for f, b in boards.items():
@@ -222,8 +230,8 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
             poses[f] = P
         ref.append(score(MeasurementSet(exact.structure, exact.q, poses, labels=exact.labels)))
     for f in boards:
-        med = float(np.median([r[f] for r in ref]))
-        assert from_images[f] < 2 * med, (f, from_images[f], [r[f] for r in ref])
+        draws = [r[f] for r in ref]
+        assert from_images[f] <= np.quantile(draws, REFERENCE_QUANTILE), (f, from_images[f], sorted(draws))
 
 
 def test_board_bad_input_one_line_exit_2(stage1: tuple[Path, Path, Path], head: tuple[Path, Path, Path], tmp_path: Path,

@@ -38,7 +38,10 @@ def test_start_is_named_and_both_designs_recover_the_robot():
 
 
 def test_study_writes_its_table_json_and_plot(tmp_path, capsys):
-    assert main(["--seeds", "2", "--M", "2", "--heldout", "5", "--out", str(tmp_path)]) == 0
+    """The study's claim (docs/refinement.md: random configurations beat the protocol, 20 of 20 seeds
+    at M = 9) on the two seeds run here (ratios 0.62-0.82 poses, 0.43-0.72 points); with fewer
+    records (M = 2, 13) it does not hold (1 of 2 seeds)."""
+    assert main(["--seeds", "2", "--M", "9", "--heldout", "20", "--out", str(tmp_path)]) == 0
     doc = json.loads((tmp_path / "free_configs.json").read_text())
     s = doc["summary"]
     assert s["poses/protocol"]["starts"] == ["closed-form"] and s["poses/random"]["starts"] == ["nominal"]
@@ -46,5 +49,8 @@ def test_study_writes_its_table_json_and_plot(tmp_path, capsys):
     for t in doc["trials"]:
         for k in ("poses/protocol", "poses/random", "points/protocol", "points/random"):
             assert 0 < t[k]["heldout_rms_m"] < 5e-3
+        for data in ("poses", "points"):
+            assert t[f"{data}/random"]["heldout_rms_m"] < t[f"{data}/protocol"]["heldout_rms_m"], (t["seed"], data)
+    assert s["poses/ratio"]["random_better"] == s["points/ratio"]["random_better"] == 2
     assert (tmp_path / "free_configs.png").stat().st_size > 10_000
     assert "random / protocol held-out RMS" in (tmp_path / "free_configs.md").read_text()

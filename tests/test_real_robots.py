@@ -11,17 +11,20 @@ written back into the URDF (``cpc2urdf.api.export_urdf``), and the written file 
 Pinocchio and checked:
 
 - the measured links at held-out configurations are within the error the model's covariance
-  predicts (observed RMS <= :data:`PREDICTED_FACTOR` x predicted RMS);
+  predicts: observed / predicted RMS within the central 99.99 % of its distribution under that
+  covariance (:func:`heldout_ratio_bounds`, two-sided);
 - every other URDF element is unchanged (the parsed XML trees, and yourdfpy's parsed links and
   joints): only the calibrated joints' ``<origin>`` (and a non-unit ``<axis>``) differ;
-- every link frame on the measured paths is within :data:`LINK_FACTOR` x the robot's true
-  geometric error of the true link (the frames stay on the parts);
+- every link frame on the measured paths is within :data:`LINK_FACTOR` x its own true geometric
+  error of the true link, that error being the larger of the nominal's distance with the nominal
+  placed at the true base and with it placed on the measured link (the frames stay on the parts;
+  :func:`link_errors`, docs/urdf.md "How close the links are");
 - noise-free data give the measured links exactly (:data:`EXACT`);
 - the consumer matrix (``consumer_checks.py``): the written file loads in Pinocchio, yourdfpy,
   urdfdom's ``check_urdf``, MuJoCo and PyBullet exactly as the original does (same printed output,
   same success), FK of every link agrees with Pinocchio to 1e-12 and Pinocchio's ``aba`` is finite.
 
-More seeds than the tests run, with every number:
+More seeds than the tests run, with every number (``--json FILE``: every link of every run):
 ``PYTHONPATH=. python tests/test_real_robots.py --seeds 20``.
 """
 
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import shutil
 import sys
 import sysconfig
@@ -51,7 +55,11 @@ from consumer_checks import (
 )
 
 from cpc2urdf import api
-from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.uncertainty import (
+    covariance_of_model,
+    predicted_position_std,
+)
 from cpc2urdf.identification.simulation.simulate import Experiment, simulate_experiment
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
@@ -62,8 +70,19 @@ SHARE = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share"  # example
 ICUB_SHARE = Path(sys.prefix, "share")  # icub-models
 PACKAGES = {"example-robot-data": SHARE / "example-robot-data", "iCub": ICUB_SHARE / "iCub"}
 
-PREDICTED_FACTOR = 2.0  # [-]: held-out RMS error of the measured links <= this x the predicted RMS
-LINK_FACTOR = 3.0  # [-]: every link within this x the robot's true geometric error (issue 13)
+# Held-out RMS error of the measured links / the predicted RMS: two-sided, within the central
+# 1 - HELDOUT_ALPHA of its distribution under the model's covariance (:func:`heldout_ratio_bounds`).
+# The N_HELDOUT x frames points are not independent (every error comes from the same 16-36
+# parameter errors), so the RMS is not chi with 3 x 30 x frames = 90-180 dof (bounds 0.74-1.29 at
+# 99.9 %, which the 20-seed run leaves: 0.62-1.65); the squared ratio is sum(mu_i z_i^2) / sum(mu_i),
+# mu_i the eigenvalues of the stacked held-out position covariance: effective dof
+# (sum mu)^2 / sum mu^2 of 8.6-10.0 (TIAGo), 11.3-13.2 (TALOS), 16.9-18.7 (iCub). HELDOUT_ALPHA = 1e-4:
+# a false alarm in the 60 runs of ``--seeds 20`` below 1 %; bounds about [0.30, 2.0] (TIAGo),
+# [0.36, 1.9] (TALOS), [0.47, 1.75] (iCub); measured 0.58-1.55, 0.71-1.36, 0.66-1.65, none outside.
+# At 1e-3 iCub's seed 10 (1.65) would leave its 1.61. Numbers: docs/urdf.md.
+HELDOUT_ALPHA = 1e-4
+CHUNK = 100_000  # draws of the ratio's distribution at a time
+LINK_FACTOR = 3.0  # [-]: every link within this x its true geometric error (issue 13; see link_errors)
 EXACT = 1e-9  # [m]: noise-free data, measured links of the written file vs the truth
 SIGMA_T = 0.5e-3  # [m]: Fig. 10 noise per translation entry (the paper's rig)
 SIGMA_R = np.radians(0.5)  # [rad]
@@ -181,13 +200,32 @@ def heldout_error(run: Run) -> tuple[float, float]:
     return float(np.sqrt(np.mean(d**2))), float(np.sqrt(np.mean(np.concatenate([std[f] ** 2 for f in frames]))))
 
 
+def heldout_ratio_bounds(run: Run, alpha: float = HELDOUT_ALPHA, draws: int = 2_000_000) -> tuple[float, float, float]:
+    """``(lower, upper, nu)``: the central ``1 - alpha`` interval of observed / predicted held-out RMS
+    (:func:`heldout_error`) under the model's covariance, and its effective degrees of freedom.
+
+    The stacked held-out position errors are ``G dtheta`` with ``dtheta ~ N(0, Sigma)``: the squared
+    ratio is ``sum(mu_i z_i^2) / sum(mu_i)``, ``mu_i`` the eigenvalues of ``G Sigma G^T`` and ``z_i``
+    standard normal; its quantiles are drawn (seeded), ``nu = (sum mu)^2 / sum mu^2``."""
+    cov = covariance_of_model(run.model)
+    chart = Parametrization(run.model, cov.frames)
+    _, D = chart.pose_jacobian(np.zeros(chart.n_params), run.experiment.heldout.q)
+    G = np.concatenate([D[f][:, :3, :].reshape(-1, chart.n_params) for f in run.model.structure.frame_names])
+    mu = np.linalg.eigvalsh(G @ cov.matrix @ G.T)
+    mu = mu[mu > mu.max() * 1e-12]
+    rng = np.random.default_rng(0)
+    squared = np.concatenate([rng.standard_normal((CHUNK, len(mu))) ** 2 @ mu for _ in range(draws // CHUNK)]) / mu.sum()
+    lower, upper = np.sqrt(np.quantile(squared, [alpha / 2, 1 - alpha / 2]))
+    return float(lower), float(upper), float(mu.sum() ** 2 / (mu**2).sum())
+
+
 def link_errors(run: Run, folder: Path) -> tuple[list[str], Array, Array, Array]:
     """Per link on the measured paths, the largest distance [m] over the held-out configurations
     of (identified link, true link) and of (nominal link, true link): all three read by Pinocchio
     from URDFs (the written one, the truth written back, the user's). The nominal is placed at the
     true base (its distance is then the robot's true geometric error, as in test_gauge.py); the
     last array places it instead, at each configuration, with its first measured link on the
-    truth's (the error as seen from the measured end; reported by :func:`main`)."""
+    truth's (the error as seen from the measured end, which the links near the root follow)."""
     truth = run.experiment.truth
     truth_urdf = api.export_urdf(truth, folder / "truth.urdf")
     names = list(run.plan.placements)
@@ -225,21 +263,27 @@ def test_heldout_measured_links_within_the_predicted_error(runs: Callable[[str, 
     run = runs(name, seed)
     assert run.model.metadata.uncertainty is not None and run.model.metadata.uncertainty.scale == "known"
     observed, predicted = heldout_error(run)
-    assert 0 < observed <= PREDICTED_FACTOR * predicted, (
+    lower, upper, nu = heldout_ratio_bounds(run)
+    assert lower * predicted <= observed <= upper * predicted, (
         f"{name} seed {seed}: observed {observed * 1e3:.3f} mm, predicted {predicted * 1e3:.3f} mm "
-        f"(ratio {observed / predicted:.2f})")
+        f"(ratio {observed / predicted:.2f}, outside [{lower:.2f}, {upper:.2f}], nu {nu:.1f})")
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("name", ROBOTS)
 def test_every_link_stays_on_its_part(runs: Callable[[str, int], Run], name: str, seed: int,
                                       tmp_path: Path) -> None:
-    names, ident, true_error, _ = link_errors(runs(name, seed), tmp_path)
-    assert true_error.max() > 1e-3  # the truth is millimetres from the drawing
-    worst = int(np.argmax(ident))
-    assert ident.max() <= LINK_FACTOR * true_error.max(), (
-        f"{name} seed {seed}: link {names[worst]} {ident[worst] * 1e3:.2f} mm from the true part; the robot's "
-        f"true error is {true_error.max() * 1e3:.2f} mm")
+    names, ident, at_base, anchored = link_errors(runs(name, seed), tmp_path)
+    assert at_base.max() > 1e-3  # the truth is millimetres from the drawing
+    # Per link, against the larger of its two true errors: a root-fixed link is 0 from the truth at the
+    # true base, yet its identified pose follows the measured end (the gauge keeps the nominal's shape),
+    # and a measured link is 0 from the truth once anchored there (docs/urdf.md).
+    true_error = np.maximum(at_base, anchored)
+    ratio = ident / true_error
+    worst = int(np.argmax(ratio))
+    assert ratio.max() <= LINK_FACTOR, (
+        f"{name} seed {seed}: link {names[worst]} {ident[worst] * 1e3:.2f} mm from the true part; its true error is "
+        f"{at_base[worst] * 1e3:.2f} mm at the true base, {anchored[worst] * 1e3:.2f} mm anchored on the measured link")
 
 
 def _xml(path: Path) -> ET.Element:
@@ -408,28 +452,42 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=10)
     p.add_argument("--robot", choices=list(ROBOTS), action="append")
+    p.add_argument("--json", type=Path, help="also write every per-link number here")
     args = p.parse_args(argv)
-    print("robot  seed  held-out RMS obs / pred [mm]  ratio  | worst link: identified / true error [mm] | "
+    dump: dict[str, Any] = {}
+    print("robot  seed  held-out RMS obs / pred [mm]  ratio [bounds] nu | worst link: identified / true error [mm] | "
           "max identified / max true error: nominal at the true base, anchored on the measured link")
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.robot or list(ROBOTS):
-            ratios, link_ratios, anchored_ratios = [], [], []
+            ratios, link_ratios, anchored_ratios, per_link, outside = [], [], [], [], 0
             for seed in range(args.seeds):
                 folder = Path(tmp, f"{name}_{seed}")
                 run = calibrate(name, folder, seed)
                 obs, pred = heldout_error(run)
+                lower, upper, nu = heldout_ratio_bounds(run)
                 names, ident, true_error, anchored = link_errors(run, folder)
+                dump.setdefault(name, []).append({"seed": seed, "observed": obs, "predicted": pred, "lower": lower,
+                                                  "upper": upper, "nu": nu, "links": names,
+                                                  "identified": ident.tolist(), "true": true_error.tolist(),
+                                                  "anchored": anchored.tolist()})
                 w = int(np.argmax(ident / np.maximum(true_error, 1e-15)))
                 ratios.append(obs / pred)
+                outside += not lower <= obs / pred <= upper
+                per_link.append(ident / np.maximum(true_error, anchored))
                 link_ratios.append(ident.max() / true_error.max())
                 anchored_ratios.append(ident.max() / anchored.max())
-                print(f"{name:6s} {seed:4d}  {obs * 1e3:6.3f} / {pred * 1e3:6.3f}  {obs / pred:5.2f}  | "
+                print(f"{name:6s} {seed:4d}  {obs * 1e3:6.3f} / {pred * 1e3:6.3f}  {obs / pred:5.2f} "
+                      f"[{lower:.2f}, {upper:.2f}] nu {nu:4.1f} | "
                       f"{names[w]} {ident[w] * 1e3:.2f} / {true_error[w] * 1e3:.2f} | "
                       f"{link_ratios[-1]:5.2f} {anchored_ratios[-1]:5.2f}")
                 shutil.rmtree(folder)
             print(f"{name}: held-out ratio mean {np.mean(ratios):.2f} max {np.max(ratios):.2f} "
                   f"(RMS of ratios {np.sqrt(np.mean(np.square(ratios))):.2f}); max identified / max true error: "
-                  f"at the true base max {np.max(link_ratios):.2f}, anchored max {np.max(anchored_ratios):.2f}")
+                  f"at the true base max {np.max(link_ratios):.2f}, anchored max {np.max(anchored_ratios):.2f}; "
+                  f"{outside} held-out ratio(s) outside the bounds; per link, identified / the larger true error: "
+                  f"max {np.max(per_link):.2f}")
+            if args.json:
+                args.json.write_text(json.dumps(dump))
     return 0
 
 
