@@ -311,3 +311,34 @@ def test_written_back_small_robot_with_every_awkward_joint(tmp_path: Path, capfd
     assert main(["check", str(calibrated), "--model", str(model_file), "-n", "10"]) == 0
     out = capfd.readouterr().out
     assert "6 links of the written-back URDF" in out and "result: all parsers agree" in out
+
+
+# ---- a model with two camera frames is a gaze head: reported once, with its disparity ----
+
+
+def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """The nominal IIS-head can fixate exactly; a calibrated one cannot, and says by how much
+    (the solver's disparity report); the JSON carries the same under ``gaze_head``."""
+    import json
+
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.validation.gaze import GazeSolver
+
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 0
+    out = capfd.readouterr().out
+    assert "gaze head (camera_left_optical, camera_right_optical): binocular" in out
+    assert "the two eyes can fixate exactly" in out
+    model = calibrated_iis_head(0)
+    mpath = save_model(model, tmp_path / "calibrated.json")
+    upath = write_urdf(model, tmp_path / "calibrated.urdf")
+    assert main(["check", str(upath), "--model", str(mpath), "-n", "3"]) == 0
+    out = capfd.readouterr().out
+    assert "cannot fixate exactly (vertical disparity)" in out
+    assert main(["check", str(upath), "--model", str(mpath), "-n", "3", "--json"]) == 0
+    head = json.loads(capfd.readouterr().out)["gaze_head"]
+    expected = GazeSolver.from_model(model).disparity_report(200, 0)
+    assert head["exact"] is False and head["disparity"]["max_rad"] == pytest.approx(expected["max_rad"], rel=1e-9)

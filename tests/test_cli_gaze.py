@@ -102,3 +102,40 @@ def test_one_camera_and_joints(capsys):
     assert "fixated" in out.splitlines()[0] and "pointing error:" in out
     assert main([*argv[:-3], "nope"]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_report_of_the_head_alone(capsys):
+    """--report without a target: the head's kind and whether its eyes can fixate exactly, exit 0;
+    with --json the same as data; with neither --target nor --report: bad input."""
+    assert main(["gaze", "iis_head", "--report"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("gaze head (camera_left_optical, camera_right_optical): binocular")
+    assert "can fixate exactly" in out[1] and len(out) == 2
+    assert main(["gaze", "iis_head", "--report", "--json"]) == 0
+    head = json.loads(capsys.readouterr().out)["head"]
+    assert head["kind"] == "binocular" and head["exact"] is True
+    assert head["disparity"]["max_rad"] < 1e-9 and head["disparity"]["targets"] == 200
+    assert main(["gaze", "iis_head"]) == 2
+    assert "--report" in capsys.readouterr().err
+
+
+def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
+    """A calibrated IIS-head (eyes mounted a little off): cannot fixate exactly, its vertical
+    disparity reported once (median and max over the workspace ahead), then the solution."""
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+    from cpc2urdf.validation.gaze import GazeSolver
+
+    model = calibrated_iis_head(0)
+    path = save_model(model, tmp_path / "calibrated.json")
+    assert main(["gaze", str(path), "--report", "--target", "0.1", "-0.4", "0.8", "--json"]) == 1
+    data = json.loads(capsys.readouterr().out)
+    head, sol = data["head"], data["solution"]
+    assert head["exact"] is False and sol["status"] == "disparity"
+    expected = GazeSolver.from_model(model).disparity_report(200, 0)
+    assert head["disparity"]["median_rad"] == pytest.approx(expected["median_rad"], rel=1e-9)
+    assert 1e-4 < head["disparity"]["median_rad"] <= head["disparity"]["max_rad"] < 0.05
+    assert main(["gaze", str(path), "--report"]) == 0
+    out = capsys.readouterr().out
+    assert "cannot fixate exactly (vertical disparity): pointing error left per eye over 200 targets" in out
+    assert "median" in out and "max" in out

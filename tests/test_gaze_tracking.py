@@ -212,3 +212,89 @@ def test_bad_input(head):
         GazeTracker(solver, 0.0)
     with pytest.raises(ConfigurationError, match="target"):
         GazeTracker(solver, DT).step([0.0, math.nan, 1.0])
+
+
+# ---- every head shape: one camera (TIAGo), a rigid stereo pair; checked on yourdfpy's FK ----
+
+
+@pytest.fixture(scope="module", params=["tiago", "stereo_pan_tilt"])
+def other_head(request, tmp_path_factory):
+    from gaze_heads import head_case
+
+    return head_case(request.param, tmp_path_factory.mktemp(request.param))
+
+
+def test_tracking_on_one_camera_and_rigid_pair_heads(other_head):
+    """GazeSolver.track (with saccades) on heads without two independent eyes: a target that jumps,
+    then moves; the commanded readings stay in the limits and under the speed limit (between
+    saccades), end locked on a fixated answer, and the pointing error the tracker reports of its
+    commanded posture is what yourdfpy's FK (independent of the chain's) gives."""
+    from gaze_heads import pointing_errors, yourdfpy_axes
+
+    solver = other_head.solver
+    with pytest.raises(ConfigurationError):
+        solver.head  # noqa: B018 (still no two-eye head for the Python solver)
+    P_reach, _ = other_head.reachable_targets(2, seed=7)
+    t = np.linspace(0.0, 1.0, 400)[:, None]
+    moving = P_reach[1] + 0.02 * np.hstack([np.sin(3 * t), np.cos(2 * t) - 1.0, 0.0 * t])
+    P = np.vstack([np.repeat(P_reach[:1], 100, axis=0), moving, np.repeat(moving[-1:], 600, axis=0)])
+    vmax = FAST * solver.velocity_limit
+    tr = solver.track(P, DT, vmax, q_current=solver.home, saccades=SaccadeRule())
+    assert tr.q.shape == (len(P), solver.n) and tr.joint_names == solver.joint_names
+    assert np.all(tr.q >= solver.lower - 1e-12) and np.all(tr.q <= solver.upper + 1e-12)
+    assert tr.saccade.any() and tr.reachable.all()
+    dq = np.abs(np.diff(tr.q, axis=0))
+    pursuit = ~(tr.saccade[1:] | tr.saccade[:-1])
+    assert np.all(dq[pursuit] <= vmax * DT * (1 + 1e-9) + 1e-15)
+    assert tr.locked[-1] and tr.pointing_error[-1].max() < GAZE_POINTING_TOL
+    pick = np.arange(0, len(P), 97)
+    O, Z = yourdfpy_axes(other_head, tr.q[pick])
+    assert np.allclose(pointing_errors(O, Z, P[pick]), tr.pointing_error[pick], rtol=0, atol=1e-9)
+
+
+def test_camera_poses_of_any_head_match_yourdfpy(other_head):
+    """GazeSolver.camera_poses: the chain's FK of the named optical frames, as yourdfpy has them."""
+    import yourdfpy
+
+    solver = other_head.solver
+    robot = yourdfpy.URDF.load(str(other_head.urdf), load_meshes=False, build_collision_scene_graph=False)
+    order = [solver.joint_names.index(j) for j in robot.actuated_joint_names]
+    rng = np.random.default_rng(2)
+    lo, hi = solver.lower, solver.upper
+    for _ in range(5):
+        q = solver.home.copy()
+        moved = solver.free_joints("cyclopean")
+        q[moved] = rng.uniform(lo[moved], hi[moved])
+        robot.update_cfg(q[order])
+        poses = solver.camera_poses(q)
+        assert len(poses) == len(other_head.cameras)
+        for T, name in zip(poses, other_head.cameras, strict=True):
+            assert np.allclose(T, robot.get_transform(frame_to=name, frame_from=robot.base_link), rtol=0, atol=1e-12)
+
+
+def test_warm_start_is_honoured(other_head):
+    """solve(q_start=...) starts from the given readings: from a nearby answer it fixates the next
+    target in fewer iterations than from the table, with the same kind of answer."""
+    solver = other_head.solver
+    P, _ = other_head.reachable_targets(20, seed=11)
+    fewer = 0
+    for p in P:
+        first = solver.solve(p)
+        nearby = p + np.array([0.003, -0.002, 0.001])
+        cold, warm = solver.solve(nearby), solver.solve(nearby, q_start=first.q)
+        assert warm.reachable and cold.reachable
+        assert np.all(warm.q >= solver.lower) and np.all(warm.q <= solver.upper)
+        fewer += warm.iterations < cold.iterations
+    assert fewer >= len(P) // 2
+    with pytest.raises(ConfigurationError):
+        solver.solve(P[0], q_start=np.zeros(solver.n + 1))
+
+
+def test_public_names_are_exported():
+    import cpc2urdf.validation.gaze as gaze
+    from cpc2urdf.validation.gaze import reach, tracking
+
+    for name in ("GazeTracker", "SaccadeRule", "TrackingStep", "minimum_jerk"):
+        assert getattr(gaze, name) is getattr(tracking, name) and name in gaze.__all__
+    for name in ("Region", "reachable_region", "make_grid"):
+        assert getattr(gaze, name) is getattr(reach, name) and name in gaze.__all__

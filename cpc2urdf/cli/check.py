@@ -5,12 +5,17 @@ frame and urdfdom parses the same tree; 1 on a discrepancy; 2 on bad input. For 
 from a user's URDF (or that URDF itself), URDF is the written-back file: every link on the paths
 from its root to the model's frames is compared, by the URDF's own names, where the write-back puts
 it (:func:`cpc2urdf.validation.crosscheck.cross_check_writeback`).
+
+A model with two camera frames is a gaze head: the report ends with its kind and, for two eyes,
+whether they can fixate exactly and their vertical disparity over the workspace ahead
+(:func:`cpc2urdf.validation.gaze.head_report.head_report`; ``gaze_head`` in the JSON).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -41,5 +46,37 @@ def run(args: argparse.Namespace) -> int:
 
         raise ConfigurationError(f"--configurations must be at least 1, got {args.configurations}")
     report = check_urdf(args.urdf, args.model, args.configurations, args.seed)
-    print(json.dumps(report.to_json(), indent=2) if args.json else report.format())
+    head = _gaze_head(args.model)
+    if args.json:
+        out = report.to_json()
+        if head is not None:
+            out["gaze_head"] = head
+        print(json.dumps(out, indent=2))
+    else:
+        print(report.format())
+        if head is not None:
+            from cpc2urdf.validation.gaze.head_report import format_head_report
+
+            print("\n".join(format_head_report(head)) if "error" not in head else f"gaze head: not analysed ({head['error']})")
     return 0 if report.ok else 1
+
+
+def _gaze_head(ref: str) -> dict[str, Any] | None:
+    """The gaze head report of model ``ref`` when it has exactly two camera frames; None otherwise.
+    A head the gaze solver cannot take (e.g. a joint without limits) is reported with its reason."""
+    from cpc2urdf.errors import Cpc2UrdfError
+    from cpc2urdf.robot_ref import is_urdf_ref, load_model
+
+    if is_urdf_ref(ref):
+        return None
+    model = load_model(ref)
+    cams = [f.name for f in model.structure.frames if f.kind == "camera"]
+    if len(cams) != 2:
+        return None
+    from cpc2urdf.validation.gaze import GazeSolver
+    from cpc2urdf.validation.gaze.head_report import head_report
+
+    try:
+        return head_report(GazeSolver.from_model(model, tuple(cams)))
+    except Cpc2UrdfError as e:
+        return {"cameras": cams, "error": str(e)}

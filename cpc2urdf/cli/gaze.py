@@ -1,7 +1,9 @@
-"""``cpc2urdf gaze HEAD --target X Y Z``: joint readings that fixate a target with both cameras.
+"""``cpc2urdf gaze HEAD --target X Y Z``: joint readings that fixate a target with both cameras;
+``cpc2urdf gaze HEAD --report``: the head itself (kind; for two eyes, whether they can fixate
+exactly and their vertical disparity over the workspace ahead).
 
-Exit codes: 0 the target is fixated, 1 it is not reachable (the best in-limit readings and the
-residual are still printed), 2 bad input.
+Exit codes: 0 the target is fixated (or the report alone), 1 it is not reachable (the best
+in-limit readings and the residual are still printed), 2 bad input.
 """
 
 from __future__ import annotations
@@ -31,7 +33,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     p._negative_number_matcher = NEGATIVE_NUMBER  # --target -1 -2e3 0
     p.add_argument("head", metavar="URDF_OR_MODEL", help=".urdf file, model file, robot spec or shipped robot name")
-    p.add_argument("--target", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="target in world [m]")
+    p.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="target in world [m]")
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="report the head once: its kind and, for two eyes, whether they can fixate exactly and their "
+        "vertical disparity over the workspace ahead (with or without --target)",
+    )
     p.add_argument("--policy", choices=POLICIES, default="cyclopean", help="redundancy policy (default cyclopean)")
     p.add_argument(
         "--q-current",
@@ -75,13 +83,26 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--viewing-distance must be a positive number of metres, got {args.viewing_distance}")
     if len(args.cameras) > 2:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
+    if args.target is None and not args.report:
+        raise ConfigurationError("give --target X Y Z, or --report for the head alone")
     if args.joints:
         solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints)
     else:
         solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
+    head = None
+    if args.report:
+        from cpc2urdf.validation.gaze.head_report import format_head_report, head_report
+
+        head = head_report(solver)
+        if not args.json:
+            print("\n".join(format_head_report(head)))
+    if args.target is None:
+        if args.json:
+            print(json.dumps({"head": head}, indent=2))
+        return 0
     sol = solver.solve(args.target, args.q_current, args.policy)
     if args.json:
-        print(json.dumps(sol.to_json(), indent=2))
+        print(json.dumps(sol.to_json() if head is None else {"head": head, "solution": sol.to_json()}, indent=2))
         return 0 if sol.reachable else 1
     t = ", ".join(f"{v:.10g}" for v in sol.target)
     print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")

@@ -52,7 +52,9 @@ solver reports that honestly through ``reachable``/``status`` instead of clampin
 
 Modules: :mod:`.head` (camera frames and joint classes on a
 :class:`~cpc2urdf.validation.pinocchio_robot.PinocchioRobot`), :mod:`.fixation`, :mod:`.guess`,
-:mod:`.policies`, :mod:`.gauss_newton`, :mod:`.result`, :mod:`.tracking`, :mod:`.solver`.
+:mod:`.policies`, :mod:`.gauss_newton`, :mod:`.result`, :mod:`.tracking`, :mod:`.solver`; the
+compiled solver for any head: :mod:`.chain`, :mod:`.kernels`, :mod:`.batch`; :mod:`.reach` (where a
+head can fixate) and :mod:`.head_report` (the head's kind and disparity, reported once).
 
 Frames: ``T_world_x`` is the pose of ``x`` in ``world``; points carry their frame (``p_world``).
 """
@@ -84,6 +86,7 @@ from cpc2urdf.validation.gaze.policies import (
     POLICIES,
     TABLE_TIE_WEIGHT,
 )
+from cpc2urdf.validation.gaze.reach import Region, make_grid, reachable_region
 from cpc2urdf.validation.gaze.result import (
     STATUS_BEHIND,
     STATUS_DISPARITY,
@@ -95,7 +98,13 @@ from cpc2urdf.validation.gaze.result import (
     GazeSolution,
 )
 from cpc2urdf.validation.gaze.solver import FAR_TARGET, RETRIES, GazeSolver, solver_for
-from cpc2urdf.validation.gaze.tracking import Trajectory
+from cpc2urdf.validation.gaze.tracking import (
+    GazeTracker,
+    SaccadeRule,
+    TrackingStep,
+    Trajectory,
+    minimum_jerk,
+)
 
 __all__ = [
     "BACKTRACKS",
@@ -130,9 +139,16 @@ __all__ = [
     "GazeHead",
     "GazeSolution",
     "GazeSolver",
+    "GazeTracker",
     "HeadChain",
+    "Region",
+    "SaccadeRule",
+    "TrackingStep",
     "Trajectory",
     "build_chain",
+    "make_grid",
+    "minimum_jerk",
+    "reachable_region",
     "solver_for",
     "target_point",
 ]

@@ -4,7 +4,9 @@
 table of starts (seeded samples of the unknowns, each with its cyclopean centre and axis; eyes
 and prismatic joints at home) and whether it can fixate exactly (:meth:`CompiledGaze.disparity_report`).
 :meth:`CompiledGaze.solve_many` runs :func:`~cpc2urdf.validation.gaze.kernels.solve_batch` over
-every target (numba ``prange``).
+every target (one thread); :meth:`CompiledGaze.solve_point` runs
+:func:`~cpc2urdf.validation.gaze.kernels.solve_single` on one target with preallocated buffers
+and an optional warm start (what :meth:`GazeSolver.solve` and tracking use).
 
 The policy (priority 2, in the near-null space of the pointing error): the posture nearest the
 reference readings (``q_current``, or the middle of the limits) in a weighted metric where one
@@ -37,7 +39,7 @@ BATCH_MAX_ITERATIONS = 60
 EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
 NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
 FAR_TARGET = 1e15  # [m]: beyond this, a target is solved for by its direction
-PARALLEL_FROM = 64  # targets: fewer are solved in the calling thread (no thread launch)
+AT_LIMIT = 1e-12  # [rad]/[m]: a reading this close to a limit is at it (GazeSolution.at_limit)
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,25 @@ class CompiledGaze:
             names[c] if c < len(names) else "cyclopean" for c in chain.solve_cameras.tolist()
         )
         self._table()
+        # buffers of solve_point (a CompiledGaze is not re-entrant across threads)
+        m = chain.m
+        self._held = np.abs(chain.A).sum(axis=1) == 0  # chain joints that may not move
+        self._held_index = chain.joint_index[self._held]
+        self._still = np.abs(chain.robot_A).sum(axis=1) == 0  # robot joints the head does not move
+        self._u_ref = np.empty(m)
+        self._u_start = np.empty(m)
+        self._b = chain.b.copy()
+        self._starts = np.empty((N_STARTS + 1, m))
+        self._u_out = np.empty(m)
+        self._e_out = np.empty(self.S)
+        robot = chain.robot
+        self._lo, self._hi = robot.lower.tolist(), robot.upper.tolist()
+        self._moving_index = np.flatnonzero(~self._still).tolist()
+        home_q = chain.robot_b.tolist()  # the readings of the joints the head does not move, at home
+        self._home_hits = [
+            i for i in np.flatnonzero(self._still).tolist()
+            if home_q[i] <= self._lo[i] + AT_LIMIT or home_q[i] >= self._hi[i] - AT_LIMIT
+        ]
         self.baseline = self._baseline()
         self.disparity_head = False
         self.null_rel = EXACT_NULL
@@ -185,10 +206,87 @@ class CompiledGaze:
         ch = self.chain
         if q_current is None:
             return ch.b
-        held = np.abs(ch.A).sum(axis=1) == 0
         b = ch.b.copy()
-        b[held] = q_current[ch.joint_index[held]]
+        b[self._held] = q_current[self._held_index]
         return b
+
+    def limit_hits(self, q: Array, q_current: Array | None) -> list[int]:
+        """Indices (ascending) of the robot joints within :data:`AT_LIMIT` of a limit at readings
+        ``q`` (an answer of :meth:`solve_point` from ``q_current``): the moved joints checked in
+        plain floats, the others known from ``q_current`` (or home)."""
+        ql = q.tolist()
+        lo, hi = self._lo, self._hi
+        hits = [i for i in self._moving_index if ql[i] <= lo[i] + AT_LIMIT or ql[i] >= hi[i] - AT_LIMIT]
+        if q_current is None:
+            still = self._home_hits
+        else:
+            robot = self.chain.robot
+            near = (q <= robot.lower + AT_LIMIT) | (q >= robot.upper - AT_LIMIT)
+            still = np.flatnonzero(self._still & near).tolist()
+        return sorted(hits + still) if still else hits
+
+    def camera_poses(self, q: Array) -> tuple[Array, Array]:
+        """World rotations (C, 3, 3) and centres (C, 3) of the cameras (the named ones in order;
+        a rigid pair's virtual cyclopean camera last) at robot readings ``q`` (shape (n,),
+        in-limit; readings off a coupling are taken at their least-squares unknowns)."""
+        ws = self._ws
+        kernels.fk(self.ch, self.chain.u_from_q(q), self.b_for(q), *ws[:5])
+        return ws[3].copy(), ws[4].copy()
+
+    def pointing_errors(self, q: Array, p: Array) -> Array:
+        """Angle [rad] between each solved axis (``axes``) at robot readings ``q`` (shape (n,))
+        and the direction to target ``p`` (world) [m], shape (S,); pi for a target on a centre.
+        Far targets are scaled by a power of two first (no overflow)."""
+        R, o = self.camera_poses(q)
+        px, py, pz = p.tolist()
+        out = np.empty(self.S)
+        for s, c in enumerate(self.chain.solve_cameras.tolist()):
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R[c].tolist()
+            ox, oy, oz = o[c].tolist()
+            dx, dy, dz = px - ox, py - oy, pz - oz
+            big = max(abs(dx), abs(dy), abs(dz))
+            if big > 1e150:
+                f = math.ldexp(1.0, -math.frexp(big)[1])
+                dx, dy, dz = dx * f, dy * f, dz * f
+            x = r00 * dx + r10 * dy + r20 * dz
+            y = r01 * dx + r11 * dy + r21 * dz
+            z = r02 * dx + r12 * dy + r22 * dz
+            out[s] = kernels.pointing_error(x, y, z)
+        return out
+
+    def solve_point(
+        self, p: Array, q_current: Array | None, q_start: Array | None = None
+    ) -> tuple[Array, int, int, Array, Array, Array]:
+        """One checked target ``p`` (shape (3,), finite) from checked in-limit readings
+        ``q_current`` (shape (n,) or None: the middle of the limits), warm-started at readings
+        ``q_start`` (shape (n,)) when given: ``(q, status code, iterations, errors (S,),
+        rotations (C, 3, 3), centres (C, 3))``, the last two the cameras' world poses at ``q``
+        (views of buffers the next call overwrites; ``q`` is new)."""
+        ch = self.chain
+        if q_current is None:
+            u_ref = self.home_u
+            b = ch.b
+        else:
+            u_ref = self._u_ref
+            u_ref[:] = ch.u_from_q(q_current)
+            b = self._b
+            b[self._held] = q_current[self._held_index]
+        warm = q_start is not None
+        if q_start is not None:
+            self._u_start[:] = ch.u_from_q(q_start)
+        ps = p
+        if abs(p[0]) > FAR_TARGET or abs(p[1]) > FAR_TARGET or abs(p[2]) > FAR_TARGET:
+            ps = self.targets(p[None, :])[1][0]
+        ws = self._ws
+        it, st = kernels.solve_single(
+            self.ch, ps, p, b, u_ref, self._u_start, warm, ch.lower, ch.upper, self.sw, self.table_u,
+            self.table_o, self.table_z, self.null_rel, self.tolerance, BATCH_MAX_ITERATIONS, self.disparity_head,
+            self.baseline, self._starts, self._u_out, self._e_out, ws,
+        )
+        q = ch.robot_A @ self._u_out + ch.robot_b
+        if q_current is not None:
+            q[self._still] = q_current[self._still]
+        return q, int(st), int(it), self._e_out, ws[3], ws[4]
 
     def solve_u(
         self, P: Array, Ps: Array, U_ref: Array, b: Array
@@ -201,8 +299,7 @@ class CompiledGaze:
         it = np.empty(N, dtype=np.int32)
         st = np.empty(N, dtype=np.int8)
         if N:
-            run = kernels.solve_batch if N >= PARALLEL_FROM else kernels.solve_batch_serial
-            run(
+            kernels.solve_batch(
                 self.ch, Ps, P, b, np.ascontiguousarray(U_ref), self.chain.lower, self.chain.upper, self.sw,
                 self.table_u, self.table_o, self.table_z, N_STARTS, self.null_rel, self.tolerance,
                 BATCH_MAX_ITERATIONS, self.disparity_head, self.baseline, U, E, it, st,
@@ -228,8 +325,7 @@ class CompiledGaze:
         U, E, it, st = self.solve_u(P, Ps, U_ref, np.ascontiguousarray(b))
         Qout = ch.q_from_u(U)
         if q_current is not None:
-            still = np.abs(ch.robot_A).sum(axis=1) == 0
-            Qout[:, still] = np.asarray(q_current, dtype=float)[still]
+            Qout[:, self._still] = np.asarray(q_current, dtype=float)[self._still]
         return GazeBatch(
             q=Qout,
             reachable=st == kernels.S_FIXATED,

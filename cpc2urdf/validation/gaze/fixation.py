@@ -34,7 +34,8 @@ def target_point(p_world: ArrayLike) -> Array:
         raise ConfigurationError(f"target must be three numbers x y z [m], got {p_world!r}") from e
     if p.shape != (3,):
         raise ConfigurationError(f"target must be three numbers x y z [m], got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
+    x, y, z = p.tolist()
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         raise ConfigurationError(f"target must be finite, got {p.tolist()}")
     return p
 

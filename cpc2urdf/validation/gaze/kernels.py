@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.chain import HeadChain
@@ -41,7 +41,7 @@ MIN_TARGET_DISTANCE = 1e-9  # [m]: closer to a camera centre, a target has no di
 MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
 BACKTRACKS = 10  # step halvings per iteration
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
-POLICY_STEP_TOL = 1e-7  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
+POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
 EXACT_RESIDUAL = 1e-30  # [-]: |r|^2 below this is exact (pointing error ~1e-15 rad)
@@ -224,7 +224,7 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
             diag += H[i, i] * H[i, i]
             for j in range(i + 1, f):
                 off += H[i, j] * H[i, j]
-        if off <= 1e-34 * diag or off == 0.0:
+        if off <= 1e-30 * diag or off == 0.0:  # off-diagonal at 1e-15 of the diagonal: rounding level
             break
         for a in range(f):
             for c in range(a + 1, f):
@@ -261,7 +261,8 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
 @njit(cache=True)
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2)."""
-    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial = ws
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp = ws
+    have_v = False  # Vp holds the eigenvectors of the last step with every unknown free
     m = u.shape[0]
     M = r.shape[0]
     rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
@@ -293,7 +294,39 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
                         s /= sw[idx[a]] * sw[idx[c]]
                         H[a, c] = s
                         H[c, a] = s
-                jacobi_eigh(H, f, lam, V)
+                if f == m and have_v:
+                    # warm start: in the last step's eigenbasis H is nearly diagonal, so the
+                    # Jacobi sweeps are few; the eigenvectors are then Vp times those found
+                    for a in range(f):
+                        for c in range(f):
+                            s = 0.0
+                            for k in range(f):
+                                s += H[a, k] * Vp[k, c]
+                            Hb[a, c] = s
+                    for a in range(f):
+                        for c in range(a, f):
+                            s = 0.0
+                            for k in range(f):
+                                s += Vp[k, a] * Hb[k, c]
+                            H[a, c] = s
+                            H[c, a] = s
+                    jacobi_eigh(H, f, lam, V)
+                    for a in range(f):
+                        for c in range(f):
+                            s = 0.0
+                            for k in range(f):
+                                s += Vp[a, k] * V[k, c]
+                            Hb[a, c] = s
+                    for a in range(f):
+                        for c in range(f):
+                            V[a, c] = Hb[a, c]
+                else:
+                    jacobi_eigh(H, f, lam, V)
+                if f == m:
+                    for a in range(f):
+                        for c in range(f):
+                            Vp[a, c] = V[a, c]
+                    have_v = True
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
                 for e in range(f):
@@ -374,6 +407,8 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
         np.empty(m, dtype=np.bool_),
         np.empty(m),
         np.empty(m),
+        np.empty((m, m)),
+        np.empty((m, m)),
     )
 
 
@@ -489,16 +524,21 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
         zz += CR[c, 2, 2]
     top_s = np.full(n_best, -np.inf)  # the n_best best scores so far, best first
     top_g = np.full(n_best, G)
+    # the table's axes are unit vectors and targets are within FAR_TARGET (1e15 m): |p - o|^2
+    # cannot overflow, so no scaling in the loop (the start at u_ref is g = G, scored last)
+    px, py, pz = p[0], p[1], p[2]
+    nzr = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
+    zx, zy, zz = zx / nzr, zy / nzr, zz / nzr
+    zx_ref, zy_ref, zz_ref, ox_ref, oy_ref, oz_ref = zx, zy, zz, ox, oy, oz
     for g in range(G + 1):
-        if g < G:
+        if g == G:
+            ox, oy, oz, zx, zy, zz = ox_ref, oy_ref, oz_ref, zx_ref, zy_ref, zz_ref
+        else:
             ox, oy, oz = table_o[g, 0], table_o[g, 1], table_o[g, 2]
             zx, zy, zz = table_z[g, 0], table_z[g, 1], table_z[g, 2]
-        dx, dy, dz = p[0] - ox, p[1] - oy, p[2] - oz
-        big = max(abs(dx), abs(dy), abs(dz), 1e-300)
-        dx, dy, dz = dx / big, dy / big, dz / big
-        nd = math.sqrt(dx * dx + dy * dy + dz * dz)
-        nz = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
-        cosang = (dx * zx + dy * zy + dz * zz) / (nd * nz) if nd > 0 else 0.0
+        dx, dy, dz = px - ox, py - oy, pz - oz
+        nd2 = dx * dx + dy * dy + dz * dz
+        cosang = (dx * zx + dy * zy + dz * zz) / math.sqrt(nd2) if nd2 > 0.0 else 0.0
         cost = 0.0
         if g < G:
             for v in range(m):
@@ -519,21 +559,25 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
             out[k, v] = u_ref[v] if g == G else table_u[g, v]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def solve_batch(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, table_z, n_starts, null_rel, tol,
                 max_it, disparity_head, baseline, U_out, E_out, it_out, st_out):  # type: ignore[no-untyped-def]
-    """:func:`solve_one` for every target (rows of ``P``), in parallel (numba ``prange``)."""
+    """:func:`solve_one` for every target (rows of ``P``), in one thread, one workspace.
+
+    Serial on purpose: the machine this is measured on has 2 cores (``prange`` bought at most
+    2x) and numba's parallel kernel took ~105 s of a 120 s cold compile, paid by every fresh
+    clone (CI); a serial loop compiles in a few seconds."""
     N = P.shape[0]
     K = ch[0].shape[0]
     C = ch[7].shape[0]
     S = ch[11].shape[0]
     m = lower.shape[0]
-    for i in prange(N):
-        ws = _workspace(K, C, S, m)
-        starts = np.empty((n_starts, m))
+    ws = _workspace(K, C, S, m)
+    starts = np.empty((n_starts, m))
+    u = np.empty(m)
+    e = np.empty(S)
+    for i in range(N):
         best_starts(ch, P_solve[i], b, U_ref[i], sw, table_u, table_o, table_z, n_starts, starts, ws)
-        u = np.empty(m)
-        e = np.empty(S)
         it, st = solve_one(ch, P_solve[i], P[i], b, U_ref[i], lower, upper, sw, starts, null_rel, tol, max_it,
                            disparity_head, baseline, u, e, ws)
         for v in range(m):
@@ -545,28 +589,24 @@ def solve_batch(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, ta
 
 
 @njit(cache=True)
-def solve_batch_serial(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, table_z, n_starts, null_rel, tol,
-                max_it, disparity_head, baseline, U_out, E_out, it_out, st_out):  # type: ignore[no-untyped-def]
-    """:func:`solve_batch` in one thread: no thread launch for a few targets (:meth:`GazeSolver.solve`)."""
-    N = P.shape[0]
-    K = ch[0].shape[0]
-    C = ch[7].shape[0]
-    S = ch[11].shape[0]
-    m = lower.shape[0]
-    for i in range(N):
-        ws = _workspace(K, C, S, m)
-        starts = np.empty((n_starts, m))
-        best_starts(ch, P_solve[i], b, U_ref[i], sw, table_u, table_o, table_z, n_starts, starts, ws)
-        u = np.empty(m)
-        e = np.empty(S)
-        it, st = solve_one(ch, P_solve[i], P[i], b, U_ref[i], lower, upper, sw, starts, null_rel, tol, max_it,
-                           disparity_head, baseline, u, e, ws)
+def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
+                 tol, max_it, disparity_head, baseline, starts, u_out, err_out, ws):  # type: ignore[no-untyped-def]
+    """:func:`solve_one` for one target with preallocated buffers (``starts`` (n_starts + 1, m)):
+    from the warm start ``u_start`` first when ``warm`` (e.g. the previous answer while
+    tracking), then the table's best starts only if that does not fixate and is not decided
+    by geometry. On return ``ws[3]``/``ws[4]`` hold the cameras' rotations and centres at
+    ``u_out``. Returns ``(iterations, status)``."""
+    n_rows = starts.shape[0]
+    m = u_ref.shape[0]
+    if warm:
         for v in range(m):
-            U_out[i, v] = u[v]
-        for s in range(S):
-            E_out[i, s] = e[s]
-        it_out[i] = it
-        st_out[i] = st
+            starts[0, v] = min(max(u_start[v], lower[v]), upper[v])
+        best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, n_rows - 1, starts[1:], ws)
+        return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it,
+                         disparity_head, baseline, u_out, err_out, ws)
+    best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, n_rows - 1, starts, ws)
+    return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts[: n_rows - 1], null_rel, tol, max_it,
+                     disparity_head, baseline, u_out, err_out, ws)
 
 
 def workspace(chain: HeadChain) -> tuple[Array, ...]:
@@ -595,7 +635,7 @@ __all__ = [
     "pointing_error",
     "residual",
     "solve_batch",
-    "solve_batch_serial",
     "solve_one",
+    "solve_single",
     "workspace",
 ]

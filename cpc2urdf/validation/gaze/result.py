@@ -158,28 +158,39 @@ def solution_from_compiled(
     status: str,
     iterations: int,
     policy: str,
+    limit_hits: list[int] | None = None,
 ) -> GazeSolution:
     """The :class:`GazeSolution` of a compiled solve: readings ``q`` (n,), the solved axes'
     ``poses`` (rotation (3, 3), centre (3,) in world) and pointing ``errors`` (S,) [rad] for
-    target ``p``, with the compiled status (``fixated`` iff every error is within the tolerance)."""
+    target ``p``, with the compiled status (``fixated`` iff every error is within the tolerance).
+    ``limit_hits``: the indices of the joints at a limit when the caller knows them
+    (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.limit_hits`), else found here."""
+    # plain floats: numpy calls on 3-vectors cost more than the arithmetic (a control loop's path)
     miss = []
+    origins, axes = [], []
+    px, py, pz = p.tolist()
     for R, o in poses:
-        d = p - o
-        big = float(np.abs(d).max())
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+        ox, oy, oz = o.tolist()
+        dx, dy, dz = px - ox, py - oy, pz - oz
+        big = max(abs(dx), abs(dy), abs(dz))
         f = math.ldexp(1.0, -math.frexp(big)[1]) if big > 1e150 else 1.0
-        x, y, z = (R.T @ (d * f)).tolist()
+        dx, dy, dz = dx * f, dy * f, dz * f
+        x = r00 * dx + r10 * dy + r20 * dz
+        y = r01 * dx + r11 * dy + r21 * dz
+        z = r02 * dx + r12 * dy + r22 * dz
         miss.append((math.hypot(x, y) if z >= 0 else math.hypot(x, y, z)) / f)
+        origins.append((ox, oy, oz))
+        axes.append((r02, r12, r22))
     fix = None
     vergence = 0.0
     if len(poses) == 2:
-        fix = closest_point([o.tolist() for _, o in poses], [R[:, 2].tolist() for R, _ in poses])
-        a, b = poses[0][0][:, 2], poses[1][0][:, 2]
-        vergence = math.acos(max(-1.0, min(1.0, float(a @ b))))
-    tol = 1e-12
-    at_limit = tuple(
-        n for n, v, lo, hi in zip(robot_names, q.tolist(), lower.tolist(), upper.tolist(), strict=True)
-        if v <= lo + tol or v >= hi - tol
-    )
+        fix = closest_point(origins, axes)
+        a, b = axes
+        vergence = math.acos(max(-1.0, min(1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))
+    if limit_hits is None:  # the joints within 1e-12 of a limit, unless the caller knows them
+        limit_hits = np.flatnonzero((q <= lower + 1e-12) | (q >= upper - 1e-12)).tolist()
+    at_limit = tuple(robot_names[i] for i in limit_hits)
     return GazeSolution(
         q=q,
         joint_names=robot_names,

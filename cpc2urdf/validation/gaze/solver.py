@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
+from cpc2urdf.validation.gaze.batch import BATCH_STATUSES, CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
     KIND_BINOCULAR,
     Coupling,
@@ -59,7 +59,7 @@ from cpc2urdf.validation.gaze.result import (
     solution_from_compiled,
     solution_from_state,
 )
-from cpc2urdf.validation.gaze.tracking import Trajectory, track
+from cpc2urdf.validation.gaze.tracking import SaccadeRule, Trajectory, track
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
@@ -312,25 +312,27 @@ class GazeSolver:
         for the cyclopean policy on a head that cannot fixate exactly (:attr:`disparity_head`);
         the Python solver otherwise."""
         if self._head is None or (self._posture is not None and policy == "cyclopean"):
-            return self._solve_compiled(p, qc, policy)
+            return self._solve_compiled(p, qc, policy, q_start)
         return self._solve_python(p, qc, policy, q_start, max_iterations)
 
-    def _solve_compiled(self, p: Array, qc: Array | None, policy: str) -> GazeSolution:
+    def _solve_compiled(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None = None) -> GazeSolution:
         if policy not in ("cyclopean", "min-motion"):
             raise ConfigurationError(
                 f"policy {policy!r} needs two independent eyes with every joint free; this head "
                 f"({self.chain.kind}) takes cyclopean or min-motion"
             )
         comp = self._posture or self.compiled
-        batch = comp.solve_many(p[None, :], qc)
-        q = batch.q[0]
-        chain = comp.chain
-        R, o = comp._fk(chain.u_from_q(q), comp.b_for(qc))
-        cams = chain.solve_cameras.tolist()
+        qs = None
+        if q_start is not None:
+            qs = np.asarray(q_start, dtype=float)
+            if qs.shape != (self.n,) or not np.all(np.isfinite(qs)):
+                raise ConfigurationError(f"q_start must be {self.n} finite readings, got shape {qs.shape}")
+        q, st, it, err, R, o = comp.solve_point(p, qc, qs)
+        cams = comp.chain.solve_cameras.tolist()
         poses = [(R[c], o[c]) for c in cams]
         return solution_from_compiled(
-            self.joint_names, self.lower, self.upper, p, q, poses, batch.pointing_error[0],
-            batch.status_of(0), int(batch.iterations[0]), policy,
+            self.joint_names, self.lower, self.upper, p, q, poses, err, BATCH_STATUSES[st], it, policy,
+            comp.limit_hits(q, qc),
         )
 
     def _solve_python(
@@ -414,8 +416,9 @@ class GazeSolver:
         *,
         q_current: ArrayLike | None = None,
         policy: str = "cyclopean",
+        saccades: SaccadeRule | None = None,
     ) -> Trajectory:
-        """Follow a moving target (:func:`cpc2urdf.validation.gaze.tracking.track`).
+        """Follow a moving target (:func:`cpc2urdf.validation.gaze.tracking.track`), on any head shape.
 
         Args:
             targets: Target positions (world) [m], shape (T, 3), one per sample.
@@ -424,13 +427,33 @@ class GazeSolver:
                 URDF velocity limits.
             q_current: Readings at the first sample, shape (n,); None: the first solution.
             policy: Redundancy policy.
+            saccades: None: smooth pursuit only; a :class:`~cpc2urdf.validation.gaze.tracking.SaccadeRule`:
+                minimum-jerk saccades too.
         """
-        return track(self, targets, dt, max_velocity, q_current=q_current, policy=policy)
+        return track(self, targets, dt, max_velocity, q_current=q_current, policy=policy, saccades=saccades)
 
-    def camera_poses(self, q: ArrayLike) -> tuple[Array, Array]:
-        """``T_world_<camera>`` of the left and right camera at readings ``q`` (shape (n,)), each (4, 4)."""
-        return self.head.camera_poses(q)
+    def camera_poses(self, q: ArrayLike) -> tuple[Array, ...]:
+        """``T_world_<camera>`` (4, 4) of each named camera (optical frame), in ``cameras`` order,
+        at readings ``q`` (shape (n,)): the forward kinematics of the head's chain (on a two-eye
+        head with every joint free, Pinocchio's, as before: the same to rounding)."""
+        if self._head is not None:
+            return self._head.camera_poses(q)
+        qa = self.check_q(q)
+        assert qa is not None
+        R, o = self.compiled.camera_poses(qa)
+        out = []
+        for c in range(len(self.cameras)):
+            T = np.eye(4)
+            T[:3, :3] = R[c]
+            T[:3, 3] = o[c]
+            out.append(T)
+        return tuple(out)
 
+    def pointing_errors(self, q: Array, p: Array) -> Array:
+        """Angle [rad] between each solved axis (two eyes: left, right; one camera or a rigid
+        pair: its axis) at checked readings ``q`` (shape (n,)) and the direction to the checked
+        target ``p`` (world) [m], shape (3,): what tracking reports of a commanded posture."""
+        return self.compiled.pointing_errors(q, p)
 
 def solver_for(
     ref: str | os.PathLike[str] | CPCModel,

@@ -35,9 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.fixation import evaluate_fixation, pointing_errors, target_point
+from cpc2urdf.validation.gaze.fixation import target_point
 from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
-from cpc2urdf.validation.gaze.head import GazeHead
 from cpc2urdf.validation.gaze.policies import check_policy
 from cpc2urdf.validation.gaze.result import GazeSolution
 
@@ -50,11 +49,24 @@ LOCK_TOL = 1e-15  # [rad]/[m]: commanded readings this close to the answer are l
 
 
 class WarmStartSolver(Protocol):
-    """What tracking needs of a solver (:class:`~cpc2urdf.validation.gaze.GazeSolver`)."""
+    """What tracking needs of a solver (:class:`~cpc2urdf.validation.gaze.GazeSolver`, any head shape)."""
 
     @property
-    def head(self) -> GazeHead:
-        """The two-eye head (joints, limits, camera frames)."""
+    def joint_names(self) -> tuple[str, ...]:
+        """The robot's joints, in the order of the readings."""
+        ...
+
+    @property
+    def velocity_limit(self) -> Array:
+        """Per-joint URDF velocity limits [rad/s]/[m/s], shape (n,)."""
+        ...
+
+    def check_q(self, q: ArrayLike | None) -> Array | None:
+        """Readings as an in-limit array of shape (n,), or None."""
+        ...
+
+    def pointing_errors(self, q: Array, p: Array) -> Array:
+        """Pointing error [rad] of each solved axis at readings ``q`` for target ``p``."""
         ...
 
     def solve_checked(
@@ -176,10 +188,9 @@ class GazeTracker:
         check_policy(policy)
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise ConfigurationError(f"dt must be a positive number of seconds, got {dt!r}")
-        head = solver.head
-        n = head.n
+        n = len(solver.joint_names)
         try:
-            vmax = head.velocity_limit if max_velocity is None else np.broadcast_to(
+            vmax = solver.velocity_limit if max_velocity is None else np.broadcast_to(
                 np.asarray(max_velocity, dtype=float), (n,)
             )
         except ValueError as e:
@@ -189,13 +200,13 @@ class GazeTracker:
         if saccades is not None:
             saccades.check(n)
         self.solver = solver
-        self.head = head
+        self.joint_names = solver.joint_names
         self.dt = float(dt)
         self.policy = policy
         self.saccades = saccades
         self.max_velocity: Array = np.array(vmax, dtype=float)
         self._step_limit: Array = self.max_velocity * self.dt
-        self.q: Array | None = head.check_q(q_current)  # commanded readings; None before the first sample
+        self.q: Array | None = solver.check_q(q_current)  # commanded readings; None before the first sample
         self.goal: Array | None = None
         # the saccade under way: start, end, number of samples, samples done
         self._saccade: tuple[Array, Array, int] | None = None
@@ -212,7 +223,6 @@ class GazeTracker:
 
     def step_checked(self, p: Array) -> TrackingStep:
         """:meth:`step` for a checked finite target ``p`` of shape (3,)."""
-        head = self.head
         q_prev = self.q
         q_start = self.goal
         if q_start is not None and self._miss(q_start, p) > WARM_START_ANGLE:
@@ -241,12 +251,11 @@ class GazeTracker:
         if locked:
             q_cmd = goal.copy()
         self.q = q_cmd
-        st = evaluate_fixation(head, q_cmd, p, jacobian=False)
-        return TrackingStep(q_cmd, goal, sol.reachable, np.array(pointing_errors(st)), locked, in_saccade)
+        return TrackingStep(q_cmd, goal, sol.reachable, self.solver.pointing_errors(q_cmd, p), locked, in_saccade)
 
     def _miss(self, q: Array, p: Array) -> float:
         """The largest pointing error [rad] of readings ``q`` at target ``p``."""
-        return max(pointing_errors(evaluate_fixation(self.head, q, p, jacobian=False)))
+        return float(np.max(self.solver.pointing_errors(q, p)))
 
     def _saccade_wanted(self, q_prev: Array, p: Array, sol: GazeSolution) -> bool:
         assert self.saccades is not None
@@ -336,7 +345,7 @@ def track(
         reachable=np.array([s.reachable for s in steps], dtype=bool),
         pointing_error=np.array([s.pointing_error for s in steps]),
         locked=np.array([s.locked for s in steps], dtype=bool),
-        joint_names=tracker.head.joint_names,
+        joint_names=tuple(tracker.joint_names),
         saccade=np.array([s.saccade for s in steps], dtype=bool),
     )
 
