@@ -202,6 +202,9 @@ def build_chain(
     cameras = tuple(cameras)
     if len(cameras) not in (1, 2):
         raise ConfigurationError(f"need one or two camera frames, got {list(cameras)}")
+    if len(cameras) == 2 and cameras[0] == cameras[1]:
+        raise ConfigurationError(f"camera frame {cameras[0]!r} is named twice; give two different "
+                                 "frames, or one for a single camera")
     if rigid not in RIGID_MODES:
         raise ConfigurationError(f"unknown rigid-stereo mode {rigid!r}; expected one of {', '.join(RIGID_MODES)}")
     model = robot.model
