@@ -33,7 +33,7 @@ from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.protocol import Protocol, recognise_protocol
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
-from cpc2urdf.registration import plate_pose_from_points
+from cpc2urdf.registration import plate_pose_from_points, transforms_from_point_pairs
 from cpc2urdf.transforms import Array, inverse
 
 # A marker this close to a joint's axis (relative to the sweep noise) says nothing about it.
@@ -304,13 +304,7 @@ def nominal_point_start(nominal: CPCModel, ms: MeasurementSet, iterations: int =
             Tf = T_base[ms.markers[m].frame][ok]
             a.append(Tf[:, :3, :3] @ pos[m] + Tf[:, :3, 3])
             b.append(ms.marker_points[m][ok])
-        A, B = np.concatenate(a), np.concatenate(b)
-        ca, cb = A.mean(0), B.mean(0)
-        U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
-        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-        R = Vt.T @ D @ U.T
-        G = np.eye(4)
-        G[:3, :3], G[:3, 3] = R, cb - R @ ca
+        G = transforms_from_point_pairs(np.concatenate(a), np.concatenate(b), what="marker points")  # eqs. (18)-(22)
         for m in seen:
             if ms.markers[m].known:
                 continue

@@ -14,6 +14,7 @@ import numpy as np
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.registration import transforms_from_point_pairs
 
 
 def closed_form_model(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
@@ -42,7 +43,8 @@ def align_base(model: CPCModel, ms: MeasurementSet, frames: list[str]) -> CPCMod
 
     A nominal model usually does not know where the robot stands in the measuring system's
     world; the chart of :class:`Parametrization` keeps ``T_world_base`` fixed (gauge), so a start
-    must be placed first. Kabsch/Arun fit of all measured origins (sec. 3.3's registration).
+    must be placed first. Rigid fit of all measured origins (sec. 3.3's registration, Arun
+    eqs. (18)-(22), :func:`~cpc2urdf.registration.transforms_from_point_pairs`).
 
     Args:
         model: The model to place (typically the nominal one).
@@ -55,13 +57,7 @@ def align_base(model: CPCModel, ms: MeasurementSet, frames: list[str]) -> CPCMod
         ok = ms.has_pose(f)
         a.append(T_pred[f][ok, :3, 3])
         b.append(ms.poses[f][ok, :3, 3])
-    A, B = np.concatenate(a), np.concatenate(b)
-    ca, cb = A.mean(0), B.mean(0)
-    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    G = np.eye(4)
-    G[:3, :3], G[:3, 3] = R, cb - R @ ca
+    G = transforms_from_point_pairs(np.concatenate(a), np.concatenate(b), what="measured frame origins")
     return model.with_params(world_to_base=CPCParams.from_matrix(G @ model.T_world_base()))
 
 

@@ -12,7 +12,7 @@ pixels (``docs/images.md``).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -121,39 +121,23 @@ def render_experiment(
         supersample: Anti-aliasing sub-samples per axis.
         show_progress: Progress bar on stderr.
     """
-    out = Path(folder)
-    if not out.parent.is_dir():
-        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
-    spec = load_robot(robot)
+    out, spec, rig = _experiment_inputs(folder, robot, rig)
     s = spec.structure
-    rig = rig or StereoRig.verged()
     designs = robot_plate_designs(s.frames)
     # The simulator's default placement: no circle hidden over the protocol and the held-out box.
     truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
                                                 robot_ref=robot)
-    for sub in STEREO_FOLDERS:
-        (out / sub).mkdir(parents=True, exist_ok=True)
     views = [PinholeView(rig.K1, rig.D1, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
              for w in STEREO_FOLDERS]
     fk = truth.fk(exact.q, [d.name for d in designs])
-    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
-    records = [f"{i:04d}" for i in range(exact.n_records)]
-    hidden = []
-    items = progress(range(exact.n_records), "render") if show_progress else range(exact.n_records)
-    for i in items:
-        plates = [(d, fk[d.name][i]) for d in designs]
-        hidden.append(sum(sum(hidden_circles(v, plates).values()) for v in views))
-        for sub, v in zip(STEREO_FOLDERS, views, strict=True):
-            img = render_view(v, plates, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
-            write_image(out / sub / f"{records[i]}.png", img)
-    paths = {
-        "joints": write_joints_csv(out / "joints.csv", s, records, exact.q, exact.labels),
-        "rig": save_rig(rig, out / "rig.yaml", units="mm"),
-        "truth": save_model(truth, out / "truth.json"),
-        "heldout": save_measurements(heldout, out / "heldout.json"),
-        "exact": save_measurements(exact, out / "exact.json"),
-    }
-    return RenderedExperiment(out, truth, exact, heldout, rig, paths, hidden)
+
+    def plates(i: int) -> list[tuple[PlateDesign, Array]]:
+        return [(d, fk[d.name][i]) for d in designs]
+
+    def image(v: PinholeView, i: int, rng: np.random.Generator) -> NDArray[np.uint8]:
+        return render_view(v, plates(i), blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
+
+    return _write_experiment(out, truth, exact, heldout, rig, views, seed, plates, image, show_progress)
 
 
 def render_head_experiment(
@@ -176,9 +160,7 @@ def render_head_experiment(
     Returns:
         Written files by role.
     """
-    out = Path(folder)
-    if not out.parent.is_dir():
-        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    out = _output_folder(folder)
     intr = intrinsics or stage2.DEFAULT_INTRINSICS
     cameras = list(stage2.HAND_OF_CAMERA)
     rng = np.random.default_rng(seed)
@@ -186,21 +168,11 @@ def render_head_experiment(
     q = stage2.sample_configurations(truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intr)
     design = target_design()
     T_world_target = truth.T_world_base() @ T_base_target
-    records = [f"{i:04d}" for i in range(len(q))]
-    paths: dict[str, Path] = {}
-    for c in cameras:
-        (out / c).mkdir(parents=True, exist_ok=True)
-        paths[c] = save_camera(intr.K, intr.D, (intr.width, intr.height), out / f"{c}.yaml")
-        T_world_cam = truth.fk_frame(c, q)
-        for i, rec in enumerate(records):
-            view = PinholeView(intr.K, intr.D, (intr.width, intr.height), inverse(T_world_cam[i]))
-            img = render_view(view, [(design, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
-            write_image(out / c / f"{rec}.png", img)
-    paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, q)
-    paths["target_truth"] = write_json(out / "target_truth.json", {
-        "description": "true pose of the stage-2 target in the robot base frame (for scoring)",
-        "T_base_target": T_base_target.tolist(), "units": {"length": "m"}})
-    return paths
+
+    def image(view: PinholeView) -> NDArray[np.uint8]:
+        return render_view(view, [(design, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+
+    return _write_head_images(out, truth, intr, cameras, q, T_base_target, image, "target")
 
 
 # ---- standard boards: calibration views and stage-2 board images -------------------------------------
@@ -271,9 +243,7 @@ def render_board_calibration(
     default the stage-2 head camera) or, with ``rig``, a stereo rig (``folder/left``,
     ``folder/right``). Returns the true ``T_world_board`` (world = the (left) camera), shape
     (n_views, 4, 4); ``folder/board_truth.json`` holds them and the true camera(s)."""
-    out = Path(folder)
-    if not out.parent.is_dir():
-        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    out = _output_folder(folder)
     rng = np.random.default_rng(seed)
     if rig is not None:
         views = [PinholeView(K, D, rig.image_size, np.asarray(inverse(rig.T_world_camera(w)), dtype=np.float64))
@@ -314,9 +284,7 @@ def render_head_board_experiment(
     """:func:`render_head_experiment` with a standard board as the stage-2 target: the same files
     (``<camera>/``, ``<camera>.yaml``, ``joints.csv``, ``target_truth.json``); configurations are
     drawn as there and kept when both cameras see the whole board."""
-    out = Path(folder)
-    if not out.parent.is_dir():
-        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    out = _output_folder(folder)
     intr = intrinsics or stage2.DEFAULT_INTRINSICS
     cameras = list(stage2.HAND_OF_CAMERA)
     rng = np.random.default_rng(seed)
@@ -333,22 +301,49 @@ def render_head_board_experiment(
             q.append(qi)
     if len(q) < n_poses:
         raise ConfigurationError(f"{board.name}: only {len(q)} of {n_poses} configurations show both cameras the whole board")
-    qa = np.array(q)
-    records = [f"{i:04d}" for i in range(n_poses)]
+
+    def image(view: PinholeView) -> NDArray[np.uint8]:
+        return render_board_view(view, [(board, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+
+    return _write_head_images(out, truth, intr, cameras, np.array(q), T_base_target, image, "board")
+
+
+def _write_head_images(
+    out: Path,
+    truth: CPCModel,
+    intr: CameraIntrinsics,
+    cameras: Sequence[str],
+    q: Array,
+    T_base_target: Array,
+    image: Callable[[PinholeView], NDArray[np.uint8]],
+    target: str,
+) -> dict[str, Path]:
+    """Write a simulated stage-2 folder: per camera frame of ``truth``, ``<camera>.yaml`` and the
+    ``image(view)`` at each configuration of ``q`` (``<camera>/<record>.png``), then ``joints.csv``
+    and ``target_truth.json`` (the true ``T_base_target``; ``target`` names it). Returns the
+    written files by role."""
+    size = (intr.width, intr.height)
+    records = [f"{i:04d}" for i in range(len(q))]
     paths: dict[str, Path] = {}
     for c in cameras:
         (out / c).mkdir(parents=True, exist_ok=True)
         paths[c] = save_camera(intr.K, intr.D, size, out / f"{c}.yaml")
-        T_world_cam = truth.fk_frame(c, qa)
+        T_world_cam = truth.fk_frame(c, q)
         for i, rec in enumerate(records):
-            view = PinholeView(intr.K, intr.D, size, inverse(T_world_cam[i]))
-            img = render_board_view(view, [(board, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
-            write_image(out / c / f"{rec}.png", img)
-    paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, qa)
+            write_image(out / c / f"{rec}.png", image(PinholeView(intr.K, intr.D, size, inverse(T_world_cam[i]))))
+    paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, q)
     paths["target_truth"] = write_json(out / "target_truth.json", {
-        "description": "true pose of the stage-2 board in the robot base frame (for scoring)",
+        "description": f"true pose of the stage-2 {target} in the robot base frame (for scoring)",
         "T_base_target": T_base_target.tolist(), "units": {"length": "m"}})
     return paths
+
+
+def _output_folder(folder: str | Path) -> Path:
+    """``folder`` as a path, its parent required to exist."""
+    out = Path(folder)
+    if not out.parent.is_dir():
+        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
+    return out
 
 
 def board_proxy_designs(boards: Mapping[str, Board]) -> list[PlateDesign]:
@@ -380,12 +375,8 @@ def render_board_experiment(
     board corners hidden in either image (:func:`~cpc2urdf.identification.vision.render.hidden_circles`
     on the boards' outlines). ``only``: render (and list in ``joints.csv``) only these records of the
     protocol, for quick tests; ``measured`` and ``exact.json`` then hold those records too."""
-    out = Path(folder)
-    if not out.parent.is_dir():
-        raise OutputError(f"{out}: parent folder {out.parent} does not exist")
-    spec = load_robot(robot)
+    out, spec, rig = _experiment_inputs(folder, robot, rig)
     s = spec.structure
-    rig = rig or StereoRig.verged()
     proxies = board_proxy_designs(boards)
     frames = [d.name for d in proxies]
     first = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=1, rig=rig, robot_ref=robot)[1]
@@ -396,23 +387,54 @@ def render_board_experiment(
         keep = np.asarray(only, dtype=int)
         exact = MeasurementSet(s, exact.q[keep], {f: P[keep] for f, P in exact.poses.items()}, exact.source, exact.robot,
                                [exact.labels[i] for i in keep], metadata=exact.metadata)
-    for sub in STEREO_FOLDERS:
-        (out / sub).mkdir(parents=True, exist_ok=True)
     views = [PinholeView(K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
              for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))]
     fk = truth.fk(exact.q, frames)
+
+    def outlines(i: int) -> list[tuple[PlateDesign, Array]]:
+        return [(d, fk[d.name][i]) for d in proxies]
+
+    def image(v: PinholeView, i: int, rng: np.random.Generator) -> NDArray[np.uint8]:
+        placed = [(b, fk[frame][i]) for frame, b in boards.items()]
+        return render_board_view(v, placed, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
+
+    return _write_experiment(out, truth, exact, heldout, rig, views, seed, outlines, image, show_progress)
+
+
+def _experiment_inputs(folder: str | Path, robot: str, rig: StereoRig | None) -> tuple[Path, RobotSpec, StereoRig]:
+    """The output folder (its parent must exist), the robot and the rig (default the paper's)."""
+    out = _output_folder(folder)
+    return out, load_robot(robot), rig or StereoRig.verged()
+
+
+def _write_experiment(
+    out: Path,
+    truth: CPCModel,
+    exact: MeasurementSet,
+    heldout: MeasurementSet,
+    rig: StereoRig,
+    views: Sequence[PinholeView],
+    seed: int,
+    outlines: Callable[[int], list[tuple[PlateDesign, Array]]],
+    image: Callable[[PinholeView, int, np.random.Generator], NDArray[np.uint8]],
+    show_progress: bool,
+) -> RenderedExperiment:
+    """Write a simulated stereo experiment's folder: per record, ``image(view, record, rng)`` in
+    ``left/`` and ``right/`` (``views`` in :data:`STEREO_FOLDERS` order, the image noise drawn from
+    the seed's fourth stream), the circles of ``outlines(record)`` hidden in either view counted,
+    then ``joints.csv``, ``rig.yaml`` and the truth files."""
+    for sub in STEREO_FOLDERS:
+        (out / sub).mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
     records = [f"{i:04d}" for i in range(exact.n_records)]
     hidden = []
     items = progress(range(exact.n_records), "render") if show_progress else range(exact.n_records)
     for i in items:
-        hidden.append(sum(sum(hidden_circles(v, [(d, fk[d.name][i]) for d in proxies]).values()) for v in views))
-        placed = [(b, fk[frame][i]) for frame, b in boards.items()]
+        hidden.append(sum(sum(hidden_circles(v, outlines(i)).values()) for v in views))
         for sub, v in zip(STEREO_FOLDERS, views, strict=True):
-            img = render_board_view(v, placed, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
-            write_image(out / sub / f"{records[i]}.png", img)
+            write_image(out / sub / f"{records[i]}.png", image(v, i, rng))
     paths = {
-        "joints": write_joints_csv(out / "joints.csv", s, records, exact.q, exact.labels),
+        "joints": write_joints_csv(out / "joints.csv", exact.structure, records, exact.q, exact.labels),
         "rig": save_rig(rig, out / "rig.yaml", units="mm"),
         "truth": save_model(truth, out / "truth.json"),
         "heldout": save_measurements(heldout, out / "heldout.json"),

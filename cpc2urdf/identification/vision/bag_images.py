@@ -36,6 +36,7 @@ from cpc2urdf.identification.vision.bag_sync import (
     BagSamples,
     SyncRule,
     check_limits,
+    check_topic_options,
     group_messages,
     joint_names_for,
     pair_samples,
@@ -158,11 +159,8 @@ def image_folder_from_bag(
     """
     rule = rule or SyncRule()
     path, out_p = Path(bag), Path(out)
-    if not images:
-        raise ConfigurationError("no image topic: give at least one --image CAMERA=TOPIC")
     cams = [c.camera for c in images]
-    if len(set(cams)) != len(cams):
-        raise ConfigurationError(f"--image: camera {next(c for c in cams if cams.count(c) > 1)!r} given twice")
+    check_topic_options(cams, "--image", "image", "camera", "CAMERA=TOPIC")
     topics = [c.topic for c in images]
     if len(set(topics)) != len(topics):
         raise ConfigurationError(f"--image: topic {next(t for t in topics if topics.count(t) > 1)!r} given for two cameras")

@@ -18,7 +18,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, InputFileError
-from cpc2urdf.identification.vision.bag_reader import stamp_ns, strip_frame_id
+from cpc2urdf.identification.vision.bag_reader import (
+    NS,
+    POSE_TYPES,
+    Message,
+    read_bag,
+    stamp_ns,
+    strip_frame_id,
+)
+from cpc2urdf.identification.vision.bag_sync import (
+    BagSamples,
+    SyncRule,
+    group_messages,
+    pair_samples,
+    stamp_label,
+)
 from cpc2urdf.poses import pose_from_json
 from cpc2urdf.spec import RobotSpec
 from cpc2urdf.units import Units
@@ -148,4 +162,39 @@ def pose_reader(sources: Sequence[PoseTopic], bag: Path, shared_world: bool = Tr
     return read_one, check_tf, lost
 
 
-__all__ = ["PoseTopic", "check_frames", "pose_reader"]
+def pose_samples(
+    bag: Path, topics: Sequence[PoseTopic], what: str, joint_topic: str, joints: Sequence[str],
+    kinds: dict[str, str], rule: SyncRule, *, shared_world: bool = True,
+) -> tuple[BagSamples, list[list[Message]], list[int]]:
+    """Read pose topics and joint states and pair them into samples (:mod:`bag_sync`).
+
+    Args:
+        bag: The bag.
+        topics: The pose topics (:func:`pose_reader`, with ``shared_world``).
+        what: What a topic holds, with ``{frame}`` for its frame (``"poses of {frame}"``), for messages.
+        joint_topic: The joint states topic.
+        joints: The joint names to read; ``kinds`` their types.
+        rule: Sync and rest rule.
+
+    Returns:
+        ``(samples, groups, kept)``: the kept samples (skip lines include the lost poses), all
+        message groups, and the indices in ``groups`` of the kept ones.
+
+    Raises:
+        InputFileError: As :func:`read_bag` and :func:`pair_samples`; every sample skipped.
+    """
+    read_one, check_tf, lost = pose_reader(topics, bag, shared_world=shared_world)
+    sources = {t.topic: (what.format(frame=t.frame), POSE_TYPES) for t in topics}
+    series, messages, n_bag_time = read_bag(bag, joint_topic, joints, sources, read_one)
+    check_tf()
+    groups = group_messages(messages, int(round(rule.sync_tolerance * NS)))
+    stamps, q, skipped, kept = pair_samples(bag, groups, series, kinds, rule, joint_topic)
+    skipped = lost + skipped
+    if not kept:
+        raise InputFileError(bag, f"no sample with the joints at rest ({len(groups)} samples skipped; first: "
+                                  f"{skipped[0] if skipped else 'none'})")
+    samples = BagSamples(stamps, [stamp_label(t) for t in stamps], q, list(joints), skipped, n_bag_time, len(messages))
+    return samples, groups, kept
+
+
+__all__ = ["PoseTopic", "check_frames", "pose_reader", "pose_samples"]

@@ -101,6 +101,19 @@ def group_messages(messages: list[Message], tol_ns: int) -> list[list[Message]]:
     return groups
 
 
+def check_topic_options(names: Sequence[str], option: str, topic_kind: str, name_kind: str, metavar: str) -> None:
+    """Refuse an empty topic list or a name given twice (``names``: one per ``option`` given).
+
+    Raises:
+        ConfigurationError: ``no <topic_kind> topic: give at least one <option> <metavar>``, or
+            ``<option>: <name_kind> <name> given twice``.
+    """
+    if not names:
+        raise ConfigurationError(f"no {topic_kind} topic: give at least one {option} {metavar}")
+    if len(set(names)) != len(names):
+        raise ConfigurationError(f"{option}: {name_kind} {next(n for n in names if names.count(n) > 1)!r} given twice")
+
+
 def stamp_label(t_ns: int) -> str:
     return f"t={t_ns // NS}.{t_ns % NS:09d}"
 
@@ -217,6 +230,7 @@ __all__ = [
     "BagSamples",
     "SyncRule",
     "check_limits",
+    "check_topic_options",
     "group_messages",
     "joint_names_for",
     "pair_samples",

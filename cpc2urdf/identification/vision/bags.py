@@ -34,15 +34,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from cpc2urdf.errors import ConfigurationError, InputFileError
+from cpc2urdf.errors import InputFileError
 from cpc2urdf.identification.vision.bag_images import (
     BAG_PROVENANCE,
     BagImages,
     ImageTopic,
     image_folder_from_bag,
 )
-from cpc2urdf.identification.vision.bag_poses import PoseTopic, check_frames, pose_reader
-from cpc2urdf.identification.vision.bag_reader import JOINT_STATES_TOPIC, NS, POSE_TYPES, read_bag
+from cpc2urdf.identification.vision.bag_poses import PoseTopic, check_frames, pose_samples
+from cpc2urdf.identification.vision.bag_reader import JOINT_STATES_TOPIC
 from cpc2urdf.identification.vision.bag_sync import (
     REST_TOLERANCE_M,
     REST_TOLERANCE_RAD,
@@ -51,11 +51,9 @@ from cpc2urdf.identification.vision.bag_sync import (
     BagSamples,
     SyncRule,
     check_limits,
-    group_messages,
+    check_topic_options,
     joint_names_for,
-    pair_samples,
     provenance,
-    stamp_label,
 )
 from cpc2urdf.identification.vision.measure_head import HeadImageMeasurement
 from cpc2urdf.measurements import MeasurementSet, measurements_from_json
@@ -115,26 +113,13 @@ def measurements_from_bag(
     """
     rule = rule or SyncRule()
     path = Path(bag)
-    if not poses:
-        raise ConfigurationError("no pose topic: give at least one --pose FRAME=TOPIC")
     frames = [p.frame for p in poses]
-    if len(set(frames)) != len(frames):
-        raise ConfigurationError(f"--pose: frame {next(f for f in frames if frames.count(f) > 1)!r} given twice")
+    check_topic_options(frames, "--pose", "pose", "frame", "FRAME=TOPIC")
     check_frames(robot, frames)
     joints, kinds, _ = joint_names_for(robot, frames)
-    read_one, check_tf, lost = pose_reader(poses, path)
-    sources = {p.topic: (f"poses of {p.frame}", POSE_TYPES) for p in poses}
-    series, messages, n_bag_time = read_bag(path, joint_topic, joints, sources, read_one)
-    check_tf()
-    groups = group_messages(messages, int(round(rule.sync_tolerance * NS)))
-    stamps, q, skipped, kept = pair_samples(path, groups, series, kinds, rule, joint_topic)
-    skipped = lost + skipped
-    if not kept:
-        raise InputFileError(path, f"no sample with the joints at rest ({len(groups)} samples skipped; first: "
-                                   f"{skipped[0] if skipped else 'none'})")
-    samples = BagSamples(stamps, [stamp_label(t) for t in stamps], q, joints, skipped, n_bag_time, len(messages))
+    samples, groups, kept = pose_samples(path, poses, "poses of {frame}", joint_topic, joints, kinds, rule)
     records = []
-    for row, gi, label in zip(q, kept, samples.labels, strict=True):
+    for row, gi, label in zip(samples.q, kept, samples.labels, strict=True):
         records.append({"label": label, "joints": dict(zip(joints, row.tolist(), strict=True)),
                         "poses": {m.key: pose_to_json(m.value) for m in groups[gi]}})
     doc = {"format": "cpc2urdf/measurements@1", "robot": robot_ref, "units": {"length": "m", "angle": "rad"},
@@ -173,23 +158,12 @@ def target_poses_from_bag(
     """
     rule = rule or SyncRule()
     path = Path(bag)
-    if not targets:
-        raise ConfigurationError("no target topic: give at least one --target CAMERA=TOPIC")
     cams = [t.frame for t in targets]
-    if len(set(cams)) != len(cams):
-        raise ConfigurationError(f"--target: camera {next(c for c in cams if cams.count(c) > 1)!r} given twice")
+    check_topic_options(cams, "--target", "target", "camera", "CAMERA=TOPIC")
     joints, kinds, names = joint_names_for(model, [])
-    read_one, check_tf, lost = pose_reader(targets, path, shared_world=False)
-    sources = {t.topic: (f"target poses in {t.frame}", POSE_TYPES) for t in targets}
-    series, messages, n_bag_time = read_bag(path, joint_topic, joints, sources, read_one)
-    check_tf()
-    groups = group_messages(messages, int(round(rule.sync_tolerance * NS)))
-    stamps, q, skipped, kept = pair_samples(path, groups, series, kinds, rule, joint_topic)
-    skipped = lost + skipped
-    if not kept:
-        raise InputFileError(path, f"no sample with the joints at rest ({len(groups)} samples skipped; first: "
-                                   f"{skipped[0] if skipped else 'none'})")
-    samples = BagSamples(stamps, [stamp_label(t) for t in stamps], q, joints, skipped, n_bag_time, len(messages))
+    samples, groups, kept = pose_samples(path, targets, "target poses in {frame}", joint_topic, joints, kinds, rule,
+                                         shared_world=False)
+    q = samples.q
     order = [joints.index(next(f for f, m in names.items() if m == n)) for n in model.structure.joint_names]
     check_limits(path, model.structure, q, order, joints, samples.labels)  # as the hand-eye pose files would
     labels: dict[str, list[str]] = {c: [] for c in cams}
@@ -206,7 +180,7 @@ def target_poses_from_bag(
     n = model.structure.n_joints
     meas = HeadImageMeasurement(labels, {c: np.array(rows[c]).reshape(-1, n) for c in cams},
                                 {c: np.array(poses[c]) for c in cams}, {c: np.full(len(labels[c]), np.nan) for c in cams},
-                                list(skipped))
+                                list(samples.skipped))
     return BagTargets(meas, samples)
 
 

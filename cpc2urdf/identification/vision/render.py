@@ -27,8 +27,9 @@ x right, y down), as OpenCV's ``rvec, tvec``.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -36,6 +37,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.targets import PlateDesign
+
+_T = TypeVar("_T", PlateDesign, Board)
 
 Array = NDArray[np.float64]
 
@@ -139,34 +142,89 @@ def _outline_distance(design: PlateDesign, xy: Array) -> tuple[NDArray[np.bool_]
     return inside, dist
 
 
-def _draw_plate(
-    img: Array, view: PinholeView, design: PlateDesign, T_world_plate: Array, supersample: int
-) -> None:
-    """Composite one plate into ``img`` (float, shape (h, w)) in place."""
+@dataclass(frozen=True)
+class _PlanePatch:
+    """The pixels around a plane's projected outline, with where each ray meets the plane."""
+
+    box: tuple[int, int, int, int]  # u0, u1, v0, v1 (inclusive)
+    xy: Array  # (N, 2) plane coordinates [m] of the pixel centres (1e3 where the ray misses)
+    ok: NDArray[np.bool_]  # (N,) the ray meets the plane in front of the camera
+    J: Array  # (N, 2, 2) d(x, y)/d(u, v): rows x, y; columns d/du, d/dv
+    front: bool  # the camera is on the plane's +z side
+
+    def composite(self, img: Array, alpha: Array, premult: Array) -> None:
+        """Blend premultiplied levels of coverage ``alpha`` (both (N,)) over ``img`` in place."""
+        u0, u1, v0, v1 = self.box
+        region = img[v0 : v1 + 1, u0 : u1 + 1]
+        region *= 1.0 - alpha.reshape(region.shape)
+        region += premult.reshape(region.shape)
+
+
+def _plane_patch(view: PinholeView, T_camera_plane: Array, corners: Array) -> _PlanePatch | None:
+    """Pixels covering the plane quad ``corners`` (4, 3) [m, plane frame], or None when the quad is
+    (partly) behind the camera (a real camera would not see it whole either) or off the image."""
     w, h = view.image_size
-    T_cp = view.T_camera_world @ T_world_plate
-    corners_c = design.outline_corners() @ T_cp[:3, :3].T + T_cp[:3, 3]
+    T_cp = T_camera_plane
+    corners_c = corners @ T_cp[:3, :3].T + T_cp[:3, 3]
     if np.any(corners_c[:, 2] < NEAR_CLIP):
-        return  # (partly) behind the camera: a real camera would not see it whole either
-    front = bool(-T_cp[:3, 3] @ T_cp[:3, 2] > 0)  # camera on the +z side of the plate
+        return None
+    front = bool(-T_cp[:3, 3] @ T_cp[:3, 2] > 0)  # camera on the +z side of the plane
     # Bounding box of the projected outline (densely sampled edges, for distortion), padded.
     s = np.linspace(0.0, 1.0, 33)[:, None]
-    edges = np.concatenate(
-        [corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0
-    )
+    edges = np.concatenate([corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0)
     uv_edges = PinholeView(view.K, view.D, view.image_size).project(edges)
-    u0 = int(np.floor(uv_edges[:, 0].min())) - 3
-    u1 = int(np.ceil(uv_edges[:, 0].max())) + 3
-    v0 = int(np.floor(uv_edges[:, 1].min())) - 3
-    v1 = int(np.ceil(uv_edges[:, 1].max())) + 3
-    u0, v0 = max(u0, 0), max(v0, 0)
-    u1, v1 = min(u1, w - 1), min(v1, h - 1)
+    u0 = max(int(np.floor(uv_edges[:, 0].min())) - 3, 0)
+    u1 = min(int(np.ceil(uv_edges[:, 0].max())) + 3, w - 1)
+    v0 = max(int(np.floor(uv_edges[:, 1].min())) - 3, 0)
+    v1 = min(int(np.ceil(uv_edges[:, 1].max())) + 3, h - 1)
     if u1 < u0 or v1 < v0:
-        return
+        return None
     us, vs = np.meshgrid(np.arange(u0, u1 + 1, dtype=float), np.arange(v0, v1 + 1, dtype=float))
     uv = np.stack([us.ravel(), vs.ravel()], axis=1)
     xy, ok = _plane_coords(view, T_cp, uv)
     xy = np.where(ok[:, None], xy, 1e3)  # rays that miss the plane: far outside the plate
+    # Plane size of a pixel: d(x, y)/d(u, v) by central differences.
+    gx = np.stack(list(np.gradient(xy[:, 0].reshape(us.shape))), axis=-1).reshape(-1, 2)
+    gy = np.stack(list(np.gradient(xy[:, 1].reshape(us.shape))), axis=-1).reshape(-1, 2)
+    J = np.stack([gx[:, ::-1], gy[:, ::-1]], axis=1)
+    return _PlanePatch((u0, u1, v0, v1), xy, ok, J, front)
+
+
+def _render(
+    view: PinholeView,
+    items: Sequence[tuple[_T, ArrayLike]],
+    draw: Callable[[Array, PinholeView, _T, Array, int], None],
+    background: float,
+    supersample: int,
+    blur_sigma: float,
+    noise_sigma: float,
+    rng: np.random.Generator | None,
+    who: str,
+) -> NDArray[np.uint8]:
+    """Draw ``items`` far to near with ``draw``, then blur, add noise and quantise to 8 bits."""
+    w, h = view.image_size
+    img = np.full((h, w), float(background))
+    order = sorted(items, key=lambda p: -float((view.T_camera_world @ np.asarray(p[1], dtype=float))[2, 3]))
+    for item, T in order:
+        draw(img, view, item, np.asarray(T, dtype=float), supersample)
+    img *= 255.0
+    if blur_sigma > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
+    if noise_sigma > 0:
+        if rng is None:
+            raise ValueError(f"{who}: noise_sigma > 0 needs a seeded rng")
+        img = img + rng.normal(0.0, noise_sigma, img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def _draw_plate(
+    img: Array, view: PinholeView, design: PlateDesign, T_world_plate: Array, supersample: int
+) -> None:
+    """Composite one plate into ``img`` (float, shape (h, w)) in place."""
+    patch = _plane_patch(view, view.T_camera_world @ T_world_plate, design.outline_corners())
+    if patch is None:
+        return
+    xy, ok, J, front = patch.xy, patch.ok, patch.J, patch.front
     inside, d_outline = _outline_distance(design, xy)
     if front:
         d_circle, nearest = _circle_distances(design, xy)
@@ -176,10 +234,6 @@ def _draw_plate(
         level = np.full(len(xy), PLATE_BACK_LEVEL)
     alpha = inside.astype(float)
     premult = alpha * level
-    # Plate-plane size of a pixel: d(x, y)/d(u, v) by central differences.
-    gx = np.stack(list(np.gradient(xy[:, 0].reshape(us.shape))), axis=-1).reshape(-1, 2)
-    gy = np.stack(list(np.gradient(xy[:, 1].reshape(us.shape))), axis=-1).reshape(-1, 2)
-    J = np.stack([gx[:, ::-1], gy[:, ::-1]], axis=1)  # rows: x, y; columns: d/du, d/dv
     scale = np.sqrt(np.sum(J**2, axis=(1, 2)))  # Frobenius >= the larger singular value
     near = ok & (np.minimum(d_outline, np.abs(d_circle)) <= scale)
     if supersample > 1 and np.any(near):
@@ -199,9 +253,7 @@ def _draw_plate(
             s_level = np.full(s_in.shape, PLATE_BACK_LEVEL)
         alpha[near] = s_in.mean(axis=1)
         premult[near] = (s_in * s_level).mean(axis=1)
-    region = img[v0 : v1 + 1, u0 : u1 + 1]
-    region *= 1.0 - alpha.reshape(us.shape)
-    region += premult.reshape(us.shape)
+    patch.composite(img, alpha, premult)
 
 
 def render_view(
@@ -228,22 +280,9 @@ def render_view(
     Returns:
         Image, shape (height, width), dtype uint8.
     """
-    w, h = view.image_size
-    img = np.full((h, w), float(background))
-    order = sorted(
-        plates,
-        key=lambda p: -float((view.T_camera_world @ np.asarray(p[1], dtype=float))[2, 3]),
+    return _render(
+        view, plates, _draw_plate, background, supersample, blur_sigma, noise_sigma, rng, "render_view"
     )
-    for design, T in order:
-        _draw_plate(img, view, design, np.asarray(T, dtype=float), supersample)
-    img *= 255.0
-    if blur_sigma > 0:
-        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
-    if noise_sigma > 0:
-        if rng is None:
-            raise ValueError("render_view: noise_sigma > 0 needs a seeded rng")
-        img = img + rng.normal(0.0, noise_sigma, img.shape)
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
 def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Array, supersample: int) -> None:
@@ -251,28 +290,10 @@ def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Arra
     in place. Pixels where the board's texture changes (its centre and four corners disagree) are
     supersampled (``supersample`` x ``supersample`` samples from the local Jacobian of the plane
     coordinates, as :func:`_draw_plate` does at edges); the others take their centre's level."""
-    w, h = view.image_size
-    T_cb = view.T_camera_world @ T_world_board
-    corners_c = board.outline_corners() @ T_cb[:3, :3].T + T_cb[:3, 3]
-    if np.any(corners_c[:, 2] < NEAR_CLIP):
+    patch = _plane_patch(view, view.T_camera_world @ T_world_board, board.outline_corners())
+    if patch is None:
         return
-    front = bool(-T_cb[:3, 3] @ T_cb[:3, 2] > 0)
-    s = np.linspace(0.0, 1.0, 33)[:, None]
-    edges = np.concatenate([corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0)
-    uv_edges = PinholeView(view.K, view.D, view.image_size).project(edges)
-    u0 = max(int(np.floor(uv_edges[:, 0].min())) - 3, 0)
-    u1 = min(int(np.ceil(uv_edges[:, 0].max())) + 3, w - 1)
-    v0 = max(int(np.floor(uv_edges[:, 1].min())) - 3, 0)
-    v1 = min(int(np.ceil(uv_edges[:, 1].max())) + 3, h - 1)
-    if u1 < u0 or v1 < v0:
-        return
-    us, vs = np.meshgrid(np.arange(u0, u1 + 1, dtype=float), np.arange(v0, v1 + 1, dtype=float))
-    uv = np.stack([us.ravel(), vs.ravel()], axis=1)
-    xy, ok = _plane_coords(view, T_cb, uv)
-    xy = np.where(ok[:, None], xy, 1e3)
-    gx = np.stack(list(np.gradient(xy[:, 0].reshape(us.shape))), axis=-1).reshape(-1, 2)
-    gy = np.stack(list(np.gradient(xy[:, 1].reshape(us.shape))), axis=-1).reshape(-1, 2)
-    J = np.stack([gx[:, ::-1], gy[:, ::-1]], axis=1)
+    xy, ok, J, front = patch.xy, patch.ok, patch.J, patch.front
     x0, x1, y0, y1 = board.outline
 
     def shade(duv: Array, idx: NDArray[np.intp]) -> tuple[Array, Array]:
@@ -304,9 +325,7 @@ def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Arra
     alpha[mixed], premult[mixed] = shade(np.stack([ou.ravel(), ov.ravel()], axis=1), mixed)
     alpha[~ok] = 0.0
     premult[~ok] = 0.0
-    region = img[v0 : v1 + 1, u0 : u1 + 1]
-    region *= 1.0 - alpha.reshape(us.shape)
-    region += premult.reshape(us.shape)
+    patch.composite(img, alpha, premult)
 
 
 def render_board_view(
@@ -334,19 +353,9 @@ def render_board_view(
     Returns:
         Image, shape (height, width), dtype uint8.
     """
-    w, h = view.image_size
-    img = np.full((h, w), float(background))
-    order = sorted(boards, key=lambda b: -float((view.T_camera_world @ np.asarray(b[1], dtype=float))[2, 3]))
-    for board, T in order:
-        _draw_board(img, view, board, np.asarray(T, dtype=float), supersample)
-    img *= 255.0
-    if blur_sigma > 0:
-        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
-    if noise_sigma > 0:
-        if rng is None:
-            raise ValueError("render_board_view: noise_sigma > 0 needs a seeded rng")
-        img = img + rng.normal(0.0, noise_sigma, img.shape)
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    return _render(
+        view, boards, _draw_board, background, supersample, blur_sigma, noise_sigma, rng, "render_board_view"
+    )
 
 
 def circle_centres_px(view: PinholeView, design: PlateDesign, T_world_plate: ArrayLike) -> Array:
