@@ -127,8 +127,8 @@ def render_experiment(
     # The simulator's default placement: no circle hidden over the protocol and the held-out box.
     truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
                                                 robot_ref=robot)
-    views = [PinholeView(rig.K1, rig.D1, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
-             for w in STEREO_FOLDERS]
+    views = [PinholeView(K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
+             for w, K, D in zip(STEREO_FOLDERS, (rig.K1, rig.K2), (rig.D1, rig.D2), strict=True)]
     fk = truth.fk(exact.q, [d.name for d in designs])
 
     def plates(i: int) -> list[tuple[PlateDesign, Array]]:
