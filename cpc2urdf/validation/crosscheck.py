@@ -54,7 +54,11 @@ from cpc2urdf.urdf_input import read_urdf
 from cpc2urdf.urdf_origins import WritebackPlan, plan_for_tree, urdf_link_poses
 from cpc2urdf.urdf_robot import UrdfSource, urdf_source
 from cpc2urdf.urdf_tree import UrdfTree, parse_urdf_tree
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot, UnsupportedJointError
+from cpc2urdf.validation.pinocchio_robot import (
+    PinocchioRobot,
+    UnsupportedJointError,
+    build_pinocchio_model,
+)
 
 LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
 
@@ -481,19 +485,7 @@ def _pinocchio_of(urdf_path: str) -> pin.Model:
     Raises:
         InputFileError: Pinocchio cannot read the file (its first complaint).
     """
-    text = read_urdf(urdf_path)
-    with captured_output() as out:  # urdfdom's own complaints are not the message
-        try:
-            model = pin.buildModelFromXML(text)
-        except (RuntimeError, ValueError) as e:
-            failure: Exception | None = e
-        else:
-            failure = None
-    said = out.error_lines()
-    if failure is not None or said:
-        why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
-        raise InputFileError(urdf_path, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})")
-    return model
+    return build_pinocchio_model(read_urdf(urdf_path), urdf_path)[0]
 
 
 def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:

@@ -72,6 +72,29 @@ class UnsupportedJointError(InputFileError):
         )
 
 
+def build_pinocchio_model(text: str, label: str, *, visuals: bool = False) -> tuple[pin.Model, pin.GeometryModel | None]:
+    """Pinocchio's model (and, with ``visuals``, its visual geometry) of URDF text, with urdfdom's
+    own complaints captured, never printed.
+
+    Raises:
+        InputFileError: Pinocchio cannot read it (its first complaint, naming ``label``).
+    """
+    with captured_output() as out:  # urdfdom's own complaints are not the message
+        try:
+            model = pin.buildModelFromXML(text)
+            visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
+        except (RuntimeError, ValueError) as e:
+            failure: Exception | None = e
+        else:
+            failure = None
+    # urdfdom can also report an error and go on without the part it could not read.
+    said = out.error_lines()
+    if failure is not None or said:
+        why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
+        raise InputFileError(label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})") from failure
+    return model, visual
+
+
 class PinocchioRobot:
     """A URDF through Pinocchio: kinematic model, 1-DoF joints and limits, checked frame lookup.
 
@@ -191,29 +214,7 @@ class PinocchioRobot:
         continuous: tuple[str, ...] = ()
         if continuous_as_revolute:
             for_pinocchio, continuous = revolute_from_continuous(text)
-        with captured_output() as out:  # urdfdom's own complaints are not the message
-            try:
-                model = pin.buildModelFromXML(for_pinocchio)
-                visual = (
-                    pin.buildGeomFromUrdfString(model, for_pinocchio, pin.GeometryType.VISUAL)
-                    if visuals
-                    else None
-                )
-            except (RuntimeError, ValueError) as e:
-                failure: Exception | None = e
-            else:
-                failure = None
-        # urdfdom can also report an error and go on without the part it could not read.
-        said = out.error_lines()
-        if failure is not None or said:
-            why = (
-                said[0]
-                if said
-                else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
-            )
-            raise InputFileError(
-                label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})"
-            ) from failure
+        model, visual = build_pinocchio_model(for_pinocchio, label, visuals=visuals)
         return cls(
             model,
             text,
@@ -327,6 +328,7 @@ def revolute_from_continuous(urdf: str) -> tuple[str, tuple[str, ...]]:
 
 
 __all__ = [
+    "build_pinocchio_model",
     "PRISMATIC",
     "REVOLUTE",
     "TEXT_SOURCE",
