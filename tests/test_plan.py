@@ -179,6 +179,7 @@ def test_cli_writes_plan_csv_png_and_the_plan_loads(tmp_path: Path, capsys: pyte
         (["--n", "0"], "--n must be at least 1"),
         (["--target-error", "-1"], "--target-error must be a positive"),
         (["--n", "5", "--sigma-mm", "nan"], "--sigma-mm must be a positive"),
+        (["--n", "5", "--noise", "stereo", "--pixel-sigma", "0"], "--pixel-sigma must be a positive"),
         (["--n", "5", "--measure", "nope"], "'nope' is not a frame"),
         (["--n", "5", "--rig", "missing.yaml"], "missing.yaml"),
         (["--n", "5", "--range", "pan=1"], "--range"),
@@ -329,8 +330,192 @@ def test_simulate_measures_a_plan_and_identify_reaches_it(tmp_path: Path, capsys
     for frame, poses in heldout.poses.items():
         assert np.abs(fk[frame][:, :3, 3] - poses[:, :3, 3]).max() < 1e-9
     capsys.readouterr()
-    assert main(["simulate", "iis_head", "--plan", str(plan), "--noise", "stereo", "-o", str(tmp_path / "x")]) == 2
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**json.loads(plan.read_text()), "format": "cpc2urdf/plan@9"}))
+    assert main(["simulate", "iis_head", "--plan", str(bad), "-o", str(tmp_path / "x")]) == 2
     assert main(["simulate", "iis_head", "--plan", str(tmp_path / "none.json"), "-o", str(tmp_path / "y")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "stereo" in err[0] and "none.json" in err[1]
+    assert len(err) == 2 and "bad.json" in err[0] and "plan@9" in err[0] and "none.json" in err[1]
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+# ---- stereo pixel noise (per-view pose covariance) ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def stereo_setup(setup: MeasuringSetup) -> MeasuringSetup:
+    return measuring_setup(setup.nominal, noise="stereo", pixel_sigma=0.15,
+                           world_to_base=setup.nominal.world_to_base)
+
+
+def test_stereo_pose_covariance_matches_a_monte_carlo_of_the_simulator(stereo_setup: MeasuringSetup) -> None:
+    from cpc2urdf.identification.planning.stereo import pose_error, stereo_pose_covariance
+    from cpc2urdf.identification.simulation.noise import stereo_noise
+
+    s = stereo_setup
+    q = protocol_q(s.nominal, 3)[[0, 5, 12]]
+    f = s.frames[1]
+    T = s.nominal.fk(q, [f])[f]
+    layout = np.array(s.nominal.structure.frame(f).layout)
+    C = stereo_pose_covariance(T, layout, s.rig, s.pixel_sigma)
+    n = 1500
+    Tn = np.repeat(T, n, axis=0)
+    meas, _ = stereo_noise(Tn, layout, s.rig, s.pixel_sigma, np.random.default_rng(7))
+    E = pose_error(meas, Tn).reshape(len(T), n, 6)
+    for i in range(len(T)):
+        Cm = np.cov(E[i].T)
+        # Each entry's std within 10 % (the Monte Carlo's own standard error is ~2 %).
+        np.testing.assert_allclose(np.sqrt(np.diag(Cm)), np.sqrt(np.diag(C[i])), rtol=0.10)
+        # And the whole matrix: the sample covariance whitened by the prediction is ~ I.
+        L = np.linalg.cholesky(C[i])
+        W = np.linalg.solve(L, np.linalg.solve(L, Cm).T)
+        assert np.all(np.abs(np.linalg.eigvalsh(W) - 1.0) < 0.15)
+    # Oblique and far views are worse: the covariance differs between views (not one scalar).
+    assert np.ptp([np.trace(c[:3, :3]) for c in C]) > 0.05 * np.trace(C[0, :3, :3])
+
+
+def test_sandwich_is_the_bound_when_the_weights_are_the_noise(stereo_setup: MeasuringSetup) -> None:
+    from cpc2urdf.identification.planning.information import StereoPoseMeasurement
+    from cpc2urdf.identification.planning.prediction import predict_from_jacobian
+
+    s = stereo_setup
+    m = s.measurement()
+    assert isinstance(m, StereoPoseMeasurement)
+    chart = Parametrization(s.nominal, s.frames)
+    q = protocol_q(s.nominal, 2)
+    task = task_sensitivity(chart, task_configurations(s, n=20), s.frames)
+    Jw, S = m.pipeline(chart, q)
+    # With residuals of unit covariance the weighted LS is the ML estimate: sandwich = Cramér-Rao.
+    eye = np.broadcast_to(np.eye(6), S.shape)
+    a = predict_from_jacobian(Jw, chart, task, s.frames, s.sigma_t, s.sigma_r, pipeline=(Jw, eye))
+    b = predict_from_jacobian(Jw, chart, task, s.frames, s.sigma_t, s.sigma_r)
+    np.testing.assert_allclose(a.covariance, b.covariance, rtol=1e-9, atol=1e-12 * np.abs(b.covariance).max())
+    # Whitened rows give the per-view-weighted bound, never above the pipeline's sandwich.
+    p = predict_plan(s, q, task_configurations(s, n=20))
+    assert p.bound_position_rms <= p.position_rms
+    Jwhite = m.weighted_jacobian(chart, q).reshape(-1, chart.n_params)
+    assert np.allclose(np.linalg.inv(Jwhite.T @ Jwhite), predict_from_jacobian(
+        Jwhite, chart, task, s.frames, s.sigma_t, s.sigma_r).covariance, rtol=1e-6, atol=1e-14)
+
+
+def test_stereo_prediction_matches_simulated_stereo_experiments(stereo_setup: MeasuringSetup) -> None:
+    s = stereo_setup
+    q_task = task_configurations(s, n=60)
+    q = protocol_q(s.nominal, 2)
+    pred = predict_plan(s, q, q_task)
+    ms = []
+    for seed in range(12):
+        exp = simulate_plan(s, q, seed=seed, noise="stereo", q_heldout=q_task, require_view=False)
+        assert exp.measured.metadata["noise"] == {"model": "stereo", "pixel_sigma_px": 0.15}
+        ms.append(np.mean(heldout_errors(exp, s.nominal).position ** 2))
+    observed = math.sqrt(float(np.mean(ms)))
+    # 12 experiments: the observed RMS has a ~7 % standard error; the 100-trial study is in docs/planning.md.
+    assert observed == pytest.approx(pred.position_rms, rel=0.2)
+    assert observed > 1.3 * pred.bound_position_rms  # the scalar weighting does lose accuracy
+
+
+def test_a_stereo_plan_carries_its_noise_to_the_file_and_the_simulation(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    from cpc2urdf.identification.planning.experiment import simulate_from_plan
+
+    out = tmp_path / "p.json"
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "--noise", "stereo",
+                 "--pixel-sigma", "0.2", "-o", str(out)]) == 0
+    assert "per-view weights would reach" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["setup"]["noise"]["model"] == "stereo" and doc["setup"]["noise"]["pixel_sigma_px"] == 0.2
+    assert doc["prediction"]["bound_position_rms_mm"] < doc["prediction"]["position_rms_mm"]
+    spec = load_robot("iis_head")
+    plan = load_plan(out, spec.structure)
+    assert plan.noise == "stereo" and plan.pixel_sigma == pytest.approx(0.2)
+    exp = simulate_from_plan(spec.nominal_model(), plan, seed=2, n_heldout=3)
+    assert exp.measured.metadata["noise"] == {"model": "stereo", "pixel_sigma_px": 0.2}
+    doc["setup"]["noise"]["pixel_sigma_px"] = -1
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(InputFileError, match="pixel_sigma_px"):
+        load_plan(bad)
+
+
+# ---- marker (position-only) setups --------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def marker_setup(setup: MeasuringSetup) -> MeasuringSetup:
+    return measuring_setup(setup.nominal, markers=2, marker_sigma=0.1e-3, marker_seed=3,
+                           world_to_base=setup.nominal.world_to_base)
+
+
+def test_marker_prediction_is_the_point_problems_bound(marker_setup: MeasuringSetup) -> None:
+    from cpc2urdf.identification.kinematics.point_problem import PointProblem
+    from cpc2urdf.identification.planning.markers import MarkerMeasurement
+
+    s = marker_setup
+    m = s.measurement()
+    assert isinstance(m, MarkerMeasurement) and len(m.markers) == 4
+    q = protocol_q(s.nominal, 2)
+    q_task = task_configurations(s, n=15)
+    pred = predict_plan(s, q, q_task)
+    # Direct: the point problem's whole Jacobian (no regrouping), its inverse information, and
+    # finite differences of the markers' task points along each parameter.
+    chart = m.point_chart(s.nominal)
+    names = [mk.name for mk in chart.markers]
+    y = {n: np.zeros((len(q), 3)) for n in names}
+    J = PointProblem(chart, q, y, {n: np.ones(len(q), bool) for n in names}, s.marker_sigma).jacobian(
+        np.zeros(chart.n_params))
+    C = np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(pred.covariance, C, rtol=1e-6, atol=1e-9 * np.abs(C).max())
+    h = 1e-7
+    G = []
+    for k in range(chart.n_params):
+        x = np.zeros(chart.n_params)
+        x[k] = h
+        pts = []
+        for sign in (1, -1):
+            model, pos = chart.model_from_vector(sign * x), chart.positions_from_vector(sign * x)
+            T = model.fk(q_task, [m.markers[n][0] for n in names])
+            pts.append(np.stack([T[m.markers[n][0]][:, :3, :3] @ pos[n] + T[m.markers[n][0]][:, :3, 3]
+                                 for n in names], axis=1))
+        G.append((pts[0] - pts[1]) / (2 * h))
+    Gfd = np.stack(G, axis=-1)  # (K, markers, 3, P)
+    assert pred.position_rms == pytest.approx(math.sqrt(np.einsum("nfip,pq,nfiq->nf", Gfd, C, Gfd).mean()), rel=1e-5)
+    assert math.isnan(pred.orientation_rms) and pred.rank == pred.n_params
+
+
+def test_marker_prediction_matches_simulated_marker_experiments(marker_setup: MeasuringSetup) -> None:
+    from cpc2urdf.identification.planning.experiment import (
+        heldout_point_errors,
+        simulate_plan_markers,
+    )
+
+    s = marker_setup
+    q_task = task_configurations(s, n=40)
+    q = protocol_q(s.nominal, 2)
+    pred = predict_plan(s, q, q_task)
+    ms, starts = [], set()
+    for seed in range(8):
+        err, start = heldout_point_errors(simulate_plan_markers(s, q, seed=seed, q_heldout=q_task), s.nominal)
+        ms.append(np.mean(err**2))
+        starts.add(start)
+    assert starts <= {"circle-point", "nominal (circle-point refused)"}
+    # 8 experiments: ~8 % standard error on the observed RMS; the 100-trial study is in docs/planning.md.
+    assert math.sqrt(float(np.mean(ms))) == pytest.approx(pred.position_rms, rel=0.25)
+
+
+def test_a_marker_plan_names_the_markers_simulate_places(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "p.json"
+    assert main(["plan", "iis_head", "--n", "13", "--candidates", "40", "--curve", "13", "--markers", "2",
+                 "--marker-seed", "4", "-o", str(out)]) == 0
+    assert "marker point" in capsys.readouterr().out
+    plan = load_plan(out, load_robot("iis_head").structure)
+    assert (plan.markers, plan.marker_seed, plan.marker_sigma) == (2, 4, pytest.approx(0.1e-3))
+    sim = tmp_path / "sim"
+    assert main(["simulate", "iis_head", "--plan", str(out), "--seed", "4", "-o", str(sim)]) == 0
+    held = load_measurements(sim / "heldout.json")
+    truth = load_model(sim / "truth.json")
+    positions = json.loads(out.read_text())["setup"]["markers"]["positions"]
+    assert set(positions) == set(held.marker_points)
+    for name, v in positions.items():
+        T = truth.fk(held.q, [v["frame"]])[v["frame"]]
+        y = T[:, :3, :3] @ (np.array(v["position_mm"]) / 1e3) + T[:, :3, 3]
+        np.testing.assert_allclose(y, held.marker_points[name], atol=1e-12)

@@ -38,6 +38,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--rig", metavar="RIG.yaml", help="stereo rig file (default: the paper's 600 mm rig at 1.5 m)")
     p.add_argument("--sigma-mm", type=float, default=0.5, help="pose noise: std of each translation entry [mm] (default 0.5)")
     p.add_argument("--sigma-deg", type=float, default=0.5, help="pose noise: std of the rotation error angle [deg] (default 0.5)")
+    p.add_argument("--noise", choices=("fig10", "stereo"), default="fig10",
+                   help="fig10: pose noise --sigma-mm/--sigma-deg, the same for every view (default); stereo: "
+                   "--pixel-sigma on each circle centre through the rig, triangulation and registration, so that far "
+                   "and oblique views count less (needs the plates' circle layouts)")
+    p.add_argument("--pixel-sigma", type=float, default=0.15, metavar="PX",
+                   help="stereo: std of each pixel coordinate of a circle centre [px] (default 0.15)")
+    p.add_argument("--markers", type=int, default=0, metavar="K",
+                   help="position-only data (laser tracker, mocap): K markers of unknown position on each measured "
+                   "frame, placed as `simulate --markers K --seed MARKER_SEED` places them; the predicted error is then "
+                   "the markers' point error (default 0: plate poses)")
+    p.add_argument("--marker-sigma-mm", type=float, default=0.1, help="--markers: noise per point coordinate [mm] (default 0.1)")
+    p.add_argument("--marker-seed", type=int, default=0,
+                   help="--markers: seed of their placement; simulate the plan with the same --markers K --seed (default 0)")
     p.add_argument("--one-joint", action="store_true",
                    help="keep the one-joint-at-a-time structure the closed form needs (q0 plus single-joint moves)")
     p.add_argument("--task-region", default="calibration", metavar="calibration|limits|TASK.csv",
@@ -67,7 +80,11 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.robot_ref import load_robot
 
     output_paths(args.output)  # a bad -o is refused before the work
-    for flag in ("sigma_mm", "sigma_deg"):
+    if args.markers < 0:
+        raise ConfigurationError(f"--markers must be >= 0 markers per measured frame, got {args.markers}")
+    if args.marker_seed < 0:
+        raise ConfigurationError(f"--marker-seed must be >= 0, got {args.marker_seed}")
+    for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "marker_sigma_mm"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
             raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
@@ -104,14 +121,20 @@ def run(args: argparse.Namespace) -> int:
         ranges=parse_ranges(args.range, robot), n=args.n,
         target_error=None if args.target_error is None else args.target_error / 1000,
         one_joint=args.one_joint, task_region=task, n_candidates=args.candidates, grid=args.grid, seed=args.seed,
-        curve_ns=curve_ns,
+        curve_ns=curve_ns, noise=args.noise, pixel_sigma=args.pixel_sigma, markers=args.markers,
+        marker_sigma=args.marker_sigma_mm / 1000, marker_seed=args.marker_seed,
     )
     paths = write_plan_outputs(out, args.output)
     pred = out.result.prediction
+    what = "marker point" if args.markers else "position"
     print(f"plan: {len(out.result.q)} configurations ({out.result.strategy}"
           f"{', one joint at a time' if out.result.one_joint else ''}); predicted RMS error over the task region: "
-          f"{_mm(pred.position_rms)} position, {_deg(pred.orientation_rms)} orientation; "
+          f"{_mm(pred.position_rms)} {what}" + ("" if args.markers else f", {_deg(pred.orientation_rms)} orientation")
+          + "; "
           f"{pred.rank} of {pred.n_params} parameters determined")
+    if args.noise == "stereo" and math.isfinite(pred.bound_position_rms):
+        print(f"  (stereo: predicted for the identification's scalar weights; per-view weights would reach "
+              f"{_mm(pred.bound_position_rms)})")
     for line in pred.free_combinations:
         print(f"  undetermined: {line}")
     same = [c for c in out.result.curve if c.n == len(out.result.q)]

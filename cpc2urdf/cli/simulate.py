@@ -45,15 +45,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--M", type=int, default=9, help="values per joint over its calibration range (default 9)")
-    p.add_argument("--noise", choices=("fig10", "stereo", "none"), default="fig10",
+    p.add_argument("--noise", choices=("fig10", "stereo", "none"), default=None,
                    help="fig10: Gaussian pose noise (Shih et al. Fig. 10); stereo: pixel noise -> "
-                   "triangulation -> registration; none (default fig10)")
+                   "triangulation -> registration; none (default fig10, or the plan's with --plan)")
     p.add_argument("--sigma-mm", type=float, default=None,
                    help="fig10: std of each translation entry [mm] (default 0.5, or the plan's with --plan)")
     p.add_argument("--sigma-deg", type=float, default=None,
                    help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5, or the plan's)")
-    p.add_argument("--pixel-sigma", type=float, default=0.15,
-                   help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15)")
+    p.add_argument("--pixel-sigma", type=float, default=None,
+                   help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15, or the plan's)")
     p.add_argument("--geometry-error-mm", type=float, default=1.0,
                    help="true robot: std of each CPC offset component error [mm] (default 1)")
     p.add_argument("--geometry-error-deg", type=float, default=0.5,
@@ -82,6 +82,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 DEFAULT_SIGMA_MM = 0.5  # Fig. 10
 DEFAULT_SIGMA_DEG = 0.5
+DEFAULT_NOISE = "fig10"
+DEFAULT_PIXEL_SIGMA = 0.15  # [px]
 
 
 def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> RobotSpec:
@@ -134,19 +136,22 @@ def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[Mea
 def _simulate_plan(args: argparse.Namespace, spec: RobotSpec, ref: str) -> Experiment:
     """The experiment of ``--plan``: the plan's configurations, rig and placement (its noise unless
     ``--sigma-mm``/``--sigma-deg`` are given on the command line)."""
-    from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.identification.planning.experiment import simulate_from_plan
     from cpc2urdf.identification.planning.plan_file import load_plan
 
-    if args.noise == "stereo":
-        raise ConfigurationError("--plan simulates pose noise: use --noise fig10 or none, not stereo")
     plan = load_plan(args.plan, spec.structure)
+    if plan.markers and args.markers is None:  # a marker plan: its markers (same K and seed: same places)
+        args.markers, args.marker_sigma_mm = plan.markers, plan.marker_sigma * 1e3
+    if plan.markers and (args.markers, args.seed) != (plan.markers, plan.marker_seed):
+        print(f"note: {args.plan} was planned for {plan.markers} markers per frame placed with seed {plan.marker_seed}; "
+              f"--markers {args.markers} --seed {args.seed} places other markers")
     return simulate_from_plan(
         spec.nominal_model(), plan, seed=args.seed, noise=args.noise,
         sigma_t=None if args.sigma_mm is None else args.sigma_mm / 1000,
         sigma_r=None if args.sigma_deg is None else math.radians(args.sigma_deg),
         geometry_error_t=args.geometry_error_mm / 1000,
         geometry_error_r=math.radians(args.geometry_error_deg),
+        pixel_sigma=args.pixel_sigma,
         n_heldout=args.heldout, require_view=not args.allow_out_of_view, robot_ref=ref,
     )
 
@@ -174,6 +179,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v:g}")
     plan_noise = args.plan is not None
     if not plan_noise:  # the protocol's defaults; with --plan, the plan's own noise unless given
+        args.noise = DEFAULT_NOISE if args.noise is None else args.noise
+        args.pixel_sigma = DEFAULT_PIXEL_SIGMA if args.pixel_sigma is None else args.pixel_sigma
         args.sigma_mm = DEFAULT_SIGMA_MM if args.sigma_mm is None else args.sigma_mm
         args.sigma_deg = DEFAULT_SIGMA_DEG if args.sigma_deg is None else args.sigma_deg
     for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "geometry_error_mm", "geometry_error_deg", "marker_sigma_mm"):
@@ -224,10 +231,13 @@ def run(args: argparse.Namespace) -> int:
     write_all_atomic({out / name: t for name, t in texts.items()})
     view = exp.measured.metadata["provenance"]["view"]
     stated = exp.measured.metadata.get("noise") or {}
-    sigma_mm = 1e3 * stated.get("sigma_t_m", 0.0)
-    sigma_deg = math.degrees(stated.get("sigma_r_rad", 0.0))
-    noise = {"fig10": f"fig10 noise {sigma_mm:g} mm / {sigma_deg:g} deg",
-             "stereo": f"stereo noise {args.pixel_sigma:g} px", "none": "no noise"}[args.noise]
+    model = stated.get("model", "none")
+    if model == "fig10":
+        noise = f"fig10 noise {1e3 * stated.get('sigma_t_m', 0.0):g} mm / {math.degrees(stated.get('sigma_r_rad', 0.0)):g} deg"
+    elif model == "stereo":
+        noise = f"stereo noise {stated.get('pixel_sigma_px', args.pixel_sigma):g} px"
+    else:
+        noise = "no noise"
     if args.markers:
         noise = f"{len(measured.markers)} markers, point noise {args.marker_sigma_mm:g} mm"
     where = ""

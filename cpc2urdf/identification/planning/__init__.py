@@ -1,7 +1,9 @@
 """Planning a stage-1 experiment before measuring it (issue 17).
 
 Which configurations should be measured, how many, and how good will the result be? Given a
-robot, a measuring setup (stereo rig, the robot's place in front of it, the pose noise) and a list
+robot, a measuring setup (stereo rig, the robot's place in front of it, the noise: Fig. 10 pose
+noise, stereo pixel noise with a covariance per view (:mod:`stereo`), or marker points
+(:mod:`markers`)) and a list
 of configurations, :mod:`prediction` gives the Cramér-Rao covariance of the identified parameters
 at the nominal model and the held-out position/orientation error it implies over the user's task
 region, and names the parameters the plan leaves undetermined. :mod:`optimal` chooses N

@@ -10,7 +10,13 @@ cramer_rao_covariance` computes the same matrix for a whole plan), which the ref
 
 A kind of measurement is anything with ``weighted_jacobian(chart, q) -> (N, m, P)``:
 :class:`PoseMeasurement` is the rig's plate poses under Fig. 10 noise (6 rows per measured frame);
-point or marker observations plug in the same way (their rows of their own residuals).
+:class:`StereoPoseMeasurement` the same poses under stereo pixel noise, whose covariance differs
+per view (:mod:`stereo`): its rows are whitened by each view's 6 x 6 covariance, ``L^-1 D`` with
+``Sigma = L L^T`` and ``D`` the unweighted residual's Jacobian, so that ``sum J_c^T J_c`` is the
+information with per-view optimal weights; point or marker observations plug in the same way.
+A measurement may also have ``pipeline(chart, q) -> (J, S)``: the Jacobian weighted as the
+identification actually weights it (``J``, (m, P)) and the covariance of those weighted residuals
+per 6-row block (``S``, (m / 6, 6, 6)), for the sandwich covariance of :mod:`prediction`.
 
 The task region's sensitivity: a parameter error ``x`` moves frame f's origin at q by ``G_p x``
 and turns it by ``G_r x`` (rows 0-2 and 3-5 of :meth:`Parametrization.pose_jacobian`), so the
@@ -28,7 +34,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.kinematics.problem import IdentificationProblem
+from cpc2urdf.identification.kinematics.problem import (
+    DEFAULT_SIGMA_R,
+    DEFAULT_SIGMA_T,
+    IdentificationProblem,
+)
+from cpc2urdf.identification.planning.stereo import stereo_pose_covariance
+from cpc2urdf.identification.vision.stereo import StereoRig
 
 Array = NDArray[np.float64]
 
@@ -69,6 +81,71 @@ class PoseMeasurement:
 
 
 @dataclass(frozen=True)
+class StereoPoseMeasurement:
+    """The pose of each measured plate through the stereo rig, pixel noise (the simulator's
+    ``noise="stereo"``): a 6 x 6 covariance per plate and configuration (:mod:`stereo`).
+
+    Attributes:
+        frames: The measured frames (plates).
+        layouts: Each frame's circle centres in its frame [m], shape (K, 3).
+        rig: The stereo rig (world = its left camera).
+        pixel_sigma: Pixel noise per coordinate [px].
+        sigma_t: The translation sigma the identification weights with [m]: a stereo file states
+            no pose sigma, so :func:`~cpc2urdf.identification.kinematics.methods.noise_from_metadata`
+            falls back to the paper's 0.5 mm / 0.5 deg, the defaults here.
+        sigma_r: Likewise the rotation angle sigma [rad].
+    """
+
+    frames: tuple[str, ...]
+    layouts: tuple[Array, ...]
+    rig: StereoRig
+    pixel_sigma: float
+    sigma_t: float = DEFAULT_SIGMA_T
+    sigma_r: float = float(DEFAULT_SIGMA_R)
+
+    def covariances(self, chart: Parametrization, q: Array) -> Array:
+        """Each view's pose-error covariance at the chart's centre, shape (N, F, 6, 6)."""
+        qq = np.atleast_2d(np.asarray(q, dtype=float))
+        T = chart.reference.fk(qq, self.frames)
+        return np.stack([stereo_pose_covariance(T[f], lay, self.rig, self.pixel_sigma)
+                         for f, lay in zip(self.frames, self.layouts, strict=True)], axis=1)
+
+    def _unweighted(self, chart: Parametrization, q: Array) -> Array:
+        """Jacobian of the unweighted residuals (dp, dtheta), shape (N, F, 6, P)."""
+        J = PoseMeasurement(self.frames, self.sigma_t, self.sigma_r).weighted_jacobian(chart, q)
+        n = J.shape[0]
+        w = np.array([1.0 / self.sigma_t] * 3 + [np.sqrt(3.0) / self.sigma_r] * 3)
+        return J.reshape(n, len(self.frames), 6, chart.n_params) / w[:, None]
+
+    def weighted_jacobian(self, chart: Parametrization, q: Array) -> Array:
+        """Rows whitened by each view's covariance, shape (N, 6 * n_frames, P).
+
+        Raises:
+            ValueError: A plate shows fewer than 3 circles at some configuration.
+        """
+        D = self._unweighted(chart, q)
+        S = self.covariances(chart, q)
+        if not np.all(np.isfinite(S)):
+            raise ValueError("stereo measurement: a plate shows fewer than 3 circles at a configuration")
+        L = np.linalg.cholesky(S)
+        Jw = np.linalg.solve(L, D)  # (N, F, 6, P)
+        return Jw.reshape(D.shape[0], -1, chart.n_params)
+
+    def pipeline(self, chart: Parametrization, q: Array) -> tuple[Array, Array]:
+        """``(J, S)``: the Jacobian weighted with the scalar ``sigma_t``/``sigma_r`` the
+        identification uses, (6 N F, P) in :class:`IdentificationProblem`'s order (frame after
+        frame), and each pose's weighted residual covariance ``W Sigma W``, (N F, 6, 6) in that order."""
+        qq = np.atleast_2d(np.asarray(q, dtype=float))
+        n = len(qq)
+        poses = chart.reference.fk(qq, self.frames)
+        use = {f: np.ones(n, dtype=bool) for f in self.frames}
+        J = IdentificationProblem(chart, qq, poses, use, self.sigma_t, self.sigma_r).jacobian(np.zeros(chart.n_params))
+        w = np.array([1.0 / self.sigma_t] * 3 + [np.sqrt(3.0) / self.sigma_r] * 3)
+        S = self.covariances(chart, qq) * w[:, None] * w[None, :]  # (N, F, 6, 6)
+        return J, np.swapaxes(S, 0, 1).reshape(-1, 6, 6)
+
+
+@dataclass(frozen=True)
 class TaskSensitivity:
     """How the parameters move the measured frames over the task region.
 
@@ -97,4 +174,4 @@ def task_sensitivity(chart: Parametrization, q_task: ArrayLike, frames: Sequence
     return TaskSensitivity(0.5 * (A_p + A_p.T), 0.5 * (A_r + A_r.T), Gp, Gr)
 
 
-__all__ = ["Measurement", "PoseMeasurement", "TaskSensitivity", "task_sensitivity"]
+__all__ = ["Measurement", "PoseMeasurement", "StereoPoseMeasurement", "TaskSensitivity", "task_sensitivity"]

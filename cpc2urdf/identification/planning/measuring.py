@@ -14,7 +14,13 @@ px at 1.5 m), still shows every circle.
 
 The pose noise is the simulator's Fig. 10 model (``sigma_t`` per translation entry, a rotation of
 angle ``N(0, sigma_r)`` about a random axis): the noise the identification problem's weights
-assume (:mod:`~cpc2urdf.identification.kinematics.problem`).
+assume (:mod:`~cpc2urdf.identification.kinematics.problem`); or (``noise="stereo"``) the
+simulator's stereo model, ``pixel_sigma`` per pixel coordinate of each circle centre through
+triangulation and registration, whose pose covariance differs per view (:mod:`stereo`); or
+(``markers > 0``) position-only data: that many markers of unknown position on each measured
+frame, each point with ``marker_sigma`` per coordinate (:mod:`markers`; the markers are assumed
+seen wherever the rig sees the plates: the candidates stay those the rig sees, as ``simulate
+--plan --markers`` simulates the plate experiment first).
 """
 
 from __future__ import annotations
@@ -27,6 +33,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.identification.planning.information import (
+    PoseMeasurement,
+    StereoPoseMeasurement,
+)
+from cpc2urdf.identification.planning.markers import (
+    DEFAULT_MARKER_SIGMA,
+    MarkerMeasurement,
+    plan_markers,
+)
 from cpc2urdf.identification.simulation.design import (
     DEFAULT_M,
     calibration_ranges,
@@ -34,7 +49,11 @@ from cpc2urdf.identification.simulation.design import (
     protocol_configurations,
     random_configurations,
 )
-from cpc2urdf.identification.simulation.measure import DEFAULT_SIGMA_R, DEFAULT_SIGMA_T
+from cpc2urdf.identification.simulation.measure import (
+    DEFAULT_PIXEL_SIGMA,
+    DEFAULT_SIGMA_R,
+    DEFAULT_SIGMA_T,
+)
 from cpc2urdf.identification.simulation.placement import cached_clear_placement
 from cpc2urdf.identification.simulation.visibility import check_view
 from cpc2urdf.identification.vision.stereo import StereoRig
@@ -46,6 +65,7 @@ Array = NDArray[np.float64]
 PLAN_VIEW_MARGIN_PX = 40.0  # [px]
 PLAN_MAX_VIEW_ANGLE = math.radians(70.0)  # [rad]
 PLAN_OCCLUSION_MARGIN_PX = 25.0  # [px]
+SETUP_NOISE_MODELS = ("fig10", "stereo")
 
 
 @dataclass(frozen=True)
@@ -57,8 +77,13 @@ class MeasuringSetup:
         rig: The stereo rig (world = its left camera frame).
         frames: The measured frames (plates).
         ranges: Calibration ranges per joint ``[lo, hi]`` [m]/[rad], shape (n, 2).
-        sigma_t: Fig. 10 translation noise per entry [m].
-        sigma_r: Fig. 10 rotation noise angle [rad].
+        sigma_t: Fig. 10 translation noise per entry [m] (stereo: not used).
+        sigma_r: Fig. 10 rotation noise angle [rad] (stereo: not used).
+        noise: ``"fig10"`` or ``"stereo"`` (pixel noise through the rig).
+        pixel_sigma: Stereo pixel noise per coordinate [px].
+        markers: Markers per measured frame (0: the plates' poses are measured).
+        marker_sigma: Noise of each marker point coordinate [m].
+        marker_seed: Seed of the markers' placement (as ``simulate --markers K --seed S``).
     """
 
     nominal: CPCModel
@@ -67,6 +92,24 @@ class MeasuringSetup:
     ranges: Array
     sigma_t: float = DEFAULT_SIGMA_T
     sigma_r: float = DEFAULT_SIGMA_R
+    noise: str = "fig10"
+    pixel_sigma: float = DEFAULT_PIXEL_SIGMA
+    markers: int = 0
+    marker_sigma: float = DEFAULT_MARKER_SIGMA
+    marker_seed: int = 0
+
+    def measurement(self) -> PoseMeasurement | StereoPoseMeasurement | MarkerMeasurement:
+        """What is measured and how noisily: :class:`PoseMeasurement` (Fig. 10),
+        :class:`StereoPoseMeasurement` (the frames' circle layouts through the rig) or
+        :class:`MarkerMeasurement` (marker points)."""
+        if self.markers > 0:
+            return MarkerMeasurement(plan_markers(self.nominal, self.frames, self.markers, self.marker_seed),
+                                     self.marker_sigma)
+        if self.noise == "stereo":
+            s = self.nominal.structure
+            layouts = tuple(np.array(s.frame(f).layout, dtype=float) for f in self.frames)
+            return StereoPoseMeasurement(self.frames, layouts, self.rig, self.pixel_sigma)
+        return PoseMeasurement(self.frames, self.sigma_t, self.sigma_r)
 
     def measurable(self, q: ArrayLike) -> NDArray[np.bool_]:
         """Which configurations ``q`` (N, n) [m]/[rad] a plan may use: every frame of the nominal
@@ -93,6 +136,11 @@ def measuring_setup(
     ranges: Mapping[str, tuple[float, float]] | None = None,
     frames: Sequence[str] | None = None,
     world_to_base: CPCParams | None = None,
+    noise: str = "fig10",
+    pixel_sigma: float = DEFAULT_PIXEL_SIGMA,
+    markers: int = 0,
+    marker_sigma: float = DEFAULT_MARKER_SIGMA,
+    marker_seed: int = 0,
 ) -> MeasuringSetup:
     """The setup :func:`simulate_experiment` would simulate for this robot and rig.
 
@@ -104,12 +152,23 @@ def measuring_setup(
         ranges: Calibration ranges ``{joint: (lo, hi)}`` [m]/[rad] overriding the spec's.
         frames: Measured frames (default: the frames of kind ``"plate"``).
         world_to_base: The robot's place in the rig's world (default: the simulator's search).
+        noise: ``"fig10"`` (pose noise ``sigma_t``/``sigma_r``) or ``"stereo"`` (``pixel_sigma``).
+        pixel_sigma: Stereo pixel noise per coordinate [px].
+        markers: Markers per measured frame (0: plate poses; else position-only data, ``noise`` unused).
+        marker_sigma: Noise of each marker point coordinate [m].
+        marker_seed: Seed of the markers' placement.
 
     Raises:
-        ConfigurationError: No measured frame, a frame that is not the robot's, non-positive noise.
+        ConfigurationError: No measured frame, a frame that is not the robot's, non-positive noise,
+            an unknown noise model, stereo noise on a frame without a circle layout.
     """
     s = nominal.structure
-    for name, v in (("sigma_t", sigma_t), ("sigma_r", sigma_r)):
+    if noise not in SETUP_NOISE_MODELS:
+        raise ConfigurationError(f"noise model must be one of {SETUP_NOISE_MODELS}, got {noise!r}")
+    if markers < 0:
+        raise ConfigurationError(f"markers must be >= 0 per measured frame, got {markers}")
+    for name, v in (("sigma_t", sigma_t), ("sigma_r", sigma_r), ("pixel_sigma", pixel_sigma),
+                    ("marker_sigma", marker_sigma)):
         if not (math.isfinite(v) and v > 0):
             raise ConfigurationError(f"{name} must be a finite number > 0, got {v}")
     fr = list(frames) if frames is not None else measured_frames(s)
@@ -118,6 +177,8 @@ def measuring_setup(
     for f in fr:
         if f not in s.frame_names:
             raise ConfigurationError(f"measured frame {f!r} is not a frame of robot {s.name!r} ({list(s.frame_names)})")
+        if noise == "stereo" and not markers and s.frame(f).layout is None:
+            raise ConfigurationError(f"stereo noise needs the circle layout of measured frame {f!r}, and it has none")
     rig = rig or StereoRig.verged()
     r = calibration_ranges(s, ranges)
     if world_to_base is None:
@@ -125,11 +186,13 @@ def measuring_setup(
         q_sample = random_configurations(r, 256, np.random.default_rng(0))  # as simulate_experiment
         world_to_base = cached_clear_placement(nominal, rig, q, fr, q_sample)
     return MeasuringSetup(nominal.with_params(world_to_base=world_to_base), rig, tuple(fr), r,
-                          float(sigma_t), float(sigma_r))
+                          float(sigma_t), float(sigma_r), noise, float(pixel_sigma), int(markers),
+                          float(marker_sigma), int(marker_seed))
 
 
 __all__ = [
     "PLAN_MAX_VIEW_ANGLE",
     "PLAN_OCCLUSION_MARGIN_PX",
     "PLAN_VIEW_MARGIN_PX",
+    "SETUP_NOISE_MODELS",
     "MeasuringSetup", "measuring_setup"]

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, OutputError
 from cpc2urdf.fileio import check_output_path, dumps, write_all_atomic
+from cpc2urdf.identification.planning.markers import DEFAULT_MARKER_SIGMA
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
 from cpc2urdf.identification.planning.plan import (
     DEFAULT_CANDIDATES,
@@ -36,6 +37,7 @@ from cpc2urdf.identification.planning.plan import (
     task_configurations,
 )
 from cpc2urdf.identification.planning.plan_file import plan_to_json
+from cpc2urdf.identification.simulation.measure import DEFAULT_PIXEL_SIGMA
 from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
@@ -93,6 +95,11 @@ def plan_robot(
     grid: bool = False,
     seed: int = 0,
     curve_ns: Sequence[int] | None = None,
+    noise: str = "fig10",
+    pixel_sigma: float = DEFAULT_PIXEL_SIGMA,
+    markers: int = 0,
+    marker_sigma: float = DEFAULT_MARKER_SIGMA,
+    marker_seed: int = 0,
 ) -> PlanOutputs:
     """Plan an experiment for a robot and render its files (nothing written).
 
@@ -113,6 +120,11 @@ def plan_robot(
         grid: Grid candidates instead of random ones.
         seed: Seed of the candidates.
         curve_ns: Plan sizes of the curve (default: :func:`make_plan`'s).
+        noise: ``"fig10"`` (pose noise ``sigma_t``/``sigma_r``) or ``"stereo"`` (pixel noise).
+        pixel_sigma: Stereo pixel noise per coordinate [px].
+        markers: Markers per measured frame (position-only data; 0: plate poses).
+        marker_sigma: Marker point noise per coordinate [m].
+        marker_seed: Seed of the markers' placement (``simulate --markers K --seed marker_seed``).
 
     Raises:
         Cpc2UrdfError: Bad input (named).
@@ -123,7 +135,9 @@ def plan_robot(
     spec = robot_for_plan(spec, measured)
     nominal = spec.nominal_model()
     frames = list(measured) if measured and not is_urdf else [f.name for f in nominal.structure.frames if f.kind == "plate"]
-    setup = measuring_setup(nominal, rig=rig, sigma_t=sigma_t, sigma_r=sigma_r, ranges=ranges, frames=frames or None)
+    setup = measuring_setup(nominal, rig=rig, sigma_t=sigma_t, sigma_r=sigma_r, ranges=ranges, frames=frames or None,
+                            noise=noise, pixel_sigma=pixel_sigma, markers=markers, marker_sigma=marker_sigma,
+                            marker_seed=marker_seed)
     if isinstance(task_region, str):
         q_task = task_configurations(setup, task_region, n=n_task)
         task_doc: dict[str, Any] = {"kind": task_region, "n": int(len(q_task))}

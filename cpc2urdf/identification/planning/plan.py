@@ -35,10 +35,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.planning.information import PoseMeasurement, task_sensitivity
+from cpc2urdf.identification.planning.information import StereoPoseMeasurement
 from cpc2urdf.identification.planning.measuring import MeasuringSetup
 from cpc2urdf.identification.planning.optimal import select
-from cpc2urdf.identification.planning.prediction import Prediction, predict_from_jacobian
+from cpc2urdf.identification.planning.prediction import (
+    Prediction,
+    chart_and_task,
+    predict_from_jacobian,
+)
 from cpc2urdf.identification.simulation.design import protocol_configurations, random_configurations
 
 Array = NDArray[np.float64]
@@ -171,16 +175,22 @@ class Planner:
             raise ConfigurationError("the rig measures none of the candidate configurations")
         self.setup = setup
         self.candidates = candidates
-        self.chart = Parametrization(setup.nominal, setup.frames)
-        self.measurement = PoseMeasurement(setup.frames, setup.sigma_t, setup.sigma_r)
-        self.Jc = self.measurement.weighted_jacobian(self.chart, candidates.q)
+        self.measurement = setup.measurement()
         self.q_task = np.atleast_2d(np.asarray(q_task, dtype=float))
-        self.task = task_sensitivity(self.chart, self.q_task, setup.frames)
+        self.chart, self.task, self.targets = chart_and_task(setup, self.measurement, self.q_task)
+        self.Jc = self._jacobian(candidates.q)
+
+    def _jacobian(self, q: Array) -> Array:
+        return self.measurement.weighted_jacobian(self.chart, q)  # type: ignore[arg-type]
 
     def predict(self, q: ArrayLike) -> Prediction:
         qq = np.atleast_2d(np.asarray(q, dtype=float))
-        J = self.measurement.weighted_jacobian(self.chart, qq).reshape(-1, self.chart.n_params)
-        p = predict_from_jacobian(J, self.chart, self.task, self.setup.frames, self.setup.sigma_t, self.setup.sigma_r)
+        J = self._jacobian(qq).reshape(-1, self.chart.n_params)
+        m, chart = self.measurement, self.chart
+        pipe = m.pipeline(chart, qq) if isinstance(m, StereoPoseMeasurement) and isinstance(chart, Parametrization) \
+            else None
+        p = predict_from_jacobian(J, chart, self.task, self.targets, self.setup.sigma_t, self.setup.sigma_r,
+                                  pipeline=pipe)
         p.n_configurations = len(qq)
         return p
 
@@ -217,7 +227,7 @@ class Planner:
             if self.candidates.required:  # one-joint: the candidates' q0 is the protocol's
                 q_p, lab_p = q_p[1:], lab_p[1:]
             if self.setup.measurable(q_p).all():
-                Jc = np.concatenate([self.Jc, self.measurement.weighted_jacobian(self.chart, q_p)])
+                Jc = np.concatenate([self.Jc, self._jacobian(q_p)])
                 first = len(self.Jc)
                 alt = select(Jc, n, criterion=criterion, A=self.task.A_p, required=req,
                              start=[*req, *range(first, first + len(q_p))])

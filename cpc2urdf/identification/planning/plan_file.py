@@ -29,6 +29,14 @@ file and the measured links; ``name`` is the model's joint name, and the CSV's c
 URDF's names (what the robot's ``/joint_states`` calls its joints).
 ``T_world_base`` (translation in the file's length unit) is where the plan assumes the robot
 stands in the rig's world; the configurations were checked visible from there.
+A plan made for stereo pixel noise states ``{"model": "stereo", "pixel_sigma_px": 0.15,
+"sigma_t_mm": 0.5, "sigma_r_deg": 0.5}``: the pixel noise, and the pose sigmas the identification
+weights such data with (its prediction is that weighting's, docs/planning.md); a file without
+``model`` is ``fig10``.
+A plan for a marker setup (``cpc2urdf plan --markers K``) adds ``setup.markers``: ``{"per_frame": K,
+"sigma_p_mm": 0.1, "seed": S, "positions": {"plate_left_m0": {"frame": "plate_left", "position_mm":
+[...]}, ...}}``, the markers ``cpc2urdf simulate --plan PLAN.json --markers K --seed S`` places
+(the positions are informative: they follow from K, the seed and the frames).
 """
 
 from __future__ import annotations
@@ -44,8 +52,11 @@ from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.fileio import finite_float, float_list, read_json, require_format
-from cpc2urdf.identification.planning.measuring import MeasuringSetup
+from cpc2urdf.identification.planning.information import StereoPoseMeasurement
+from cpc2urdf.identification.planning.markers import MarkerMeasurement
+from cpc2urdf.identification.planning.measuring import SETUP_NOISE_MODELS, MeasuringSetup
 from cpc2urdf.identification.planning.plan import PlanResult
+from cpc2urdf.identification.simulation.measure import DEFAULT_PIXEL_SIGMA
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.units import Units
@@ -94,7 +105,8 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
         "configurations": [{"label": lab, "q": [float(v) for v in q / scale]}
                            for lab, q in zip(result.labels, result.q, strict=True)],
         "setup": {
-            "noise": {"model": "fig10", "sigma_t_mm": setup.sigma_t * 1e3, "sigma_r_deg": math.degrees(setup.sigma_r)},
+            "noise": _noise_doc(setup),
+            **({"markers": _markers_doc(setup)} if setup.markers else {}),
             "rig": setup.rig.to_json(),
             "T_world_base": T.tolist(),
         },
@@ -105,6 +117,22 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
         "curve": [{"strategy": c.strategy, "n": c.n, "position_rms_mm": mm(c.position_rms),
                    "orientation_rms_deg": deg(c.orientation_rms)} for c in result.curve],
     }
+
+
+def _markers_doc(setup: MeasuringSetup) -> dict[str, Any]:
+    m = setup.measurement()
+    assert isinstance(m, MarkerMeasurement)
+    return {"per_frame": setup.markers, "sigma_p_mm": setup.marker_sigma * 1e3, "seed": setup.marker_seed,
+            "positions": {name: {"frame": f, "position_mm": [float(v) * 1e3 for v in p]}
+                          for name, (f, p) in m.markers.items()}}
+
+
+def _noise_doc(setup: MeasuringSetup) -> dict[str, Any]:
+    m = setup.measurement()
+    if isinstance(m, StereoPoseMeasurement):  # the pose sigmas are the identification's weights
+        return {"model": "stereo", "pixel_sigma_px": setup.pixel_sigma, "sigma_t_mm": m.sigma_t * 1e3,
+                "sigma_r_deg": math.degrees(m.sigma_r)}
+    return {"model": "fig10", "sigma_t_mm": setup.sigma_t * 1e3, "sigma_r_deg": math.degrees(setup.sigma_r)}
 
 
 @dataclass
@@ -124,6 +152,11 @@ class LoadedPlan:
         sigma_r: Rotation noise angle the prediction assumed [rad].
         one_joint: Whether the plan keeps the one-joint-at-a-time structure.
         prediction: The file's ``prediction`` section (mm / deg).
+        noise: The noise model the plan was made for, ``"fig10"`` or ``"stereo"``.
+        pixel_sigma: Stereo pixel noise per coordinate [px] (``"stereo"``).
+        markers: Markers per measured frame the plan was made for (0: plate poses).
+        marker_sigma: Their point noise per coordinate [m].
+        marker_seed: The seed that placed them (``simulate --markers K --seed marker_seed``).
     """
 
     q: Array
@@ -137,6 +170,11 @@ class LoadedPlan:
     sigma_r: float
     one_joint: bool
     prediction: dict[str, Any]
+    noise: str = "fig10"
+    pixel_sigma: float = DEFAULT_PIXEL_SIGMA
+    markers: int = 0
+    marker_sigma: float = 0.0
+    marker_seed: int = 0
 
 
 def load_plan(path: str | os.PathLike[str], structure: RobotStructure | None = None) -> LoadedPlan:
@@ -208,6 +246,28 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     sigma_r = math.radians(finite_float(noise.get("sigma_r_deg"), "setup.noise.sigma_r_deg"))
     if sigma_t <= 0 or sigma_r <= 0:
         raise ValueError("setup.noise sigmas must be > 0")
+    model = noise.get("model", "fig10")
+    if model not in SETUP_NOISE_MODELS:
+        raise ValueError(f"setup.noise.model must be one of {list(SETUP_NOISE_MODELS)}, got {model!r}")
+    pixel_sigma = DEFAULT_PIXEL_SIGMA
+    if model == "stereo":
+        pixel_sigma = finite_float(noise.get("pixel_sigma_px"), "setup.noise.pixel_sigma_px")
+        if pixel_sigma <= 0:
+            raise ValueError("setup.noise.pixel_sigma_px must be > 0")
+    markers, marker_sigma, marker_seed = 0, 0.0, 0
+    mk = setup.get("markers")
+    if mk is not None:
+        if not isinstance(mk, dict):
+            raise ValueError("setup.markers must be an object {per_frame, sigma_p_mm, seed}")
+        k_doc, seed_doc = mk.get("per_frame"), mk.get("seed")
+        if not isinstance(k_doc, int) or isinstance(k_doc, bool) or k_doc < 1:
+            raise ValueError(f"setup.markers.per_frame must be an integer >= 1, got {k_doc!r}")
+        if not isinstance(seed_doc, int) or isinstance(seed_doc, bool) or seed_doc < 0:
+            raise ValueError(f"setup.markers.seed must be an integer >= 0, got {seed_doc!r}")
+        marker_sigma = finite_float(mk.get("sigma_p_mm"), "setup.markers.sigma_p_mm") * 1e-3
+        if marker_sigma <= 0:
+            raise ValueError("setup.markers.sigma_p_mm must be > 0")
+        markers, marker_seed = k_doc, seed_doc
     rig_doc = setup.get("rig")
     if not isinstance(rig_doc, dict):
         raise ValueError("setup.rig must be an object with K1, D1, K2, D2, R, T, image_size")
@@ -232,7 +292,8 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
         raise ValueError("robot must be the robot reference the plan was made for")
     pred = doc.get("prediction")
     return LoadedPlan(q, labels, tuple(names), robot, tuple(frames), T, rig, sigma_t, sigma_r,
-                      bool(doc.get("one_joint", False)), pred if isinstance(pred, dict) else {})
+                      bool(doc.get("one_joint", False)), pred if isinstance(pred, dict) else {}, str(model),
+                      pixel_sigma, markers, marker_sigma, marker_seed)
 
 
 __all__ = ["PLAN_FORMAT", "LoadedPlan", "load_plan", "plan_to_json"]
