@@ -137,6 +137,27 @@ def test_cyclopean_on_nominal(nominal, solver):
     assert sol.to_json()["reachable"] is True
 
 
+def test_compiled_cyclopean_gives_the_python_solvers_answer(nominal, solver):
+    """The nominal head's cyclopean solve is compiled (zero version in the kernel's null-space
+    task); over seeded reachable targets it gives the Python solver's answer: exact fixation on
+    the CPC model's FK, and where the Python answer has zero version, the same readings."""
+    P, _ = reachable_targets(nominal, 60, seed=7)
+    same = 0
+    for p in P:
+        new = solver.solve(p)
+        old = solver._solve_python(p, None, "cyclopean", None, 60)  # the Python path, as before
+        assert new.status == "fixated" and old.status == "fixated"
+        assert np.all(_errors(nominal, new.q, p) < GAZE_POINTING_TOL)
+        v_new = (new.q[4] - solver.home[4]) + (new.q[5] - solver.home[5])
+        v_old = (old.q[4] - solver.home[4]) + (old.q[5] - solver.home[5])
+        assert abs(v_new) <= abs(v_old) + 1e-9  # a bound may hold the version off zero: no further
+        if abs(v_old) < 1e-9:
+            same += 1
+            assert abs(v_new) < 1e-9
+            assert np.abs(new.q - old.q).max() < 1e-9
+    assert same >= 40  # most targets leave the version free
+
+
 def test_policies(nominal, solver):
     q0 = solver.solve(AHEAD).q
     q_cur = q0 + np.array([0.0, 0.0, 0.05, 0.02, -0.03, 0.04])

@@ -51,6 +51,7 @@ from cpc2urdf.validation.gaze import (
     GazeSolution,
     GazeSolver,
 )
+from cpc2urdf.validation.gaze.batch import MAX_SOLVE_ITERATIONS
 
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 FAST_CUBE = 600  # cube targets per head by default
@@ -172,7 +173,8 @@ def solve_cases(solver: GazeSolver, cases: Cases) -> tuple[list[str], np.ndarray
     Q = np.full((N, n), np.nan)
     E = np.full((N, 2), np.nan)
     solved = np.zeros(N, dtype=bool)
-    cap = (RETRIES + 1) * MAX_ITERATIONS
+    # the Python solver's cap, or the compiled one's (it answers the cyclopean policy)
+    cap = max((RETRIES + 1) * MAX_ITERATIONS, MAX_SOLVE_ITERATIONS)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):

@@ -36,7 +36,11 @@ TABLE_SIZE = 256  # starts in the table
 TABLE_SEED = 0
 N_STARTS = 3  # starts tried per target at most (a further one only if undecided)
 BATCH_MAX_ITERATIONS = 60
+# most iterations one solve_point reports: its starts, each a policy phase and a polish, twice
+# with the zero-version fallback
+MAX_SOLVE_ITERATIONS = 2 * N_STARTS * (BATCH_MAX_ITERATIONS + kernels.POLISH_ITERATIONS)
 EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
+VERSION_WEIGHT = 1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
 NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
 FAR_TARGET = 1e15  # [m]: beyond this, a target is solved for by its direction
 AT_LIMIT = 1e-12  # [rad]/[m]: a reading this close to a limit is at it (GazeSolution.at_limit)
@@ -88,9 +92,14 @@ class CompiledGaze:
             :data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL`.
     """
 
-    def __init__(self, chain: HeadChain, tolerance: float | None = None) -> None:
+    def __init__(
+        self, chain: HeadChain, tolerance: float | None = None, version_row: Array | None = None
+    ) -> None:
         self.chain = chain
-        self.ch = kernels.pack(chain)
+        self.ch = kernels.pack(chain, version_row, VERSION_WEIGHT)
+        self.version_row = version_row
+        # without the zero-version task: solve_point's fallback where a bound traps that task
+        self._ch_plain = kernels.pack(chain) if version_row is not None else None
         self.tolerance = GAZE_POINTING_TOL if tolerance is None else float(tolerance)
         self.sw = np.sqrt(chain.weight)
         self.home_u = 0.5 * (chain.lower + chain.upper)
@@ -283,6 +292,22 @@ class CompiledGaze:
             self.table_o, self.table_z, self.null_rel, self.tolerance, BATCH_MAX_ITERATIONS, self.disparity_head,
             self.baseline, self._starts, self._u_out, self._e_out, ws,
         )
+        if self._ch_plain is not None and st in (kernels.S_LIMITS, kernels.S_NO_SOLUTION):
+            # the zero-version task can hold a joint at a bound where fixation needs it inside
+            # (e.g. pan at 0 with tilt at its limit): the weighted home alone, the better answer
+            u1, e1 = self._u_out.copy(), self._e_out.copy()
+            it2, st2 = kernels.solve_single(
+                self._ch_plain, ps, p, b, u_ref, self._u_start, warm, ch.lower, ch.upper, self.sw, self.table_u,
+                self.table_o, self.table_z, self.null_rel, self.tolerance, BATCH_MAX_ITERATIONS,
+                self.disparity_head, self.baseline, self._starts, self._u_out, self._e_out, ws,
+            )
+            if st2 != kernels.S_FIXATED and float(self._e_out.max()) >= float(e1.max()):
+                self._u_out[:] = u1
+                self._e_out[:] = e1
+                kernels.fk(self.ch, self._u_out, b, *ws[:5])  # the cameras at the kept answer
+            else:
+                st = st2
+            it += it2
         q = ch.robot_A @ self._u_out + ch.robot_b
         if q_current is not None:
             q[self._still] = q_current[self._still]
@@ -369,8 +394,11 @@ class CompiledGaze:
 
 
 __all__ = [
+    "BATCH_MAX_ITERATIONS",
     "BATCH_STATUSES",
     "EXACT_NULL",
+    "MAX_SOLVE_ITERATIONS",
+    "VERSION_WEIGHT",
     "NEAR_NULL",
     "N_STARTS",
     "TABLE_SIZE",

@@ -23,7 +23,11 @@ free unknowns, the pointing task moves along the eigen-directions with ``l > cut
 (``-gain v v^T (x - x_ref)``), the *near-null space* of the pointing error. ``cut`` is
 ``null_rel * max(l)``: 1e-12 on heads that can fixate exactly (only the exact null space), larger
 on a binocular head that cannot (its weak direction, along which exact fixation would swing the
-neck and eyes far from the policy's posture, is left to the policy). Joints at a bound whose step
+neck and eyes far from the policy's posture, is left to the policy). With a zero-version row
+``c`` (:func:`pack`; the nominal binocular head's cyclopean policy) the null-space move is the
+Newton step of ``|x - x_ref|^2 / 2 + w (c . (u - home))^2 / 2`` over the null directions
+(Sherman-Morrison, ``w`` large: version held at zero), and the polish zeroes a small remaining
+version exactly. Joints at a bound whose step
 points outward are held (active set); the step is capped and projected on the bounds.
 """
 
@@ -40,10 +44,12 @@ from cpc2urdf.validation.gaze.chain import HeadChain
 MIN_TARGET_DISTANCE = 1e-9  # [m]: closer to a camera centre, a target has no direction
 MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
 BACKTRACKS = 10  # step halvings per iteration
+POLISH_ITERATIONS = 12  # iterations of the polish (pointing alone) after the policy phase
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
 POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
+VERSION_POLISH = 1e-4  # [rad]: the polish zeroes a version this small (larger: a bound holds it)
 EXACT_RESIDUAL = 1e-30  # [-]: |r|^2 below this is exact (pointing error ~1e-15 rad)
 AT_BOUND = 1e-12  # [rad]/[m]: an unknown this close to a bound is at it
 
@@ -51,8 +57,14 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown this close to a bound is at it
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
 
 
-def pack(chain: HeadChain) -> tuple:  # type: ignore[type-arg]
-    """The chain's arrays as the tuple the kernels take."""
+def pack(chain: HeadChain, version_row: Array | None = None, version_weight: float = 0.0) -> tuple:  # type: ignore[type-arg]
+    """The chain's arrays as the tuple the kernels take, then the zero-version task: its row
+    ``c`` over the unknowns (shape (m,); zeros: none) and ``(weight, c . home)`` (see
+    :func:`_iterate`)."""
+    m = chain.m
+    c = np.zeros(m) if version_row is None else np.ascontiguousarray(version_row, dtype=float)
+    home = 0.5 * (chain.lower + chain.upper)
+    vw = np.array([float(version_weight) if version_row is not None else 0.0, float(c @ home)])
     return (
         chain.parent,
         chain.jtype,
@@ -66,6 +78,8 @@ def pack(chain: HeadChain) -> tuple:  # type: ignore[type-arg]
         chain.cam_t,
         chain.anc,
         chain.solve_cameras,
+        c,
+        vw,
     )
 
 
@@ -263,6 +277,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2)."""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp = ws
     have_v = False  # Vp holds the eigenvectors of the last step with every unknown free
+    vc = ch[12]
+    vw_w, vw_ref = ch[13][0], ch[13][1]
     m = u.shape[0]
     M = r.shape[0]
     rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
@@ -285,6 +301,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
                     f += 1
             for v in range(m):
                 dx[v] = 0.0
+            vmove = 0.0  # squared length of the null-space (policy) move, scaled
             if f > 0:
                 for a in range(f):
                     for c in range(a, f):
@@ -329,6 +346,31 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
                     have_v = True
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
+                # zero-version task over the null directions: a_e = v_e . c_x, c_x = c / sw
+                aa = 0.0
+                ab = 0.0
+                if vw_w > 0.0:
+                    for e in range(f):
+                        if lam[e] <= cut:
+                            a_e = 0.0
+                            b_e = 0.0
+                            for a in range(f):
+                                va = idx[a]
+                                a_e += V[a, e] * vc[va] / sw[va]
+                                b_e += V[a, e] * sw[va] * (u[va] - u_ref[va])
+                            aa += a_e * a_e
+                            ab += a_e * b_e
+                    ver = -vw_ref
+                    for v in range(m):
+                        ver += vc[v] * u[v]
+                    if gain == 0.0:  # the polish: version to exact zero alone (the least null
+                        ab = 0.0  # move), only where the policy phase left it near zero
+                        if abs(ver) > VERSION_POLISH:
+                            ab, ver, aa = 0.0, 0.0, 0.0
+                    # Sherman-Morrison on (I + w a a^T) z = -(b + w a ver), without the w^2 terms
+                    kv = vw_w * (ab - ver) / (1.0 + vw_w * aa)
+                else:
+                    kv = 0.0
                 for e in range(f):
                     if lam[e] > cut:
                         s = 0.0
@@ -337,10 +379,13 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
                         s = -s / (lam[e] + mu)
                     else:
                         s = 0.0
+                        a_e = 0.0
                         for a in range(f):
                             va = idx[a]
                             s += V[a, e] * sw[va] * (u[va] - u_ref[va])
-                        s = -gain * s
+                            a_e += V[a, e] * vc[va] / sw[va]
+                        s = -gain * s + (gain if gain > 0.0 else 1.0) * a_e * kv
+                        vmove += s * s
                     for a in range(f):
                         dx[idx[a]] += V[a, e] * s
             changed = False
@@ -364,6 +409,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
                 d = dx[v] / sw[v] * scale
                 allowance += d * d
             allowance = min(allowance, 1.0) * 1e-2 * min(1.0, gain)
+        elif vmove > 0.0:  # the polish's zero-version move (scaled unknowns)
+            allowance = min(vmove, 1.0) * 1e-2
         accepted = False
         for _ in range(BACKTRACKS):
             for v in range(m):
@@ -444,7 +491,7 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
             u[v] = starts[k, v]
         it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws)
         # polish: pointing alone (same near-null space), to the rounding floor
-        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, 12, ws)
+        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, POLISH_ITERATIONS, ws)
         total += it1 + it2
         if rr < best_rr:
             best_rr = rr
@@ -620,6 +667,7 @@ __all__ = [
     "EXACT_RESIDUAL",
     "MAX_STEP",
     "MIN_TARGET_DISTANCE",
+    "POLISH_ITERATIONS",
     "SECONDARY_GAIN",
     "STEP_TOL",
     "S_BEHIND",

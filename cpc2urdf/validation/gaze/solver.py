@@ -135,6 +135,15 @@ class GazeSolver:
             self._posture = CompiledGaze(
                 build_chain(robot, self.cameras, [self.joint_names[i] for i in free]), tolerance
             )
+        # the cyclopean policy of a head that can: the compiled loop over neck and eyes with the
+        # Python solver's secondary task, zero version (then the weighted home)
+        self._version: CompiledGaze | None = None
+        if self._head is not None and self._posture is None:
+            free = self._free_joints["cyclopean"]
+            vchain = build_chain(robot, self.cameras, [self.joint_names[i] for i in free])
+            row = self._head.version_row
+            vrow = np.array([row[robot.joint_index(v)] for v in vchain.variables])
+            self._version = CompiledGaze(vchain, tolerance, vrow)
 
     def _neck_and_eyes(self) -> bool:
         """Whether every robot joint has finite limits (the Python solver's assumption)."""
@@ -309,19 +318,26 @@ class GazeSolver:
         the entry of :meth:`track`, which does not re-check the readings it produced itself.
 
         The compiled solver answers on a head of another shape than two independent eyes, and
-        for the cyclopean policy on a head that cannot fixate exactly (:attr:`disparity_head`);
-        the Python solver otherwise."""
-        if self._head is None or (self._posture is not None and policy == "cyclopean"):
+        for the cyclopean policy on every head (zero version in the null space of fixation
+        where the head can fixate exactly; the near-null posture where it cannot,
+        :attr:`disparity_head`); the Python solver answers the other policies ("min-motion",
+        "eyes-only", "use-table") on two independent eyes."""
+        if self._head is None:
             return self._solve_compiled(p, qc, policy, q_start)
+        if policy == "cyclopean":
+            return self._solve_compiled(p, qc, policy, q_start, self._posture or self._version)
         return self._solve_python(p, qc, policy, q_start, max_iterations)
 
-    def _solve_compiled(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None = None) -> GazeSolution:
+    def _solve_compiled(
+        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None = None,
+        comp: CompiledGaze | None = None,
+    ) -> GazeSolution:
         if policy not in ("cyclopean", "min-motion"):
             raise ConfigurationError(
                 f"policy {policy!r} needs two independent eyes with every joint free; this head "
                 f"({self.chain.kind}) takes cyclopean or min-motion"
             )
-        comp = self._posture or self.compiled
+        comp = comp or self._posture or self.compiled
         qs = None
         if q_start is not None:
             qs = np.asarray(q_start, dtype=float)
