@@ -315,7 +315,7 @@ def measurements_from_json(
         marker_defs = _marker_links(d.get("markers", {})) if version == 2 else {}
         if isinstance(robot, UrdfRobot):
             robot = robot.restricted(_measured_links(records, robot, marker_defs))
-        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot), version)
+        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot), version, marker_defs)
         ms.spec = robot
         return ms
     except InputFileError as e:
@@ -432,10 +432,11 @@ def _parse_records(
     doc: Mapping[str, Any],
     names: _FileNames | None = None,
     version: int = 1,
+    marker_defs: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> MeasurementSet:
     names = names or _FileNames.of(None, s)
     markers: dict[str, Marker] = {}
-    for mname, m in (_marker_links(doc["markers"]) if version == 2 and "markers" in doc else {}).items():
+    for mname, m in (marker_defs or {}).items():
         frame = _known_frame(s, names, m["link"], f"markers.{mname}.link").name
         pos = m.get("position")
         if pos is not None:

@@ -53,7 +53,6 @@ from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.progress import progress
 
 STRATEGIES = ("protocol", "I-optimal", "I-optimal one-joint", "D-optimal")
-MATCH = 0.15  # the issue's "within 15 %"
 TIAGO_PLATE = """  <link name="calib_plate"/>
   <joint name="calib_plate_joint" type="fixed">
     <parent link="head_2_link"/>

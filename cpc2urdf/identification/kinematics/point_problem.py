@@ -181,9 +181,5 @@ class PointProblem:
             out.append(-J.reshape(-1, c.n_params) * self.w)
         return np.concatenate(out, axis=0)
 
-    def point_chi2(self, x: Array) -> dict[str, Array]:
-        """Per used point, ``|y - y_pred|^2 / sigma_p^2`` (chi-square with 3 dof for a good point)."""
-        return {k: (v**2).sum(1) * self.w**2 for k, v in self.residual_blocks(x).items()}
-
 
 __all__ = ["DEFAULT_SIGMA_P", "MARKER_PARAMS", "PointChart", "PointProblem"]

@@ -29,7 +29,6 @@ from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
     analyze_jacobian,
 )
-from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.point_problem import PointChart, PointProblem
 from cpc2urdf.identification.kinematics.refine import (
     MAX_RECENTRES,
@@ -278,10 +277,4 @@ def point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: float) ->
     return start.model, start.positions, "circle-point", start.notes
 
 
-def chart_of(model: CPCModel, ms: MeasurementSet) -> Parametrization:
-    """The model chart through the markers' frames (names of the ``uncertainty`` section)."""
-    frames = list(dict.fromkeys(ms.markers[m].frame for m in ms.marker_points if ms.has_marker(m).any()))
-    return Parametrization(model, frames)
-
-
-__all__ = ["PointRefinement", "chart_of", "point_start", "refine_points", "undetermined_by_points"]
+__all__ = ["PointRefinement", "point_start", "refine_points", "undetermined_by_points"]

@@ -267,10 +267,6 @@ class HeldoutErrors:
     def position_rms(self) -> float:
         return float(np.sqrt(np.mean(self.position**2)))
 
-    @property
-    def angle_rms(self) -> float:
-        return float(np.sqrt(np.mean(self.angle**2)))
-
 
 def heldout_errors(exp: Experiment, nominal: CPCModel | None) -> HeldoutErrors:
     """Identify ``exp.measured`` (refined; closed-form start when it applies, else the nominal

@@ -45,6 +45,20 @@ from cpc2urdf.identification.vision.stereo import StereoRig
 Array = NDArray[np.float64]
 
 
+def _problem_jacobian(chart: Parametrization, qq: Array, frames: Sequence[str], sigma_t: float,
+                      sigma_r: float) -> Array:
+    """The :class:`IdentificationProblem`'s Jacobian at the chart's centre on its own noise-free
+    poses at ``qq`` (N, n), in its order (frame after frame, 6 rows per pose): shape (6 N F, P)."""
+    poses = chart.reference.fk(qq, frames)
+    use = {f: np.ones(len(qq), dtype=bool) for f in frames}
+    return IdentificationProblem(chart, qq, poses, use, sigma_t, sigma_r).jacobian(np.zeros(chart.n_params))
+
+
+def _pose_weights(sigma_t: float, sigma_r: float) -> Array:
+    """The problem's weights of one pose's 6 residuals (position, rotation vector), shape (6,)."""
+    return np.array([1.0 / sigma_t] * 3 + [np.sqrt(3.0) / sigma_r] * 3)
+
+
 class Measurement(Protocol):
     """A kind of measurement: its weighted Jacobian rows per configuration."""
 
@@ -71,12 +85,9 @@ class PoseMeasurement:
         """The :class:`IdentificationProblem`'s Jacobian at the chart's centre on its own noise-free
         poses, regrouped per configuration: shape (N, 6 * n_frames, P)."""
         qq = np.atleast_2d(np.asarray(q, dtype=float))
-        n = len(qq)
-        poses = chart.reference.fk(qq, self.frames)
-        use = {f: np.ones(n, dtype=bool) for f in self.frames}
-        J = IdentificationProblem(chart, qq, poses, use, self.sigma_t, self.sigma_r).jacobian(np.zeros(chart.n_params))
+        J = _problem_jacobian(chart, qq, self.frames, self.sigma_t, self.sigma_r)
         # The problem stacks frame after frame, 6 rows per pose: regroup per configuration.
-        blocks = J.reshape(len(self.frames), n, 6, chart.n_params)
+        blocks = J.reshape(len(self.frames), len(qq), 6, chart.n_params)
         return np.concatenate(list(blocks), axis=1)
 
 
@@ -114,7 +125,7 @@ class StereoPoseMeasurement:
         """Jacobian of the unweighted residuals (dp, dtheta), shape (N, F, 6, P)."""
         J = PoseMeasurement(self.frames, self.sigma_t, self.sigma_r).weighted_jacobian(chart, q)
         n = J.shape[0]
-        w = np.array([1.0 / self.sigma_t] * 3 + [np.sqrt(3.0) / self.sigma_r] * 3)
+        w = _pose_weights(self.sigma_t, self.sigma_r)
         return J.reshape(n, len(self.frames), 6, chart.n_params) / w[:, None]
 
     def weighted_jacobian(self, chart: Parametrization, q: Array) -> Array:
@@ -136,11 +147,8 @@ class StereoPoseMeasurement:
         identification uses, (6 N F, P) in :class:`IdentificationProblem`'s order (frame after
         frame), and each pose's weighted residual covariance ``W Sigma W``, (N F, 6, 6) in that order."""
         qq = np.atleast_2d(np.asarray(q, dtype=float))
-        n = len(qq)
-        poses = chart.reference.fk(qq, self.frames)
-        use = {f: np.ones(n, dtype=bool) for f in self.frames}
-        J = IdentificationProblem(chart, qq, poses, use, self.sigma_t, self.sigma_r).jacobian(np.zeros(chart.n_params))
-        w = np.array([1.0 / self.sigma_t] * 3 + [np.sqrt(3.0) / self.sigma_r] * 3)
+        J = _problem_jacobian(chart, qq, self.frames, self.sigma_t, self.sigma_r)
+        w = _pose_weights(self.sigma_t, self.sigma_r)
         S = self.covariances(chart, qq) * w[:, None] * w[None, :]  # (N, F, 6, 6)
         return J, np.swapaxes(S, 0, 1).reshape(-1, 6, 6)
 

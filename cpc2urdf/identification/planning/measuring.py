@@ -2,8 +2,7 @@
 
 The robot is placed exactly as :func:`~cpc2urdf.identification.simulation.simulate.
 simulate_experiment` places it (:func:`~cpc2urdf.identification.simulation.placement.
-cached_clear_placement` over the paper's protocol with ``M = DEFAULT_M`` and a fixed sample of the
-calibration ranges), so that a plan, the paper's protocol and the simulator all see the same
+experiment_placement` over the paper's protocol with ``M = DEFAULT_M``), so that a plan, the paper's protocol and the simulator all see the same
 scene. A configuration is *measurable* when :func:`~cpc2urdf.identification.simulation.visibility.
 check_view` finds, on the nominal robot, every circle (or, for a frame without a circle layout,
 its origin) of every measured frame at least ``PLAN_VIEW_MARGIN_PX`` inside both images, no more
@@ -47,14 +46,13 @@ from cpc2urdf.identification.simulation.design import (
     calibration_ranges,
     measured_frames,
     protocol_configurations,
-    random_configurations,
 )
 from cpc2urdf.identification.simulation.measure import (
     DEFAULT_PIXEL_SIGMA,
     DEFAULT_SIGMA_R,
     DEFAULT_SIGMA_T,
 )
-from cpc2urdf.identification.simulation.placement import cached_clear_placement
+from cpc2urdf.identification.simulation.placement import experiment_placement
 from cpc2urdf.identification.simulation.visibility import check_view
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import CPCModel, CPCParams
@@ -183,8 +181,7 @@ def measuring_setup(
     r = calibration_ranges(s, ranges)
     if world_to_base is None:
         q, _ = protocol_configurations(r, DEFAULT_M, s.joint_names)
-        q_sample = random_configurations(r, 256, np.random.default_rng(0))  # as simulate_experiment
-        world_to_base = cached_clear_placement(nominal, rig, q, fr, q_sample)
+        world_to_base = experiment_placement(nominal, rig, q, fr, r)  # as simulate_experiment
     return MeasuringSetup(nominal.with_params(world_to_base=world_to_base), rig, tuple(fr), r,
                           float(sigma_t), float(sigma_r), noise, float(pixel_sigma), int(markers),
                           float(marker_sigma), int(marker_seed))

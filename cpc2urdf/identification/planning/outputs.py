@@ -37,7 +37,11 @@ from cpc2urdf.identification.planning.plan import (
     task_configurations,
 )
 from cpc2urdf.identification.planning.plan_file import plan_to_json
-from cpc2urdf.identification.simulation.measure import DEFAULT_PIXEL_SIGMA
+from cpc2urdf.identification.simulation.measure import (
+    DEFAULT_PIXEL_SIGMA,
+    DEFAULT_SIGMA_R,
+    DEFAULT_SIGMA_T,
+)
 from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
@@ -83,8 +87,8 @@ def plan_robot(
     robot_ref: str,
     measured: Sequence[str] | None = None,
     rig: StereoRig | None = None,
-    sigma_t: float = 0.5e-3,
-    sigma_r: float = math.radians(0.5),
+    sigma_t: float = DEFAULT_SIGMA_T,
+    sigma_r: float = DEFAULT_SIGMA_R,
     ranges: Mapping[str, tuple[float, float]] | None = None,
     n: int | None = None,
     target_error: float | None = None,

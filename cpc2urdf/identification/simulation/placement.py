@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cpc2urdf.identification.simulation.design import random_configurations
 from cpc2urdf.identification.simulation.visibility import check_view, frame_points
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import PlateDesign
@@ -31,6 +32,9 @@ Array = NDArray[np.float64]
 # [px]: the placement search asks for more clearance on the nominal robot, so that the true robot
 # (nominal + ~1 mm / 0.5 deg errors, a few px at 1.5 m) still keeps OCCLUSION_MARGIN_PX.
 PLACEMENT_MARGIN_PX = 10.0
+# Configurations of the fixed sample (seed 0, over the calibration ranges) in which the simulator's
+# placement keeps as few circles as possible hidden (:func:`experiment_placement`).
+PLACEMENT_SAMPLE = 256
 
 
 def place_in_front_of_rig(
@@ -144,6 +148,17 @@ def cached_clear_placement(
     return _PLACEMENTS[key]
 
 
+def experiment_placement(
+    model: CPCModel, rig: StereoRig, q: NDArray[np.float64], frames: Sequence[str], ranges: ArrayLike
+) -> CPCParams:
+    """Where the simulator places ``model`` for the protocol configurations ``q`` (N, n):
+    :func:`cached_clear_placement` with a fixed sample of ``PLACEMENT_SAMPLE`` configurations drawn
+    (seed 0) from the calibration ``ranges`` (n, 2), so that it depends on the robot, rig and ranges
+    only, not on an experiment's seed (``simulate_experiment`` and a plan's measuring setup)."""
+    q_sample = random_configurations(ranges, PLACEMENT_SAMPLE, np.random.default_rng(0))
+    return cached_clear_placement(model, rig, q, frames, q_sample)
+
+
 def clear_placement(
     model: CPCModel,
     rig: StereoRig,
@@ -221,4 +236,5 @@ def clear_placement(
     return face_on if best is None else best[1]
 
 
-__all__ = ["PLACEMENT_MARGIN_PX", "cached_clear_placement", "clear_placement", "place_in_front_of_rig"]
+__all__ = ["PLACEMENT_MARGIN_PX", "PLACEMENT_SAMPLE", "cached_clear_placement", "clear_placement", "experiment_placement",
+           "place_in_front_of_rig"]

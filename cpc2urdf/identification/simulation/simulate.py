@@ -41,7 +41,6 @@ from cpc2urdf.identification.simulation.design import (
     calibration_ranges,
     measured_frames,
     protocol_configurations,
-    random_configurations,
 )
 from cpc2urdf.identification.simulation.measure import (
     DEFAULT_PIXEL_SIGMA,
@@ -50,7 +49,7 @@ from cpc2urdf.identification.simulation.measure import (
     NOISE_MODELS,
     measure_poses,
 )
-from cpc2urdf.identification.simulation.placement import cached_clear_placement
+from cpc2urdf.identification.simulation.placement import experiment_placement
 from cpc2urdf.identification.simulation.truth import (
     DEFAULT_GEOMETRY_ERROR_R,
     DEFAULT_GEOMETRY_ERROR_T,
@@ -171,8 +170,7 @@ def simulate_experiment(
     rng_geometry, rng_noise, rng_heldout = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
 
     # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
-    q_sample = random_configurations(r, 256, np.random.default_rng(0))
-    w2b = world_to_base or cached_clear_placement(nominal, rig, q, frames, q_sample)
+    w2b = world_to_base or experiment_placement(nominal, rig, q, frames, r)
     truth = perturbed_model(nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r)
     q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
     view = check_view(truth, rig, np.vstack([q, q_held]), frames,
