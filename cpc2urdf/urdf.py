@@ -100,10 +100,10 @@ class Primitive:
 
     def geometry(self) -> str:
         if self.shape == "box":
-            return f'<box size="{_vec(self.size)}"/>'
+            return f'<box size="{urdf_vector(self.size)}"/>'
         if self.shape == "cylinder":
-            return f'<cylinder radius="{_num(self.size[0])}" length="{_num(self.size[1])}"/>'
-        return f'<sphere radius="{_num(self.size[0])}"/>'
+            return f'<cylinder radius="{urdf_number(self.size[0])}" length="{urdf_number(self.size[1])}"/>'
+        return f'<sphere radius="{urdf_number(self.size[0])}"/>'
 
 
 def link_name(joint_or_base: str) -> str:
@@ -139,17 +139,24 @@ def urdf_link_names(structure: RobotStructure) -> list[str]:
     return names
 
 
-def _num(v: float) -> str:
+def urdf_number(v: float) -> str:
+    """``v`` as URDF text: the shortest text that reads back to the same double; no -0."""
     v = float(v)
     return "0" if v == 0.0 else repr(v)  # also turns -0.0 into 0
 
 
-def _vec(v: Array | Sequence[float]) -> str:
-    return " ".join(_num(x) for x in v)
+def urdf_vector(v: Array | Sequence[float]) -> str:
+    """The numbers of ``v`` as URDF text (:func:`urdf_number`), space-separated."""
+    return " ".join(urdf_number(x) for x in v)
+
+
+def origin_attributes(T: Array) -> str:
+    """The ``xyz="..." rpy="..."`` attributes of an ``<origin>`` placing pose ``T`` (4x4)."""
+    return f'xyz="{urdf_vector(T[:3, 3])}" rpy="{urdf_vector(rpy_from_matrix(T[:3, :3]))}"'
 
 
 def _origin(T: Array) -> str:
-    return f'<origin xyz="{_vec(T[:3, 3])}" rpy="{_vec(rpy_from_matrix(T[:3, :3]))}"/>'
+    return f"<origin {origin_attributes(T)}/>"
 
 
 def _at(xyz: Array | Sequence[float], R: Array | None = None) -> Array:
@@ -220,9 +227,9 @@ def _mass_properties(prims: Sequence[Primitive], mass: float | None, density: fl
 def _inertial(mp: MassProperties) -> str:
     R, moments = mp.principal()
     return (
-        f"    <inertial>\n      {_origin(_at(mp.com, R))}\n      <mass value=\"{_num(mp.mass)}\"/>\n"
-        f'      <inertia ixx="{_num(moments[0])}" ixy="0" ixz="0" iyy="{_num(moments[1])}" iyz="0" '
-        f'izz="{_num(moments[2])}"/>\n    </inertial>\n'
+        f"    <inertial>\n      {_origin(_at(mp.com, R))}\n      <mass value=\"{urdf_number(mp.mass)}\"/>\n"
+        f'      <inertia ixx="{urdf_number(moments[0])}" ixy="0" ixz="0" iyy="{urdf_number(moments[1])}" iyz="0" '
+        f'izz="{urdf_number(moments[2])}"/>\n    </inertial>\n'
     )
 
 
@@ -348,7 +355,7 @@ def urdf_from_model(
     if mujoco:
         out.append(MUJOCO_ELEMENT)
     for name, rgba in MATERIALS.items():
-        out.append(f'  <material name="{name}"><color rgba="{_vec(rgba)}"/></material>\n')
+        out.append(f'  <material name="{name}"><color rgba="{urdf_vector(rgba)}"/></material>\n')
     out.append(f'  <link name="{WORLD}"/>\n')
     out.append(_fixed("base_joint", WORLD, BASE, T_wb))
     out.append(link_xml(BASE))
@@ -359,8 +366,8 @@ def urdf_from_model(
             f'    <child link="{link_name(j.name)}"/>\n'
             f"    {_origin(model.joints[j.name].matrix())}\n"
             f'    <axis xyz="0 0 1"/>\n'
-            f'    <limit lower="{_num(j.lower)}" upper="{_num(j.upper)}" '
-            f'effort="{_num(j.effort)}" velocity="{_num(j.velocity)}"/>\n'
+            f'    <limit lower="{urdf_number(j.lower)}" upper="{urdf_number(j.upper)}" '
+            f'effort="{urdf_number(j.effort)}" velocity="{urdf_number(j.velocity)}"/>\n'
             "  </joint>\n"
         )
         out.append(link_xml(link_name(j.name)))
@@ -415,8 +422,11 @@ __all__ = [
     "T_world_base_of",
     "camera_body_names",
     "link_name",
+    "origin_attributes",
     "total_mass",
     "urdf_from_model",
     "urdf_link_names",
+    "urdf_number",
+    "urdf_vector",
     "write_urdf",
 ]

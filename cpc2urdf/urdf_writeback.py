@@ -26,7 +26,8 @@ import numpy as np
 
 from cpc2urdf.fileio import check_output_path, dumps, write_atomic
 from cpc2urdf.model import CPCModel
-from cpc2urdf.transforms import Array, rpy_from_matrix
+from cpc2urdf.transforms import Array
+from cpc2urdf.urdf import origin_attributes, urdf_vector
 from cpc2urdf.urdf_input import validate_urdf
 from cpc2urdf.urdf_origins import WritebackPlan, writeback_plan
 from cpc2urdf.urdf_report import CalibrationReport, OriginStd, calibration_report, report_paths
@@ -35,18 +36,9 @@ from cpc2urdf.urdf_tree import TagSpan
 UNIT_AXIS_TOL = 1e-12  # [-]: an <axis> whose length differs from 1 by more is rewritten as a unit vector
 
 
-def _num(v: float) -> str:
-    v = float(v)
-    return "0" if v == 0.0 else repr(v)  # shortest text that reads back to the same double; no -0
-
-
-def _vec(v: Array) -> str:
-    return " ".join(_num(x) for x in v)
-
-
 def _origin_tag(T: Array, empty: bool) -> bytes:
     end = "/>" if empty else ">"
-    return f'<origin xyz="{_vec(T[:3, 3])}" rpy="{_vec(rpy_from_matrix(T[:3, :3]))}"{end}'.encode()
+    return f"<origin {origin_attributes(T)}{end}".encode()
 
 
 def _indent(data: bytes, tag: TagSpan) -> bytes:
@@ -71,7 +63,7 @@ def calibrated_urdf_text(plan: WritebackPlan) -> str:
                 edits.append((j.tag.end, j.tag.end, b"\n" + _indent(data, j.tag) + _origin_tag(c.calibrated, True)))
         if c.changed and c.axis is not None and j.axis_tag is not None and abs(np.linalg.norm(j.axis) - 1.0) > UNIT_AXIS_TOL:
             end = "/>" if j.axis_tag.empty else ">"
-            edits.append((j.axis_tag.start, j.axis_tag.end, f'<axis xyz="{_vec(c.axis)}"{end}'.encode()))
+            edits.append((j.axis_tag.start, j.axis_tag.end, f'<axis xyz="{urdf_vector(c.axis)}"{end}'.encode()))
     for first, last, new in sorted(edits, reverse=True):
         data = data[:first] + new + data[last:]
     return data.decode("utf-8")

@@ -67,7 +67,6 @@ class Case:
         expected: Words the error line must contain (placeholders above).
         bad: What ``{bad}`` holds, from the clean corpus; None if the case has no ``{bad}``.
         name: File name of ``{bad}``.
-        xfail: Why the product still fails this case (a known bug, marked strict), or None.
     """
 
     id: str
@@ -75,7 +74,6 @@ class Case:
     expected: str
     bad: Callable[[Corpus], Content] | None = None
     name: str = "bad.json"
-    xfail: str | None = None
 
     @property
     def command(self) -> str:

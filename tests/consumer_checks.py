@@ -93,6 +93,22 @@ def package_folder(folder: Path, packages: Mapping[str, Path]) -> Path:
     return folder
 
 
+def pinocchio_q(model: Any, readings: Mapping[str, float]) -> Array:
+    """Pinocchio's configuration of ``model`` with ``readings`` (joints by URDF name), the other
+    joints neutral."""
+    import pinocchio as pin
+
+    q = pin.neutral(model)
+    for name, v in readings.items():
+        jid = model.getJointId(name)
+        i = model.idx_qs[jid]
+        if model.joints[jid].nq == 2:  # continuous: (cos, sin)
+            q[i], q[i + 1] = np.cos(v), np.sin(v)
+        else:
+            q[i] = v
+    return q
+
+
 def load_pinocchio(path: Path, packages: Sequence[Path] = (), *, geometry: bool = True) -> Loaded:
     """Pinocchio's model (and, with ``geometry``, its visual and collision models) of the URDF."""
     import pinocchio as pin
@@ -105,15 +121,7 @@ def load_pinocchio(path: Path, packages: Sequence[Path] = (), *, geometry: bool 
     body = {f.name: i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY}
 
     def fk(q: dict[str, float]) -> Poses:
-        qp = pin.neutral(model)
-        for name, v in q.items():
-            jid = model.getJointId(name)
-            i = model.idx_qs[jid]
-            if model.joints[jid].nq == 2:  # continuous: (cos, sin)
-                qp[i], qp[i + 1] = np.cos(v), np.sin(v)
-            else:
-                qp[i] = v
-        pin.framesForwardKinematics(model, data, qp)
+        pin.framesForwardKinematics(model, data, pinocchio_q(model, q))
         return {link: data.oMf[i].homogeneous.copy() for link, i in body.items()}
 
     return fk, out.text, lambda: None

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from consumer_checks import pinocchio_q
 
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.noise import fig10_noise
@@ -123,13 +124,5 @@ def pinocchio_poses(urdf: Path, readings: dict[str, float], links: list[str]) ->
     """``T_root_link`` of ``links`` by Pinocchio (urdfdom) from the file, joints by URDF name."""
     model = pin.buildModelFromUrdf(str(urdf))
     data = model.createData()
-    q = pin.neutral(model)
-    for name, v in readings.items():
-        jid = model.getJointId(name)
-        i = model.idx_qs[jid]
-        if model.joints[jid].nq == 2:  # continuous: (cos, sin)
-            q[i], q[i + 1] = np.cos(v), np.sin(v)
-        else:
-            q[i] = v
-    pin.framesForwardKinematics(model, data, q)
+    pin.framesForwardKinematics(model, data, pinocchio_q(model, readings))
     return {n: data.oMf[model.getFrameId(n, pin.FrameType.BODY)].homogeneous.copy() for n in links}
