@@ -251,4 +251,26 @@ def pointing_errors(O: np.ndarray, Z: np.ndarray, P: np.ndarray) -> np.ndarray:
     return np.arctan2(s, c)
 
 
-__all__ = ["HEAD_SHAPES", "HeadCase", "head_case", "pointing_errors", "yourdfpy_axes"]
+IIS_CAMERAS = ("camera_left_optical", "camera_right_optical")
+
+
+def model_pointing_errors(model, Q, P) -> np.ndarray:
+    """Pointing error of each IIS eye [rad], shape (N, 2), from the CPC model's FK (not Pinocchio)."""
+    T = model.fk(np.atleast_2d(Q), IIS_CAMERAS)
+    out = []
+    for cam in IIS_CAMERAS:
+        R, o = T[cam][:, :3, :3], T[cam][:, :3, 3]
+        pc = np.einsum("nji,nj->ni", R, np.atleast_2d(P) - o)
+        out.append(np.arctan2(np.hypot(pc[:, 0], pc[:, 1]), pc[:, 2]))
+    return np.stack(out, axis=1)
+
+
+__all__ = [
+    "HEAD_SHAPES",
+    "IIS_CAMERAS",
+    "HeadCase",
+    "head_case",
+    "model_pointing_errors",
+    "pointing_errors",
+    "yourdfpy_axes",
+]

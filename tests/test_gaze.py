@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 import pytest
+from gaze_heads import IIS_CAMERAS as CAMERAS
+from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, UnknownNameError
 from cpc2urdf.robot_ref import load_model
@@ -27,7 +29,6 @@ from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.gaze import POLICIES, GazeSolver, solver_for
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
-CAMERAS = ("camera_left_optical", "camera_right_optical")
 N_TARGETS = 10_000
 N_YOURDFPY = 300
 N_UNREACHABLE = 150
@@ -49,17 +50,6 @@ def head(request, tmp_path_factory):
     model = load_model("iis_head") if request.param == "nominal" else calibrated_iis_head(0)
     path = write_urdf(model, tmp_path_factory.mktemp(request.param) / "head.urdf")
     return request.param, model, path, GazeSolver(path)
-
-
-def _errors(model, Q, P):
-    """Pointing error of each eye [rad], shape (N, 2), from the CPC model's FK (not Pinocchio)."""
-    T = model.fk(np.atleast_2d(Q), CAMERAS)
-    out = []
-    for cam in CAMERAS:
-        R, o = T[cam][:, :3, :3], T[cam][:, :3, 3]
-        pc = np.einsum("nji,nj->ni", R, np.atleast_2d(P) - o)
-        out.append(np.arctan2(np.hypot(pc[:, 0], pc[:, 1]), pc[:, 2]))
-    return np.stack(out, axis=1)
 
 
 def _errors_yourdfpy(path, solver, Q, P):
@@ -86,14 +76,14 @@ def test_reachable_targets_all_fixated_within_limits(head):
     name, model, path, solver = head
     P, Q_made = reachable_targets(model, N_TARGETS, seed=1)
     # the construction itself is sound: its readings fixate its targets
-    assert np.all(_errors(model, Q_made, P) < GAZE_POINTING_TOL)
+    assert np.all(model_pointing_errors(model, Q_made, P) < GAZE_POINTING_TOL)
     policy = "min-motion" if solver.disparity_head else "cyclopean"
     sols = [solver.solve(p, policy=policy) for p in P]
     failed = [i for i, s in enumerate(sols) if not s.reachable]
     assert not failed, f"{name}: {len(failed)} reachable targets not fixated, e.g. {P[failed[0]]}"
     Q = np.array([s.q for s in sols])
     assert np.all(Q >= solver.lower) and np.all(Q <= solver.upper)
-    err = _errors(model, Q, P)
+    err = model_pointing_errors(model, Q, P)
     assert err.max() < GAZE_POINTING_TOL, f"{name}: worst {err.max():.3g} rad"
     reported = np.array([s.pointing_error for s in sols])
     assert np.allclose(reported, err, atol=1e-12)
@@ -123,7 +113,7 @@ def test_unreachable_targets_all_reported(head):
 def test_cyclopean_on_nominal(nominal, solver):
     sol = solver.solve(AHEAD)
     assert sol.reachable and sol.status == "fixated"
-    assert np.all(_errors(nominal, sol.q, AHEAD) < GAZE_POINTING_TOL)
+    assert np.all(model_pointing_errors(nominal, sol.q, AHEAD) < GAZE_POINTING_TOL)
     assert np.all(sol.q[:2] == solver.home[:2])
     # zero version: the eyes turn equally and oppositely from home
     assert abs((sol.q[4] - solver.home[4]) + (sol.q[5] - solver.home[5])) < 1e-9
@@ -147,7 +137,7 @@ def test_compiled_cyclopean_gives_the_python_solvers_answer(nominal, solver):
         new = solver.solve(p)
         old = solver._solve_python(p, None, "cyclopean", None, 60)  # the Python path, as before
         assert new.status == "fixated" and old.status == "fixated"
-        assert np.all(_errors(nominal, new.q, p) < GAZE_POINTING_TOL)
+        assert np.all(model_pointing_errors(nominal, new.q, p) < GAZE_POINTING_TOL)
         v_new = (new.q[4] - solver.home[4]) + (new.q[5] - solver.home[5])
         v_old = (old.q[4] - solver.home[4]) + (old.q[5] - solver.home[5])
         assert abs(v_new) <= abs(v_old) + 1e-9  # a bound may hold the version off zero: no further
@@ -213,7 +203,7 @@ def test_tracking_circle_1khz(nominal, solver):
     assert np.all(v <= vmax * (1 + 1e-12))
     assert tr.reachable.all() and tr.locked.all()
     assert tr.pointing_error.max() < GAZE_POINTING_TOL
-    assert np.all(_errors(nominal, tr.q[::50], P[::50]) < GAZE_POINTING_TOL)
+    assert np.all(model_pointing_errors(nominal, tr.q[::50], P[::50]) < GAZE_POINTING_TOL)
     # a slow head lags: velocity-limited, not locked, but never over the limit
     slow = vmax / 50
     tr2 = solver.track(P, dt, slow, q_current=q_start)

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.robot_ref import load_model
@@ -27,7 +28,6 @@ from cpc2urdf.validation.gaze.tracking import (
     track,
 )
 
-CAMERAS = ("camera_left_optical", "camera_right_optical")
 DT = 1e-3
 FAST = 4.0  # the tests' speed limits: the URDF's times this (shorter saccades, shorter tests)
 
@@ -46,23 +46,12 @@ def head(request, heads):
     return heads[request.param]
 
 
-def _errors(model, Q, P):
-    """Pointing error of each eye [rad], shape (N, 2), from the CPC model's FK (not Pinocchio)."""
-    T = model.fk(np.atleast_2d(Q), CAMERAS)
-    out = []
-    for cam in CAMERAS:
-        R, o = T[cam][:, :3, :3], T[cam][:, :3, 3]
-        pc = np.einsum("nji,nj->ni", R, np.atleast_2d(P) - o)
-        out.append(np.arctan2(np.hypot(pc[:, 0], pc[:, 1]), pc[:, 2]))
-    return np.stack(out, axis=1)
-
-
 def _assert_on_answer(solver, model, tr, P, where):
     """Samples ``where`` are the solver's answers for their targets, and point as the CPC model's
     FK says; to within the tolerance where the head fixates exactly (nominal)."""
     np.testing.assert_array_equal(tr.q[where], tr.q_goal[where])
     Q, Pw = tr.q[where][::25], P[where][::25]
-    err = _errors(model, Q, Pw)
+    err = model_pointing_errors(model, Q, Pw)
     np.testing.assert_allclose(tr.pointing_error[where][::25], err, rtol=1e-6, atol=1e-11)
     if eyes_coplanar(model):
         assert tr.reachable[where].all() and np.all(err < GAZE_POINTING_TOL)

@@ -13,6 +13,8 @@ import math
 import matplotlib.image
 import numpy as np
 import pytest
+from gaze_heads import IIS_CAMERAS as CAMERAS
+from gaze_heads import model_pointing_errors
 
 from cpc2urdf.cli import main
 from cpc2urdf.cli import reach as cli_reach
@@ -33,7 +35,6 @@ from cpc2urdf.validation.gaze.reach import (
     shell_grid,
 )
 
-CAMERAS = ("camera_left_optical", "camera_right_optical")
 SAMPLES = (3, 7, 5)  # 105 targets: small enough for a per-target solve loop
 
 
@@ -47,17 +48,6 @@ def head(request):
 def region(head):
     model, solver = head
     return model, solver, reachable_region(solver, make_grid(solver, "shell", 0.3, 2.5, SAMPLES))
-
-
-def _errors(model, Q, P):
-    """Pointing error of each eye [rad], shape (N, 2), from the CPC model's FK (not Pinocchio)."""
-    T = model.fk(np.atleast_2d(Q), CAMERAS)
-    out = []
-    for cam in CAMERAS:
-        R, o = T[cam][:, :3, :3], T[cam][:, :3, 3]
-        pc = np.einsum("nji,nj->ni", R, np.atleast_2d(P) - o)
-        out.append(np.arctan2(np.hypot(pc[:, 0], pc[:, 1]), pc[:, 2]))
-    return np.stack(out, axis=1)
 
 
 def test_head_frame_and_grids(head):
@@ -105,7 +95,7 @@ def test_region_statuses_are_true(region):
     fixated = r.category == REGION_CATEGORIES.index("fixated")
     disparity = r.category == REGION_CATEGORIES.index("disparity")
     limits = r.category == REGION_CATEGORIES.index("joint_limits")
-    err = _errors(model, r.q, r.points)
+    err = model_pointing_errors(model, r.q, r.points)
     assert np.all(err[fixated] < GAZE_POINTING_TOL)
     np.testing.assert_allclose(np.max(err, axis=1)[~fixated], r.error[~fixated], rtol=1e-6, atol=1e-12)
     assert np.all(r.error[~fixated] > GAZE_POINTING_TOL)
@@ -126,7 +116,7 @@ def test_region_statuses_are_true(region):
         for q0 in starts:
             q = solver.home.copy()
             q[free] = q0[free]  # the table stays, as in the solver
-            best = min(best, float(np.max(_errors(model, ref(r.points[i], q)[0], r.points[i]))))
+            best = min(best, float(np.max(model_pointing_errors(model, ref(r.points[i], q)[0], r.points[i]))))
         assert best > GAZE_POINTING_TOL
     # colours for the 3D view, one per point, by category
     c = r.colours()

@@ -149,8 +149,6 @@ def solution_from_state(
 
 def solution_from_compiled(
     robot_names: tuple[str, ...],
-    lower: Array,
-    upper: Array,
     p: Array,
     q: Array,
     poses: list[tuple[Array, Array]],
@@ -158,13 +156,13 @@ def solution_from_compiled(
     status: str,
     iterations: int,
     policy: str,
-    limit_hits: list[int] | None = None,
+    limit_hits: list[int],
 ) -> GazeSolution:
     """The :class:`GazeSolution` of a compiled solve: readings ``q`` (n,), the solved axes'
     ``poses`` (rotation (3, 3), centre (3,) in world) and pointing ``errors`` (S,) [rad] for
     target ``p``, with the compiled status (``fixated`` iff every error is within the tolerance).
-    ``limit_hits``: the indices of the joints at a limit when the caller knows them
-    (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.limit_hits`), else found here."""
+    ``limit_hits``: the indices of the joints at a limit
+    (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.limit_hits`)."""
     # plain floats: numpy calls on 3-vectors cost more than the arithmetic (a control loop's path)
     miss = []
     origins, axes = [], []
@@ -188,8 +186,6 @@ def solution_from_compiled(
         fix = closest_point(origins, axes)
         a, b = axes
         vergence = math.acos(max(-1.0, min(1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))
-    if limit_hits is None:  # the joints within 1e-12 of a limit, unless the caller knows them
-        limit_hits = np.flatnonzero((q <= lower + 1e-12) | (q >= upper - 1e-12)).tolist()
     at_limit = tuple(robot_names[i] for i in limit_hits)
     return GazeSolution(
         q=q,

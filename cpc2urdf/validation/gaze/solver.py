@@ -347,7 +347,7 @@ class GazeSolver:
         cams = comp.chain.solve_cameras.tolist()
         poses = [(R[c], o[c]) for c in cams]
         return solution_from_compiled(
-            self.joint_names, self.lower, self.upper, p, q, poses, err, BATCH_STATUSES[st], it, policy,
+            self.joint_names, p, q, poses, err, BATCH_STATUSES[st], it, policy,
             comp.limit_hits(q, qc),
         )
 
