@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.identification.handeye.axxb import relative_motions, solve_park_martin, target_from_x
 from cpc2urdf.identification.handeye.noise import PoseNoise, estimate_noise, residual_covariance
-from cpc2urdf.transforms import Array, homogeneous, inverse
+from cpc2urdf.transforms import Array, homogeneous, inverse, skew
 
 # Residuals below these are rounding, not noise: floors of every level the gate compares.
 NUMERIC_POSITION = 1e-9  # [m]
@@ -57,7 +57,7 @@ def rotvec_from_matrix(R: Array) -> Array:
 def matrix_from_rotvec(r: Array) -> Array:
     """Rodrigues' formula for one rotation vector (3,) [rad] -> (3, 3)."""
     theta = float(np.linalg.norm(r))
-    K = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    K = skew(r)
     if theta < 1e-8:
         return np.eye(3) + K + 0.5 * K @ K
     return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K

@@ -131,8 +131,8 @@ def detect_board(image: ArrayLike, board: Board, *, image_name: str = "image") -
         if n < MIN_BOARD_POINTS:
             return _not_found(image_name, board, f"too few ChArUco corners ({n} < {MIN_BOARD_POINTS}; board partly hidden?)")
         uv = np.asarray(corners, dtype=float).reshape(-1, 2)
-        sv = np.linalg.svd(board.object_points()[np.asarray(ids).ravel(), :2] - board.object_points()[np.asarray(ids).ravel(), :2].mean(0),
-                           compute_uv=False)
+        xy = board.object_points()[np.asarray(ids).ravel(), :2]
+        sv = np.linalg.svd(xy - xy.mean(0), compute_uv=False)
         if sv[1] < MIN_SPREAD * sv[0]:
             return _not_found(image_name, board, f"the {n} ChArUco corners seen lie on one line (no pose from them)")
         return BoardDetection(np.asarray(ids, dtype=np.intp).ravel(), uv)
@@ -312,6 +312,13 @@ def pnp_pose_covariance(K: ArrayLike, D: ArrayLike, T_camera_board: ArrayLike, p
 # ---- stereo rig: triangulation + registration -----------------------------------------------------
 
 
+def common_points(a: BoardPose, b: BoardPose) -> tuple[NDArray[np.intp], Array, Array]:
+    """The point ids two views of one board share (sorted) and their pixels in ``a`` and in ``b``,
+    shapes (N,), (N, 2), (N, 2)."""
+    both = np.intersect1d(a.ids, b.ids)
+    return both, a.uv[np.searchsorted(a.ids, both)], b.uv[np.searchsorted(b.ids, both)]
+
+
 def stereo_board_pose(
     image_left: ArrayLike,
     image_right: ArrayLike,
@@ -333,12 +340,10 @@ def stereo_board_pose(
     b = board_pose(image_right, rig.K2, rig.D2, board, image_name=names[1])
     if isinstance(b, DetectionError):
         return b
-    both = np.intersect1d(a.ids, b.ids)
+    both, uv_l, uv_r = common_points(a, b)
     where = f"{names[0]} + {names[1]}"
     if len(both) < MIN_BOARD_POINTS:
         return PlateNotFoundError(where, board.name, f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})")
-    uv_l = a.uv[np.searchsorted(a.ids, both)]
-    uv_r = b.uv[np.searchsorted(b.ids, both)]
     p = rig.triangulate(uv_l, uv_r)
     obj = board.object_points()[both]
     try:
@@ -363,6 +368,7 @@ __all__ = [
     "BoardPose",
     "board_pose",
     "circle_design",
+    "common_points",
     "detect_board",
     "pnp_pose_covariance",
     "stereo_board_pose",

@@ -32,7 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
-from cpc2urdf.identification.vision.board_poses import board_pose, detect_board
+from cpc2urdf.identification.vision.board_poses import (
+    MIN_BOARD_POINTS,
+    board_pose,
+    common_points,
+    detect_board,
+)
 from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
@@ -138,6 +143,24 @@ def _flags(fix_k3: bool) -> int:
     return cv2.CALIB_FIX_K3 if fix_k3 else 0
 
 
+def _detect_views(board: Board, paths: Sequence[Path], names: Sequence[str], imgs: Sequence[NDArray[np.uint8]],
+                  on_error: str, problems: list[str]) -> tuple[list[Array], list[Array], list[str]]:
+    """The board's points in each view (object points, pixels, the view's name), for every view
+    where it is found; the others go to :func:`report_problem` (raised or listed in ``problems``)."""
+    obj: list[Array] = []
+    pts: list[Array] = []
+    found_in: list[str] = []
+    for path, name, img in zip(paths, names, imgs, strict=True):
+        found = detect_board(img, board, image_name=str(path))
+        if isinstance(found, DetectionError):
+            report_problem(found, on_error, problems)
+            continue
+        obj.append(board.object_points()[found.ids])
+        pts.append(found.uv)
+        found_in.append(name)
+    return obj, pts, found_in
+
+
 def _calibrate(obj: list[Array], img: list[Array], size: tuple[int, int], names: list[str], fix_k3: bool,
                problems: list[str]) -> CameraCalibration:
     if len(obj) < MIN_VIEWS:
@@ -179,18 +202,8 @@ def calibrate_camera_images(
     check_on_error(on_error)
     paths = list_images(images) if isinstance(images, (str, Path)) else list(images)
     imgs, size = _read_same_size(paths, image_size)
-    obj: list[Array] = []
-    pts: list[Array] = []
-    names: list[str] = []
     problems: list[str] = []
-    for path, img in zip(paths, imgs, strict=True):
-        found = detect_board(img, board, image_name=str(path))
-        if isinstance(found, DetectionError):
-            report_problem(found, "stop" if on_error == "stop" else "skip", problems)
-            continue
-        obj.append(board.object_points()[found.ids])
-        pts.append(found.uv)
-        names.append(path.name)
+    obj, pts, names = _detect_views(board, paths, [p.name for p in paths], imgs, on_error, problems)
     return _calibrate(obj, pts, size, names, fix_k3, problems)
 
 
@@ -238,15 +251,7 @@ def calibrate_rig_images(
     # 1. each camera alone, from every view where it finds the board
     mono = []
     for side, imgs in (("left", imgs_l), ("right", imgs_r)):
-        obj, pts, names = [], [], []
-        for v, img in zip(views, imgs, strict=True):
-            found = detect_board(img, board, image_name=str(sides[side][v]))
-            if isinstance(found, DetectionError):
-                report_problem(found, on_error if on_error == "stop" else "skip", problems)
-                continue
-            obj.append(board.object_points()[found.ids])
-            pts.append(found.uv)
-            names.append(v)
+        obj, pts, names = _detect_views(board, [sides[side][v] for v in views], views, imgs, on_error, problems)
         mono.append(_calibrate(obj, pts, size, names, fix_k3, []))
     left, right = mono
     # 2. point ids fixed by each view's pose; 3. stereoCalibrate from the single-camera intrinsics
@@ -257,18 +262,18 @@ def calibrate_rig_images(
         bad = [r for r in (a, b) if isinstance(r, DetectionError)]
         if bad:
             if str(bad[0]) not in problems:
-                report_problem(bad[0], on_error if on_error == "stop" else "skip", problems)
+                report_problem(bad[0], on_error, problems)
             continue
         assert not isinstance(a, DetectionError) and not isinstance(b, DetectionError)
-        both = np.intersect1d(a.ids, b.ids)
-        if len(both) < 6:
+        both, uv_l, uv_r = common_points(a, b)
+        if len(both) < MIN_BOARD_POINTS:
             report_problem(DetectionError(f"{sides['left'][v]} + {sides['right'][v]}", board.name,
-                                          f"too few corners seen by both cameras ({len(both)} < 6)"),
-                           on_error if on_error == "stop" else "skip", problems)
+                                          f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})"),
+                           on_error, problems)
             continue
         obj_s.append(np.ascontiguousarray(board.object_points()[both], dtype=np.float32).reshape(-1, 1, 3))
-        pl_s.append(np.ascontiguousarray(a.uv[np.searchsorted(a.ids, both)], dtype=np.float32).reshape(-1, 1, 2))
-        pr_s.append(np.ascontiguousarray(b.uv[np.searchsorted(b.ids, both)], dtype=np.float32).reshape(-1, 1, 2))
+        pl_s.append(np.ascontiguousarray(uv_l, dtype=np.float32).reshape(-1, 1, 2))
+        pr_s.append(np.ascontiguousarray(uv_r, dtype=np.float32).reshape(-1, 1, 2))
         names_s.append(v)
     if len(obj_s) < MIN_VIEWS:
         raise DegenerateDataError(f"{root}: both cameras saw the board in {len(obj_s)} views; rig calibration needs at least "

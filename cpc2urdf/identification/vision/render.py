@@ -315,8 +315,9 @@ def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Arra
     # pixels wide); only the others are supersampled.
     probe = np.array([[0.0, 0.0], [-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]])
     every = np.arange(len(xy))
-    a5 = np.stack([shade(probe[k : k + 1], every)[0] for k in range(5)], axis=1)
-    p5 = np.stack([shade(probe[k : k + 1], every)[1] for k in range(5)], axis=1)
+    at_probes = [shade(probe[k : k + 1], every) for k in range(5)]
+    a5 = np.stack([a for a, _ in at_probes], axis=1)
+    p5 = np.stack([p for _, p in at_probes], axis=1)
     alpha, premult = a5[:, 0].copy(), p5[:, 0].copy()
     mixed = np.flatnonzero((np.ptp(a5, axis=1) > 0) | (np.ptp(p5, axis=1) > 0))
     n = max(int(supersample), 1)
@@ -345,7 +346,7 @@ def render_board_view(
         boards: (board, ``T_world_board`` of shape (4, 4)) pairs; the board frame is
             :mod:`~cpc2urdf.identification.vision.boards`' (printed face towards +z).
         background: Grey level behind the boards (0..1).
-        supersample: Sub-samples per axis at every board pixel.
+        supersample: Sub-samples per axis at pixels where the board's texture changes.
         blur_sigma: Gaussian blur [px] (0: none).
         noise_sigma: Standard deviation of additive Gaussian noise [grey levels of 255].
         rng: Random generator for the noise (required when ``noise_sigma > 0``).
