@@ -314,11 +314,14 @@ def test_page_in_headless_chromium(tmp_path: Path) -> None:
 
     marker = 'document.title = "cpc2urdf view (loaded)";'
     played = tmp_path / "played.html"
-    played.write_text(html.read_text().replace(marker, marker + " viewer.animator.play();"))
+    # Play, then hold the sweep at 1.5 s: the first joint (table_x) at q0 - 40 % of its range.
+    # (A free-running sweep screenshot depends on how long the page took to load.)
+    seek = " viewer.animator.play(); viewer.animator.pause(); viewer.animator.seek(1.5);"
+    played.write_text(html.read_text().replace(marker, marker + seek))
     moved = matplotlib.image.imread(str(screenshot_html(played, tmp_path / "moved.png", size=SIZE)))
     head_still = colour_mask(img, HEAD_RGBA)
     head_moved = colour_mask(moved[..., :3], HEAD_RGBA)
-    # After ~1 s of the sweep the table has moved: the head's pixels are elsewhere, the
+    # At 1.5 s into the sweep the table has moved: the head's pixels are elsewhere, the
     # target (not animated) is not (only the rays ending on it moved).
     assert (head_still ^ head_moved).sum() > 0.3 * head_still.sum()
     u, v = summary.pixel(TARGET, *SIZE)
