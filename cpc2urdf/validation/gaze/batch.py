@@ -3,10 +3,11 @@
 :class:`CompiledGaze` holds a head's :class:`~cpc2urdf.validation.gaze.chain.HeadChain`, its
 table of starts (seeded samples of the unknowns, each with its cyclopean centre and axis; eyes
 and prismatic joints at home) and whether it can fixate exactly (:meth:`CompiledGaze.disparity_report`).
-:meth:`CompiledGaze.solve_many` runs :func:`~cpc2urdf.validation.gaze.kernels.solve_batch` over
-every target (one thread); :meth:`CompiledGaze.solve_point` runs
-:func:`~cpc2urdf.validation.gaze.kernels.solve_single` on one target with preallocated buffers
-and an optional warm start (what :meth:`GazeSolver.solve` and tracking use).
+:meth:`CompiledGaze.solve_point` runs :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` on
+one target (one compiled call: the head and the answer as flat arrays) with an optional warm
+start (what :meth:`GazeSolver.solve` and tracking use); :meth:`CompiledGaze.solve_many` runs
+the same solve over every target in one call
+(:func:`~cpc2urdf.validation.gaze.kernels.solve_flat_many`, one thread).
 
 The policy (priority 2, in the near-null space of the pointing error): the posture nearest the
 reference readings (``q_current``, or the middle of the limits) in a weighted metric where one
@@ -19,6 +20,8 @@ the eyes stay near their middle (the cyclopean axis faces the target), the table
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,8 +33,9 @@ from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze import kernels
 from cpc2urdf.validation.gaze.chain import KIND_BINOCULAR, HeadChain
+from cpc2urdf.validation.gaze.result import STATUSES
 
-BATCH_STATUSES = ("fixated", "joint_limits", "behind", "too_close", "no_solution", "disparity")
+BATCH_STATUSES = STATUSES  # indexed by the kernels' status codes (kernels.S_FIXATED, ...)
 TABLE_SIZE = 256  # starts in the table
 TABLE_SEED = 0
 N_STARTS = 3  # starts tried per target at most (a further one only if undecided)
@@ -43,7 +47,7 @@ EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
 VERSION_WEIGHT = 1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
 NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
 FAR_TARGET = 1e15  # [m]: beyond this, a target is solved for by its direction
-AT_LIMIT = 1e-12  # [rad]/[m]: a reading this close to a limit is at it (GazeSolution.at_limit)
+THREADED_BATCH = 64  # targets from which solve_many splits the work over the cores
 
 
 @dataclass(frozen=True)
@@ -98,8 +102,6 @@ class CompiledGaze:
         self.chain = chain
         self.ch = kernels.pack(chain, version_row, VERSION_WEIGHT)
         self.version_row = version_row
-        # without the zero-version task: solve_point's fallback where a bound traps that task
-        self._ch_plain = kernels.pack(chain) if version_row is not None else None
         self.tolerance = GAZE_POINTING_TOL if tolerance is None else float(tolerance)
         self.sw = np.sqrt(chain.weight)
         self.home_u = 0.5 * (chain.lower + chain.upper)
@@ -110,25 +112,10 @@ class CompiledGaze:
             names[c] if c < len(names) else "cyclopean" for c in chain.solve_cameras.tolist()
         )
         self._table()
-        # buffers of solve_point (a CompiledGaze is not re-entrant across threads)
-        m = chain.m
         self._held = np.abs(chain.A).sum(axis=1) == 0  # chain joints that may not move
         self._held_index = chain.joint_index[self._held]
         self._still = np.abs(chain.robot_A).sum(axis=1) == 0  # robot joints the head does not move
-        self._u_ref = np.empty(m)
-        self._u_start = np.empty(m)
-        self._b = chain.b.copy()
-        self._starts = np.empty((N_STARTS + 1, m))
-        self._u_out = np.empty(m)
-        self._e_out = np.empty(self.S)
         robot = chain.robot
-        self._lo, self._hi = robot.lower.tolist(), robot.upper.tolist()
-        self._moving_index = np.flatnonzero(~self._still).tolist()
-        home_q = chain.robot_b.tolist()  # the readings of the joints the head does not move, at home
-        self._home_hits = [
-            i for i in np.flatnonzero(self._still).tolist()
-            if home_q[i] <= self._lo[i] + AT_LIMIT or home_q[i] >= self._hi[i] - AT_LIMIT
-        ]
         self.baseline = self._baseline()
         self.disparity_head = False
         self.null_rel = EXACT_NULL
@@ -136,6 +123,18 @@ class CompiledGaze:
             self.disparity_head = self._weak_direction() > 0.0
             if self.disparity_head:
                 self.null_rel = NEAR_NULL
+        # the head as two flat arrays: one solve is one call of kernels.solve_flat
+        self.F, self.I = kernels.pack_flat(
+            self.ch, chain.lower, chain.upper, self.sw, self._table_T,
+            (chain.robot_A, chain.robot_b, robot.lower, robot.upper, np.linalg.pinv(chain.robot_A)),
+            chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
+            self.tolerance, self.baseline, self.disparity_head,
+        )
+        self.n = len(robot.joint_names)
+        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        self._tgt = np.empty(6)
+        self._qin = np.empty(2 * self.n)
+        self._out = np.empty(kernels.out_size(self.n, self.S))  # (not re-entrant across threads)
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
         ws = self._ws
@@ -164,6 +163,8 @@ class CompiledGaze:
             z = R[cams][:, :, 2].sum(axis=0)
             Z[g] = z / max(float(np.linalg.norm(z)), 1e-300)
         self.table_u, self.table_o, self.table_z = U, O, Z
+        # the kernels' layout: one column per entry
+        self._table_T = (np.ascontiguousarray(U.T), np.ascontiguousarray(O.T), np.ascontiguousarray(Z.T))
 
     def _weak_direction(self) -> float:
         """The weak eigenvalue ratio of the pointing task at home with both eyes on the closest
@@ -219,21 +220,6 @@ class CompiledGaze:
         b[self._held] = q_current[self._held_index]
         return b
 
-    def limit_hits(self, q: Array, q_current: Array | None) -> list[int]:
-        """Indices (ascending) of the robot joints within :data:`AT_LIMIT` of a limit at readings
-        ``q`` (an answer of :meth:`solve_point` from ``q_current``): the moved joints checked in
-        plain floats, the others known from ``q_current`` (or home)."""
-        ql = q.tolist()
-        lo, hi = self._lo, self._hi
-        hits = [i for i in self._moving_index if ql[i] <= lo[i] + AT_LIMIT or ql[i] >= hi[i] - AT_LIMIT]
-        if q_current is None:
-            still = self._home_hits
-        else:
-            robot = self.chain.robot
-            near = (q <= robot.lower + AT_LIMIT) | (q >= robot.upper - AT_LIMIT)
-            still = np.flatnonzero(self._still & near).tolist()
-        return sorted(hits + still) if still else hits
-
     def camera_poses(self, q: Array) -> tuple[Array, Array]:
         """World rotations (C, 3, 3) and centres (C, 3) of the cameras (the named ones in order;
         a rigid pair's virtual cyclopean camera last) at robot readings ``q`` (shape (n,),
@@ -263,102 +249,64 @@ class CompiledGaze:
             out[s] = kernels.pointing_error(x, y, z)
         return out
 
-    def solve_point(
-        self, p: Array, q_current: Array | None, q_start: Array | None = None
-    ) -> tuple[Array, int, int, Array, Array, Array]:
+    def solve_point(self, p: Array, q_current: Array | None, q_start: Array | None = None) -> Array:
         """One checked target ``p`` (shape (3,), finite) from checked in-limit readings
         ``q_current`` (shape (n,) or None: the middle of the limits), warm-started at readings
-        ``q_start`` (shape (n,)) when given: ``(q, status code, iterations, errors (S,),
-        rotations (C, 3, 3), centres (C, 3))``, the last two the cameras' world poses at ``q``
-        (views of buffers the next call overwrites; ``q`` is new)."""
-        ch = self.chain
-        if q_current is None:
-            u_ref = self.home_u
-            b = ch.b
-        else:
-            u_ref = self._u_ref
-            u_ref[:] = ch.u_from_q(q_current)
-            b = self._b
-            b[self._held] = q_current[self._held_index]
-        warm = q_start is not None
-        if q_start is not None:
-            self._u_start[:] = ch.u_from_q(q_start)
-        ps = p
+        ``q_start`` (shape (n,)) when given: the output of
+        :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` (status, iterations, readings,
+        errors, misses, fixation point, vergence, limit flags; a buffer the next call
+        overwrites)."""
+        tgt = self._tgt
+        tgt[0:3] = p
         if abs(p[0]) > FAR_TARGET or abs(p[1]) > FAR_TARGET or abs(p[2]) > FAR_TARGET:
-            ps = self.targets(p[None, :])[1][0]
-        ws = self._ws
-        it, st = kernels.solve_single(
-            self.ch, ps, p, b, u_ref, self._u_start, warm, ch.lower, ch.upper, self.sw, self.table_u,
-            self.table_o, self.table_z, self.null_rel, self.tolerance, BATCH_MAX_ITERATIONS, self.disparity_head,
-            self.baseline, self._starts, self._u_out, self._e_out, ws,
-        )
-        if self._ch_plain is not None and st in (kernels.S_LIMITS, kernels.S_NO_SOLUTION):
-            # the zero-version task can hold a joint at a bound where fixation needs it inside
-            # (e.g. pan at 0 with tilt at its limit): the weighted home alone, the better answer
-            u1, e1 = self._u_out.copy(), self._e_out.copy()
-            it2, st2 = kernels.solve_single(
-                self._ch_plain, ps, p, b, u_ref, self._u_start, warm, ch.lower, ch.upper, self.sw, self.table_u,
-                self.table_o, self.table_z, self.null_rel, self.tolerance, BATCH_MAX_ITERATIONS,
-                self.disparity_head, self.baseline, self._starts, self._u_out, self._e_out, ws,
-            )
-            if st2 != kernels.S_FIXATED and float(self._e_out.max()) >= float(e1.max()):
-                self._u_out[:] = u1
-                self._e_out[:] = e1
-                kernels.fk(self.ch, self._u_out, b, *ws[:5])  # the cameras at the kept answer
-            else:
-                st = st2
-            it += it2
-        q = ch.robot_A @ self._u_out + ch.robot_b
+            tgt[3:6] = self.targets(p[None, :])[1][0]
+        else:
+            tgt[3:6] = p
+        mode = 4
         if q_current is not None:
-            q[self._still] = q_current[self._still]
-        return q, int(st), int(it), self._e_out, ws[3], ws[4]
-
-    def solve_u(
-        self, P: Array, Ps: Array, U_ref: Array, b: Array
-    ) -> tuple[Array, Array, NDArray[np.int32], NDArray[np.int8]]:
-        """The compiled loop over checked targets: ``(U, errors, iterations, status)``."""
-        N = P.shape[0]
-        m = self.chain.m
-        U = np.empty((N, m))
-        E = np.empty((N, self.S))
-        it = np.empty(N, dtype=np.int32)
-        st = np.empty(N, dtype=np.int8)
-        if N:
-            kernels.solve_batch(
-                self.ch, Ps, P, b, np.ascontiguousarray(U_ref), self.chain.lower, self.chain.upper, self.sw,
-                self.table_u, self.table_o, self.table_z, N_STARTS, self.null_rel, self.tolerance,
-                BATCH_MAX_ITERATIONS, self.disparity_head, self.baseline, U, E, it, st,
-            )
-        return U, E, it, st
+            self._qin[: self.n] = q_current
+            mode |= 1
+        if q_start is not None:
+            self._qin[self.n :] = q_start
+            mode |= 2
+        kernels.solve_flat(self.F, self.I, tgt, self._qin, mode, self._out)
+        return self._out
 
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets``, world [m]) from ``q_current`` (robot readings,
-        shape (n,) or (N, n); None: the middle of the limits): a :class:`GazeBatch`."""
+        shape (n,); None: the middle of the limits): a :class:`GazeBatch`, target by target
+        the answer of :meth:`solve_point` (one compiled call for all)."""
         P, Ps = self.targets(targets)
         N = P.shape[0]
-        ch = self.chain
-        n = len(ch.robot.joint_names)
-        b = ch.b
-        if q_current is None:
-            U_ref = np.tile(self.home_u, (N, 1))
-        else:
+        n = self.n
+        qin = np.zeros(2 * n)
+        mode = 4
+        if q_current is not None:
             Q = np.asarray(q_current, dtype=float)
             if Q.shape != (n,) or not np.all(np.isfinite(Q)):
                 raise ConfigurationError(f"q_current must be {n} finite readings, got shape {Q.shape}")
-            U_ref = np.tile(ch.u_from_q(Q), (N, 1))
-            b = self.b_for(Q)
-        U, E, it, st = self.solve_u(P, Ps, U_ref, np.ascontiguousarray(b))
-        Qout = ch.q_from_u(U)
-        if q_current is not None:
-            Qout[:, self._still] = np.asarray(q_current, dtype=float)[self._still]
+            qin[:n] = Q
+            mode |= 1
+        OUT = np.empty((N, kernels.out_size(n, self.S)))
+        T = np.ascontiguousarray(np.hstack([P, Ps]))
+        chunks = [(a, min(a + -(-N // self.threads), N)) for a in range(0, N, -(-N // self.threads))] if N else []
+        if len(chunks) > 1 and N >= THREADED_BATCH:
+            # the kernel releases the GIL: one thread per core, each on its own rows
+            with ThreadPoolExecutor(len(chunks)) as pool:
+                list(pool.map(lambda ab: kernels.solve_flat_many(
+                    self.F, self.I, T[ab[0]:ab[1]], qin, mode, OUT[ab[0]:ab[1]]), chunks))
+        elif N:
+            kernels.solve_flat_many(self.F, self.I, T, qin, mode, OUT)
+        o = 2 + n
+        st = OUT[:, 0].astype(np.int8)
         return GazeBatch(
-            q=Qout,
+            q=OUT[:, 2:o].copy(),
             reachable=st == kernels.S_FIXATED,
-            pointing_error=E,
+            pointing_error=OUT[:, o : o + self.S].copy(),
             status=st,
             status_names=BATCH_STATUSES,
-            iterations=it,
-            joint_names=ch.robot.joint_names,
+            iterations=OUT[:, 1].astype(np.int32),
+            joint_names=self.chain.robot.joint_names,
             axes=self.axes,
             tolerance=self.tolerance,
         )

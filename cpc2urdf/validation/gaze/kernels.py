@@ -34,9 +34,11 @@ points outward are held (active set); the step is capped and projected on the bo
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.chain import HeadChain
@@ -45,15 +47,27 @@ MIN_TARGET_DISTANCE = 1e-9  # [m]: closer to a camera centre, a target has no di
 MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
 BACKTRACKS = 10  # step halvings per iteration
 POLISH_ITERATIONS = 12  # iterations of the polish (pointing alone) after the policy phase
+PROBE_ITERATIONS = 8  # policy iterations a further start gets before it must beat the best answer
+STALLED = 1e-12  # [-]: a polish step that lowers |r|^2 by less than this fraction ends the polish
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
 POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
 VERSION_POLISH = 1e-4  # [rad]: the polish zeroes a version this small (larger: a bound holds it)
 EXACT_RESIDUAL = 1e-30  # [-]: |r|^2 below this is exact (pointing error ~1e-15 rad)
-AT_BOUND = 1e-12  # [rad]/[m]: an unknown this close to a bound is at it
+POLISHED = 1e-24  # [-]: |r|^2 at which the polish stops (pointing error ~1e-12 rad, 1/1000 of the tolerance)
+VERSION_SETTLED = 1e-13  # [rad]: a version this small is zero for the polish
+AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a limit) is at it
 
-# status codes of the compiled solve (names in result.py's BATCH_STATUSES)
+# every kernel: cached across runs; IEEE division (no zero-division checks in the loops: every
+# division is guarded where it matters); the GIL released (a batch is split over threads, one
+# per core)
+kernel = njit(cache=True, error_model="numpy", nogil=True)
+# the small ones are inlined into their callers: a call passing the chain's tuple of arrays
+# costs ~100 ns, as much as the arithmetic of a residual
+inline_kernel = njit(cache=True, error_model="numpy", nogil=True, inline="always")
+
+# status codes of the compiled solve (indices into result.py's STATUSES)
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
 
 
@@ -76,41 +90,54 @@ def pack(chain: HeadChain, version_row: Array | None = None, version_weight: flo
         chain.cam_parent,
         chain.cam_R,
         chain.cam_t,
-        chain.anc,
+        np.ascontiguousarray(chain.anc, dtype=np.int64),
         chain.solve_cameras,
         c,
         vw,
     )
 
 
-@njit(cache=True)
+@kernel
 def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
     """World rotation ``JR`` (K, 3, 3), origin ``Jp`` (K, 3) and axis ``Ja`` (K, 3) of every
     chain joint, and rotation ``CR`` (C, 3, 3) and centre ``Co`` (C, 3) of every camera, at
-    unknowns ``u`` (chain readings ``A u + b``; ``b`` given per solve)."""
-    parent, jtype, axis, R, t, A, _, cam_parent, cam_R, cam_t = ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9]
+    unknowns ``u`` (chain readings ``A u + b``; ``b`` given per solve). Written out in scalars
+    (3x3 products unrolled, no temporaries): the trigonometry is most of its cost."""
+    parent, jtype, axis, R, t, A, cam_parent, cam_R, cam_t = ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[7], ch[8], ch[9]
     K = parent.shape[0]
     m = u.shape[0]
-    M0 = np.empty((3, 3))
     for k in range(K):
         q = b[k]
         for v in range(m):
             q += A[k, v] * u[v]
         pk = parent[k]
-        # T0 = T_world_parent * placement
-        for i in range(3):
-            for j in range(3):
-                s = 0.0
-                for l in range(3):
-                    s += (JR[pk, i, l] if pk >= 0 else (1.0 if i == l else 0.0)) * R[k, l, j]
-                M0[i, j] = s
-            s = t[k, 0] * (JR[pk, i, 0] if pk >= 0 else (1.0 if i == 0 else 0.0))
-            s += t[k, 1] * (JR[pk, i, 1] if pk >= 0 else (1.0 if i == 1 else 0.0))
-            s += t[k, 2] * (JR[pk, i, 2] if pk >= 0 else (1.0 if i == 2 else 0.0))
-            Jp[k, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
+        if pk >= 0:
+            p00, p01, p02 = JR[pk, 0, 0], JR[pk, 0, 1], JR[pk, 0, 2]
+            p10, p11, p12 = JR[pk, 1, 0], JR[pk, 1, 1], JR[pk, 1, 2]
+            p20, p21, p22 = JR[pk, 2, 0], JR[pk, 2, 1], JR[pk, 2, 2]
+            ox, oy, oz = Jp[pk, 0], Jp[pk, 1], Jp[pk, 2]
+        else:
+            p00, p01, p02, p10, p11, p12, p20, p21, p22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+            ox, oy, oz = 0.0, 0.0, 0.0
+        tx, ty, tz = t[k, 0], t[k, 1], t[k, 2]
+        px = ox + p00 * tx + p01 * ty + p02 * tz
+        py = oy + p10 * tx + p11 * ty + p12 * tz
+        pz = oz + p20 * tx + p21 * ty + p22 * tz
+        # M0 = Rparent * R[k]
+        q00 = p00 * R[k, 0, 0] + p01 * R[k, 1, 0] + p02 * R[k, 2, 0]
+        q01 = p00 * R[k, 0, 1] + p01 * R[k, 1, 1] + p02 * R[k, 2, 1]
+        q02 = p00 * R[k, 0, 2] + p01 * R[k, 1, 2] + p02 * R[k, 2, 2]
+        q10 = p10 * R[k, 0, 0] + p11 * R[k, 1, 0] + p12 * R[k, 2, 0]
+        q11 = p10 * R[k, 0, 1] + p11 * R[k, 1, 1] + p12 * R[k, 2, 1]
+        q12 = p10 * R[k, 0, 2] + p11 * R[k, 1, 2] + p12 * R[k, 2, 2]
+        q20 = p20 * R[k, 0, 0] + p21 * R[k, 1, 0] + p22 * R[k, 2, 0]
+        q21 = p20 * R[k, 0, 1] + p21 * R[k, 1, 1] + p22 * R[k, 2, 1]
+        q22 = p20 * R[k, 0, 2] + p21 * R[k, 1, 2] + p22 * R[k, 2, 2]
         ax, ay, az = axis[k, 0], axis[k, 1], axis[k, 2]
-        for i in range(3):
-            Ja[k, i] = M0[i, 0] * ax + M0[i, 1] * ay + M0[i, 2] * az
+        wx = q00 * ax + q01 * ay + q02 * az
+        wy = q10 * ax + q11 * ay + q12 * az
+        wz = q20 * ax + q21 * ay + q22 * az
+        Ja[k, 0], Ja[k, 1], Ja[k, 2] = wx, wy, wz
         if jtype[k] == 0:
             c, s = math.cos(q), math.sin(q)
             C1 = 1.0 - c
@@ -123,16 +150,23 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
             r20 = az * ax * C1 - ay * s
             r21 = az * ay * C1 + ax * s
             r22 = c + az * az * C1
-            for i in range(3):
-                a0, a1, a2 = M0[i, 0], M0[i, 1], M0[i, 2]
-                JR[k, i, 0] = a0 * r00 + a1 * r10 + a2 * r20
-                JR[k, i, 1] = a0 * r01 + a1 * r11 + a2 * r21
-                JR[k, i, 2] = a0 * r02 + a1 * r12 + a2 * r22
+            JR[k, 0, 0] = q00 * r00 + q01 * r10 + q02 * r20
+            JR[k, 0, 1] = q00 * r01 + q01 * r11 + q02 * r21
+            JR[k, 0, 2] = q00 * r02 + q01 * r12 + q02 * r22
+            JR[k, 1, 0] = q10 * r00 + q11 * r10 + q12 * r20
+            JR[k, 1, 1] = q10 * r01 + q11 * r11 + q12 * r21
+            JR[k, 1, 2] = q10 * r02 + q11 * r12 + q12 * r22
+            JR[k, 2, 0] = q20 * r00 + q21 * r10 + q22 * r20
+            JR[k, 2, 1] = q20 * r01 + q21 * r11 + q22 * r21
+            JR[k, 2, 2] = q20 * r02 + q21 * r12 + q22 * r22
         else:
-            for i in range(3):
-                for j in range(3):
-                    JR[k, i, j] = M0[i, j]
-                Jp[k, i] += q * Ja[k, i]
+            JR[k, 0, 0], JR[k, 0, 1], JR[k, 0, 2] = q00, q01, q02
+            JR[k, 1, 0], JR[k, 1, 1], JR[k, 1, 2] = q10, q11, q12
+            JR[k, 2, 0], JR[k, 2, 1], JR[k, 2, 2] = q20, q21, q22
+            px += q * wx
+            py += q * wy
+            pz += q * wz
+        Jp[k, 0], Jp[k, 1], Jp[k, 2] = px, py, pz
     C = cam_parent.shape[0]
     for c in range(C):
         pk = cam_parent[c]
@@ -148,7 +182,7 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
             Co[c, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
 
 
-@njit(cache=True)
+@inline_kernel
 def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
     """World Jacobian ``Jc`` (6, K) of camera ``c`` by the chain readings: rows (v, w)."""
     jtype, anc = ch[1], ch[10]
@@ -170,13 +204,20 @@ def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
             Jc[3, k], Jc[4, k], Jc[5, k] = 0.0, 0.0, 0.0
 
 
-@njit(cache=True)
+@kernel
 def residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 4): ``p_cam`` and ``|p_cam|``. Returns ``|r|^2``."""
-    A, solve_cams = ch[5], ch[11]
     fk(ch, u, b, JR, Jp, Ja, CR, Co)
+    return residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
+
+
+@inline_kernel
+def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
+    """:func:`residual` on the kinematics already in ``JR``, ``Jp``, ``Ja``, ``CR``, ``Co`` (the
+    last :func:`fk`): an accepted trial step's configuration is not evaluated twice."""
+    A, solve_cams = ch[5], ch[11]
     S = solve_cams.shape[0]
     K = A.shape[0]
     m = A.shape[1]
@@ -223,7 +264,7 @@ def residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
     return rr
 
 
-@njit(cache=True)
+@kernel
 def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
     """Eigen-decomposition of the symmetric ``H[:f, :f]`` (destroyed) by cyclic Jacobi
     rotations: ``lam[:f]`` ascending, eigenvectors in the columns of ``V[:f, :f]``. Small ``f``
@@ -272,7 +313,7 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
             j -= 1
 
 
-@njit(cache=True)
+@kernel
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2)."""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp = ws
@@ -284,6 +325,12 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
     rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
     it = 0
     while it < max_it:
+        if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
+            ver = -vw_ref
+            for v in range(m):
+                ver += vc[v] * u[v]
+            if vw_w == 0.0 or abs(ver) <= VERSION_SETTLED or abs(ver) > VERSION_POLISH:
+                break
         it += 1
         # gradient in scaled unknowns: g = J_x^T r, J_x = J / sw
         for v in range(m):
@@ -426,13 +473,16 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
         for v in range(m):
             moved = max(moved, abs(trial[v] - u[v]))
             u[v] = trial[v]
-        rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
+        rr_old = rr
+        rr = residual_at_fk(ch, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)  # the FK of the trial
         if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
             break
+        if gain == 0.0 and vmove == 0.0 and rr > rr_old * (1.0 - STALLED):
+            break  # a residual that cannot be removed (a bound, disparity): polished to the floor
     return it, rr
 
 
-@njit(cache=True)
+@kernel
 def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
     return (
         np.empty((K, 3, 3)),
@@ -459,7 +509,7 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
     )
 
 
-@njit(cache=True)
+@kernel
 def pointing_error(x, y, z):  # type: ignore[no-untyped-def]
     """Angle [rad] between the optical axis and a target at ``(x, y, z)`` in the camera frame
     (scaled first: no overflow for any finite coordinates); pi on the centre."""
@@ -472,7 +522,7 @@ def pointing_error(x, y, z):  # type: ignore[no-untyped-def]
     return math.atan2(math.sqrt(x * x + y * y), z)
 
 
-@njit(cache=True)
+@kernel
 def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it, disparity_head,
               baseline, u_out, err_out, ws):  # type: ignore[no-untyped-def]
     """One target: the policy phase, then pointing alone, from the best start of ``starts``
@@ -489,7 +539,21 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     for k in range(starts.shape[0]):
         for v in range(m):
             u[v] = starts[k, v]
-        it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws)
+        if k == 0:
+            it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws)
+        else:
+            # a further start is probed first: it goes on only if it already does better than
+            # the best answer so far (an unreachable target costs a few iterations per start,
+            # not a full solve each)
+            it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
+                               PROBE_ITERATIONS, ws)
+            if it1 == PROBE_ITERATIONS:
+                if rr >= best_rr:
+                    total += it1
+                    continue
+                it1b, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
+                                    max_it - PROBE_ITERATIONS, ws)
+                it1 += it1b
         # polish: pointing alone (same near-null space), to the rounding floor
         it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, POLISH_ITERATIONS, ws)
         total += it1 + it2
@@ -549,14 +613,16 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     return total, S_NO_SOLUTION
 
 
-@njit(cache=True)
+@kernel
 def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws):  # type: ignore[no-untyped-def]
     """The ``n_best`` starts (rows of ``out``) that best face target ``p``: ``u_ref`` and the
-    table entries (unknowns ``table_u`` (G, m), cyclopean centre ``table_o`` and axis
-    ``table_z`` (G, 3), world) ranked by the cosine of the angle between their axis and the
-    target direction, less a small cost of their distance (scaled) from ``u_ref``."""
+    table entries (unknowns ``table_u`` (m, G), cyclopean centre ``table_o`` and axis
+    ``table_z`` (3, G), world; one column per entry) ranked by the cosine of the angle between
+    their axis and the target direction, less a small cost of their distance (scaled) from
+    ``u_ref``. The scores are computed column-wise first (loops the compiler vectorises), then
+    the best ``n_best`` picked."""
     JR, Jp, Ja, CR, Co = ws[0], ws[1], ws[2], ws[3], ws[4]
-    G, m = table_u.shape
+    m, G = table_u.shape
     solve_cams = ch[11]
     S = solve_cams.shape[0]
     fk(ch, u_ref, b, JR, Jp, Ja, CR, Co)
@@ -569,29 +635,28 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
         zx += CR[c, 0, 2]
         zy += CR[c, 1, 2]
         zz += CR[c, 2, 2]
-    top_s = np.full(n_best, -np.inf)  # the n_best best scores so far, best first
-    top_g = np.full(n_best, G)
     # the table's axes are unit vectors and targets are within FAR_TARGET (1e15 m): |p - o|^2
     # cannot overflow, so no scaling in the loop (the start at u_ref is g = G, scored last)
     px, py, pz = p[0], p[1], p[2]
+    score = np.empty(G + 1)
+    for g in range(G):
+        dx, dy, dz = px - table_o[0, g], py - table_o[1, g], pz - table_o[2, g]
+        nd2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
+        score[g] = (dx * table_z[0, g] + dy * table_z[1, g] + dz * table_z[2, g]) / math.sqrt(nd2)
+    for v in range(m):
+        w = 0.01 * sw[v] * sw[v]
+        r = u_ref[v]
+        for g in range(G):
+            d = table_u[v, g] - r
+            score[g] -= w * d * d
     nzr = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
-    zx, zy, zz = zx / nzr, zy / nzr, zz / nzr
-    zx_ref, zy_ref, zz_ref, ox_ref, oy_ref, oz_ref = zx, zy, zz, ox, oy, oz
+    dx, dy, dz = px - ox, py - oy, pz - oz
+    nd2 = dx * dx + dy * dy + dz * dz
+    score[G] = (dx * zx + dy * zy + dz * zz) / nzr / math.sqrt(nd2) if nd2 > 0.0 else 0.0
+    top_s = np.full(n_best, -np.inf)  # the n_best best scores so far, best first
+    top_g = np.full(n_best, G)
     for g in range(G + 1):
-        if g == G:
-            ox, oy, oz, zx, zy, zz = ox_ref, oy_ref, oz_ref, zx_ref, zy_ref, zz_ref
-        else:
-            ox, oy, oz = table_o[g, 0], table_o[g, 1], table_o[g, 2]
-            zx, zy, zz = table_z[g, 0], table_z[g, 1], table_z[g, 2]
-        dx, dy, dz = px - ox, py - oy, pz - oz
-        nd2 = dx * dx + dy * dy + dz * dz
-        cosang = (dx * zx + dy * zy + dz * zz) / math.sqrt(nd2) if nd2 > 0.0 else 0.0
-        cost = 0.0
-        if g < G:
-            for v in range(m):
-                d = sw[v] * (table_u[g, v] - u_ref[v])
-                cost += d * d
-        sc = cosang - 0.01 * cost
+        sc = score[g]
         if sc > top_s[n_best - 1]:
             k = n_best - 1
             while k > 0 and top_s[k - 1] < sc:
@@ -603,39 +668,10 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
     for k in range(n_best):
         g = top_g[k]
         for v in range(m):
-            out[k, v] = u_ref[v] if g == G else table_u[g, v]
+            out[k, v] = u_ref[v] if g == G else table_u[v, g]
 
 
-@njit(cache=True)
-def solve_batch(ch, P_solve, P, b, U_ref, lower, upper, sw, table_u, table_o, table_z, n_starts, null_rel, tol,
-                max_it, disparity_head, baseline, U_out, E_out, it_out, st_out):  # type: ignore[no-untyped-def]
-    """:func:`solve_one` for every target (rows of ``P``), in one thread, one workspace.
-
-    Serial on purpose: the machine this is measured on has 2 cores (``prange`` bought at most
-    2x) and numba's parallel kernel took ~105 s of a 120 s cold compile, paid by every fresh
-    clone (CI); a serial loop compiles in a few seconds."""
-    N = P.shape[0]
-    K = ch[0].shape[0]
-    C = ch[7].shape[0]
-    S = ch[11].shape[0]
-    m = lower.shape[0]
-    ws = _workspace(K, C, S, m)
-    starts = np.empty((n_starts, m))
-    u = np.empty(m)
-    e = np.empty(S)
-    for i in range(N):
-        best_starts(ch, P_solve[i], b, U_ref[i], sw, table_u, table_o, table_z, n_starts, starts, ws)
-        it, st = solve_one(ch, P_solve[i], P[i], b, U_ref[i], lower, upper, sw, starts, null_rel, tol, max_it,
-                           disparity_head, baseline, u, e, ws)
-        for v in range(m):
-            U_out[i, v] = u[v]
-        for s in range(S):
-            E_out[i, s] = e[s]
-        it_out[i] = it
-        st_out[i] = st
-
-
-@njit(cache=True)
+@kernel
 def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
                  tol, max_it, disparity_head, baseline, starts, u_out, err_out, ws):  # type: ignore[no-untyped-def]
     """:func:`solve_one` for one target with preallocated buffers (``starts`` (n_starts + 1, m)):
@@ -656,6 +692,259 @@ def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, tabl
                      disparity_head, baseline, u_out, err_out, ws)
 
 
+
+# ---- one call per solve from Python: the head and its workspace as flat arrays ----------------
+# numba's dispatcher types every argument of a call: the chain's and the workspace's tuples (35
+# arrays) cost ~5 us a call, more than the solve's arithmetic. The entry below takes the head as
+# one float and one int array (:func:`pack_flat`), views them (:func:`_unpack`, same layout)
+# and writes the whole answer (readings, errors, misses, fixation point, vergence, limits) into
+# one output array.
+I_HEADER = 9  # K, C, S, m, G, n, starts per target, iteration cap, disparity head (0/1)
+F_SCALARS = 4  # null_rel, tolerance, baseline, has a zero-version task (0/1)
+
+
+def pack_flat(
+    ch: tuple,  # type: ignore[type-arg]
+    lower: Array,
+    upper: Array,
+    sw: Array,
+    table: tuple[Array, Array, Array],
+    robot: tuple[Array, Array, Array, Array, NDArray[np.floating[Any]]],
+    joint_index: NDArray[np.integer[Any]],
+    held: NDArray[np.bool_],
+    still: NDArray[np.bool_],
+    n_starts: int,
+    max_it: int,
+    null_rel: float,
+    tol: float,
+    baseline: float,
+    disparity_head: bool,
+) -> tuple[Array, Array]:
+    """The head as ``(F, I)`` for :func:`solve_flat`: the chain's tuple ``ch`` (:func:`pack`),
+    the unknowns' bounds and scale ``sw``, the start ``table`` (unknowns (m, G), centres and
+    axes (3, G)), the
+    ``robot`` map (``robot_A``, ``robot_b``, readings' lower and upper limits, ``pinv`` of
+    ``robot_A``), per chain joint its robot index and whether it is held at its reading, per
+    robot joint whether the head leaves it still, and the solve's constants."""
+    parent, jtype, axis, R, t, A, b, cam_parent, cam_R, cam_t, anc, solve_cams, c, vw = ch
+    table_u, table_o, table_z = table
+    robot_A, robot_b, robot_lo, robot_hi, pinv = robot
+    K, C, S, m, G, n = len(parent), len(cam_parent), len(solve_cams), len(lower), table_u.shape[1], len(robot_b)
+    floats = [axis, R, t, A, b, cam_R, cam_t, c, vw, lower, upper, sw, 0.5 * (lower + upper), table_u, table_o,
+              table_z, robot_A, robot_b, robot_lo, robot_hi, pinv,
+              np.array([null_rel, tol, baseline, 1.0 if vw[0] > 0.0 else 0.0])]
+    ints = [np.array([K, C, S, m, G, n, n_starts, max_it, int(bool(disparity_head))]), parent, jtype, cam_parent,
+            anc, solve_cams, joint_index, held, still]
+    F = np.concatenate([np.asarray(x, dtype=float).ravel() for x in floats])
+    I = np.concatenate([np.asarray(x).astype(np.int64).ravel() for x in ints])
+    return np.ascontiguousarray(F), np.ascontiguousarray(I)
+
+
+@inline_kernel
+def _unpack(F, I):  # type: ignore[no-untyped-def]
+    """Views of :func:`pack_flat`'s arrays: ``(ch, lower, upper, sw, home, table_u, table_o,
+    table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars, joint_index, held, still)``."""
+    K, C, S, m, G, n = I[0], I[1], I[2], I[3], I[4], I[5]
+    o = I_HEADER
+    parent = I[o:o + K]
+    o += K
+    jtype = I[o:o + K]
+    o += K
+    cam_parent = I[o:o + C]
+    o += C
+    anc = I[o:o + C * K].reshape((C, K))
+    o += C * K
+    solve_cams = I[o:o + S]
+    o += S
+    joint_index = I[o:o + K]
+    o += K
+    held = I[o:o + K]
+    o += K
+    still = I[o:o + n]
+    f = 0
+    axis = F[f:f + 3 * K].reshape((K, 3))
+    f += 3 * K
+    R = F[f:f + 9 * K].reshape((K, 3, 3))
+    f += 9 * K
+    t = F[f:f + 3 * K].reshape((K, 3))
+    f += 3 * K
+    A = F[f:f + K * m].reshape((K, m))
+    f += K * m
+    b = F[f:f + K]
+    f += K
+    cam_R = F[f:f + 9 * C].reshape((C, 3, 3))
+    f += 9 * C
+    cam_t = F[f:f + 3 * C].reshape((C, 3))
+    f += 3 * C
+    c = F[f:f + m]
+    f += m
+    vw = F[f:f + 2]
+    f += 2
+    lower = F[f:f + m]
+    f += m
+    upper = F[f:f + m]
+    f += m
+    sw = F[f:f + m]
+    f += m
+    home = F[f:f + m]
+    f += m
+    table_u = F[f:f + G * m].reshape((m, G))
+    f += G * m
+    table_o = F[f:f + 3 * G].reshape((3, G))
+    f += 3 * G
+    table_z = F[f:f + 3 * G].reshape((3, G))
+    f += 3 * G
+    robot_A = F[f:f + n * m].reshape((n, m))
+    f += n * m
+    robot_b = F[f:f + n]
+    f += n
+    robot_lo = F[f:f + n]
+    f += n
+    robot_hi = F[f:f + n]
+    f += n
+    pinv = F[f:f + m * n].reshape((m, n))
+    f += m * n
+    scalars = F[f:f + F_SCALARS]
+    ch = (parent, jtype, axis, R, t, A, b, cam_parent, cam_R, cam_t, anc, solve_cams, c, vw)
+    return (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv,
+            scalars, joint_index, held, still)
+
+
+def out_size(n: int, S: int) -> int:
+    """Length of :func:`solve_flat`'s output for ``n`` robot joints and ``S`` solved axes."""
+    return 2 + n + 2 * S + 4 + n
+
+
+@inline_kernel
+def _u_of_q(q, robot_b, pinv, lower, upper, u):  # type: ignore[no-untyped-def]
+    """Unknowns ``u`` closest to robot readings ``q`` in least squares, clipped to the bounds
+    (:meth:`~cpc2urdf.validation.gaze.chain.HeadChain.u_from_q`)."""
+    m, n = pinv.shape
+    for v in range(m):
+        s = 0.0
+        for i in range(n):
+            s += pinv[v, i] * (q[i] - robot_b[i])
+        u[v] = min(max(s, lower[v]), upper[v])
+
+
+@kernel
+def _solve_into(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
+    """One target, the whole answer in one call. ``tgt`` (6,): the target, then the point the
+    iteration aims at (a far target pulled in); ``qin`` (2 n,): ``q_current`` then ``q_start``;
+    ``mode``: bit 1 ``q_current`` given, bit 2 warm start at ``q_start``, bit 4 the fallback
+    without the zero-version task when the first answer is at a limit or has no solution.
+
+    ``out`` (:func:`out_size`): status, iterations, readings (n), pointing errors (S), miss
+    distances (S), fixation point (3; NaN when the two axes are parallel or S = 1), vergence,
+    per robot joint 1.0 at a limit (n)."""
+    (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars,
+     joint_index, held, still) = _unpack(F, I)
+    K, C, S, m, n, n_starts, max_it = I[0], I[1], I[2], I[3], I[5], I[6], I[7]
+    disparity_head = I[8] != 0
+    null_rel, tol, baseline = scalars[0], scalars[1], scalars[2]
+    ws = _workspace(K, C, S, m)
+    p = tgt[0:3]
+    ps = tgt[3:6]
+    has_qc = (mode & 1) != 0
+    warm = (mode & 2) != 0
+    b = ch[6].copy()
+    u_ref = home.copy()
+    if has_qc:
+        _u_of_q(qin[0:n], robot_b, pinv, lower, upper, u_ref)
+        for k in range(K):
+            if held[k] != 0:
+                b[k] = qin[joint_index[k]]
+    u_start = np.empty(m)
+    if warm:
+        _u_of_q(qin[n:2 * n], robot_b, pinv, lower, upper, u_start)
+    starts = np.empty((n_starts + 1, m))
+    u_out = np.empty(m)
+    e_out = np.empty(S)
+    it, st = solve_single(ch, ps, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
+                          tol, max_it, disparity_head, baseline, starts, u_out, e_out, ws)
+    if (mode & 4) != 0 and scalars[3] > 0.0 and (st == S_LIMITS or st == S_NO_SOLUTION):
+        # the zero-version task can hold a joint at a bound where fixation needs it inside (e.g.
+        # pan at 0 with tilt at its limit): the weighted home alone, the better answer
+        u1 = u_out.copy()
+        e1 = e_out.copy()
+        plain = (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
+                 np.zeros(2))
+        it2, st2 = solve_single(plain, ps, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z,
+                                null_rel, tol, max_it, disparity_head, baseline, starts, u_out, e_out, ws)
+        if st2 != S_FIXATED and e_out.max() >= e1.max():
+            u_out[:] = u1
+            e_out[:] = e1
+            fk(ch, u_out, b, ws[0], ws[1], ws[2], ws[3], ws[4])  # the cameras at the kept answer
+        else:
+            st = st2
+        it += it2
+    # the report, on the cameras at u_out (ws[3], ws[4])
+    out[0] = st
+    out[1] = it
+    q = out[2:2 + n]
+    for i in range(n):
+        s = robot_b[i]
+        for v in range(m):
+            s += robot_A[i, v] * u_out[v]
+        q[i] = qin[i] if (has_qc and still[i] != 0) else s
+    CR, Co = ws[3], ws[4]
+    solve_cams = ch[11]
+    o = 2 + n
+    for s_ in range(S):
+        cam = solve_cams[s_]
+        out[o + s_] = e_out[s_]
+        dx, dy, dz = p[0] - Co[cam, 0], p[1] - Co[cam, 1], p[2] - Co[cam, 2]
+        big = max(abs(dx), abs(dy), abs(dz))
+        f = math.ldexp(1.0, -math.frexp(big)[1]) if big > 1e150 else 1.0
+        dx, dy, dz = dx * f, dy * f, dz * f
+        x = CR[cam, 0, 0] * dx + CR[cam, 1, 0] * dy + CR[cam, 2, 0] * dz
+        y = CR[cam, 0, 1] * dx + CR[cam, 1, 1] * dy + CR[cam, 2, 1] * dz
+        z = CR[cam, 0, 2] * dx + CR[cam, 1, 2] * dy + CR[cam, 2, 2] * dz
+        # the lateral offset in front of the camera, the distance behind it
+        out[o + S + s_] = (math.sqrt(x * x + y * y) if z >= 0 else math.sqrt(x * x + y * y + z * z)) / f
+    o += 2 * S
+    out[o], out[o + 1], out[o + 2], out[o + 3] = np.nan, np.nan, np.nan, 0.0
+    if S == 2:
+        c0, c1 = solve_cams[0], solve_cams[1]
+        d0x, d0y, d0z = CR[c0, 0, 2], CR[c0, 1, 2], CR[c0, 2, 2]
+        d1x, d1y, d1z = CR[c1, 0, 2], CR[c1, 1, 2], CR[c1, 2, 2]
+        wx, wy, wz = Co[c0, 0] - Co[c1, 0], Co[c0, 1] - Co[c1, 1], Co[c0, 2] - Co[c1, 2]
+        aa = d0x * d0x + d0y * d0y + d0z * d0z
+        bb = d0x * d1x + d0y * d1y + d0z * d1z
+        cc = d1x * d1x + d1y * d1y + d1z * d1z
+        den = aa * cc - bb * bb
+        if den >= 1e-14:  # the midpoint of the closest points of the two axes
+            dd = d0x * wx + d0y * wy + d0z * wz
+            ee = d1x * wx + d1y * wy + d1z * wz
+            s0 = (bb * ee - cc * dd) / den
+            t0 = (aa * ee - bb * dd) / den
+            out[o] = 0.5 * (Co[c0, 0] + s0 * d0x + Co[c1, 0] + t0 * d1x)
+            out[o + 1] = 0.5 * (Co[c0, 1] + s0 * d0y + Co[c1, 1] + t0 * d1y)
+            out[o + 2] = 0.5 * (Co[c0, 2] + s0 * d0z + Co[c1, 2] + t0 * d1z)
+        out[o + 3] = math.acos(max(-1.0, min(1.0, bb)))
+    o += 4
+    for i in range(n):
+        out[o + i] = 1.0 if (q[i] <= robot_lo[i] + AT_BOUND or q[i] >= robot_hi[i] - AT_BOUND) else 0.0
+
+
+
+@kernel
+def solve_flat(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
+    """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
+    _solve_into(F, I, tgt, qin, mode, out)
+
+
+@kernel
+def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
+    """:func:`_solve_into` for every row of ``T`` (N, 6), answers in the rows of ``OUT``:
+    ``solve_many``'s answers are ``solve``'s, target by target.
+
+    Serial, without the GIL: ``solve_many`` runs one call per core on its share of the rows
+    from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
+    by every fresh clone; threads cost nothing to compile.)"""
+    for i in range(T.shape[0]):
+        _solve_into(F, I, T[i], qin, mode, OUT[i])
+
 def workspace(chain: HeadChain) -> tuple[Array, ...]:
     """Scratch arrays of one solve on ``chain``."""
     return _workspace(len(chain.parent), len(chain.cam_parent), len(chain.solve_cameras), chain.m)  # type: ignore[no-any-return]
@@ -667,6 +956,8 @@ __all__ = [
     "EXACT_RESIDUAL",
     "MAX_STEP",
     "MIN_TARGET_DISTANCE",
+    "POLISHED",
+    "PROBE_ITERATIONS",
     "POLISH_ITERATIONS",
     "SECONDARY_GAIN",
     "STEP_TOL",
@@ -679,10 +970,14 @@ __all__ = [
     "best_starts",
     "camera_jacobian",
     "fk",
+    "out_size",
+    "pack_flat",
+    "solve_flat",
+    "solve_flat_many",
     "pack",
     "pointing_error",
     "residual",
-    "solve_batch",
+    "residual_at_fk",
     "solve_one",
     "solve_single",
     "workspace",

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.batch import BATCH_STATUSES, CompiledGaze, GazeBatch
+from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
     KIND_BINOCULAR,
     Coupling,
@@ -56,7 +56,7 @@ from cpc2urdf.validation.gaze.policies import (
 )
 from cpc2urdf.validation.gaze.result import (
     GazeSolution,
-    solution_from_compiled,
+    solution_from_flat,
     solution_from_state,
 )
 from cpc2urdf.validation.gaze.tracking import SaccadeRule, Trajectory, track
@@ -200,13 +200,15 @@ class GazeSolver:
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets`` (N, 3), world [m]) through the compiled loop, from
         ``q_current`` (shape (n,); None: the middle of the limits); joints the head may not move
-        stay at ``q_current``. See :class:`~cpc2urdf.validation.gaze.batch.GazeBatch`.
+        stay at ``q_current``. Target by target the answer of :meth:`solve` with its default
+        (cyclopean) policy: on the IIS-head the table stays. See
+        :class:`~cpc2urdf.validation.gaze.batch.GazeBatch`.
 
         Raises:
             ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
         """
         qc = self.check_q(q_current)
-        return (self._posture or self.compiled).solve_many(targets, qc)
+        return (self._posture or self._version or self.compiled).solve_many(targets, qc)
 
     def check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
         """Readings ``q_current`` as an in-limit array of shape (n,), or None
@@ -343,13 +345,8 @@ class GazeSolver:
             qs = np.asarray(q_start, dtype=float)
             if qs.shape != (self.n,) or not np.all(np.isfinite(qs)):
                 raise ConfigurationError(f"q_start must be {self.n} finite readings, got shape {qs.shape}")
-        q, st, it, err, R, o = comp.solve_point(p, qc, qs)
-        cams = comp.chain.solve_cameras.tolist()
-        poses = [(R[c], o[c]) for c in cams]
-        return solution_from_compiled(
-            self.joint_names, p, q, poses, err, BATCH_STATUSES[st], it, policy,
-            comp.limit_hits(q, qc),
-        )
+        out = comp.solve_point(p, qc, qs)
+        return solution_from_flat(self.joint_names, p, out, comp.S, policy)
 
     def _solve_python(
         self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
