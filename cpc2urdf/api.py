@@ -340,6 +340,7 @@ def gaze_solver(
     coupling: Coupling | None = None,
     rigid: str = "cyclopean",
     tolerance: float | None = None,
+    focal_px: float | None = None,
 ) -> GazeSolver:
     """A gaze solver (``cpc2urdf gaze``) for a model, model file, robot spec, shipped robot or
     URDF path, pointing the optical axes of ``cameras``.
@@ -357,10 +358,13 @@ def gaze_solver(
             or the name of the master camera.
         tolerance: Pointing error [rad] below which a target counts as fixated (default
             :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL`).
+        focal_px: Instead of ``tolerance``, the cameras' focal length [px] when known: a target
+            counts as fixated within :data:`cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` (0.1) of a
+            pixel, ``atan(0.1 / focal_px)`` rad.
     """
     ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
     return solver_for(ref, cameras, viewing_distance=viewing_distance, joints=joints,
-                      coupling=coupling, rigid=rigid, tolerance=tolerance)
+                      coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px)
 
 
 def reachable_region(

@@ -59,6 +59,9 @@ def test_unreachable_exit_1(capsys):
         ["gaze", "iis_head", "--target", "1", "2", "3", "--policy", "nope"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--cameras", "camera_left_optical", "nope"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--viewing-distance", "-1"],
+        ["gaze", "iis_head", "--target", "1", "2", "3", "--focal-px", "0"],
+        ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "nan"],
+        ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "1e-3", "--focal-px", "500"],
     ],
 )
 def test_bad_input_exit_2(argv, capsys):

@@ -16,9 +16,10 @@ from gaze_heads import HEAD_SHAPES, head_case, pointing_errors, yourdfpy_axes
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head
-from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
-from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels
+from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels, solver_for
+from cpc2urdf.validation.gaze.solver import pointing_tolerance
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 N_TARGETS = 200
@@ -213,3 +214,31 @@ def test_demo_head_disparity(demo_run):
     _faces_ahead(cal, GazeSolver.from_model(load_model("iis_head")), "demo")
     rep = cal.disparity_report(60)
     assert not rep["exact"] and rep["median_rad"] > GAZE_POINTING_TOL
+
+
+def test_tolerance_from_the_cameras_focal_length():
+    """With the focal length known, a target counts as fixated within a tenth of a pixel: on a
+    calibrated head whose disparity leaves ~1e-3 rad, a coarse camera (tolerance above that
+    residual) calls its answers fixated, a fine one (below) names the disparity; the readings
+    are the same either way."""
+    assert pointing_tolerance() == GAZE_POINTING_TOL
+    assert pointing_tolerance(focal_px=500.0) == pytest.approx(math.atan(GAZE_PIXEL_FRACTION / 500.0))
+    assert pointing_tolerance(2e-3) == 2e-3
+    with pytest.raises(ConfigurationError, match="not both"):
+        pointing_tolerance(1e-3, 500.0)
+    with pytest.raises(ConfigurationError, match="focal length"):
+        pointing_tolerance(focal_px=-1.0)
+    model = calibrated_iis_head(0)
+    exact = solver_for(model)
+    P = np.array([_facing(exact, d) for d in (0.8, 1.5, 3.0)])
+    b0 = exact.solve_many(P)
+    assert set(b0.status_of(i) for i in range(3)) == {"disparity"}
+    worst = float(b0.pointing_error.max())
+    coarse = solver_for(model, focal_px=0.5 * GAZE_PIXEL_FRACTION / worst)  # tolerance ~2x the residual
+    fine = solver_for(model, focal_px=2.0 * GAZE_PIXEL_FRACTION / float(b0.pointing_error.min()))
+    assert coarse.tolerance > worst > fine.tolerance
+    b1, b2 = coarse.solve_many(P), fine.solve_many(P)
+    assert b1.reachable.all() and not b2.reachable.any()
+    assert np.array_equal(b1.q, b0.q) and np.array_equal(b2.q, b0.q)
+    sol = coarse.solve(P[1])
+    assert sol.reachable and sol.status == "fixated" and np.array_equal(sol.q, b0.q[1])

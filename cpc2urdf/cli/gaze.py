@@ -70,6 +70,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         metavar="JOINT",
         help="the joints that may move (default: every joint on the paths to the cameras)",
     )
+    tol = p.add_mutually_exclusive_group()
+    tol.add_argument("--tolerance", type=float, metavar="RAD",
+                     help="pointing error [rad] below which a target counts as fixated (default 1e-9: exact)")
+    tol.add_argument("--focal-px", type=float, metavar="F",
+                     help="the cameras' focal length [px]: a target counts as fixated within 0.1 px")
     p.add_argument("--json", action="store_true", help="print the solution as JSON (SI units)")
     p.set_defaults(run=run)
 
@@ -85,10 +90,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
+    tol = {"tolerance": args.tolerance, "focal_px": args.focal_px}
     if args.joints:
-        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints)
+        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints,
+                            **tol)
     else:
-        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance)
+        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **tol)
     head = None
     if args.report:
         from cpc2urdf.validation.gaze.head_report import format_head_report, head_report

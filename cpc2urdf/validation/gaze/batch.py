@@ -258,7 +258,8 @@ class CompiledGaze:
         overwrites)."""
         tgt = self._tgt
         tgt[0:3] = p
-        if abs(p[0]) > FAR_TARGET or abs(p[1]) > FAR_TARGET or abs(p[2]) > FAR_TARGET:
+        x, y, z = p.tolist()
+        if abs(x) > FAR_TARGET or abs(y) > FAR_TARGET or abs(z) > FAR_TARGET:
             tgt[3:6] = self.targets(p[None, :])[1][0]
         else:
             tgt[3:6] = p

@@ -55,7 +55,7 @@ DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
 VERSION_POLISH = 1e-4  # [rad]: the polish zeroes a version this small (larger: a bound holds it)
 EXACT_RESIDUAL = 1e-30  # [-]: |r|^2 below this is exact (pointing error ~1e-15 rad)
-POLISHED = 1e-24  # [-]: |r|^2 at which the polish stops (pointing error ~1e-12 rad, 1/1000 of the tolerance)
+POLISHED = 1e-22  # [-]: |r|^2 at which the polish stops (pointing error ~1e-11 rad, 1/100 of the tolerance)
 VERSION_SETTLED = 1e-13  # [rad]: a version this small is zero for the polish
 AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a limit) is at it
 
@@ -64,7 +64,7 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a l
 # per core)
 kernel = njit(cache=True, error_model="numpy", nogil=True)
 # the small ones are inlined into their callers: a call passing the chain's tuple of arrays
-# costs ~100 ns, as much as the arithmetic of a residual
+# costs ~100-400 ns (a reference counted in and out per array), as much as their arithmetic
 inline_kernel = njit(cache=True, error_model="numpy", nogil=True, inline="always")
 
 # status codes of the compiled solve (indices into result.py's STATUSES)
@@ -182,6 +182,12 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
             Co[c, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
 
 
+# the same FK inlined into the residual, the solve's hot path: a call that passes the chain's
+# tuple costs ~400 ns there (numba counts a reference in and out for each of its ~27 arrays),
+# more than the FK itself; every other caller calls fk (one compiled copy, a shorter compile)
+_fk_inline = inline_kernel(fk.py_func)
+
+
 @inline_kernel
 def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
     """World Jacobian ``Jc`` (6, K) of camera ``c`` by the chain readings: rows (v, w)."""
@@ -204,13 +210,16 @@ def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
             Jc[3, k], Jc[4, k], Jc[5, k] = 0.0, 0.0, 0.0
 
 
-@kernel
-def residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
+def _residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 4): ``p_cam`` and ``|p_cam|``. Returns ``|r|^2``."""
-    fk(ch, u, b, JR, Jp, Ja, CR, Co)
+    _fk_inline(ch, u, b, JR, Jp, Ja, CR, Co)
     return residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
+
+
+residual = kernel(_residual)  # one compiled copy: Python, and the cold callers
+_residual_hot = inline_kernel(_residual)  # inlined into the iteration's two calls
 
 
 @inline_kernel
@@ -279,7 +288,7 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
             diag += H[i, i] * H[i, i]
             for j in range(i + 1, f):
                 off += H[i, j] * H[i, j]
-        if off <= 1e-30 * diag or off == 0.0:  # off-diagonal at 1e-15 of the diagonal: rounding level
+        if off <= 1e-24 * diag or off == 0.0:  # off-diagonal at 1e-12 of the diagonal (a Newton step needs no more)
             break
         for a in range(f):
             for c in range(a + 1, f):
@@ -322,7 +331,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
     vw_w, vw_ref = ch[13][0], ch[13][1]
     m = u.shape[0]
     M = r.shape[0]
-    rr = residual(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
+    rr = _residual_hot(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
     it = 0
     while it < max_it:
         if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
@@ -462,7 +471,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws): 
         for _ in range(BACKTRACKS):
             for v in range(m):
                 trial[v] = min(max(u[v] + scale * dx[v] / sw[v], lower[v]), upper[v])
-            rr_new = residual(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
+            rr_new = _residual_hot(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
             if rr_new <= rr + allowance * scale * scale or rr_new <= EXACT_RESIDUAL:
                 accepted = True
                 break

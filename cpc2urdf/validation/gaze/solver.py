@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
+from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
@@ -66,6 +67,29 @@ RETRIES = 2  # further starts tried when the first one ends in a local minimum
 FAR_TARGET = 1e15  # [m]: a target with a coordinate beyond this is solved for by its direction
 
 
+def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
+    """The pointing error [rad] below which an axis counts as on its target: ``tolerance``
+    itself; else, with the cameras' focal length ``focal_px`` [px] known (the smaller of the
+    two), :data:`~cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` of a pixel at the image centre,
+    ``atan(0.1 / focal_px)`` (2e-4 rad at 500 px); else
+    :data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL` (exact fixation).
+
+    Raises:
+        ConfigurationError: Both given, or either not a positive finite number.
+    """
+    if tolerance is not None and focal_px is not None:
+        raise ConfigurationError("give a pointing tolerance [rad] or the cameras' focal length [px], not both")
+    if tolerance is not None:
+        if not (math.isfinite(tolerance) and tolerance > 0):
+            raise ConfigurationError(f"the pointing tolerance must be a positive number of radians, got {tolerance}")
+        return float(tolerance)
+    if focal_px is not None:
+        if not (math.isfinite(focal_px) and focal_px > 0):
+            raise ConfigurationError(f"the focal length must be a positive number of pixels, got {focal_px}")
+        return math.atan(GAZE_PIXEL_FRACTION / focal_px)
+    return GAZE_POINTING_TOL
+
+
 class GazeSolver:
     """Gaze inverse kinematics on the Pinocchio model of a URDF.
 
@@ -75,8 +99,15 @@ class GazeSolver:
         cameras: Names of the left and right camera optical frames (z along the optical axis).
         viewing_distance: Preferred distance [m] from the cyclopean point to the target for the
             ``"use-table"`` policy.
+        joints, coupling, rigid: Which joints may move, a stated coupling, and what a rigid
+            pair points (see :func:`~cpc2urdf.api.gaze_solver`).
+        tolerance: Pointing error [rad] below which a target counts as fixated.
+        focal_px: Instead of ``tolerance``: the cameras' focal length [px]; fixated within
+            :data:`~cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` of a pixel
+            (:func:`pointing_tolerance`). Neither: exact fixation (``GAZE_POINTING_TOL``).
 
     Raises:
+        ConfigurationError: Both ``tolerance`` and ``focal_px``, or either not positive.
         InputFileError: An unreadable URDF, or joints with more than one degree of freedom
             (continuous, floating, planar).
         UnknownNameError: A camera frame the URDF does not have.
@@ -89,6 +120,7 @@ class GazeSolver:
             ``model``, ``data``, ``cameras``, ``joint_names``, ``joint_kinds``, ``n``, ``lower``,
             ``upper``, ``velocity_limit``, ``home``, ``baseline``.
         redundant: Whether fixation by neck and eyes leaves spare freedom for the policy.
+        tolerance: Pointing error [rad] below which a target counts as fixated.
     """
 
     def __init__(
@@ -101,7 +133,10 @@ class GazeSolver:
         coupling: Coupling | None = None,
         rigid: str = "cyclopean",
         tolerance: float | None = None,
+        focal_px: float | None = None,
     ) -> None:
+        tolerance = pointing_tolerance(tolerance, focal_px)
+        self.tolerance = tolerance
         robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf)
         if robot.cpc_model is not None:
             for name in cameras:
@@ -144,6 +179,8 @@ class GazeSolver:
             row = self._head.version_row
             vrow = np.array([row[robot.joint_index(v)] for v in vchain.variables])
             self._version = CompiledGaze(vchain, tolerance, vrow)
+        # the compiled solver of the cyclopean policy (solve_checked's choice; solve_many's)
+        self._fast: CompiledGaze = self._posture or self._version or self.compiled
 
     def _neck_and_eyes(self) -> bool:
         """Whether every robot joint has finite limits (the Python solver's assumption)."""
@@ -208,7 +245,7 @@ class GazeSolver:
             ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
         """
         qc = self.check_q(q_current)
-        return (self._posture or self._version or self.compiled).solve_many(targets, qc)
+        return self._fast.solve_many(targets, qc)
 
     def check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
         """Readings ``q_current`` as an in-limit array of shape (n,), or None
@@ -310,6 +347,10 @@ class GazeSolver:
         """
         check_policy(policy)
         p = target_point(p_world)
+        if q_current is None and q_start is None and policy == "cyclopean":
+            # a control loop's call: straight to the compiled solve (what solve_checked picks)
+            comp = self._fast
+            return solution_from_flat(self.joint_names, p, comp.solve_point(p, None), comp.S, policy)
         qc = self.check_q(q_current)
         return self.solve_checked(p, qc, policy, q_start, max_iterations)
 
@@ -385,7 +426,7 @@ class GazeSolver:
                     break
         if p_solve is not p:  # the answer is judged on the target itself
             st = evaluate_fixation(self.head, q, p, jacobian=False)
-        return solution_from_state(self.head, p, q, it, policy, st)
+        return solution_from_state(self.head, p, q, it, policy, st, self.tolerance)
 
     def _solved_target(self, p: Array) -> Array:
         """The point the iteration aims at for target ``p`` (world) [m], shape (3,): ``p`` itself,
@@ -477,14 +518,15 @@ def solver_for(
     coupling: Coupling | None = None,
     rigid: str = "cyclopean",
     tolerance: float | None = None,
+    focal_px: float | None = None,
 ) -> GazeSolver:
     """A solver for a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot name
     or a :class:`~cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`; ``continuous`` joints off
     the cameras' paths, e.g. a mobile base's wheels, are read as unlimited revolute ones)."""
     return GazeSolver(
         PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, viewing_distance=viewing_distance,
-        joints=joints, coupling=coupling, rigid=rigid, tolerance=tolerance,
+        joints=joints, coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
     )
 
 
-__all__ = ["FAR_TARGET", "RETRIES", "GazeSolver", "solver_for"]
+__all__ = ["FAR_TARGET", "RETRIES", "GazeSolver", "pointing_tolerance", "solver_for"]
