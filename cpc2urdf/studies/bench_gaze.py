@@ -494,10 +494,13 @@ def _generic_reference_solver(axes: SolvedAxes) -> Callable[[Array, Array], tupl
     return solve
 
 
-def kinematics_call_us(solver: GazeSolver, n: int = 2000, seed: int = 0) -> float:
-    """Median time [us] of one Pinocchio forward kinematics plus two frame Jacobians (the
-    cameras', LOCAL) from Python, on its own ``Data``, at ``n`` seeded in-limit readings: the
-    unit the solve times are given in."""
+KIN_BLOCK = 100  # solves timed between two blocks of as many kinematics calls
+
+
+def kinematics_timer(solver: GazeSolver, n: int = 2000, seed: int = 0) -> Callable[[int], float]:
+    """A function ``i -> seconds`` that times one Pinocchio forward kinematics plus two frame
+    Jacobians (the cameras', LOCAL) from Python, on its own ``Data``, at the ``i``-th (mod
+    ``n``) of ``n`` seeded in-limit readings: the unit the solve times are given in."""
     import pinocchio as pin
 
     model = solver.model
@@ -508,31 +511,50 @@ def kinematics_call_us(solver: GazeSolver, n: int = 2000, seed: int = 0) -> floa
     lo, hi = solver.lower, solver.upper
     limited = np.isfinite(lo) & np.isfinite(hi)
     span = np.where(limited, hi - lo, 2.0 * math.pi)  # an unlimited joint: any turn
-    Q = np.where(limited, lo, -math.pi) + span * rng.random((n, solver.n))
+    Q = list(np.where(limited, lo, -math.pi) + span * rng.random((n, solver.n)))
     local = pin.LOCAL
-    times = np.empty(n)
     clock = time.perf_counter
-    for i, q in enumerate(Q):
+
+    def one(i: int) -> float:
+        q = Q[i % n]
         t0 = clock()
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         pin.getFrameJacobian(model, data, f0, local)
         pin.getFrameJacobian(model, data, f1, local)
-        times[i] = clock() - t0
-    return float(np.median(times) * 1e6)
+        return clock() - t0
+
+    return one
 
 
-def _solve_times(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool_], Array, Array]:
+def kinematics_call_us(solver: GazeSolver, n: int = 2000, seed: int = 0) -> float:
+    """Median time [us] of one Pinocchio forward kinematics plus two frame Jacobians
+    (:func:`kinematics_timer`) over ``n`` seeded readings."""
+    one = kinematics_timer(solver, n, seed)
+    return float(np.median([one(i) for i in range(n)]) * 1e6)
+
+
+def _solve_times(
+    solver: GazeSolver, P: Array, kin: Callable[[int], float] | None = None
+) -> tuple[Array, NDArray[np.bool_], Array, Array, Array]:
     """Time [s], reachable flag and iterations of one ``solve`` per target (the latency a caller
-    sees), and the thread's CPU time [s] of each (without the time the process waited for a core:
-    on a shared machine the scheduler's preemptions, ~4 ms each, set the wall-clock p99)."""
+    sees), the thread's CPU time [s] of each (without the time the process waited for a core:
+    on a shared machine the scheduler's preemptions, ~4 ms each, set the wall-clock p99), and,
+    with ``kin`` (:func:`kinematics_timer`), the unit measured in blocks between the solves:
+    before every :data:`KIN_BLOCK` solves, :data:`KIN_BLOCK` kinematics calls back to back (a
+    machine whose speed drifts during the run moves both; back to back, the calls run as warm
+    as they can, the smallest unit, unlike one call squeezed between two solves)."""
     n = P.shape[0]
     times = np.empty(n)
     cpu = np.empty(n)
+    kin_times = np.empty(n if kin is not None else 0)
     ok = np.zeros(n, dtype=bool)
     iters = np.empty(n)
     clock, cpu_clock = time.perf_counter, time.thread_time
     for i, p in enumerate(P):
+        if kin is not None and i % KIN_BLOCK == 0:
+            for j in range(i, min(i + KIN_BLOCK, n)):
+                kin_times[j] = kin(j)
         c0 = cpu_clock()
         t0 = clock()
         sol = solver.solve(p)
@@ -540,7 +562,7 @@ def _solve_times(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool_]
         cpu[i] = cpu_clock() - c0
         ok[i] = sol.reachable
         iters[i] = sol.iterations
-    return times, ok, iters, cpu
+    return times, ok, iters, cpu, kin_times
 
 
 def _reference_run(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool_], Array, str]:
@@ -732,10 +754,9 @@ def run_head(
         U = generic_unreachable_targets(solver, unreachable, seed) if unreachable else np.zeros((0, 3))
     solver.solve(P[0])  # warm up: first-call costs (caches, compiled code)
     solve_batch(solver, P[:2])
-    kin = [kinematics_call_us(solver, seed=seed)]
-    times, ok, iters, cpu = _solve_times(solver, P)
+    times, ok, iters, cpu, kin_times = _solve_times(solver, P, kinematics_timer(solver, seed=seed))
     statuses = solve_batch(solver, P).status
-    utimes, uok, _, _ = _solve_times(solver, U)
+    utimes, uok, _, _, _ = _solve_times(solver, U)
     m_ref = min(n, reference)
     rtimes, rok, otimes, reference_start = _reference_run(solver, P[:m_ref])
     rate, path = _batch_throughput(solver, np.concatenate([P, U]))
@@ -759,8 +780,7 @@ def run_head(
         "track_cpu_max_us": float(np.max(tcpu) * 1e6),
         "track_cpu_over_deadline": int(np.sum(tcpu > TRACK_DEADLINE)),
     }
-    kin.append(kinematics_call_us(solver, seed=seed + 1))
-    kin_us = float(np.median(kin))
+    kin_us = float(np.median(kin_times) * 1e6)
     median_us = float(np.median(times) * 1e6)
     p99_us = float(np.percentile(times, 99) * 1e6)
     u_median = float(np.median(utimes) * 1e6) if utimes.size else None  # None: no unreachable targets
@@ -885,7 +905,7 @@ def format_table(res: dict[str, Any]) -> str:
             f"{r['ratio']:8.1f}x {r['batch_targets_per_s']:9.0f} {track}"
         )
     lines.append(
-        "kin: one Pinocchio FK + two frame Jacobians [us], this run; median/p99: one solve per reachable "
+        "kin: one Pinocchio FK + two frame Jacobians [us], in blocks of 100 between the solves; median/p99: one solve per reachable "
         "target, over kin (p99 cpu: by this thread's CPU time); unreach: unreachable median over reachable median; success: fixated, or "
         "answered with the head's disparity; vs scipy: least_squares median over ours, same targets; "
         "batch/s: "
@@ -962,6 +982,7 @@ __all__ = [
     "eyes_coplanar",
     "format_table",
     "kinematics_call_us",
+    "kinematics_timer",
     "main",
     "reachable_targets",
     "run_benchmark",

@@ -63,9 +63,10 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a l
 # division is guarded where it matters); the GIL released (a batch is split over threads, one
 # per core)
 kernel = njit(cache=True, error_model="numpy", nogil=True)
-# the small ones are inlined into their callers: a call passing the chain's tuple of arrays
-# costs ~100-400 ns (a reference counted in and out per array), as much as their arithmetic
-inline_kernel = njit(cache=True, error_model="numpy", nogil=True, inline="always")
+# the small ones are inlined into their callers by LLVM (forceinline: numba's own inline="always"
+# gave the same speed at ~1.7x the cold compile): a call that passes the chain's tuple of arrays
+# costs ~100-400 ns, as much as their arithmetic
+inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=True)
 
 # status codes of the compiled solve (indices into result.py's STATUSES)
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
@@ -183,8 +184,8 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
 
 
 # the same FK inlined into the residual, the solve's hot path: a call that passes the chain's
-# tuple costs ~400 ns there (numba counts a reference in and out for each of its ~27 arrays),
-# more than the FK itself; every other caller calls fk (one compiled copy, a shorter compile)
+# tuple (and the workspace's arrays) costs ~400 ns there, more than the FK itself; every other
+# caller calls fk (one compiled copy, a shorter compile)
 _fk_inline = inline_kernel(fk.py_func)
 
 
@@ -323,15 +324,18 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws):  # type: ignore[no-untyped-def]
-    """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2)."""
+def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u=-1.0):  # type: ignore[no-untyped-def]
+    """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2),
+    with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
+    ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
+    re-evaluated."""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp = ws
     have_v = False  # Vp holds the eigenvectors of the last step with every unknown free
     vc = ch[12]
     vw_w, vw_ref = ch[13][0], ch[13][1]
     m = u.shape[0]
     M = r.shape[0]
-    rr = _residual_hot(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
+    rr = rr_at_u if rr_at_u >= 0.0 else _residual_hot(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
     it = 0
     while it < max_it:
         if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
@@ -561,10 +565,10 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
                     total += it1
                     continue
                 it1b, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
-                                    max_it - PROBE_ITERATIONS, ws)
+                                    max_it - PROBE_ITERATIONS, ws, rr)
                 it1 += it1b
         # polish: pointing alone (same near-null space), to the rounding floor
-        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, POLISH_ITERATIONS, ws)
+        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, POLISH_ITERATIONS, ws, rr)
         total += it1 + it2
         if rr < best_rr:
             best_rr = rr
