@@ -271,3 +271,36 @@ def test_board_bad_input_one_line_exit_2(stage1: tuple[Path, Path, Path], head: 
     bad.write_text(json.dumps({**TARGET, "dictionary": "DICT_5X5_10"}))
     assert main([*argv, str(bad)]) == 2
     assert "bad.json: dictionary must be an OpenCV ArUco dictionary name" in capsys.readouterr().err and not hout.exists()
+
+
+def test_plate_boards_from_prefix_dictionaries_are_told_apart_by_id() -> None:
+    """OpenCV's DICT_4X4_50 is the first 50 markers of DICT_4X4_100/250/1000: two plates with
+    those dictionaries and overlapping ids would be confused in one image, and are refused; a
+    different marker size (5x5) or disjoint ids are fine."""
+    import cv2
+
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.vision.boards import Board
+    from cpc2urdf.identification.vision.measure_stereo import check_plate_boards, dictionary_family
+    from cpc2urdf.robot_ref import load_model
+
+    small = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50).bytesList
+    large = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_1000).bytesList
+    assert np.array_equal(small, large[:50])  # the fact the check relies on
+    assert dictionary_family("DICT_4X4_250") == dictionary_family("DICT_4X4_50") == "DICT_4X4"
+    assert dictionary_family("DICT_ARUCO_ORIGINAL") == "DICT_ARUCO_ORIGINAL"
+
+    def charuco(dictionary: str, first: int) -> Board:
+        return Board("charuco", (5, 4), square_size=0.02, marker_size=0.015, dictionary=dictionary,
+                     first_marker_id=first)
+
+    structure = load_model("iis_head").structure
+    n = charuco("DICT_4X4_50", 0).n_markers
+    with pytest.raises(ConfigurationError, match=r"share marker ids of DICT_4X4_100 and DICT_4X4_50|"
+                                                 r"share marker ids of DICT_4X4_50 and DICT_4X4_100"):
+        check_plate_boards({"plate_left": charuco("DICT_4X4_50", 0), "plate_right": charuco("DICT_4X4_100", 2)},
+                           structure)
+    ok = check_plate_boards({"plate_left": charuco("DICT_4X4_50", 0), "plate_right": charuco("DICT_4X4_100", n)},
+                            structure)
+    assert set(ok) == {"plate_left", "plate_right"}
+    check_plate_boards({"plate_left": charuco("DICT_4X4_50", 0), "plate_right": charuco("DICT_5X5_50", 0)}, structure)

@@ -18,6 +18,7 @@ policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -197,6 +198,14 @@ def measure_stereo_images(
     return ImageMeasurement(ms, problems, details)
 
 
+def dictionary_family(name: str) -> str:
+    """The marker family of an OpenCV ArUco dictionary name: ``DICT_4X4`` for ``DICT_4X4_50``,
+    ``DICT_4X4_100``, ... (their markers are prefixes of one list, so equal ids are equal
+    markers); any other name is its own family."""
+    m = re.fullmatch(r"(DICT_\d+X\d+)_\d+", name)
+    return m.group(1) if m else name
+
+
 def check_plate_boards(boards: Mapping[str, Board], structure: RobotStructure) -> dict[str, Board]:
     """Boards as stage-1 plates: plate frame -> board, each named after its frame.
 
@@ -218,12 +227,16 @@ def check_plate_boards(boards: Mapping[str, Board], structure: RobotStructure) -
         if any(b.kind != "charuco" for b in items):
             raise ConfigurationError("several plates need boards the detector can tell apart in one image: ChArUco boards "
                                      "with disjoint marker ids (first_marker_id); chessboards and circle grids all look alike")
-        spans = sorted((b.dictionary, b.first_marker_id, b.first_marker_id + b.n_markers, b.name) for b in items)
+        # OpenCV's DICT_NxN_50/100/250/1000 share their first markers (the smaller is a prefix of
+        # the larger): ids overlap within a marker size, whatever the dictionary's length
+        spans = sorted((dictionary_family(b.dictionary), b.first_marker_id, b.first_marker_id + b.n_markers, b.name,
+                        b.dictionary) for b in items)
         for a, c in zip(spans, spans[1:], strict=False):
             if a[0] == c[0] and c[1] < a[2]:
-                raise ConfigurationError(f"boards {a[3]} and {c[3]} share marker ids of {a[0]} ({c[1]}..{a[2] - 1}); "
+                same = a[4] if a[4] == c[4] else f"{a[4]} and {c[4]}"
+                raise ConfigurationError(f"boards {a[3]} and {c[3]} share marker ids of {same} ({c[1]}..{min(a[2], c[2]) - 1}); "
                                          "give each plate's board its own first_marker_id")
     return out
 
 
-__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "check_plate_boards", "measure_stereo_images"]
+__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "check_plate_boards", "dictionary_family", "measure_stereo_images"]
