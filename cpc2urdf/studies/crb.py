@@ -157,7 +157,7 @@ def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, held
                    T_true: dict[str, np.ndarray], frames: list[str], sigma_t: float, sigma_r: float,
                    fraction: float, seed: int) -> dict[str, Any]:
     """Corrupt ``fraction`` of the records; robust refinement vs the clean refinement."""
-    from cpc2urdf.errors import InconsistentDataError
+    from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.kinematics.methods import identify
     from cpc2urdf.identification.kinematics.refine import refine
@@ -179,14 +179,16 @@ def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, held
     plain = refine(start, dirty, sigma_t, sigma_r, warn=False)
     found = sorted((o.record, o.frame) for o in robust.outliers)
     # The default pipeline (refined + consistency gate) on the corrupted data: it must refuse and
-    # name exactly the corrupted records.
+    # name exactly the corrupted records. Any refusal counts as one (corrupted records can also
+    # make the data degenerate, e.g. a joint that no longer moves); only the gate's names records.
+    refusal = ""
     try:
         identify(dirty)
         named: list[int] = []
         refused = False
-    except InconsistentDataError as e:
-        refused = True
-        d = getattr(e.report, "diagnosis", None)
+    except DegenerateDataError as e:
+        refused, refusal = True, type(e).__name__
+        d = getattr(e.report, "diagnosis", None) if isinstance(e, InconsistentDataError) else None
         named = sorted(d.records) if d is not None else []
     return {
         "corrupted": sorted(hit),
@@ -201,6 +203,7 @@ def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, held
         "start": start_name,
         "time_robust_s": t_robust,
         "default_refused": refused,
+        "default_refusal": refusal,
         "default_named_exactly": refused and named == sorted({k for k, _ in hit}),
     }
 
