@@ -80,6 +80,16 @@ class Case:
         return self.argv[0]
 
 
+NO_PLATE_URDF = """<?xml version="1.0"?>
+<robot name="arm">
+  <link name="base"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <link name="l1"/>
+</robot>
+"""  # a robot with nothing to measure: no plate link
+
+
 def write_content(path: Path, content: Content) -> None:
     """Put ``content`` at ``path`` (see :data:`Content`)."""
     if content is Missing:
@@ -672,6 +682,8 @@ def _study() -> list[Case]:
         Case("study-crb-trials-one", ("study", "crb", "--trials", "1", "--out", "{out}"), "--trials"),
         Case("study-crb-sigma-negative", ("study", "crb", "--sigma-mm", "-1", "--out", "{out}"), "sigma"),
         Case("study-crb-robot-missing", ("study", "crb", "--robot", "{tmp}/nope.json", "--out", "{out}"), "{tmp}/nope.json"),
+        Case("study-crb-robot-no-plate", ("study", "crb", "--robot", "{bad}", "--trials", "2", "--out", "{out}"),
+             "no frame of kind 'plate'", lambda c: NO_PLATE_URDF, name="arm.urdf"),
         Case("study-stereo-samples-zero", ("study", "stereo", "--samples", "0", "--out", "{out}"), "--samples"),
         Case("study-li2010-repeats-zero", ("study", "li2010", "--repeats", "0", "--out", "{out}"), "--repeats"),
         Case("study-li2010-max-poses-one", ("study", "li2010", "--max-poses", "1", "--out", "{out}"), "--max-poses"),

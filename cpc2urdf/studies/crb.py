@@ -395,11 +395,11 @@ def main(argv: list[str]) -> int:
     from cpc2urdf.robot_ref import load_robot
 
     load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
-    out = make_folder(args.out)
-    trials = [
-        run_trial(args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers)
-        for k in progress(range(args.trials), "crb")
-    ]
+    trials = []
+    for k in progress(range(args.trials), "crb"):
+        trials.append(run_trial(args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers))
+        if k == 0:  # a robot the study cannot simulate (e.g. no plate to measure) fails before --out exists
+            out = make_folder(args.out)
     s = summarise(trials)
     s["outlier_fraction"] = args.outliers
     setting = f"{args.robot}, M = {args.M}, σ = {args.sigma_mm:g} mm / {args.sigma_deg:g}°"
