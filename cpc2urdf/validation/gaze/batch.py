@@ -290,7 +290,8 @@ class CompiledGaze:
             mode |= 1
         OUT = np.empty((N, kernels.out_size(n, self.S)))
         T = np.ascontiguousarray(np.hstack([P, Ps]))
-        chunks = [(a, min(a + -(-N // self.threads), N)) for a in range(0, N, -(-N // self.threads))] if N else []
+        step = max(1, -(-N // self.threads))  # rows per thread, rounded up
+        chunks = [(a, min(a + step, N)) for a in range(0, N, step)]
         if len(chunks) > 1 and N >= THREADED_BATCH:
             # the kernel releases the GIL: one thread per core, each on its own rows
             with ThreadPoolExecutor(len(chunks)) as pool:
