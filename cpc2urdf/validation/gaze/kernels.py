@@ -186,7 +186,7 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
 # the same FK inlined into the residual, the solve's hot path: a call that passes the chain's
 # tuple (and the workspace's arrays) costs ~400 ns there, more than the FK itself; every other
 # caller calls fk (one compiled copy, a shorter compile)
-_fk_inline = inline_kernel(fk.py_func)
+_fk_inline = inline_kernel(getattr(fk, "py_func", fk))  # plain Python under NUMBA_DISABLE_JIT=1
 
 
 @inline_kernel
@@ -291,10 +291,11 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
                 off += H[i, j] * H[i, j]
         if off <= 1e-24 * diag or off == 0.0:  # off-diagonal at 1e-12 of the diagonal (a Newton step needs no more)
             break
+        tiny = 1e-24 * diag / (f * f)  # elements this small cannot keep the test above from passing: not rotated
         for a in range(f):
             for c in range(a + 1, f):
                 hac = H[a, c]
-                if hac == 0.0:
+                if hac * hac <= tiny:
                     continue
                 theta = (H[c, c] - H[a, a]) / (2.0 * hac)
                 tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
@@ -329,8 +330,14 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
     re-evaluated."""
-    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp = ws
-    have_v = False  # Vp holds the eigenvectors of the last step with every unknown free
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig = ws
+    # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
+    # start of the next decomposition, whatever u is now); eig[1] > 0: V, lam are the
+    # decomposition of J^T J at this very u, every unknown free (the policy phase ended on a
+    # small step without moving: the polish's first step needs no decomposition of its own)
+    have_v = eig[0] > 0.0
+    exact_v = eig[1] > 0.0 and rr_at_u >= 0.0
+    eig[1] = 0.0
     vc = ch[12]
     vw_w, vw_ref = ch[13][0], ch[13][1]
     m = u.shape[0]
@@ -362,7 +369,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             for v in range(m):
                 dx[v] = 0.0
             vmove = 0.0  # squared length of the null-space (policy) move, scaled
-            if f > 0:
+            if f > 0 and f == m and exact_v:
+                exact_v = False  # V, lam already hold J^T J's decomposition at this u
+            elif f > 0:
                 for a in range(f):
                     for c in range(a, f):
                         s = 0.0
@@ -404,6 +413,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                         for c in range(f):
                             Vp[a, c] = V[a, c]
                     have_v = True
+            if f > 0:
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
                 # zero-version task over the null directions: a_e = v_e . c_x, c_x = c / sw
@@ -462,6 +472,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             big = max(big, abs(dx[v] / sw[v]))
         scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
         if big * scale < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
+            if f == m:  # not moved: the decomposition holds at u for the next phase
+                eig[1] = 1.0
             break
         allowance = 0.0  # the policy's null-space move may raise |r|^2 to second order
         if gain > 0.0:
@@ -492,6 +504,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             break
         if gain == 0.0 and vmove == 0.0 and rr > rr_old * (1.0 - STALLED):
             break  # a residual that cannot be removed (a bound, disparity): polished to the floor
+    eig[0] = 1.0 if have_v else 0.0
     return it, rr
 
 
@@ -519,6 +532,7 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
         np.empty(m),
         np.empty((m, m)),
         np.empty((m, m)),
+        np.zeros(2),  # eig: see _iterate
     )
 
 
