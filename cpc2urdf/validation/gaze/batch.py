@@ -46,7 +46,6 @@ MAX_SOLVE_ITERATIONS = 2 * N_STARTS * (BATCH_MAX_ITERATIONS + kernels.POLISH_ITE
 EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
 VERSION_WEIGHT = 1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
 NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
-FAR_TARGET = 1e15  # [m]: beyond this, a target is solved for by its direction
 THREADED_BATCH = 64  # targets from which solve_many splits the work over the cores
 
 
@@ -128,11 +127,10 @@ class CompiledGaze:
             self.ch, chain.lower, chain.upper, self.sw, self._table_T,
             (chain.robot_A, chain.robot_b, robot.lower, robot.upper, np.linalg.pinv(chain.robot_A)),
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
-            self.tolerance, self.baseline, self.disparity_head,
+            self.tolerance, self.baseline, self.disparity_head, self._centre(),
         )
         self.n = len(robot.joint_names)
         self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        self._tgt = np.empty(6)
         self._qin = np.empty(2 * self.n)
         self._out = np.empty(kernels.out_size(self.n, self.S))  # (not re-entrant across threads)
 
@@ -186,9 +184,9 @@ class CompiledGaze:
             return float((sv[3] / sv[0]) ** 2)
         return 0.0
 
-    def targets(self, targets: ArrayLike) -> tuple[Array, Array]:
-        """Checked targets (N, 3) and the points the iteration aims at (far ones pulled in
-        along their ray from the head's centre to :data:`FAR_TARGET`)."""
+    def targets(self, targets: ArrayLike) -> Array:
+        """Checked targets (N, 3), a C-contiguous copy (the kernel pulls far ones in along
+        their ray from the head's centre to :data:`~cpc2urdf.validation.gaze.kernels.FAR_TARGET`)."""
         try:
             P = np.array(targets, dtype=float)
         except (TypeError, ValueError) as e:
@@ -197,14 +195,7 @@ class CompiledGaze:
             raise ConfigurationError(f"targets must have shape (N, 3) [m], got shape {P.shape}")
         if not np.all(np.isfinite(P)):
             raise ConfigurationError("targets contain NaN or inf")
-        Ps = P.copy()
-        far = np.abs(P).max(axis=1) > FAR_TARGET if len(P) else np.zeros(0, dtype=bool)
-        if np.any(far):
-            centre = self._centre()
-            d = P[far] - centre
-            d = d / np.abs(d).max(axis=1, keepdims=True)
-            Ps[far] = centre + FAR_TARGET * d / np.linalg.norm(d, axis=1, keepdims=True)
-        return np.ascontiguousarray(P), np.ascontiguousarray(Ps)
+        return np.ascontiguousarray(P)
 
     def _centre(self) -> Array:
         _, o = self._fk(self.home_u)
@@ -256,13 +247,8 @@ class CompiledGaze:
         :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` (status, iterations, readings,
         errors, misses, fixation point, vergence, limit flags; a buffer the next call
         overwrites)."""
-        tgt = self._tgt
-        tgt[0:3] = p
-        x, y, z = p.tolist()
-        if abs(x) > FAR_TARGET or abs(y) > FAR_TARGET or abs(z) > FAR_TARGET:
-            tgt[3:6] = self.targets(p[None, :])[1][0]
-        else:
-            tgt[3:6] = p
+        if not p.flags.carray:  # a view, read-only: the kernel takes (and is compiled for) a plain array
+            p = np.array(p, dtype=float)
         mode = 4
         if q_current is not None:
             self._qin[: self.n] = q_current
@@ -270,14 +256,14 @@ class CompiledGaze:
         if q_start is not None:
             self._qin[self.n :] = q_start
             mode |= 2
-        kernels.solve_flat(self.F, self.I, tgt, self._qin, mode, self._out)
+        kernels.solve_flat(self.F, self.I, p, self._qin, mode, self._out)
         return self._out
 
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets``, world [m]) from ``q_current`` (robot readings,
         shape (n,); None: the middle of the limits): a :class:`GazeBatch`, target by target
         the answer of :meth:`solve_point` (one compiled call for all)."""
-        P, Ps = self.targets(targets)
+        P = self.targets(targets)
         N = P.shape[0]
         n = self.n
         qin = np.zeros(2 * n)
@@ -289,7 +275,7 @@ class CompiledGaze:
             qin[:n] = Q
             mode |= 1
         OUT = np.empty((N, kernels.out_size(n, self.S)))
-        T = np.ascontiguousarray(np.hstack([P, Ps]))
+        T = P
         step = max(1, -(-N // self.threads))  # rows per thread, rounded up
         chunks = [(a, min(a + step, N)) for a in range(0, N, step)]
         if len(chunks) > 1 and N >= THREADED_BATCH:

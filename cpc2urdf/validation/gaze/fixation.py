@@ -27,9 +27,10 @@ SCALED_DISTANCE = 1e150  # [m]: beyond this from a camera, p_cam is computed sca
 
 def target_point(p_world: ArrayLike) -> Array:
     """A gaze target as a finite point of shape (3,) [m], or :class:`ConfigurationError` saying
-    what is wrong (the solver and the view check targets the same way)."""
+    what is wrong (the solver and the view check targets the same way). Always a new
+    C-contiguous array: the solver keeps it in its answer and the kernels take it as it is."""
     try:
-        p = np.asarray(p_world, dtype=float)
+        p = np.array(p_world, dtype=float)
     except (TypeError, ValueError) as e:
         raise ConfigurationError(f"target must be three numbers x y z [m], got {p_world!r}") from e
     if p.shape != (3,):

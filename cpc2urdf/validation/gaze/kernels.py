@@ -44,6 +44,7 @@ from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.chain import HeadChain
 
 MIN_TARGET_DISTANCE = 1e-9  # [m]: closer to a camera centre, a target has no direction
+FAR_TARGET = 1e15  # [m]: a target with a coordinate beyond this is solved for by its direction
 MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
 BACKTRACKS = 10  # step halvings per iteration
 POLISH_ITERATIONS = 12  # iterations of the polish (pointing alone) after the policy phase
@@ -727,7 +728,7 @@ def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, tabl
 # and writes the whole answer (readings, errors, misses, fixation point, vergence, limits) into
 # one output array.
 I_HEADER = 9  # K, C, S, m, G, n, starts per target, iteration cap, disparity head (0/1)
-F_SCALARS = 4  # null_rel, tolerance, baseline, has a zero-version task (0/1)
+F_SCALARS = 7  # null_rel, tolerance, baseline, has a zero-version task (0/1), the head's centre (3)
 
 
 def pack_flat(
@@ -746,20 +747,21 @@ def pack_flat(
     tol: float,
     baseline: float,
     disparity_head: bool,
+    centre: Array,
 ) -> tuple[Array, Array]:
     """The head as ``(F, I)`` for :func:`solve_flat`: the chain's tuple ``ch`` (:func:`pack`),
     the unknowns' bounds and scale ``sw``, the start ``table`` (unknowns (m, G), centres and
-    axes (3, G)), the
-    ``robot`` map (``robot_A``, ``robot_b``, readings' lower and upper limits, ``pinv`` of
-    ``robot_A``), per chain joint its robot index and whether it is held at its reading, per
-    robot joint whether the head leaves it still, and the solve's constants."""
+    axes (3, G)), the ``robot`` map (``robot_A``, ``robot_b``, readings' lower and upper
+    limits, ``pinv`` of ``robot_A``), per chain joint its robot index and whether it is held at
+    its reading, per robot joint whether the head leaves it still, and the solve's constants
+    (``centre``: the point far targets are pulled in towards, world [m], shape (3,))."""
     parent, jtype, axis, R, t, A, b, cam_parent, cam_R, cam_t, anc, solve_cams, c, vw = ch
     table_u, table_o, table_z = table
     robot_A, robot_b, robot_lo, robot_hi, pinv = robot
     K, C, S, m, G, n = len(parent), len(cam_parent), len(solve_cams), len(lower), table_u.shape[1], len(robot_b)
     floats = [axis, R, t, A, b, cam_R, cam_t, c, vw, lower, upper, sw, 0.5 * (lower + upper), table_u, table_o,
               table_z, robot_A, robot_b, robot_lo, robot_hi, pinv,
-              np.array([null_rel, tol, baseline, 1.0 if vw[0] > 0.0 else 0.0])]
+              np.array([null_rel, tol, baseline, 1.0 if vw[0] > 0.0 else 0.0]), np.asarray(centre, dtype=float)]
     ints = [np.array([K, C, S, m, G, n, n_starts, max_it, int(bool(disparity_head))]), parent, jtype, cam_parent,
             anc, solve_cams, joint_index, held, still]
     F = np.concatenate([np.asarray(x, dtype=float).ravel() for x in floats])
@@ -854,10 +856,30 @@ def _u_of_q(q, robot_b, pinv, lower, upper, u):  # type: ignore[no-untyped-def]
         u[v] = min(max(s, lower[v]), upper[v])
 
 
+@inline_kernel
+def _aim_point(p, centre):  # type: ignore[no-untyped-def]
+    """The point the iteration aims at for target ``p``: ``p`` itself, or for a target with a
+    coordinate beyond :data:`FAR_TARGET` the point on the ray from ``centre`` through ``p`` at
+    that distance. Seen from any camera the two differ in direction by less than the head's
+    reach over FAR_TARGET (~1e-15 rad), below the rounding of a direction at that distance;
+    beyond it the start table and the policies would square coordinates out of the float
+    range. The answer is judged on ``p`` itself."""
+    big = max(abs(p[0]), abs(p[1]), abs(p[2]))
+    if big <= FAR_TARGET:
+        return p
+    dx, dy, dz = p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]
+    big = max(abs(dx), abs(dy), abs(dz))  # components scaled into [-1, 1]: no overflow in the norm
+    dx, dy, dz = dx / big, dy / big, dz / big
+    k = FAR_TARGET / math.sqrt(dx * dx + dy * dy + dz * dz)
+    ps = np.empty(3)
+    ps[0], ps[1], ps[2] = centre[0] + k * dx, centre[1] + k * dy, centre[2] + k * dz
+    return ps
+
+
 @kernel
-def _solve_into(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
-    """One target, the whole answer in one call. ``tgt`` (6,): the target, then the point the
-    iteration aims at (a far target pulled in); ``qin`` (2 n,): ``q_current`` then ``q_start``;
+def _solve_into(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
+    """One target, the whole answer in one call. ``p`` (3,): the target (world) [m], finite;
+    ``qin`` (2 n,): ``q_current`` then ``q_start``;
     ``mode``: bit 1 ``q_current`` given, bit 2 warm start at ``q_start``, bit 4 the fallback
     without the zero-version task when the first answer is at a limit or has no solution.
 
@@ -870,8 +892,7 @@ def _solve_into(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
     disparity_head = I[8] != 0
     null_rel, tol, baseline = scalars[0], scalars[1], scalars[2]
     ws = _workspace(K, C, S, m)
-    p = tgt[0:3]
-    ps = tgt[3:6]
+    ps = _aim_point(p, scalars[4:7])
     has_qc = (mode & 1) != 0
     warm = (mode & 2) != 0
     b = ch[6].copy()
@@ -956,14 +977,14 @@ def _solve_into(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def solve_flat(F, I, tgt, qin, mode, out):  # type: ignore[no-untyped-def]
+def solve_flat(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
-    _solve_into(F, I, tgt, qin, mode, out)
+    _solve_into(F, I, p, qin, mode, out)
 
 
 @kernel
 def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
-    """:func:`_solve_into` for every row of ``T`` (N, 6), answers in the rows of ``OUT``:
+    """:func:`_solve_into` for every row of ``T`` (N, 3), answers in the rows of ``OUT``:
     ``solve_many``'s answers are ``solve``'s, target by target.
 
     Serial, without the GIL: ``solve_many`` runs one call per core on its share of the rows
@@ -981,6 +1002,7 @@ __all__ = [
     "BACKTRACKS",
     "DAMPING",
     "EXACT_RESIDUAL",
+    "FAR_TARGET",
     "MAX_STEP",
     "MIN_TARGET_DISTANCE",
     "POLISHED",

@@ -49,6 +49,7 @@ from cpc2urdf.validation.gaze.gauss_newton import (
 )
 from cpc2urdf.validation.gaze.guess import GuessTable
 from cpc2urdf.validation.gaze.head import DEFAULT_CAMERAS, GazeHead, Index
+from cpc2urdf.validation.gaze.kernels import FAR_TARGET
 from cpc2urdf.validation.gaze.policies import (
     DEFAULT_VIEWING_DISTANCE,
     POLICIES,
@@ -64,7 +65,6 @@ from cpc2urdf.validation.gaze.tracking import SaccadeRule, Trajectory, track
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
-FAR_TARGET = 1e15  # [m]: a target with a coordinate beyond this is solved for by its direction
 
 
 def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
@@ -387,7 +387,7 @@ class GazeSolver:
             if qs.shape != (self.n,) or not np.all(np.isfinite(qs)):
                 raise ConfigurationError(f"q_start must be {self.n} finite readings, got shape {qs.shape}")
         out = comp.solve_point(p, qc, qs)
-        return solution_from_flat(self.joint_names, p, out, comp.S, policy)
+        return solution_from_flat(self.joint_names, p.copy(), out, comp.S, policy)
 
     def _solve_python(
         self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int

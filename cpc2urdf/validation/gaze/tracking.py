@@ -330,7 +330,7 @@ def track(
     Returns:
         A :class:`Trajectory`.
     """
-    P = np.asarray(targets, dtype=float)
+    P = np.array(targets, dtype=float, order="C")  # rows: plain (3,) arrays, as target_point gives
     if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] == 0:
         raise ConfigurationError(f"targets must have shape (T, 3) [m], got shape {P.shape}")
     if not np.all(np.isfinite(P)):
