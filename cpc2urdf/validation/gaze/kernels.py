@@ -49,7 +49,11 @@ MAX_STEP = 0.5  # [rad]/[m]: largest change of one unknown per step
 BACKTRACKS = 10  # step halvings per iteration
 POLISH_ITERATIONS = 12  # iterations of the polish (pointing alone) after the policy phase
 PROBE_ITERATIONS = 8  # policy iterations a further start gets before it must beat the best answer
-STALLED = 1e-12  # [-]: a polish step that lowers |r|^2 by less than this fraction ends the polish
+# [-]: a polish step that lowers |r|^2 by less than this fraction ends the polish. A residual the
+# head can remove falls by orders of magnitude per step (Gauss-Newton on a zero residual converges
+# quadratically); one this slow is what a bound or the head's disparity leaves, and what further
+# steps could still take off is of the order of this fraction of it (pointing error ~5e-7 relative)
+STALLED = 1e-6
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
 POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
@@ -417,10 +421,26 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             if f > 0:
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
+                # the pointing step along the strong directions (Gauss-Newton, damped), and
+                # the version it moves by, vr = c_x . dx_range (the null move makes up for it)
+                vr = 0.0
+                for e in range(f):
+                    if lam[e] > cut:
+                        s = 0.0
+                        a_e = 0.0
+                        for a in range(f):
+                            va = idx[a]
+                            s += V[a, e] * g[va]
+                            a_e += V[a, e] * vc[va] / sw[va]
+                        s = -s / (lam[e] + mu)
+                        vr += a_e * s
+                        for a in range(f):
+                            dx[idx[a]] += V[a, e] * s
                 # zero-version task over the null directions: a_e = v_e . c_x, c_x = c / sw
-                aa = 0.0
-                ab = 0.0
+                kv = 0.0
                 if vw_w > 0.0:
+                    aa = 0.0
+                    ab = 0.0
                     for e in range(f):
                         if lam[e] <= cut:
                             a_e = 0.0
@@ -434,21 +454,14 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                     ver = -vw_ref
                     for v in range(m):
                         ver += vc[v] * u[v]
-                    if gain == 0.0:  # the polish: version to exact zero alone (the least null
-                        ab = 0.0  # move), only where the policy phase left it near zero
-                        if abs(ver) > VERSION_POLISH:
-                            ab, ver, aa = 0.0, 0.0, 0.0
-                    # Sherman-Morrison on (I + w a a^T) z = -(b + w a ver), without the w^2 terms
-                    kv = vw_w * (ab - ver) / (1.0 + vw_w * aa)
-                else:
-                    kv = 0.0
+                    if gain > 0.0 or abs(ver) <= VERSION_POLISH:
+                        if gain == 0.0:  # the polish: version to exact zero alone (the least null
+                            ab = 0.0  # move), only where the policy phase left it near zero
+                        # Sherman-Morrison on (I + w a a^T) z = -(b + w a (ver + vr)), without
+                        # the w^2 terms: the version after the whole step is zero
+                        kv = vw_w * (ab - ver - vr) / (1.0 + vw_w * aa)
                 for e in range(f):
-                    if lam[e] > cut:
-                        s = 0.0
-                        for a in range(f):
-                            s += V[a, e] * g[idx[a]]
-                        s = -s / (lam[e] + mu)
-                    else:
+                    if lam[e] <= cut:
                         s = 0.0
                         a_e = 0.0
                         for a in range(f):
@@ -457,8 +470,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                             a_e += V[a, e] * vc[va] / sw[va]
                         s = -gain * s + (gain if gain > 0.0 else 1.0) * a_e * kv
                         vmove += s * s
-                    for a in range(f):
-                        dx[idx[a]] += V[a, e] * s
+                        for a in range(f):
+                            dx[idx[a]] += V[a, e] * s
             changed = False
             for v in range(m):
                 if free[v]:
