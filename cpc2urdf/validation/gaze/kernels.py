@@ -307,18 +307,25 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
                 tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
                 cs = 1.0 / math.sqrt(tt * tt + 1.0)
                 sn = tt * cs
+                tau = sn / (1.0 + cs)
+                # the rotation on the symmetric H touches rows and columns a and c only: the
+                # pivot's two diagonal entries in closed form, the others in pairs (Numerical
+                # Recipes' form: a third of the updates of rotating all of H's rows and columns)
+                H[a, a] -= tt * hac
+                H[c, c] += tt * hac
+                H[a, c] = 0.0
+                H[c, a] = 0.0
                 for k in range(f):
-                    hka, hkc = H[k, a], H[k, c]
-                    H[k, a] = cs * hka - sn * hkc
-                    H[k, c] = sn * hka + cs * hkc
-                for k in range(f):
-                    hak, hck = H[a, k], H[c, k]
-                    H[a, k] = cs * hak - sn * hck
-                    H[c, k] = sn * hak + cs * hck
+                    if k != a and k != c:
+                        hka, hkc = H[k, a], H[k, c]
+                        H[k, a] = hka - sn * (hkc + hka * tau)
+                        H[k, c] = hkc + sn * (hka - hkc * tau)
+                        H[a, k] = H[k, a]
+                        H[c, k] = H[k, c]
                 for k in range(f):
                     vka, vkc = V[k, a], V[k, c]
-                    V[k, a] = cs * vka - sn * vkc
-                    V[k, c] = sn * vka + cs * vkc
+                    V[k, a] = vka - sn * (vkc + vka * tau)
+                    V[k, c] = vkc + sn * (vka - vkc * tau)
     for i in range(f):
         lam[i] = H[i, i]
     for i in range(1, f):  # insertion sort, ascending
