@@ -33,6 +33,7 @@ import numpy as np
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head, reachable_targets
 from cpc2urdf.urdf import write_urdf
+from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import Coupling, GazeSolver
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -233,7 +234,7 @@ def yourdfpy_axes(case: HeadCase, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray
     Z = np.empty_like(O)
     for i, q in enumerate(Q):
         robot.update_cfg(q[order])
-        T = [robot.get_transform(frame_to=c, frame_from=robot.base_link) for c in case.cameras]
+        T = [yourdfpy_pose(robot, c, robot.base_link) for c in case.cameras]
         for s, c in enumerate(chain.solve_cameras.tolist()):
             if c < len(case.cameras):
                 O[i, s], Z[i, s] = T[c][:3, 3], T[c][:3, 2]

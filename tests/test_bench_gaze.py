@@ -20,6 +20,7 @@ from cpc2urdf.studies.bench_gaze import (
     tracking_targets,
 )
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.validation.crosscheck import yourdfpy_pose
 
 KEYS = (
     "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",
@@ -84,7 +85,7 @@ def test_generic_targets_fixatable_on_yourdfpy(tiago):
     order = [names.index(j) for j in robot.actuated_joint_names]
     for p, q in zip(P, Q, strict=True):
         robot.update_cfg(q[order])
-        T = robot.get_transform(frame_to=cam, frame_from=robot.base_link)
+        T = yourdfpy_pose(robot, cam, robot.base_link)
         d = T[:3, :3].T @ (p - T[:3, 3])
         assert np.arctan2(np.hypot(d[0], d[1]), d[2]) < GAZE_POINTING_TOL
         assert 0.3 <= np.linalg.norm(d) <= 3.0

@@ -26,6 +26,7 @@ from cpc2urdf.studies.bench_gaze import (
 )
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
+from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import POLICIES, GazeSolver, solver_for
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -61,7 +62,7 @@ def _errors_yourdfpy(path, solver, Q, P):
     for k, (q, p) in enumerate(zip(Q, P, strict=True)):
         robot.update_cfg(q[order])
         for e, cam in enumerate(CAMERAS):
-            T = robot.get_transform(frame_to=cam, frame_from="world")
+            T = yourdfpy_pose(robot, cam, "world")
             pc = T[:3, :3].T @ (p - T[:3, 3])
             out[k, e] = math.atan2(math.hypot(pc[0], pc[1]), pc[2])
     return out

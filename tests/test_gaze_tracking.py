@@ -18,6 +18,7 @@ from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head, eyes_coplanar, reachable_targets
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import GazeSolver
 from cpc2urdf.validation.gaze.tracking import (
     MIN_JERK_PEAK_ACCELERATION,
@@ -258,7 +259,7 @@ def test_camera_poses_of_any_head_match_yourdfpy(other_head):
         poses = solver.camera_poses(q)
         assert len(poses) == len(other_head.cameras)
         for T, name in zip(poses, other_head.cameras, strict=True):
-            assert np.allclose(T, robot.get_transform(frame_to=name, frame_from=robot.base_link), rtol=0, atol=1e-12)
+            assert np.allclose(T, yourdfpy_pose(robot, name, robot.base_link), rtol=0, atol=1e-12)
 
 
 def test_warm_start_is_honoured(other_head):

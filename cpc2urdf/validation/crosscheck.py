@@ -276,6 +276,31 @@ def _load_yourdfpy(urdf_path: str) -> Any:
     return robot
 
 
+def yourdfpy_pose(robot: Any, frame_to: str, frame_from: str) -> Array:
+    """``T_<frame_from>_<frame_to>`` (4x4) at the configuration of yourdfpy's last
+    ``update_cfg``, composed from yourdfpy's own joint transforms (its parse, its joint
+    motion, its mimic rule) along the links' parent chain. Not ``robot.get_transform``: that
+    reads trimesh's scene graph, which keeps an edge whose new matrix is within 1e-8 of the old
+    one (``EnforcedForest.add_edge``), so a joint moved by less than ~1e-8 rad or m since the
+    previous ``update_cfg`` comes back stale: an error of that size in a check at 1e-9 (seen:
+    1.3e-8 rad on a gaze answer 6.6e-9 rad off a limit)."""
+    above = {j.child: j for j in robot.robot.joints}
+
+    def to_root(link: str) -> tuple[str, Array]:
+        T = np.eye(4)
+        while link in above:
+            joint = above[link]
+            T = robot._forward_kinematics_joint(joint)[0] @ T  # yourdfpy's joint FK (no public one)
+            link = joint.parent
+        return link, T
+
+    root_to, T_to = to_root(frame_to)
+    root_from, T_from = to_root(frame_from)
+    if root_to != root_from:
+        raise ValueError(f"links {frame_from!r} and {frame_to!r} are in different trees")
+    return np.linalg.solve(T_from, T_to)
+
+
 def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     """FK of every compared frame with yourdfpy vs the CPC model.
 
@@ -313,7 +338,7 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     for k, q in enumerate(Q):
         robot.update_cfg(q[order])
         for f in frames:
-            got[f][k] = robot.get_transform(frame_to=f, frame_from="world")
+            got[f][k] = yourdfpy_pose(robot, f, "world")
     ref = _reference_poses(model, Q, bodies, _mount(model, got[BASE][0], rep))
     _worst(rep, {f: _compare(ref[f], got[f]) for f in frames})
     rep.ok = rep.ok and not rep.problems
@@ -564,7 +589,7 @@ def check_yourdfpy_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: Wr
     for k, q in enumerate(Q):
         robot.update_cfg(_urdf_q(model, source, q))
         for ln in links:
-            got[ln][k] = robot.get_transform(frame_to=ln, frame_from=root)
+            got[ln][k] = yourdfpy_pose(robot, ln, root)
     _worst_link(rep, plan, {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()})
     return rep
 
