@@ -104,6 +104,13 @@ def test_unreachable_targets_all_reported(head):
         assert s.status != "fixated" and s.pointing_error.max() > GAZE_POINTING_TOL
         assert np.all(s.q >= solver.lower) and np.all(s.q <= solver.upper)
         assert np.all(np.isfinite(s.pointing_error)) and np.all(np.isfinite(s.miss_distance))
+        # the report is of the returned readings (the CPC model's FK)
+        T = model.fk(s.q, CAMERAS)
+        for e, cam in enumerate(CAMERAS):
+            pc = T[cam][:3, :3].T @ (p - T[cam][:3, 3])
+            miss = math.hypot(pc[0], pc[1]) if pc[2] >= 0 else float(np.linalg.norm(pc))
+            assert abs(s.miss_distance[e] - miss) < 1e-9 and abs(s.pointing_error[e] - math.atan2(
+                math.hypot(pc[0], pc[1]), pc[2])) < 1e-9, (name, p, cam)
     # with the head still, targets inside the cameras' orbit about the vergence axis
     q = solver.solve(AHEAD).q
     for p in too_close_targets(model, q, 100, seed=3):
@@ -287,6 +294,35 @@ def _reference_cyclopean_step(solver, q, p, act):
     out[act] = d
     return out * (MAX_STEP / max(MAX_STEP, np.abs(out).max()))
 
+
+
+# Reachable (each is fixated at the readings after it) only with an eye at its lower bound and
+# tilt 0.03 rad below its limit: the weighted home's pull of the eyes to their middle led
+# pointing into the corner pan = 0, tilt at its limit (joint_limits, 0.27 / 0.42 deg); 2 of
+# 40,000 bench_gaze.reachable_targets (seeds 10-19, indices 3072 of seed 11, 3054 of seed 18)
+CORNER_TARGETS = (
+    ([-0.3156096808719948, 0.1461449846005398, 0.21604715033419486],
+     [0.5, 0.25, 0.24914717090413305, 1.0205095036362168, 0.00520147806113107, 0.47137090259605297]),
+    ([-0.3473969614746056, 0.13481412892199035, 0.23582311840347847],
+     [0.5, 0.25, 0.13994656096534083, 1.01630261109377, 0.0372579384869882, 0.635520248693666]),
+)
+
+
+def test_cyclopean_fixates_targets_reachable_only_near_a_corner_of_the_limits(nominal, solver):
+    """The cyclopean solve and solve_many fixate them, inside the limits; the reported errors,
+    misses and fixation point are those of the returned readings."""
+    P = np.array([p for p, _ in CORNER_TARGETS])
+    for p, q_ref in CORNER_TARGETS:
+        assert np.all(model_pointing_errors(nominal, np.array(q_ref), np.array(p)) < GAZE_POINTING_TOL)
+    batch = solver.solve_many(P)
+    assert batch.reachable.all(), batch.counts()
+    for i, p in enumerate(P):
+        sol = solver.solve(p)
+        assert sol.status == "fixated", (sol.status, sol.pointing_error)
+        assert np.array_equal(sol.q, batch.q[i])
+        assert np.all(sol.q >= solver.lower) and np.all(sol.q <= solver.upper)
+        assert np.all(model_pointing_errors(nominal, sol.q, p) < GAZE_POINTING_TOL)
+        assert sol.miss_distance.max() < 1e-9 and np.linalg.norm(sol.fixation_point - p) < 1e-9
 
 def test_cyclopean_step_with_an_eye_held_at_its_limit(solver):
     """Issue 14: once an eye joint is held at its limit (out of the active set), the cyclopean
