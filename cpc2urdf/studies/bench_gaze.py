@@ -660,6 +660,9 @@ def _tracking_step_times(solver: GazeSolver, targets: Array) -> tuple[Array, Arr
     out the time the process waited for a core."""
     from cpc2urdf.validation.gaze.tracking import GazeTracker, SaccadeRule
 
+    # warm up on a tracker of its own: a process's first step loads the code it alone uses (~3 ms
+    # once, like the first solve's; not a step of the loop)
+    GazeTracker(solver, TRACK_DT, saccades=SaccadeRule()).step_checked(targets[0])
     tracker = GazeTracker(solver, TRACK_DT, saccades=SaccadeRule())
     wall = np.empty(targets.shape[0])
     cpu = np.empty(targets.shape[0])
