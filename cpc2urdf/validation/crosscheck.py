@@ -298,7 +298,7 @@ def yourdfpy_pose(robot: Any, frame_to: str, frame_from: str) -> Array:
     root_from, T_from = to_root(frame_from)
     if root_to != root_from:
         raise ValueError(f"links {frame_from!r} and {frame_to!r} are in different trees")
-    return np.linalg.solve(T_from, T_to)
+    return np.asarray(np.linalg.solve(T_from, T_to), dtype=np.float64)
 
 
 def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
