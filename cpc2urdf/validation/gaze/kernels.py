@@ -922,8 +922,10 @@ def _aim_point(p, centre):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _solve_into(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
-    """One target, the whole answer in one call. ``p`` (3,): the target (world) [m], finite;
+def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
+    """One target, the whole answer in one call. ``head``: :func:`_unpack` of the packed head
+    ``(F, I)``; ``ws``: a :func:`_workspace` for it (reused from target to target: nothing of
+    one solve is read by the next); ``p`` (3,): the target (world) [m], finite;
     ``qin`` (2 n,): ``q_current`` then ``q_start``;
     ``mode``: bit 1 ``q_current`` given, bit 2 warm start at ``q_start``, bit 4 the fallback
     without the zero-version task when the first answer is at a limit or has no solution.
@@ -932,11 +934,13 @@ def _solve_into(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
     distances (S), fixation point (3; NaN when the two axes are parallel or S = 1), vergence,
     per robot joint 1.0 at a limit (n)."""
     (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars,
-     joint_index, held, still) = _unpack(F, I)
+     joint_index, held, still) = head
     K, C, S, m, n, n_starts, max_it = I[0], I[1], I[2], I[3], I[5], I[6], I[7]
     disparity_head = I[8] != 0
     null_rel, tol, baseline = scalars[0], scalars[1], scalars[2]
-    ws = _workspace(K, C, S, m)
+    eig = ws[21]  # the one state _iterate keeps in the workspace: no warm eigenvectors from another target
+    eig[0] = 0.0
+    eig[1] = 0.0
     ps = _aim_point(p, scalars[4:7])
     has_qc = (mode & 1) != 0
     warm = (mode & 2) != 0
@@ -1052,7 +1056,7 @@ def _solve_into(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
 @kernel
 def solve_flat(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
-    _solve_into(F, I, p, qin, mode, out)
+    _solve_into(_unpack(F, I), I, _workspace(I[0], I[1], I[2], I[3]), p, qin, mode, out)
 
 
 @kernel
@@ -1063,8 +1067,10 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     Serial, without the GIL: ``solve_many`` runs one call per core on its share of the rows
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
+    head = _unpack(F, I)  # once per batch, as the workspace (~1.5 us a target otherwise)
+    ws = _workspace(I[0], I[1], I[2], I[3])
     for i in range(T.shape[0]):
-        _solve_into(F, I, T[i], qin, mode, OUT[i])
+        _solve_into(head, I, ws, T[i], qin, mode, OUT[i])
 
 def workspace(chain: HeadChain) -> tuple[Array, ...]:
     """Scratch arrays of one solve on ``chain``."""
