@@ -57,6 +57,7 @@ STALLED = 1e-6
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
 POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
+SAME_BASIN = 1e-3  # [rad]/[m]: a probe this close to the best answer (every unknown) is converging to it
 OVERSHOOT = 0.1  # [-]: a step back along the last one by more than this fraction of it is shortened (secant)
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
 VERSION_POLISH = 1e-4  # [rad]: the polish zeroes a version this small (larger: a bound holds it)
@@ -343,13 +344,14 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
     re-evaluated."""
-    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev = ws
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near = ws
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
     sigma_prev = 1.0
     # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
     # start of the next decomposition, whatever u is now); eig[1] > 0: V, lam are the
     # decomposition of J^T J at this very u, every unknown free (the policy phase ended on a
-    # small step without moving: the polish's first step needs no decomposition of its own)
+    # small step without moving: the polish's first step needs no decomposition of its own);
+    # eig[2] > 0: stop once u is within SAME_BASIN of u_near (a probe reaching the best answer)
     have_v = eig[0] > 0.0
     exact_v = eig[1] > 0.0 and rr_at_u >= 0.0
     eig[1] = 0.0
@@ -541,6 +543,12 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
         moved_before = True
         rr_old = rr
         rr = residual_at_fk(ch, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)  # the FK of the trial
+        if eig[2] > 0.0:
+            near = 0.0
+            for v in range(m):
+                near = max(near, abs(u[v] - u_near[v]))
+            if near < SAME_BASIN:
+                break
         if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
             break
         if gain == 0.0 and vmove == 0.0 and rr > rr_old * (1.0 - STALLED):
@@ -573,8 +581,9 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
         np.empty(m),
         np.empty((m, m)),
         np.empty((m, m)),
-        np.zeros(2),  # eig: see _iterate
+        np.zeros(3),  # eig: see _iterate
         np.empty(m),  # s_prev: see _iterate
+        np.empty(m),  # u_near: see _iterate
     )
 
 
@@ -616,8 +625,19 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
             # a further start is probed first: it goes on only if it already does better than
             # the best answer so far (an unreachable target costs a few iterations per start,
             # not a full solve each)
+            u_near = ws[23]
+            for v in range(m):
+                u_near[v] = u_out[v]
+            ws[21][2] = 1.0
             it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
                                PROBE_ITERATIONS, ws)
+            ws[21][2] = 0.0
+            near = 0.0
+            for v in range(m):
+                near = max(near, abs(u[v] - u_out[v]))
+            if near < SAME_BASIN:  # on its way to the best answer: nothing new
+                total += it1
+                continue
             if it1 == PROBE_ITERATIONS:
                 if rr >= best_rr:
                     total += it1
@@ -941,6 +961,7 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     eig = ws[21]  # the one state _iterate keeps in the workspace: no warm eigenvectors from another target
     eig[0] = 0.0
     eig[1] = 0.0
+    eig[2] = 0.0
     ps = _aim_point(p, scalars[4:7])
     has_qc = (mode & 1) != 0
     warm = (mode & 2) != 0
