@@ -955,7 +955,7 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     per robot joint 1.0 at a limit (n)."""
     (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars,
      joint_index, held, still) = head
-    K, C, S, m, n, n_starts, max_it = I[0], I[1], I[2], I[3], I[5], I[6], I[7]
+    K, S, m, n, n_starts, max_it = I[0], I[2], I[3], I[5], I[6], I[7]
     disparity_head = I[8] != 0
     null_rel, tol, baseline = scalars[0], scalars[1], scalars[2]
     eig = ws[21]  # the one state _iterate keeps in the workspace: no warm eigenvectors from another target
