@@ -19,6 +19,7 @@ from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels, solver_for
+from cpc2urdf.validation.gaze.batch import THREADED_BATCH
 from cpc2urdf.validation.gaze.solver import pointing_tolerance
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -89,6 +90,33 @@ def test_reachable_targets_exact_on_independent_fk(case):
     # solve() gives the same answer as solve_many
     sol = solver.solve(P[0], policy="min-motion" if solver._head is not None else "cyclopean")
     assert sol.reachable
+
+
+def test_threaded_batch_answers_each_target_as_one_solve(case):
+    """solve_many over two threads (rows dealt round-robin) answers every target exactly as
+    one thread does and as solve_point does, wherever the hard (unreachable) targets sit: a run
+    of them first, then reachable ones, as a workspace map's rows come."""
+    comp = case.solver._fast
+    P, _ = case.reachable_targets(150, seed=7)
+    R, o = comp._fk(comp.home_u)
+    c = o[comp.chain.solve_cameras].mean(axis=0)
+    d = np.random.default_rng(7).normal(size=(150, 3))
+    far = c + 5.0 * d / np.linalg.norm(d, axis=1, keepdims=True)  # all around the head: many behind
+    T = np.vstack([far, P])
+    threads = comp.threads
+    try:
+        comp.threads = 1
+        one = comp.solve_many(T)
+        comp.threads = 2
+        two = comp.solve_many(T)
+    finally:
+        comp.threads = threads
+    assert len(T) >= 2 * THREADED_BATCH  # (two threads take part)
+    for field in ("q", "pointing_error", "status", "iterations"):
+        assert np.array_equal(getattr(one, field), getattr(two, field)), field
+    for i in range(0, len(T), 37):
+        out = comp.solve_point(T[i], None)
+        assert out[0] == two.status[i] and np.array_equal(out[2 : 2 + comp.n], two.q[i])
 
 
 def test_unreachable_targets_answered_in_limits(case):
