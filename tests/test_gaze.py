@@ -254,6 +254,30 @@ def test_bad_input(solver, tmp_path):
         GazeSolver(continuous)
 
 
+def test_every_form_of_a_target_gets_the_same_answer(solver):
+    """solve() passes a plain float (3,) array to the kernel unchecked and uncopied (the kernel
+    checks finiteness and keeps the target): every other form of the same point (list, ints,
+    float32, read-only, a strided view, big-endian) gets the same answer, a non-finite one the
+    same one-line error, and the answer's target is not the caller's array."""
+    ref = solver.solve(np.array([-0.6, -0.6, 0.7]))
+    grid = np.zeros((3, 2))
+    grid[:, 1] = [-0.6, -0.6, 0.7]
+    ro = np.array([-0.6, -0.6, 0.7])
+    ro.flags.writeable = False
+    for form in ([-0.6, -0.6, 0.7], (-0.6, -0.6, 0.7), np.array([-0.6, -0.6, 0.7], dtype=">f8"), ro, grid[:, 1],
+                 np.array([-0.6, -0.6, 0.7])[None][0]):
+        sol = solver.solve(form)
+        assert np.array_equal(sol.q, ref.q) and sol.status == ref.status and np.array_equal(sol.target, ref.target)
+    assert solver.solve(np.array([0, 0, 1], dtype=np.int64)).target.tolist() == [0.0, 0.0, 1.0]
+    p = np.array([-0.6, -0.6, 0.7])
+    sol = solver.solve(p)
+    p[:] = 9.0
+    assert sol.target.tolist() == [-0.6, -0.6, 0.7]
+    for bad in (np.array([np.nan, 0.0, 1.0]), np.array([0.0, -np.inf, 1.0]), np.array([0.0, 0.0, np.inf])):
+        with pytest.raises(ConfigurationError, match=r"target must be finite, got \["):
+            solver.solve(bad)
+
+
 def test_target_on_camera_centre_is_not_fixated(nominal, solver):
     """A target on a camera centre has no direction: that eye counts as missed by pi, the
     status says too close, and the readings stay finite (the iteration used to start from an

@@ -144,8 +144,8 @@ class CompiledGaze:
         )
         self.n = len(robot.joint_names)
         self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        self._qin = np.empty(2 * self.n)
-        self._out = np.empty(kernels.out_size(self.n, self.S))  # (not re-entrant across threads)
+        self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
+        self._out_size = kernels.out_size(self.n, self.S)
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
         ws = self._ws
@@ -253,24 +253,36 @@ class CompiledGaze:
             out[s] = kernels.pointing_error(x, y, z)
         return out
 
+    def solve_target(self, p: Array) -> Array:
+        """:meth:`solve_point` without readings or warm start, on a plain array ``p`` (float,
+        shape (3,), C-contiguous and writeable: what the kernel is compiled for): a control
+        loop's call, nothing checked or copied in Python."""
+        out = np.empty(self._out_size)
+        kernels.solve_flat(self.F, self.I, p, self._qin, 4, out)
+        return out
+
     def solve_point(self, p: Array, q_current: Array | None, q_start: Array | None = None) -> Array:
-        """One checked target ``p`` (shape (3,), finite) from checked in-limit readings
-        ``q_current`` (shape (n,) or None: the middle of the limits), warm-started at readings
-        ``q_start`` (shape (n,)) when given: the output of
+        """One target ``p`` (float, shape (3,); a coordinate that is not finite is answered
+        with status :data:`~cpc2urdf.validation.gaze.kernels.S_NOT_FINITE`) from checked
+        in-limit readings ``q_current`` (shape (n,) or None: the middle of the limits),
+        warm-started at readings ``q_start`` (shape (n,)) when given: a new array, the output of
         :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` (status, iterations, readings,
-        errors, misses, fixation point, vergence, limit flags; a buffer the next call
-        overwrites)."""
+        errors, misses, fixation point, vergence, limit flags, the target)."""
         if not p.flags.carray:  # a view, read-only: the kernel takes (and is compiled for) a plain array
             p = np.array(p, dtype=float)
         mode = 4
-        if q_current is not None:
-            self._qin[: self.n] = q_current
-            mode |= 1
-        if q_start is not None:
-            self._qin[self.n :] = q_start
-            mode |= 2
-        kernels.solve_flat(self.F, self.I, p, self._qin, mode, self._out)
-        return self._out
+        qin = self._qin  # read by the kernel only with q_current or q_start
+        if q_current is not None or q_start is not None:
+            qin = np.empty(2 * self.n)
+            if q_current is not None:
+                qin[: self.n] = q_current
+                mode |= 1
+            if q_start is not None:
+                qin[self.n :] = q_start
+                mode |= 2
+        out = np.empty(self._out_size)
+        kernels.solve_flat(self.F, self.I, p, qin, mode, out)
+        return out
 
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets``, world [m]) from ``q_current`` (robot readings,

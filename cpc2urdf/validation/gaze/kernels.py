@@ -77,6 +77,7 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 
 # status codes of the compiled solve (indices into result.py's STATUSES)
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
+S_NOT_FINITE = -1  # solve_flat's answer to a target with a NaN or infinite coordinate (nothing solved)
 
 
 def pack(chain: HeadChain, version_row: Array | None = None, version_weight: float = 0.0) -> tuple:  # type: ignore[type-arg]
@@ -906,7 +907,7 @@ def _unpack(F, I):  # type: ignore[no-untyped-def]
 
 def out_size(n: int, S: int) -> int:
     """Length of :func:`solve_flat`'s output for ``n`` robot joints and ``S`` solved axes."""
-    return 2 + n + 2 * S + 4 + n
+    return 2 + n + 2 * S + 4 + n + 3
 
 
 @inline_kernel
@@ -952,7 +953,12 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
 
     ``out`` (:func:`out_size`): status, iterations, readings (n), pointing errors (S), miss
     distances (S), fixation point (3; NaN when the two axes are parallel or S = 1), vergence,
-    per robot joint 1.0 at a limit (n)."""
+    per robot joint 1.0 at a limit (n), the target (3). A target with a coordinate that is not
+    finite: status :data:`S_NOT_FINITE`, nothing else written (the caller checks it here, not
+    in Python: ``GazeSolver.solve`` passes a float array to this call as it is)."""
+    if not (math.isfinite(p[0]) and math.isfinite(p[1]) and math.isfinite(p[2])):
+        out[0] = S_NOT_FINITE
+        return
     (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars,
      joint_index, held, still) = head
     K, S, m, n, n_starts, max_it = I[0], I[2], I[3], I[5], I[6], I[7]
@@ -1071,6 +1077,8 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     o += 4
     for i in range(n):
         out[o + i] = 1.0 if (q[i] <= robot_lo[i] + AT_BOUND or q[i] >= robot_hi[i] - AT_BOUND) else 0.0
+    o += n
+    out[o], out[o + 1], out[o + 2] = p[0], p[1], p[2]
 
 
 
@@ -1115,6 +1123,7 @@ __all__ = [
     "S_FIXATED",
     "S_LIMITS",
     "S_NO_SOLUTION",
+    "S_NOT_FINITE",
     "S_TOO_CLOSE",
     "best_starts",
     "camera_jacobian",

@@ -157,7 +157,7 @@ class _FlatSolution(GazeSolution):
     def __repr__(self) -> str:  # the public class's name, not this one's
         return "GazeSolution" + GazeSolution.__repr__(self)[len(type(self).__qualname__):]
 
-    _a: Array  # the output row (status, iterations, readings, errors, misses, fixation point, vergence, limit flags)
+    _a: Array  # the output row (status, iterations, readings, errors, misses, fixation point, vergence, limit flags, target)
     _S: int  # solved axes
 
     @cached_property
@@ -196,19 +196,23 @@ class _FlatSolution(GazeSolution):
         return float(self._a[4 + len(self.joint_names) + 2 * self._S + 1])
 
     @cached_property
+    def target(self) -> Array:  # type: ignore[override]
+        return self._a[-3:]
+
+    @cached_property
     def at_limit(self) -> tuple[str, ...]:  # type: ignore[override]
-        flags = self._a[6 + len(self.joint_names) + 2 * self._S :].tolist()
+        flags = self._a[6 + len(self.joint_names) + 2 * self._S : -3].tolist()
         return tuple(name for name, hit in zip(self.joint_names, flags, strict=True) if hit)
 
 
-def solution_from_flat(robot_names: tuple[str, ...], p: Array, out: Array, S: int, policy: str) -> GazeSolution:
-    """The :class:`GazeSolution` of a compiled solve of target ``p`` (kept, not copied: pass an
-    array no one else holds) from the output ``out`` of
-    :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` (``S`` solved axes; ``fixated`` iff
-    every pointing error is within the tolerance): one copy of ``out``, its fields read from
-    it when first used (the frozen dataclass filled without its generated ``__init__``)."""
+def solution_from_flat(robot_names: tuple[str, ...], out: Array, S: int, policy: str) -> GazeSolution:
+    """The :class:`GazeSolution` of a compiled solve from its output ``out`` (kept, not copied:
+    pass an array no one else holds) of :func:`~cpc2urdf.validation.gaze.kernels.solve_flat`
+    (``S`` solved axes; ``fixated`` iff every pointing error is within the tolerance): its
+    fields read from it when first used (the frozen dataclass filled without its generated
+    ``__init__``)."""
     sol = object.__new__(_FlatSolution)
-    sol.__dict__.update(_a=out.copy(), _S=S, joint_names=robot_names, policy=policy, target=p)
+    sol.__dict__.update(_a=out, _S=S, joint_names=robot_names, policy=policy)
     return sol
 
 
