@@ -10,6 +10,8 @@ docstring), so every one of them is fixatable by construction.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 
 import numpy as np
 import pytest
@@ -276,6 +278,30 @@ def test_every_form_of_a_target_gets_the_same_answer(solver):
     for bad in (np.array([np.nan, 0.0, 1.0]), np.array([0.0, -np.inf, 1.0]), np.array([0.0, 0.0, np.inf])):
         with pytest.raises(ConfigurationError, match=r"target must be finite, got \["):
             solver.solve(bad)
+
+
+def _batch_in_child(solver, P, queue):
+    queue.put(solver.solve_many(P).q)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork only")
+def test_batch_in_a_forked_child(solver):
+    """A process forked after a threaded batch (multiprocessing's default on Linux) inherits the
+    thread pool without its threads: its own batch must still run (it hung before the pool was
+    dropped at fork), with the parent's answers."""
+    P = AHEAD + np.random.default_rng(0).normal(0, 0.05, (300, 3))
+    parent = solver.solve_many(P)  # the pool exists now
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_batch_in_child, args=(solver, P, queue))
+    child.start()
+    try:
+        q = queue.get(timeout=120)
+    finally:
+        child.join(10)
+        if child.is_alive():
+            child.kill()
+    assert np.array_equal(q, parent.q)
 
 
 def test_target_on_camera_centre_is_not_fixated(nominal, solver):

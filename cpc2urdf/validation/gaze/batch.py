@@ -50,6 +50,10 @@ NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direc
 THREADED_BATCH = 64  # targets per thread from which solve_many splits the work over the cores
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+if hasattr(os, "register_at_fork"):
+    # a forked child (multiprocessing's default on Linux) inherits the pools without their
+    # threads: work queued there would never run. It makes its own on first use.
+    os.register_at_fork(after_in_child=_POOLS.clear)
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
