@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import sys
+import threading
 
 import numpy as np
 import pytest
@@ -275,6 +277,9 @@ def test_every_form_of_a_target_gets_the_same_answer(solver):
     sol = solver.solve(p)
     p[:] = 9.0
     assert sol.target.tolist() == [-0.6, -0.6, 0.7]
+    q = sol.q.copy()
+    other = solver.solve(np.array([0.3, -0.9, 0.6]))  # each answer its own array
+    assert np.array_equal(sol.q, q) and not np.array_equal(other.q, q)
     for bad in (np.array([np.nan, 0.0, 1.0]), np.array([0.0, -np.inf, 1.0]), np.array([0.0, 0.0, np.inf])):
         with pytest.raises(ConfigurationError, match=r"target must be finite, got \["):
             solver.solve(bad)
@@ -290,18 +295,62 @@ def test_batch_in_a_forked_child(solver):
     thread pool without its threads: its own batch must still run (it hung before the pool was
     dropped at fork), with the parent's answers."""
     P = AHEAD + np.random.default_rng(0).normal(0, 0.05, (300, 3))
-    parent = solver.solve_many(P)  # the pool exists now
-    ctx = multiprocessing.get_context("fork")
-    queue = ctx.Queue()
-    child = ctx.Process(target=_batch_in_child, args=(solver, P, queue))
-    child.start()
+    comp = solver._fast
+    threads = comp.threads
+    comp.threads = 2  # threaded on any machine: the pool exists after this batch
     try:
-        q = queue.get(timeout=120)
+        parent = solver.solve_many(P)
+        ctx = multiprocessing.get_context("fork")
+        queue = ctx.Queue()
+        child = ctx.Process(target=_batch_in_child, args=(solver, P, queue))
+        child.start()
+        try:
+            q = queue.get(timeout=120)
+        finally:
+            child.join(10)
+            if child.is_alive():
+                child.kill()
     finally:
-        child.join(10)
-        if child.is_alive():
-            child.kill()
+        comp.threads = threads
     assert np.array_equal(q, parent.q)
+
+
+def test_a_target_written_by_another_thread_during_solve(solver):
+    """solve() copies the caller's array before the kernel runs without the GIL: with another
+    thread writing it (a finite target, then NaN, over and over), every call either refuses a
+    NaN target or answers the finite one, readings and target alike (without the copy, answers
+    mixed the two, and a NaN seen by the kernel but gone by the check came back as an answer)."""
+    A = np.array([-0.6, -0.6, 0.7])
+    ref = solver.solve(A)
+    shared = A.copy()
+    stop = threading.Event()
+
+    def writer():
+        nan = np.array([np.nan, -0.6, 0.7])
+        while not stop.is_set():
+            shared[:] = nan
+            shared[:] = A
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    thread = threading.Thread(target=writer)
+    thread.start()
+    answered = refused = 0
+    try:
+        for _ in range(400):
+            try:
+                sol = solver.solve(shared)
+            except ConfigurationError as e:
+                assert "target must be finite" in str(e)
+                refused += 1
+                continue
+            answered += 1
+            assert np.array_equal(sol.target, A) and np.array_equal(sol.q, ref.q) and sol.status == ref.status
+    finally:
+        stop.set()
+        thread.join()
+        sys.setswitchinterval(interval)
+    assert answered > 0
 
 
 def test_target_on_camera_centre_is_not_fixated(nominal, solver):

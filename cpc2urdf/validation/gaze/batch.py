@@ -259,8 +259,9 @@ class CompiledGaze:
 
     def solve_target(self, p: Array) -> Array:
         """:meth:`solve_point` without readings or warm start, on a plain array ``p`` (float,
-        shape (3,), C-contiguous and writeable: what the kernel is compiled for): a control
-        loop's call, nothing checked or copied in Python."""
+        shape (3,), C-contiguous and writeable: what the kernel is compiled for; no one may
+        write it during the call, which runs without the GIL): a control loop's call, nothing
+        checked or copied in Python."""
         out = np.empty(self._out_size)
         kernels.solve_flat(self.F, self.I, p, self._qin, 4, out)
         return out
