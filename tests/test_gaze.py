@@ -423,6 +423,36 @@ def test_cyclopean_fixates_targets_reachable_only_near_a_corner_of_the_limits(no
         assert np.all(model_pointing_errors(nominal, sol.q, p) < GAZE_POINTING_TOL)
         assert sol.miss_distance.max() < 1e-9 and np.linalg.norm(sol.fixation_point - p) < 1e-9
 
+def test_fallback_only_where_the_version_task_holds_pointing_back(nominal, solver):
+    """The nominal head's fallback without the zero-version task (and its rescue) runs only where
+    pointing alone still has a descent direction inside the bounds at the first answer
+    (kernels._pointing_stationary): so at the first answers of the corner targets (which the
+    task holds at a bound: the fallback fixates them) and not at those of unreachable targets,
+    where it cannot lower the error (the skip saves ~40 % of their time)."""
+    from cpc2urdf.validation.gaze import kernels
+
+    comp = solver._fast
+    chain = comp.chain
+    plain = (*comp.ch[:13], np.zeros(2))
+    ws = kernels.workspace(chain)
+    qin = np.zeros(2 * comp.n)
+
+    def stationary_at_first_answer(P):
+        out = np.empty((len(P), kernels.out_size(comp.n, comp.S)))
+        kernels.solve_flat_many(comp.F, comp.I, P, qin, 0, out)  # mode 0: the first answer alone
+        return [bool(kernels._pointing_stationary(plain, np.ascontiguousarray(chain.u_from_q(o[2:2 + comp.n])),
+                                                  chain.b, p, chain.lower, chain.upper, ws))
+                for p, o in zip(P, out, strict=True)], out[:, 0]
+
+    corner = np.array([p for p, _ in CORNER_TARGETS])
+    flags, status = stationary_at_first_answer(corner)
+    assert not any(flags) and np.all(status != kernels.S_FIXATED)  # held back first, retried
+    far = unreachable_targets(nominal, 60, 0)
+    flags, status = stationary_at_first_answer(far)
+    assert all(flags) and np.all(status == kernels.S_LIMITS)
+    assert solver.solve_many(far).counts()["joint_limits"] == len(far)
+
+
 def test_cyclopean_step_with_an_eye_held_at_its_limit(solver):
     """Issue 14: once an eye joint is held at its limit (out of the active set), the cyclopean
     step used to look it up in the active set and raise ValueError ('4 is not in list')."""
