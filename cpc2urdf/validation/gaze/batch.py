@@ -275,16 +275,16 @@ class CompiledGaze:
         errors, misses, fixation point, vergence, limit flags, the target)."""
         if not p.flags.carray:  # a view, read-only: the kernel takes (and is compiled for) a plain array
             p = np.array(p, dtype=float)
+        if q_current is None and q_start is None:
+            return self.solve_target(p)
         mode = 4
-        qin = self._qin  # read by the kernel only with q_current or q_start
-        if q_current is not None or q_start is not None:
-            qin = np.empty(2 * self.n)
-            if q_current is not None:
-                qin[: self.n] = q_current
-                mode |= 1
-            if q_start is not None:
-                qin[self.n :] = q_start
-                mode |= 2
+        qin = np.empty(2 * self.n)
+        if q_current is not None:
+            qin[: self.n] = q_current
+            mode |= 1
+        if q_start is not None:
+            qin[self.n :] = q_start
+            mode |= 2
         out = np.empty(self._out_size)
         kernels.solve_flat(self.F, self.I, p, qin, mode, out)
         return out
@@ -313,8 +313,9 @@ class CompiledGaze:
             # unreachable target costs ~4 reachable ones), so blocks left one core idle for up
             # to a third of the call (bench nominal IIS-head, 2,000 reachable + 200 unreachable,
             # 2 cores: 88k -> 111k targets/s with the persistent pool below)
-            order = np.concatenate([np.arange(k, N, threads) for k in range(threads)])
-            ends = np.cumsum([len(range(k, N, threads)) for k in range(threads)]).tolist()
+            dealt = [np.arange(k, N, threads) for k in range(threads)]
+            order = np.concatenate(dealt)
+            ends = np.cumsum([len(rows) for rows in dealt]).tolist()
             shares = list(zip([0, *ends[:-1]], ends, strict=True))
             T = np.ascontiguousarray(P[order])
             OUT_dealt = np.empty_like(OUT)

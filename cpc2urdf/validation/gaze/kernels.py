@@ -947,6 +947,13 @@ def _aim_point(p, centre):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _without_version(ch):  # type: ignore[no-untyped-def]
+    """The chain tuple ``ch`` without its zero-version task (weight 0)."""
+    return (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
+            np.zeros(2))
+
+
+@inline_kernel
 def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-untyped-def]
     """Whether pointing alone (chain ``ch``) has no descent direction at ``u`` inside the
     bounds: the gradient ``J^T r`` without its components that push an unknown out through the
@@ -1012,10 +1019,8 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     e_out = np.empty(S)
     it, st = solve_single(ch, ps, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
                           tol, max_it, disparity_head, baseline, starts, u_out, e_out, ws, np.inf)
-    plain = (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
-             np.zeros(2))  # the chain without the zero-version task
     if ((mode & 4) != 0 and scalars[3] > 0.0 and (st == S_LIMITS or st == S_NO_SOLUTION)
-            and not _pointing_stationary(plain, u_out, b, ps, lower, upper, ws)):
+            and not _pointing_stationary(_without_version(ch), u_out, b, ps, lower, upper, ws)):
         # the zero-version task can hold a joint at a bound where fixation needs it inside (e.g.
         # pan at 0 with tilt at its limit): the weighted home alone, from the first answer (the
         # constraint gone, the pointing task moves along the direction it held). Not from the
@@ -1026,6 +1031,7 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
         # back: at a first answer where pointing alone has no descent direction inside the
         # bounds (an unreachable target's), neither this nor the rescue below lowered the error
         # by more than 1e-8 relative (23 of 200 bench targets; the rest not at all)
+        plain = _without_version(ch)
         u1 = u_out.copy()
         e1 = e_out.copy()
         best_start = starts[1 if warm else 0].copy()
