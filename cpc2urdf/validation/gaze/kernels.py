@@ -29,6 +29,13 @@ Newton step of ``|x - x_ref|^2 / 2 + w (c . (u - home))^2 / 2`` over the null di
 (Sherman-Morrison, ``w`` large: version held at zero), and the polish zeroes a small remaining
 version exactly. Joints at a bound whose step
 points outward are held (active set); the step is capped and projected on the bounds.
+
+Near the answer (``|r|^2 <= ACCELERATE_BELOW``) the policy phase of a head that fixates
+exactly, with no zero-version task, takes Anderson-accelerated steps: its plain step ignores how
+the null space turns as the joints move, so it converges linearly (on the redundant heads, iCub's
+neck and eyes or a camera on an arm, 2-4x per step); a multisecant step over the last
+``HISTORY`` pairs of (unknowns, plain step) removes most of that, with the plain step as the
+fallback and the stopping test.
 """
 
 from __future__ import annotations
@@ -69,6 +76,9 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a l
 # Nominal IIS-head: answers of unreachable targets 0 - 2.9e-6 (300), first answers of reachable
 # targets the zero-version task held at a bound 0.06 - 0.20 (all 7 of 40,000)
 STATIONARY = 1e-4
+HISTORY = 2  # pairs (x, step) the policy phase's Anderson acceleration uses
+ACCELERATE_BELOW = 1e-6  # [-]: |r|^2 under which the policy phase is accelerated (pointing error ~1e-3 rad)
+ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
 
 # every kernel: cached across runs; IEEE division (no zero-division checks in the loops: every
 # division is guarded where it matters); the GIL released (a batch is split over threads, one
@@ -349,7 +359,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
     re-evaluated."""
-    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near = ws
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
     sigma_prev = 1.0
     # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
@@ -364,6 +374,17 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     vw_w, vw_ref = ch[13][0], ch[13][1]
     m = u.shape[0]
     M = r.shape[0]
+    # the policy phase's Anderson acceleration (heads that fixate exactly, policy = distance
+    # from u_ref: the version task's and a disparity head's near-null moves are left as they are);
+    # acc rows: the history's unknowns hx and plain steps hf (newest first), their differences
+    # to the current ones dXh, dFh, then the plain step d_plain
+    accelerate = gain > 0.0 and vw_w == 0.0 and null_rel <= ACCELERATE_NULL_REL and m <= 62
+    hx, hf = acc[0:HISTORY], acc[HISTORY:2 * HISTORY]
+    dXh, dFh, d_plain = acc[2 * HISTORY:3 * HISTORY], acc[3 * HISTORY:4 * HISTORY], acc[4 * HISTORY]
+    dn = acc[4 * HISTORY + 1]  # the null (policy) move of the step dx
+    nh = 0  # pairs (x, F) in the history
+    rr_old = 0.0  # |r|^2 before the last accepted step
+    h_free = 0  # the free unknowns of the pairs in the history, as bits
     rr = rr_at_u if rr_at_u >= 0.0 else _residual_hot(ch, u, b, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)
     it = 0
     while it < max_it:
@@ -390,6 +411,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                     f += 1
             for v in range(m):
                 dx[v] = 0.0
+                dn[v] = 0.0
             vmove = 0.0  # squared length of the null-space (policy) move, scaled
             if f > 0 and f == m and exact_v:
                 exact_v = False  # V, lam already hold J^T J's decomposition at this u
@@ -489,6 +511,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                         vmove += s * s
                         for a in range(f):
                             dx[idx[a]] += V[a, e] * s
+                            dn[idx[a]] += V[a, e] * s
             changed = False
             for v in range(m):
                 if free[v]:
@@ -498,15 +521,108 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                         changed = True
             if not changed:
                 break
+        accel = False
+        if accelerate:
+            bits = 0  # the history holds for one active set
+            for v in range(m):
+                if free[v]:
+                    bits |= 1 << v
+            if bits != h_free:
+                nh = 0
+                h_free = bits
+        if nh > 0:
+            # safeguard: the history is dropped when the step map grew since its last pair
+            # (the acceleration did not bring it nearer its fixed point)
+            f_now = 0.0
+            f_last = 0.0
+            for v in range(m):
+                f_now += dx[v] * dx[v]
+                f_last += hf[0, v] * hf[0, v]
+            if f_now >= f_last:
+                nh = 0
+        if accelerate and rr <= ACCELERATE_BELOW and vmove > 0.0:
+            # the policy phase converges linearly near the answer: its step ignores how the
+            # pointing constraint's null space turns (error map e -> -C e, C the derivative of
+            # the null projector applied to the answer's offset from the policy's posture).
+            # Anderson acceleration (a multisecant quasi-Newton step on the step map
+            # F(x) = dx) over the last HISTORY pairs (x_i, F_i): gamma = argmin |F - dF gamma|,
+            # step F - (dX + dF) gamma, dX_j = x - x_j, dF_j = F - F_j
+            for j in range(nh):
+                for v in range(m):
+                    dXh[j, v] = sw[v] * u[v] - hx[j, v]
+                    dFh[j, v] = dx[v] - hf[j, v]
+            # push (x, F) into the history (newest first)
+            for j in range(HISTORY - 1, 0, -1):
+                for v in range(m):
+                    hx[j, v] = hx[j - 1, v]
+                    hf[j, v] = hf[j - 1, v]
+            for v in range(m):
+                hx[0, v] = sw[v] * u[v]
+                hf[0, v] = dx[v]
+            k = nh
+            nh = min(nh + 1, HISTORY)
+            if k > 0:
+                # normal equations of the small least squares (k <= 2), solved by Cramer
+                g11 = 0.0
+                g12 = 0.0
+                g22 = 0.0
+                c1 = 0.0
+                c2 = 0.0
+                for v in range(m):
+                    g11 += dFh[0, v] * dFh[0, v]
+                    c1 += dFh[0, v] * dx[v]
+                    if k > 1:
+                        g12 += dFh[0, v] * dFh[1, v]
+                        g22 += dFh[1, v] * dFh[1, v]
+                        c2 += dFh[1, v] * dx[v]
+                ga1 = 0.0
+                ga2 = 0.0
+                det = g11 * g22 - g12 * g12
+                if k > 1 and det > 1e-10 * g11 * g22:
+                    ga1 = (c1 * g22 - c2 * g12) / det
+                    ga2 = (g11 * c2 - g12 * c1) / det
+                elif g11 > 0.0:
+                    ga1 = c1 / g11
+                if g11 > 0.0:
+                    for v in range(m):
+                        d_plain[v] = dx[v]
+                        dx[v] -= ga1 * (dXh[0, v] + dFh[0, v])
+                        if k > 1:
+                            dx[v] -= ga2 * (dXh[1, v] + dFh[1, v])
+                    accel = True
+        else:
+            nh = 0
         big = 0.0
         for v in range(m):
             big = max(big, abs(dx[v] / sw[v]))
         scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
-        if big * scale < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
+        if accelerate and not accel and scale < 1.0 and vmove > 0.0 and moved_before and rr > rr_old:
+            # a long policy walk that raised the pointing error over its last step is capped on
+            # its own, not the pointing step with it: scaled together, the pointing error
+            # settles where the walk's drift off the fixating postures balances a fraction of
+            # its correction, and the walk circles there (a camera on an arm: 60 iterations)
+            big_r = 0.0
+            big_n = 0.0
+            for v in range(m):
+                big_r = max(big_r, abs((dx[v] - dn[v]) / sw[v]))
+                big_n = max(big_n, abs(dn[v] / sw[v]))
+            if big_r < MAX_STEP:
+                tn = (MAX_STEP - big_r) / big_n
+                big = 0.0
+                for v in range(m):
+                    dx[v] += (tn - 1.0) * dn[v]
+                    big = max(big, abs(dx[v] / sw[v]))
+                scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+        plain = big * scale
+        if accel:  # converged is judged on the plain step (an accelerated one can stagnate)
+            plain = 0.0
+            for v in range(m):
+                plain = max(plain, abs(d_plain[v] / sw[v]))
+        if plain < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
             if f == m:  # not moved: the decomposition holds at u for the next phase
                 eig[1] = 1.0
             break
-        if moved_before:
+        if moved_before and not accel:
             # a Gauss-Newton step that turns back along the last one overshoots (a large
             # residual's curvature, e.g. one free joint against bounded ones: the iterates
             # alternate and converge linearly). Along the last step s' (taken at scale sigma)
@@ -529,13 +645,25 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
         elif vmove > 0.0:  # the polish's zero-version move (scaled unknowns)
             allowance = min(vmove, 1.0) * 1e-2
         accepted = False
+        allow = allowance * scale * scale
         for _ in range(BACKTRACKS):
             for v in range(m):
                 trial[v] = min(max(u[v] + scale * dx[v] / sw[v], lower[v]), upper[v])
             rr_new = _residual_hot(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
-            if rr_new <= rr + allowance * scale * scale or rr_new <= EXACT_RESIDUAL:
+            if rr_new <= rr + allow or rr_new <= EXACT_RESIDUAL:
                 accepted = True
                 break
+            if accel:  # the accelerated step failed: the plain one, and a fresh history
+                accel = False
+                nh = 0
+                big = 0.0
+                for v in range(m):
+                    dx[v] = d_plain[v]
+                    big = max(big, abs(dx[v] / sw[v]))
+                scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+                allow = allowance * scale * scale
+                continue
+            allow *= 0.25
             scale *= 0.5
         if not accepted:
             break
@@ -554,7 +682,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 near = max(near, abs(u[v] - u_near[v]))
             if near < SAME_BASIN:
                 break
-        if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL):
+        if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL) and not accel:
             break
         if gain == 0.0 and vmove == 0.0 and rr > rr_old * (1.0 - STALLED):
             break  # a residual that cannot be removed (a bound, disparity): polished to the floor
@@ -589,6 +717,7 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
         np.zeros(3),  # eig: see _iterate
         np.empty(m),  # s_prev: see _iterate
         np.empty(m),  # u_near: see _iterate
+        np.empty((4 * HISTORY + 2, m)),  # acc: see _iterate
     )
 
 
