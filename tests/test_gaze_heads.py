@@ -272,37 +272,69 @@ def test_tolerance_from_the_cameras_focal_length():
     assert sol.reachable and sol.status == "fixated" and np.array_equal(sol.q, b0.q[1])
 
 
+def _policy_kkt(case, Q, P, margin):
+    """First-order optimality of each answer (rows of ``Q``, robot readings) for the policy
+    ``|sw (u - home)|^2 / 2`` subject to fixating ``P`` and the bounds: the policy's gradient
+    ``g`` (scaled unknowns) must be ``J_x^T lambda + mu`` with ``mu`` on the unknowns within
+    ``margin`` of a bound only, of the sign that holds them there (>= 0 at a lower bound, <= 0
+    at an upper one). Returns per answer the stationarity residual and the worst wrong-signed
+    multiplier, and the dimension of the pointing task's null space over the free unknowns."""
+    comp = case.solver._fast
+    chain = comp.chain
+    ws = kernels.workspace(chain)
+    res, sign, null = [], [], []
+    for q, p in zip(Q, P, strict=True):
+        u = chain.u_from_q(q)
+        kernels.residual(comp.ch, u.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
+        Jx = ws[8] / comp.sw
+        g = comp.sw * (u - comp.home_u)
+        at_lo = u < chain.lower + margin
+        at_hi = u > chain.upper - margin
+        held = np.flatnonzero(at_lo | at_hi)
+        A = np.hstack([Jx.T, np.eye(len(u))[:, held]])
+        sol, *_ = np.linalg.lstsq(A, g, rcond=1e-10)
+        res.append(float(np.abs(g - A @ sol).max()))
+        mu = sol[Jx.shape[0]:]
+        wrong = np.concatenate([-mu[at_lo[held]], mu[at_hi[held]], [0.0]])
+        sign.append(float(wrong.max()))
+        free = ~(at_lo | at_hi)
+        sv = np.linalg.svd(Jx[:, free], compute_uv=False) if free.any() else np.zeros(0)
+        null.append(int(free.sum() - np.sum(sv > 1e-9 * sv[0])) if sv.size else 0)
+    return np.array(res), np.array(sign), np.array(null)
+
+
 def test_answers_are_the_policys_constrained_minimum(case):
-    """Each fixated answer minimises the policy, ``|sw (u - home)|^2 / 2``, on the set of
-    postures that fixate (first order): the policy's gradient has no component in the null
-    space of the pointing Jacobian over the unknowns not at a bound. Checks that the policy
-    phase (its Anderson-accelerated steps near the answer) converges to the minimum, not only
-    to a fixating posture. Answers that used up the iteration cap are fixated but may stop
-    short of the minimum (a camera on an arm: 12 of 2,000 reachable targets); they are counted,
-    not checked. Heads whose policy has other terms are left out (the nominal IIS-head's
-    zero-version task, a calibrated head's near-null space)."""
+    """Each fixated answer minimises the policy, ``|sw (u - home)|^2 / 2``, over the postures
+    that fixate the target inside the bounds, to first order (KKT: :func:`_policy_kkt`), on
+    reachable targets of three seeds. Checks that the policy phase converges to a minimum, not
+    only to a fixating posture: its Anderson-accelerated steps near the answer, and a phase that
+    used to end where every trial was refused because the step took an unknown a few 1e-5 from
+    its bound through it (iCub: 3 to 10 of 200 targets per seed ended far from the minimum,
+    policy gradient up to 0.7). Which local minimum is not checked. Answers that used up the
+    iteration cap are fixated but may stop short (a camera on an arm: 12 of 2,000); they are
+    counted, not checked. Heads whose policy has other terms are left out (the nominal
+    IIS-head's zero-version task, a calibrated head's near-null space), and heads with no null
+    space (a stereo pan-tilt: nothing to choose)."""
     comp = case.solver._fast
     if comp.version_row is not None or comp.disparity_head:
         pytest.skip("policy with terms other than the distance from home")
-    chain = comp.chain
-    P, _ = case.reachable_targets(N_TARGETS, seed=7)
-    batch = case.solver.solve_many(P)
-    assert batch.reachable.all()
-    converged = batch.iterations < BATCH_MAX_ITERATIONS
-    assert converged.mean() > 0.95, f"{case.name}: {np.sum(~converged)} answers at the iteration cap"
-    # the policy phase stops on a step under POLICY_STEP_TOL (unknowns), i.e. a gradient of
-    # about that size times the weight (scaled unknowns)
+    # the policy phase stops on a step under POLICY_STEP_TOL (unknowns): a gradient of about
+    # that size times the weight (scaled unknowns), and an unknown that close to its bound
     tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
-    ws = kernels.workspace(chain)
-    worst = 0.0
-    for q, p in zip(batch.q[converged], P[converged], strict=True):
-        u = chain.u_from_q(q)
-        kernels.residual(comp.ch, u.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
-        free = (u > chain.lower + 1e-6) & (u < chain.upper - 1e-6)
-        Jx = (ws[8] / comp.sw)[:, free]
-        _, sv, Vt = np.linalg.svd(Jx)
-        rank = int(np.sum(sv > 1e-9 * sv[0]))
-        Z = Vt[rank:].T  # null space of the pointing task over the free unknowns (scaled)
-        g = (comp.sw * (u - comp.home_u))[free]
-        worst = max(worst, float(np.abs(Z.T @ g).max()) if Z.size else 0.0)
-    assert worst < tol, f"{case.name}: policy gradient {worst:.3g} in the pointing task's null space (tolerance {tol:.1g})"
+    margin = 10 * kernels.POLICY_STEP_TOL
+    nulls = 0
+    for seed in (7, 8, 9):
+        P, _ = case.reachable_targets(N_TARGETS // 2, seed=seed)
+        batch = case.solver.solve_many(P)
+        assert batch.reachable.all()
+        converged = batch.iterations < BATCH_MAX_ITERATIONS
+        assert converged.mean() > 0.95, f"{case.name}: {np.sum(~converged)} answers at the iteration cap"
+        res, sign, null = _policy_kkt(case, batch.q[converged], P[converged], margin)
+        nulls += int(null.sum())
+        worst = int(np.argmax(res))
+        assert res[worst] < tol, (
+            f"{case.name} seed {seed}: target {worst} not stationary: policy gradient {res[worst]:.3g} "
+            f"off the pointing task's rows and the bounds (tolerance {tol:.1g})")
+        assert sign.max() < tol, f"{case.name} seed {seed}: a bound holds an unknown the policy would pull off it ({sign.max():.3g})"
+    if nulls == 0:
+        pytest.skip("no null space: the pointing task fixes every unknown")

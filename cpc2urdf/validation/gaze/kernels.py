@@ -76,7 +76,7 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a l
 # Nominal IIS-head: answers of unreachable targets 0 - 2.9e-6 (300), first answers of reachable
 # targets the zero-version task held at a bound 0.06 - 0.20 (all 7 of 40,000)
 STATIONARY = 1e-4
-HISTORY = 2  # pairs (x, step) the policy phase's Anderson acceleration uses
+HISTORY = 2  # pairs (x, step) the policy phase's Anderson acceleration uses (its 2x2 solve: 2 only)
 ACCELERATE_BELOW = 1e-6  # [-]: |r|^2 under which the policy phase is accelerated (pointing error ~1e-3 rad)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
 
@@ -645,26 +645,62 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
         elif vmove > 0.0:  # the polish's zero-version move (scaled unknowns)
             allowance = min(vmove, 1.0) * 1e-2
         accepted = False
+        limited = False  # the step was cut to take an unknown exactly to its bound (below)
+        scale0 = scale
         allow = allowance * scale * scale
-        for _ in range(BACKTRACKS):
+        tries = BACKTRACKS + 1 if accel else BACKTRACKS  # the fallback to the plain step is not a halving
+        for _ in range(tries):
             for v in range(m):
                 trial[v] = min(max(u[v] + scale * dx[v] / sw[v], lower[v]), upper[v])
             rr_new = _residual_hot(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
             if rr_new <= rr + allow or rr_new <= EXACT_RESIDUAL:
                 accepted = True
                 break
-            if accel:  # the accelerated step failed: the plain one, and a fresh history
+            if accel:  # the accelerated step failed: the plain one (its own allowance), a fresh history
                 accel = False
                 nh = 0
                 big = 0.0
+                allowance = 0.0
                 for v in range(m):
                     dx[v] = d_plain[v]
                     big = max(big, abs(dx[v] / sw[v]))
                 scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+                scale0 = scale
+                for v in range(m):
+                    d = dx[v] / sw[v] * scale
+                    allowance += d * d
+                allowance = min(allowance, 1.0) * 1e-2 * min(1.0, gain)
                 allow = allowance * scale * scale
                 continue
             allow *= 0.25
             scale *= 0.5
+        if not accepted and gain > 0.0:
+            # every trial refused: where the step takes a free unknown through its bound, the
+            # trial is clipped there and leaves the null space, and |r|^2 grows with the step
+            # while a halving gains only ~|r|^2 (a policy walk freed an unknown a few 1e-5 from
+            # its bound: the phase ended far from the policy's minimum). The step cut at the first
+            # bound it reaches (ratio test) stays in the linearised null space; that unknown is
+            # then at its bound, held by the active set from the next iteration on.
+            sb = scale0
+            vb = -1
+            for v in range(m):
+                du = dx[v] / sw[v]
+                if du < 0.0 and u[v] + sb * du < lower[v]:
+                    sb = max((lower[v] - u[v]) / du, 0.0)
+                    vb = v
+                elif du > 0.0 and u[v] + sb * du > upper[v]:
+                    sb = max((upper[v] - u[v]) / du, 0.0)
+                    vb = v
+            if vb >= 0:
+                for v in range(m):
+                    trial[v] = min(max(u[v] + sb * dx[v] / sw[v], lower[v]), upper[v])
+                du = dx[vb] / sw[vb]
+                trial[vb] = lower[vb] if du < 0.0 else upper[vb]
+                rr_new = _residual_hot(ch, trial, b, p, r2, J2, False, JR, Jp, Ja, CR, Co, Jc, Pc)
+                if rr_new <= rr + allowance * sb * sb or rr_new <= EXACT_RESIDUAL:
+                    accepted = True
+                    limited = True
+                    scale = sb
         if not accepted:
             break
         moved = 0.0
@@ -673,7 +709,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             moved = max(moved, abs(trial[v] - u[v]))
             u[v] = trial[v]
         sigma_prev = scale
-        moved_before = True
+        # the secant rule (OVERSHOOT) compares a plain step with the last plain one: not after
+        # an accelerated step or a step cut at a bound
+        moved_before = not accel and not limited
         rr_old = rr
         rr = residual_at_fk(ch, p, r, J, True, JR, Jp, Ja, CR, Co, Jc, Pc)  # the FK of the trial
         if eig[2] > 0.0:
@@ -682,7 +720,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 near = max(near, abs(u[v] - u_near[v]))
             if near < SAME_BASIN:
                 break
-        if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL) and not accel:
+        if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL) and not accel and not limited:
             break
         if gain == 0.0 and vmove == 0.0 and rr > rr_old * (1.0 - STALLED):
             break  # a residual that cannot be removed (a bound, disparity): polished to the floor
