@@ -411,7 +411,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                     f += 1
             for v in range(m):
                 dx[v] = 0.0
-                dn[v] = 0.0
+            if accelerate:  # the null move on its own (the split cap below)
+                for v in range(m):
+                    dn[v] = 0.0
             vmove = 0.0  # squared length of the null-space (policy) move, scaled
             if f > 0 and f == m and exact_v:
                 exact_v = False  # V, lam already hold J^T J's decomposition at this u
@@ -511,7 +513,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                         vmove += s * s
                         for a in range(f):
                             dx[idx[a]] += V[a, e] * s
-                            dn[idx[a]] += V[a, e] * s
+                        if accelerate:
+                            for a in range(f):
+                                dn[idx[a]] += V[a, e] * s
             changed = False
             for v in range(m):
                 if free[v]:
