@@ -303,6 +303,13 @@ def _policy_kkt(case, Q, P, margin):
     return np.array(res), np.array(sign), np.array(null)
 
 
+# the head shapes whose policy is the distance from home and whose pointing task leaves a null
+# space to choose in (the IIS-heads' policies have other terms: the nominal's zero-version task,
+# a calibrated head's near-null space; a stereo pan-tilt's two joints are fixed by pointing)
+POLICY_HEADS = ("tiago", "talos", "icub", "panda_camera")
+
+
+@pytest.mark.parametrize("case", POLICY_HEADS, indirect=True)
 def test_answers_are_the_policys_constrained_minimum(case):
     """Each fixated answer minimises the policy, ``|sw (u - home)|^2 / 2``, over the postures
     that fixate the target inside the bounds, to first order (KKT: :func:`_policy_kkt`), on
@@ -312,12 +319,9 @@ def test_answers_are_the_policys_constrained_minimum(case):
     its bound through it (iCub: 3 to 10 of 200 targets per seed ended far from the minimum,
     policy gradient up to 0.7). Which local minimum is not checked. Answers that used up the
     iteration cap are fixated but may stop short (a camera on an arm: 12 of 2,000); they are
-    counted, not checked. Heads whose policy has other terms are left out (the nominal
-    IIS-head's zero-version task, a calibrated head's near-null space), and heads with no null
-    space (a stereo pan-tilt: nothing to choose)."""
+    counted, not checked."""
     comp = case.solver._fast
-    if comp.version_row is not None or comp.disparity_head:
-        pytest.skip("policy with terms other than the distance from home")
+    assert comp.version_row is None and not comp.disparity_head  # the policy is the distance from home
     # the policy phase stops on a step under POLICY_STEP_TOL (unknowns): a gradient of about
     # that size times the weight (scaled unknowns), and an unknown that close to its bound
     tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
@@ -336,5 +340,4 @@ def test_answers_are_the_policys_constrained_minimum(case):
             f"{case.name} seed {seed}: target {worst} not stationary: policy gradient {res[worst]:.3g} "
             f"off the pointing task's rows and the bounds (tolerance {tol:.1g})")
         assert sign.max() < tol, f"{case.name} seed {seed}: a bound holds an unknown the policy would pull off it ({sign.max():.3g})"
-    if nulls == 0:
-        pytest.skip("no null space: the pointing task fixes every unknown")
+    assert nulls > 0, f"{case.name}: no null space at any answer: the check chose nothing"

@@ -353,6 +353,27 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
             j -= 1
 
 
+@inline_kernel
+def _capped(dx, sw, m):  # type: ignore[no-untyped-def]
+    """The step ``dx`` (scaled unknowns) as ``(big, scale)``: its largest change of one unknown
+    and the factor that caps that at :data:`MAX_STEP`."""
+    big = 0.0
+    for v in range(m):
+        big = max(big, abs(dx[v] / sw[v]))
+    return big, (1.0 if big <= MAX_STEP else MAX_STEP / big)
+
+
+@inline_kernel
+def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
+    """The rise of ``|r|^2`` a policy step ``scale dx`` may cause (its null-space move's second
+    order): 1e-2 of its squared length (at most 1), times the gain."""
+    allowance = 0.0
+    for v in range(m):
+        d = dx[v] / sw[v] * scale
+        allowance += d * d
+    return min(allowance, 1.0) * 1e-2 * min(1.0, gain)
+
+
 @kernel
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u=-1.0):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2),
@@ -596,10 +617,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                     accel = True
         else:
             nh = 0
-        big = 0.0
-        for v in range(m):
-            big = max(big, abs(dx[v] / sw[v]))
-        scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+        big, scale = _capped(dx, sw, m)
         if accelerate and not accel and scale < 1.0 and vmove > 0.0 and moved_before and rr > rr_old:
             # a long policy walk that raised the pointing error over its last step is capped on
             # its own, not the pointing step with it: scaled together, the pointing error
@@ -612,11 +630,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 big_n = max(big_n, abs(dn[v] / sw[v]))
             if big_r < MAX_STEP:
                 tn = (MAX_STEP - big_r) / big_n
-                big = 0.0
                 for v in range(m):
                     dx[v] += (tn - 1.0) * dn[v]
-                    big = max(big, abs(dx[v] / sw[v]))
-                scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+                big, scale = _capped(dx, sw, m)
         plain = big * scale
         if accel:  # converged is judged on the plain step (an accelerated one can stagnate)
             plain = 0.0
@@ -642,10 +658,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 scale = min(scale, sigma_prev / (1.0 - max(rho, -10.0)))
         allowance = 0.0  # the policy's null-space move may raise |r|^2 to second order
         if gain > 0.0:
-            for v in range(m):
-                d = dx[v] / sw[v] * scale
-                allowance += d * d
-            allowance = min(allowance, 1.0) * 1e-2 * min(1.0, gain)
+            allowance = _policy_allowance(dx, sw, scale, gain, m)
         elif vmove > 0.0:  # the polish's zero-version move (scaled unknowns)
             allowance = min(vmove, 1.0) * 1e-2
         accepted = False
@@ -663,17 +676,11 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             if accel:  # the accelerated step failed: the plain one (its own allowance), a fresh history
                 accel = False
                 nh = 0
-                big = 0.0
-                allowance = 0.0
                 for v in range(m):
                     dx[v] = d_plain[v]
-                    big = max(big, abs(dx[v] / sw[v]))
-                scale = 1.0 if big <= MAX_STEP else MAX_STEP / big
+                big, scale = _capped(dx, sw, m)
                 scale0 = scale
-                for v in range(m):
-                    d = dx[v] / sw[v] * scale
-                    allowance += d * d
-                allowance = min(allowance, 1.0) * 1e-2 * min(1.0, gain)
+                allowance = _policy_allowance(dx, sw, scale, gain, m)
                 allow = allowance * scale * scale
                 continue
             allow *= 0.25
