@@ -88,6 +88,19 @@ kernel = njit(cache=True, error_model="numpy", nogil=True)
 # gave the same speed at ~1.7x the cold compile): a call that passes the chain's tuple of arrays
 # costs ~100-400 ns, as much as their arithmetic
 inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=True)
+# the solve's kernels below the entry points (_solve_into, solve_single, solve_one, best_starts,
+# _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
+# so they are compiled without numba's reference counting (its CPU target option _nrt=False):
+# every array they see is owned by the entry point's frame for the whole call. With it, numba
+# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 42) on
+# entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
+# in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
+# batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
+# NRT_incref/NRT_decref); the batch kernel's time a target 14.3 -> 10.8 us (TALOS 14.8 -> 11.2,
+# TIAGo 9.1 -> 6.1); answers identical bit for bit. A function compiled so must not call one
+# that returns a new array: nothing would release it
+# (the option is in numba's own tests, not in the type stubs mypy reads)
+kernel_without_refcounts = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)  # type: ignore[call-overload]
 
 # status codes of the compiled solve (indices into result.py's STATUSES)
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
@@ -374,13 +387,13 @@ def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
     return min(allowance, 1.0) * 1e-2 * min(1.0, gain)
 
 
-@kernel
+@kernel_without_refcounts
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u=-1.0):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2),
     with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
     re-evaluated."""
-    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws
+    JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws[:25]
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
     sigma_prev = 1.0
     # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
@@ -740,7 +753,10 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
 
 
 @kernel
-def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
+def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
+    """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
+    cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
+    :func:`fk` and :func:`residual` only)."""
     return (
         np.empty((K, 3, 3)),
         np.empty((K, 3)),
@@ -767,6 +783,23 @@ def _workspace(K, C, S, m):  # type: ignore[no-untyped-def]
         np.empty(m),  # s_prev: see _iterate
         np.empty(m),  # u_near: see _iterate
         np.empty((4 * HISTORY + 2, m)),  # acc: see _iterate
+        np.empty(m),  # u: see solve_one
+        np.empty(G + 1),  # score: see best_starts
+        np.empty(n_top),  # top_s: see best_starts
+        np.empty(n_top, dtype=np.int64),  # top_g: see best_starts
+        np.empty(3),  # ps: see _solve_into
+        np.empty(K),  # b: see _solve_into
+        np.empty(m),  # u_ref: see _solve_into
+        np.empty(m),  # u_start: see _solve_into
+        np.empty((n_top, m)),  # starts: see _solve_into
+        np.empty(m),  # u_out: see _solve_into
+        np.empty(S),  # e_out: see _solve_into
+        np.empty(m),  # u1: see _solve_into
+        np.empty(S),  # e1: see _solve_into
+        np.empty(m),  # best_start: see _solve_into
+        np.empty(m),  # u2: see _solve_into
+        np.empty(S),  # e2: see _solve_into
+        np.ones(m),  # equal weights: see _solve_into
     )
 
 
@@ -783,7 +816,7 @@ def pointing_error(x, y, z):  # type: ignore[no-untyped-def]
     return math.atan2(math.sqrt(x * x + y * y), z)
 
 
-@kernel
+@kernel_without_refcounts
 def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it, disparity_head,
               baseline, u_out, err_out, ws, rr_to_beat):  # type: ignore[no-untyped-def]
     """One target: the policy phase, then pointing alone, from the best start of ``starts``
@@ -796,7 +829,7 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     m = u_ref.shape[0]
     S = err_out.shape[0]
     solve_cams = ch[11]
-    u = np.empty(m)
+    u = ws[25]
     best_rr = rr_to_beat
     total = 0
     for k in range(starts.shape[0]):
@@ -889,7 +922,7 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     return total, S_NO_SOLUTION
 
 
-@kernel
+@kernel_without_refcounts
 def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws):  # type: ignore[no-untyped-def]
     """The ``n_best`` starts (rows of ``out``) that best face target ``p``: ``u_ref`` and the
     table entries (unknowns ``table_u`` (m, G), cyclopean centre ``table_o`` and axis
@@ -914,7 +947,7 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
     # the table's axes are unit vectors and targets are within FAR_TARGET (1e15 m): |p - o|^2
     # cannot overflow, so no scaling in the loop (the start at u_ref is g = G, scored last)
     px, py, pz = p[0], p[1], p[2]
-    score = np.empty(G + 1)
+    score = ws[26]
     for g in range(G):
         dx, dy, dz = px - table_o[0, g], py - table_o[1, g], pz - table_o[2, g]
         nd2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
@@ -929,8 +962,10 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
     dx, dy, dz = px - ox, py - oy, pz - oz
     nd2 = dx * dx + dy * dy + dz * dz
     score[G] = (dx * zx + dy * zy + dz * zz) / nzr / math.sqrt(nd2) if nd2 > 0.0 else 0.0
-    top_s = np.full(n_best, -np.inf)  # the n_best best scores so far, best first
-    top_g = np.full(n_best, G)
+    top_s, top_g = ws[27], ws[28]  # the n_best best scores so far, best first
+    for k in range(n_best):
+        top_s[k] = -np.inf
+        top_g[k] = G
     for g in range(G + 1):
         sc = score[g]
         if sc > top_s[n_best - 1]:
@@ -947,7 +982,7 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
             out[k, v] = u_ref[v] if g == G else table_u[v, g]
 
 
-@kernel
+@kernel_without_refcounts
 def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
                  tol, max_it, disparity_head, baseline, starts, u_out, err_out, ws, rr_to_beat):  # type: ignore[no-untyped-def]
     """:func:`solve_one` for one target with preallocated buffers (``starts`` (n_starts + 1, m)):
@@ -1105,8 +1140,8 @@ def _u_of_q(q, robot_b, pinv, lower, upper, u):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _aim_point(p, centre):  # type: ignore[no-untyped-def]
-    """The point the iteration aims at for target ``p``: ``p`` itself, or for a target with a
+def _aim_point(p, centre, ps):  # type: ignore[no-untyped-def]
+    """Writes into ``ps`` (3,) the point the iteration aims at for target ``p``: ``p`` itself, or for a target with a
     coordinate beyond :data:`FAR_TARGET` the point on the ray from ``centre`` through ``p`` at
     that distance. Seen from any camera the two differ in direction by less than the head's
     reach over FAR_TARGET (~1e-15 rad), below the rounding of a direction at that distance;
@@ -1114,14 +1149,29 @@ def _aim_point(p, centre):  # type: ignore[no-untyped-def]
     range. The answer is judged on ``p`` itself."""
     big = max(abs(p[0]), abs(p[1]), abs(p[2]))
     if big <= FAR_TARGET:
-        return p
+        ps[0], ps[1], ps[2] = p[0], p[1], p[2]
+        return
     dx, dy, dz = p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]
     big = max(abs(dx), abs(dy), abs(dz))  # components scaled into [-1, 1]: no overflow in the norm
     dx, dy, dz = dx / big, dy / big, dz / big
     k = FAR_TARGET / math.sqrt(dx * dx + dy * dy + dz * dz)
-    ps = np.empty(3)
     ps[0], ps[1], ps[2] = centre[0] + k * dx, centre[1] + k * dy, centre[2] + k * dz
-    return ps
+
+
+@inline_kernel
+def _copy(src, dst):  # type: ignore[no-untyped-def]
+    """``dst[:] = src`` (1-D, same length), as a loop: no view or temporary."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@inline_kernel
+def _largest(a):  # type: ignore[no-untyped-def]
+    """``a.max()`` of a non-empty 1-D array, as a loop."""
+    big = a[0]
+    for i in range(1, a.shape[0]):
+        big = max(big, a[i])
+    return big
 
 
 @inline_kernel
@@ -1153,11 +1203,12 @@ def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-unty
     return g2 <= STATIONARY * STATIONARY * j2 * rr
 
 
-@kernel
-def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
+@kernel_without_refcounts
+def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target, the whole answer in one call. ``head``: :func:`_unpack` of the packed head
-    ``(F, I)``; ``ws``: a :func:`_workspace` for it (reused from target to target: nothing of
-    one solve is read by the next); ``p`` (3,): the target (world) [m], finite;
+    ``(F, I)``; ``plain``: its chain :func:`_without_version`; ``ws``: a :func:`_workspace` for
+    it (reused from target to target: nothing of one solve is read by the next, every buffer
+    of this call is one of its arrays); ``p`` (3,): the target (world) [m], finite;
     ``qin`` (2 n,): ``q_current`` then ``q_start``;
     ``mode``: bit 1 ``q_current`` given, bit 2 warm start at ``q_start``, bit 4 the fallback
     without the zero-version task when the first answer is at a limit or has no solution.
@@ -1172,33 +1223,30 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
         return
     (ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv, scalars,
      joint_index, held, still) = head
-    K, S, m, n, n_starts, max_it = I[0], I[2], I[3], I[5], I[6], I[7]
+    K, S, m, n, max_it = I[0], I[2], I[3], I[5], I[7]
     disparity_head = I[8] != 0
     null_rel, tol, baseline = scalars[0], scalars[1], scalars[2]
     eig = ws[21]  # the one state _iterate keeps in the workspace: no warm eigenvectors from another target
     eig[0] = 0.0
     eig[1] = 0.0
     eig[2] = 0.0
-    ps = _aim_point(p, scalars[4:7])
+    ps, b, u_ref, u_start, starts, u_out, e_out = ws[29], ws[30], ws[31], ws[32], ws[33], ws[34], ws[35]
+    _aim_point(p, scalars[4:7], ps)
     has_qc = (mode & 1) != 0
     warm = (mode & 2) != 0
-    b = ch[6].copy()
-    u_ref = home.copy()
+    _copy(ch[6], b)
+    _copy(home, u_ref)
     if has_qc:
         _u_of_q(qin[0:n], robot_b, pinv, lower, upper, u_ref)
         for k in range(K):
             if held[k] != 0:
                 b[k] = qin[joint_index[k]]
-    u_start = np.empty(m)
     if warm:
         _u_of_q(qin[n:2 * n], robot_b, pinv, lower, upper, u_start)
-    starts = np.empty((n_starts + 1, m))
-    u_out = np.empty(m)
-    e_out = np.empty(S)
     it, st = solve_single(ch, ps, p, b, u_ref, u_start, warm, lower, upper, sw, table_u, table_o, table_z, null_rel,
                           tol, max_it, disparity_head, baseline, starts, u_out, e_out, ws, np.inf)
     if ((mode & 4) != 0 and scalars[3] > 0.0 and (st == S_LIMITS or st == S_NO_SOLUTION)
-            and not _pointing_stationary(_without_version(ch), u_out, b, ps, lower, upper, ws)):
+            and not _pointing_stationary(plain, u_out, b, ps, lower, upper, ws)):
         # the zero-version task can hold a joint at a bound where fixation needs it inside (e.g.
         # pan at 0 with tilt at its limit): the weighted home alone, from the first answer (the
         # constraint gone, the pointing task moves along the direction it held). Not from the
@@ -1209,10 +1257,10 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
         # back: at a first answer where pointing alone has no descent direction inside the
         # bounds (an unreachable target's), neither this nor the rescue below lowered the error
         # by more than 1e-8 relative (23 of 200 bench targets; the rest not at all)
-        plain = _without_version(ch)
-        u1 = u_out.copy()
-        e1 = e_out.copy()
-        best_start = starts[1 if warm else 0].copy()
+        u1, e1, best_start = ws[36], ws[37], ws[38]
+        _copy(u_out, u1)
+        _copy(e_out, e1)
+        _copy(starts[1 if warm else 0], best_start)
         for v in range(m):
             starts[0, v] = u1[v]
         it2, st2 = solve_one(plain, ps, p, b, u_ref, lower, upper, sw, starts[:1], null_rel, tol, max_it,
@@ -1224,22 +1272,23 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
             # (nominal IIS-head, 40,000 reachable targets: 2 such, both fixated so; 300
             # unreachable: 19.9 -> 25.3 iterations; probed for 8 iterations it fixated neither:
             # the way out of that corner first raises |r|^2)
-            u2 = u_out.copy()
-            e2 = e_out.copy()
+            u2, e2 = ws[39], ws[40]
+            _copy(u_out, u2)
+            _copy(e_out, e2)
             for v in range(m):
                 starts[0, v] = best_start[v]
-            it3, st3 = solve_one(plain, ps, p, b, u_ref, lower, upper, np.ones(m), starts[:1], null_rel, tol,
+            it3, st3 = solve_one(plain, ps, p, b, u_ref, lower, upper, ws[41], starts[:1], null_rel, tol,
                                  max_it, disparity_head, baseline, u_out, e_out, ws, np.inf)
             it2 += it3
-            if st3 == S_FIXATED or e_out.max() < e2.max():
+            if st3 == S_FIXATED or _largest(e_out) < _largest(e2):
                 st2 = st3
             else:
-                u_out[:] = u2
-                e_out[:] = e2
+                _copy(u2, u_out)
+                _copy(e2, e_out)
                 fk(ch, u_out, b, ws[0], ws[1], ws[2], ws[3], ws[4])  # the cameras at the kept answer
-        if st2 != S_FIXATED and e_out.max() >= e1.max():
-            u_out[:] = u1
-            e_out[:] = e1
+        if st2 != S_FIXATED and _largest(e_out) >= _largest(e1):
+            _copy(u1, u_out)
+            _copy(e1, e_out)
             fk(ch, u_out, b, ws[0], ws[1], ws[2], ws[3], ws[4])  # the cameras at the kept answer
         else:
             st = st2
@@ -1299,7 +1348,9 @@ def _solve_into(head, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
 @kernel
 def solve_flat(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
-    _solve_into(_unpack(F, I), I, _workspace(I[0], I[1], I[2], I[3]), p, qin, mode, out)
+    head = _unpack(F, I)
+    _solve_into(head, _without_version(head[0]), I, _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1), p, qin,
+                mode, out)
 
 
 @kernel
@@ -1311,13 +1362,14 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
     head = _unpack(F, I)  # once per batch, as the workspace (~1.5 us a target otherwise)
-    ws = _workspace(I[0], I[1], I[2], I[3])
+    plain = _without_version(head[0])
+    ws = _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
     for i in range(T.shape[0]):
-        _solve_into(head, I, ws, T[i], qin, mode, OUT[i])
+        _solve_into(head, plain, I, ws, T[i], qin, mode, OUT[i])
 
 def workspace(chain: HeadChain) -> tuple[Array, ...]:
     """Scratch arrays of one solve on ``chain``."""
-    return _workspace(len(chain.parent), len(chain.cam_parent), len(chain.solve_cameras), chain.m)  # type: ignore[no-any-return]
+    return _workspace(len(chain.parent), len(chain.cam_parent), len(chain.solve_cameras), chain.m, 0, 0)  # type: ignore[no-any-return]
 
 
 __all__ = [
