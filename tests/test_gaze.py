@@ -315,6 +315,61 @@ def test_batch_in_a_forked_child(solver):
     assert np.array_equal(q, parent.q)
 
 
+_LEAK_CHECK = """
+import numpy as np
+from numba.core.runtime import rtsys
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.studies.bench_gaze import reachable_targets, unreachable_targets
+from cpc2urdf.validation.gaze import GazeSolver
+
+model = load_model("iis_head")
+s = GazeSolver.from_model(model)
+P, Q = reachable_targets(model, 60, 0)
+T = np.concatenate([P, unreachable_targets(model, 20, 0), [[1e300, 2e300, 1e300], [np.nan, 0.0, 0.0]]])
+comp = s._fast
+
+
+def every_path():
+    comp.solve_many(T[:-1])                                   # one call per core
+    for p in T[:-1]:
+        s.solve(p)                                            # the control loop's call
+    for p, q0, q1 in zip(P[:20], Q[:20], Q[1:21]):
+        s.solve(p, q_current=q0, q_start=q1)                  # readings and a warm start
+    try:
+        s.solve(T[-1])                                        # refused in the kernel, raised here
+    except Exception:
+        pass
+
+
+def live():
+    st = rtsys.get_allocation_stats()
+    return st.alloc - st.free, st.mi_alloc - st.mi_free
+
+
+every_path()
+before = live()
+for _ in range(5):
+    every_path()
+print(before, live())
+"""
+
+
+def test_the_compiled_solve_releases_every_array():
+    """The solve's inner kernels run without numba's reference counting (kernels.py,
+    ``kernel_without_refcounts``): one that called a function returning a new array would leak
+    it on every solve. numba's own allocation counts (NUMBA_NRT_STATS, read at its start: a
+    fresh process) must not grow over repeated solves through every path of the kernel: a
+    batch, single solves (reachable, unreachable with the fallback, an astronomically far
+    target, one with NaN) and solves from readings with a warm start."""
+    import subprocess
+
+    env = dict(os.environ, NUMBA_NRT_STATS="1")
+    done = subprocess.run([sys.executable, "-c", _LEAK_CHECK], env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    before, after = done.stdout.strip().splitlines()[-1].split(") (")
+    assert before + ")" == "(" + after, f"live numba allocations (arrays, meminfos) grew: {done.stdout.strip()}"
+
+
 def test_a_target_written_by_another_thread_during_solve(solver):
     """solve() copies the caller's array before the kernel runs without the GIL: with another
     thread writing it (a finite target, then NaN, over and over), every call either refuses a
