@@ -133,12 +133,9 @@ def pack(chain: HeadChain, version_row: Array | None = None, version_weight: flo
     )
 
 
-@kernel
-def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
-    """World rotation ``JR`` (K, 3, 3), origin ``Jp`` (K, 3) and axis ``Ja`` (K, 3) of every
-    chain joint, and rotation ``CR`` (C, 3, 3) and centre ``Co`` (C, 3) of every camera, at
-    unknowns ``u`` (chain readings ``A u + b``; ``b`` given per solve). Written out in scalars
-    (3x3 products unrolled, no temporaries): the trigonometry is most of its cost."""
+@inline_kernel
+def _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
+    """:func:`fk`'s arithmetic, inlined into the residual (the solve's hot path)."""
     parent, jtype, axis, R, t, A, cam_parent, cam_R, cam_t = ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[7], ch[8], ch[9]
     K = parent.shape[0]
     m = u.shape[0]
@@ -218,10 +215,18 @@ def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
             Co[c, i] = s + (Jp[pk, i] if pk >= 0 else 0.0)
 
 
-# the same FK inlined into the residual, the solve's hot path: a call that passes the chain's
-# tuple (and the workspace's arrays) costs ~400 ns there, more than the FK itself; every other
-# caller calls fk (one compiled copy, a shorter compile)
-_fk_inline = inline_kernel(getattr(fk, "py_func", fk))  # plain Python under NUMBA_DISABLE_JIT=1
+# the FK is inlined into the residual, the solve's hot path (_fk_scalars): numba passes each
+# array of a call as its fields, and the chain's tuple and the workspace's arrays cost more
+# there than the FK's arithmetic. Every other caller calls fk (one compiled copy, a shorter
+# compile). (A second dispatcher of the same Python function, as before, compiled under the same
+# name as fk's and was called, not inlined: 3 call sites in _iterate, one a residual)
+@kernel
+def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
+    """World rotation ``JR`` (K, 3, 3), origin ``Jp`` (K, 3) and axis ``Ja`` (K, 3) of every
+    chain joint, and rotation ``CR`` (C, 3, 3) and centre ``Co`` (C, 3) of every camera, at
+    unknowns ``u`` (chain readings ``A u + b``; ``b`` given per solve). Written out in scalars
+    (3x3 products unrolled, no temporaries): the trigonometry is most of its cost."""
+    _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co)
 
 
 @inline_kernel
@@ -250,7 +255,7 @@ def _residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type:
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 4): ``p_cam`` and ``|p_cam|``. Returns ``|r|^2``."""
-    _fk_inline(ch, u, b, JR, Jp, Ja, CR, Co)
+    _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co)
     return residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
 
 
