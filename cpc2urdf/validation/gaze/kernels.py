@@ -251,7 +251,8 @@ def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
             Jc[3, k], Jc[4, k], Jc[5, k] = 0.0, 0.0, 0.0
 
 
-def _residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
+@inline_kernel
+def _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 4): ``p_cam`` and ``|p_cam|``. Returns ``|r|^2``."""
@@ -259,8 +260,12 @@ def _residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type:
     return residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
 
 
-residual = kernel(_residual)  # one compiled copy: Python, and the cold callers
-_residual_hot = inline_kernel(_residual)  # inlined into the iteration's two calls
+@kernel
+def residual(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
+    """:func:`_residual_hot` as one compiled copy: Python, and the cold callers (the iteration's
+    two calls inline it; as with :func:`fk`, not a second dispatcher of the same function,
+    which numba compiles under the same name)."""
+    return _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
 
 
 @inline_kernel
