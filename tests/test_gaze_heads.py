@@ -341,3 +341,22 @@ def test_answers_are_the_policys_constrained_minimum(case):
             f"off the pointing task's rows and the bounds (tolerance {tol:.1g})")
         assert sign.max() < tol, f"{case.name} seed {seed}: a bound holds an unknown the policy would pull off it ({sign.max():.3g})"
     assert nulls > 0, f"{case.name}: no null space at any answer: the check chose nothing"
+
+
+@pytest.mark.parametrize("sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)])
+def test_workspace_views_tile_their_buffers(sizes):
+    """The solve's workspace (kernels._workspace) is views carved from one float buffer by a
+    size written out by hand: every float view in its place, none overlapping another, the
+    buffer used to its end; the arrays that start with a value have it."""
+    K, C, S, m, G, n_top = sizes
+    ws = kernels._workspace(*sizes)
+    assert len(ws) == 42
+    spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
+    for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
+        assert start + size == following  # adjacent: no overlap, no gap
+    buffer = ws[0].base  # numba's MemInfo of the float buffer: its address and, as a buffer, its size
+    assert spans[0][0] == buffer.data
+    assert spans[-1][0] + spans[-1][1] - buffer.data == memoryview(buffer).nbytes  # used to its end
+    assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (3 * S, m)
+    assert ws[26].shape == (G + 1,) and ws[33].shape == (n_top, m) and ws[28].dtype == np.int64
+    assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[41], np.ones(m))

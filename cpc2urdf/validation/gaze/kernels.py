@@ -218,8 +218,8 @@ def _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
 # the FK is inlined into the residual, the solve's hot path (_fk_scalars): numba passes each
 # array of a call as its fields, and the chain's tuple and the workspace's arrays cost more
 # there than the FK's arithmetic. Every other caller calls fk (one compiled copy, a shorter
-# compile). (A second dispatcher of the same Python function, as before, compiled under the same
-# name as fk's and was called, not inlined: 3 call sites in _iterate, one a residual)
+# compile). (Before, a second dispatcher of fk's own Python function did that job: numba
+# compiled it under fk's name, and _iterate called fk at three sites instead of inlining it.)
 @kernel
 def fk(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
     """World rotation ``JR`` (K, 3, 3), origin ``Jp`` (K, 3) and axis ``Ja`` (K, 3) of every
