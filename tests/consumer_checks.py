@@ -41,7 +41,7 @@ import numpy as np
 
 from cpc2urdf.native_output import captured_output
 from cpc2urdf.transforms import Array, matrix_from_rpy, rotation_error
-from cpc2urdf.validation.crosscheck import check_urdfdom_executable
+from cpc2urdf.validation.crosscheck import check_urdfdom_executable, yourdfpy_pose
 
 CONSUMER_TOL = 1e-12  # [m] and [rad]: every consumer's pose of every link vs Pinocchio's
 CONSUMERS = ("pinocchio", "yourdfpy", "check_urdf", "mujoco", "pybullet")
@@ -139,8 +139,10 @@ def load_yourdfpy(path: Path, packages: Sequence[Path] = ()) -> Loaded:
     root = robot.base_link
 
     def fk(q: dict[str, float]) -> Poses:
+        # yourdfpy's own joint transforms, composed (crosscheck.yourdfpy_pose), not its
+        # get_transform: that reads trimesh's scene graph, which keeps an edge moved by < 1e-8
         robot.update_cfg(q)
-        return {link: robot.get_transform(frame_to=link, frame_from=root) for link in robot.link_map}
+        return {link: yourdfpy_pose(robot, link, root) for link in robot.link_map}
 
     return fk, out.text, lambda: None
 
