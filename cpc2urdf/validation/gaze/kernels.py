@@ -1326,8 +1326,7 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
         _copy(u_out, u1)
         _copy(e_out, e1)
         _copy(starts[1 if warm else 0], best_start)
-        for v in range(m):
-            starts[0, v] = u1[v]
+        _copy(u1, starts[0])
         it2, st2 = solve_one(plain, ps, p, b, u_ref, lower, upper, sw, starts[:1], null_rel, tol, max_it,
                              disparity_head, baseline, u_out, e_out, ws, np.inf)
         if st2 == S_LIMITS:
@@ -1340,8 +1339,7 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
             u2, e2 = ws[39], ws[40]
             _copy(u_out, u2)
             _copy(e_out, e2)
-            for v in range(m):
-                starts[0, v] = best_start[v]
+            _copy(best_start, starts[0])
             it3, st3 = solve_one(plain, ps, p, b, u_ref, lower, upper, ws[41], starts[:1], null_rel, tol,
                                  max_it, disparity_head, baseline, u_out, e_out, ws, np.inf)
             it2 += it3
@@ -1410,12 +1408,20 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
 
 
 
+@inline_kernel
+def _solve_state(F, I):  # type: ignore[no-untyped-def]
+    """What :func:`_solve_into` takes besides the target, made by the entry points (which own
+    every array of it for the call): the head's views (:func:`_unpack`), its chain without the
+    zero-version task and the workspace."""
+    head = _unpack(F, I)
+    return head, _without_version(head[0]), _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+
+
 @kernel
 def solve_flat(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
-    head = _unpack(F, I)
-    _solve_into(head, _without_version(head[0]), I, _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1), p, qin,
-                mode, out)
+    head, plain, ws = _solve_state(F, I)
+    _solve_into(head, plain, I, ws, p, qin, mode, out)
 
 
 @kernel
@@ -1426,9 +1432,7 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     Serial, without the GIL: ``solve_many`` runs one call per core on its share of the rows
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
-    head = _unpack(F, I)  # once per batch, as the workspace (~1.5 us a target otherwise)
-    plain = _without_version(head[0])
-    ws = _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+    head, plain, ws = _solve_state(F, I)  # once per batch (~1.5 us a target otherwise)
     for i in range(T.shape[0]):
         _solve_into(head, plain, I, ws, T[i], qin, mode, OUT[i])
 
