@@ -350,7 +350,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     buffer used to its end; the arrays that start with a value have it."""
     K, C, S, m, G, n_top = sizes
     ws = kernels._workspace(*sizes)
-    assert len(ws) == 42
+    assert len(ws) == 44
     spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
     for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
         assert start + size == following  # adjacent: no overlap, no gap

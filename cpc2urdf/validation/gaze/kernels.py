@@ -92,7 +92,7 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 # _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
 # so they are compiled without numba's reference counting (its CPU target option _nrt=False):
 # every array they see is owned by the entry point's frame for the whole call. With it, numba
-# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 42) on
+# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 44) on
 # entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
 # in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
 # batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
@@ -397,6 +397,83 @@ def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
     return min(allowance, 1.0) * 1e-2 * min(1.0, gain)
 
 
+@inline_kernel
+def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, mu, gain, accelerate, v, pz,
+                    pc, dx, dn):  # type: ignore[no-untyped-def]
+    """:func:`_iterate`'s step (added to ``dx``, its null move to ``dn`` if ``accelerate``) when
+    the free unknowns ``idx[:f]`` outnumber the ``M`` residual rows, from ``J_x J_x^T = W diag(l)
+    W^T`` (``J_x = J / sw``): the range directions of ``J_x^T J_x`` are ``v_e = J_x^T w_e /
+    sqrt(l_e)`` (each in turn in ``v``), its null directions are everything orthogonal to them, and
+    each null-space sum of the column form is a projection by ``P = I - sum_e v_e v_e^T``. The
+    same step as the column form's, from an M x M eigen-problem instead of f x f. Returns the
+    null move's squared length.
+
+    The pointing step along ``v_e`` is ``-v_e (v_e . g) / (l_e + mu)`` (``g = J_x^T r``), with
+    ``v_e . g`` taken as ``sqrt(l_e) (w_e . r)``: an error ``d`` in ``w_e`` (the Jacobi sweeps'
+    stopping test leaves ~1e-13 of the largest eigenvector in it) then moves the step by about
+    ``d |r| / sqrt(l_e)``, where ``v_e . g`` from ``J_x^T w_e`` would move it by ``d l_max |r| /
+    l_e^1.5``. That matters for a weak direction just above the cut (iCub's fixation Jacobian
+    loses rank at the answer): a step of ~1e-11 instead of ~1."""
+    cut = null_rel * max(lam[M - 1], 1e-300)
+    for a in range(f):  # the policy's offset z = sw (u - u_ref) and the version row c_x = c / sw
+        va = idx[a]
+        pz[a] = sw[va] * (u[va] - u_ref[va])
+        pc[a] = vc[va] / sw[va]
+    vr = 0.0
+    for e in range(M):
+        if lam[e] <= cut:
+            continue
+        root = math.sqrt(lam[e])
+        a_e = 0.0
+        bz = 0.0
+        for a in range(f):
+            va = idx[a]
+            t = 0.0
+            for i in range(M):
+                t += J[i, va] * W[i, e]
+            t /= root * sw[va]
+            v[a] = t
+            a_e += t * pc[a]
+            bz += t * pz[a]
+        # the pointing step along v_e (Gauss-Newton, damped) and the version it moves by; z and
+        # c_x lose their v_e component (Gram-Schmidt, one range direction at a time)
+        s = 0.0
+        for i in range(M):
+            s += W[i, e] * r[i]
+        s = -root * s / (lam[e] + mu)
+        vr += a_e * s
+        for a in range(f):
+            dx[idx[a]] += v[a] * s
+            pz[a] -= bz * v[a]
+            pc[a] -= a_e * v[a]
+    # the zero-version task over the null space (as the column form, whose sums over the null
+    # directions of a_e^2 and a_e b_e are |P c_x|^2 and P c_x . z)
+    kv = 0.0
+    if vw_w > 0.0:
+        aa = 0.0
+        ab = 0.0
+        for a in range(f):
+            aa += pc[a] * pc[a]
+            ab += pc[a] * pz[a]
+        ver = -vw_ref
+        for i in range(u.shape[0]):
+            ver += vc[i] * u[i]
+        if gain > 0.0 or abs(ver) <= VERSION_POLISH:
+            if gain == 0.0:
+                ab = 0.0
+            kv = vw_w * (ab - ver - vr) / (1.0 + vw_w * aa)
+    # the null move: -gain P z + k P c_x (the column form's sum of v_e s_e over the null directions)
+    k = (gain if gain > 0.0 else 1.0) * kv
+    vmove = 0.0
+    for a in range(f):
+        s = -gain * pz[a] + k * pc[a]
+        vmove += s * s
+        dx[idx[a]] += s
+        if accelerate:
+            dn[idx[a]] += s
+    return vmove
+
+
 @kernel_without_refcounts
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u=-1.0):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2),
@@ -404,6 +481,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
     re-evaluated."""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws[:25]
+    null_z, null_c = ws[42], ws[43]
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
     sigma_prev = 1.0
     # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
@@ -459,51 +537,68 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 for v in range(m):
                     dn[v] = 0.0
             vmove = 0.0  # squared length of the null-space (policy) move, scaled
+            # more free unknowns than residual rows (a camera on an arm, iCub's neck and eyes):
+            # the decomposition is of J_x J_x^T (M x M), whose nonzero eigenvalues are J^T J's
+            rows = f > M
+            nd = M if rows else f
             if f > 0 and f == m and exact_v:
-                exact_v = False  # V, lam already hold J^T J's decomposition at this u
+                exact_v = False  # V, lam already hold this decomposition at this u
             elif f > 0:
-                for a in range(f):
-                    for c in range(a, f):
-                        s = 0.0
-                        for i in range(M):
-                            s += J[i, idx[a]] * J[i, idx[c]]
-                        s /= sw[idx[a]] * sw[idx[c]]
-                        H[a, c] = s
-                        H[c, a] = s
-                if f == m and have_v:
-                    # warm start: in the last step's eigenbasis H is nearly diagonal, so the
-                    # Jacobi sweeps are few; the eigenvectors are then Vp times those found
-                    for a in range(f):
-                        for c in range(f):
+                if rows:
+                    for i in range(M):
+                        for j in range(i, M):
                             s = 0.0
-                            for k in range(f):
-                                s += H[a, k] * Vp[k, c]
-                            Hb[a, c] = s
+                            for a in range(f):
+                                va = idx[a]
+                                s += J[i, va] * J[j, va] / (sw[va] * sw[va])
+                            H[i, j] = s
+                            H[j, i] = s
+                else:
                     for a in range(f):
                         for c in range(a, f):
                             s = 0.0
-                            for k in range(f):
+                            for i in range(M):
+                                s += J[i, idx[a]] * J[i, idx[c]]
+                            s /= sw[idx[a]] * sw[idx[c]]
+                            H[a, c] = s
+                            H[c, a] = s
+                if f == m and have_v:
+                    # warm start: in the last step's eigenbasis H is nearly diagonal, so the
+                    # Jacobi sweeps are few; the eigenvectors are then Vp times those found
+                    for a in range(nd):
+                        for c in range(nd):
+                            s = 0.0
+                            for k in range(nd):
+                                s += H[a, k] * Vp[k, c]
+                            Hb[a, c] = s
+                    for a in range(nd):
+                        for c in range(a, nd):
+                            s = 0.0
+                            for k in range(nd):
                                 s += Vp[k, a] * Hb[k, c]
                             H[a, c] = s
                             H[c, a] = s
-                    jacobi_eigh(H, f, lam, V)
-                    for a in range(f):
-                        for c in range(f):
+                    jacobi_eigh(H, nd, lam, V)
+                    for a in range(nd):
+                        for c in range(nd):
                             s = 0.0
-                            for k in range(f):
+                            for k in range(nd):
                                 s += Vp[a, k] * V[k, c]
                             Hb[a, c] = s
-                    for a in range(f):
-                        for c in range(f):
+                    for a in range(nd):
+                        for c in range(nd):
                             V[a, c] = Hb[a, c]
                 else:
-                    jacobi_eigh(H, f, lam, V)
+                    jacobi_eigh(H, nd, lam, V)
                 if f == m:
-                    for a in range(f):
-                        for c in range(f):
+                    for a in range(nd):
+                        for c in range(nd):
                             Vp[a, c] = V[a, c]
                     have_v = True
-            if f > 0:
+            if f > 0 and rows:
+                vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, DAMPING * rr,
+                                        gain, accelerate, Hb[0], null_z, null_c, dx, dn)
+            elif f > 0:
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
                 # the pointing step along the strong directions (Gauss-Newton, damped), and
@@ -773,11 +868,11 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
     :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
-    solve makes its workspace on every call, and 42 allocations cost ~1.3 us of it."""
+    solve makes its workspace on every call, and 44 allocations cost ~1.3 us of it."""
     M = 3 * S
     f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + 4 * S + M + M * m + M + M * m + m + 4 * m * m
                  + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + n_top + 3 + K + m + m + n_top * m
-                 + m + S + m + S + m + m + S + m)
+                 + m + S + m + S + m + m + S + m + m + m)
     ints = np.empty(m + n_top, dtype=np.int64)
     JR, o = _carve(f, 0, 9 * K)
     Jp, o = _carve(f, o, 3 * K)
@@ -818,6 +913,8 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     u2, o = _carve(f, o, m)
     e2, o = _carve(f, o, S)
     ones, o = _carve(f, o, m)
+    null_z, o = _carve(f, o, m)
+    null_c, o = _carve(f, o, m)
     for i in range(3):
         eig[i] = 0.0
     for i in range(m):
@@ -865,6 +962,8 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         u2,  # see _solve_into
         e2,  # see _solve_into
         ones,  # equal weights: see _solve_into
+        null_z,  # see _step_from_rows
+        null_c,  # see _step_from_rows
     )
 
 
