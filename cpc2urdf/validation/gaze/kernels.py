@@ -409,11 +409,17 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
     null move's squared length.
 
     The pointing step along ``v_e`` is ``-v_e (v_e . g) / (l_e + mu)`` (``g = J_x^T r``), with
-    ``v_e . g`` taken as ``sqrt(l_e) (w_e . r)``: an error ``d`` in ``w_e`` (the Jacobi sweeps'
-    stopping test leaves ~1e-13 of the largest eigenvector in it) then moves the step by about
-    ``d |r| / sqrt(l_e)``, where ``v_e . g`` from ``J_x^T w_e`` would move it by ``d l_max |r| /
-    l_e^1.5``. That matters for a weak direction just above the cut (iCub's fixation Jacobian
-    loses rank at the answer): a step of ~1e-11 instead of ~1."""
+    ``v_e . g`` taken as ``sqrt(l_e) (w_e . r_t)``: ``r_t`` is ``r`` without each camera's radial
+    part ``(u . r) u``, which ``J`` cannot see (``u^T J_c = 0``, ``u = r_c + e_z``: the
+    eigenvalues of ``J_x J_x^T`` that are zero by construction). Both choices keep the Jacobi
+    sweeps' error out of a weak direction's step: they stop with off-diagonal terms ~1e-12 of
+    ``l_max``, so a weak ``w_e`` holds ~1e-12 of the strong eigenvectors and ~1e-12 ``l_max /
+    l_e`` of the zero ones. From ``J_x^T w_e`` the first would move ``v_e . g`` by ~1e-12
+    ``l_max |r| / sqrt(l_e)``; with ``r`` the second by that fraction of the radial part.
+    iCub's pointing Jacobian loses rank at its answers (a 4th eigenvalue 1e-11..1e-8 of
+    ``l_max``, just above the cut): the first made 2 of 2,000 targets end at a limit, and the
+    second moved their unit direction there by up to 0.3 (largest component).
+    """
     cut = null_rel * max(lam[M - 1], 1e-300)
     for a in range(f):  # the policy's offset z = sw (u - u_ref) and the version row c_x = c / sw
         va = idx[a]
@@ -438,8 +444,13 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
         # the pointing step along v_e (Gauss-Newton, damped) and the version it moves by; z and
         # c_x lose their v_e component (Gram-Schmidt, one range direction at a time)
         s = 0.0
-        for i in range(M):
-            s += W[i, e] * r[i]
+        for c in range(M // 3):  # w_e . r_t
+            ux, uy, uz = r[3 * c], r[3 * c + 1], r[3 * c + 2] + 1.0
+            if ux * ux + uy * uy + uz * uz < 0.5:  # a target on the camera centre: J's rows are zero
+                continue
+            d = ux * r[3 * c] + uy * r[3 * c + 1] + uz * r[3 * c + 2]
+            s += (W[3 * c, e] * (r[3 * c] - d * ux) + W[3 * c + 1, e] * (r[3 * c + 1] - d * uy)
+                  + W[3 * c + 2, e] * (r[3 * c + 2] - d * uz))
         s = -root * s / (lam[e] + mu)
         vr += a_e * s
         for a in range(f):
