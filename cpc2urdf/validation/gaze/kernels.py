@@ -28,7 +28,10 @@ neck and eyes far from the policy's posture, is left to the policy). With a zero
 Newton step of ``|x - x_ref|^2 / 2 + w (c . (u - home))^2 / 2`` over the null directions
 (Sherman-Morrison, ``w`` large: version held at zero), and the polish zeroes a small remaining
 version exactly. Joints at a bound whose step
-points outward are held (active set); the step is capped and projected on the bounds.
+points outward are held (active set); the step is capped and projected on the bounds. With more
+free unknowns than residual rows (a camera on an arm, iCub's torso, neck and eyes, TALOS's torso
+and head) the same step comes from ``J_x J_x^T`` (``M x M``, ``M = 3S``) instead
+(:func:`_step_from_rows`).
 
 Near the answer (``|r|^2 <= ACCELERATE_BELOW``) the policy phase of a head that fixates
 exactly, with no zero-version task, takes Anderson-accelerated steps: its plain step ignores how
@@ -398,6 +401,44 @@ def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _eigh_warm(H, n, lam, V, Vp, Hb, warm, keep):  # type: ignore[no-untyped-def]
+    """:func:`jacobi_eigh` of ``H[:n, :n]``, warm-started from the eigenvectors in ``Vp`` when
+    ``warm`` (the last step's, every unknown free): in that basis ``H`` is nearly diagonal, so the
+    sweeps are few, and the eigenvectors are then ``Vp`` times those found. ``keep``: ``Vp``
+    takes the result (for the next step's warm start)."""
+    if warm:
+        for a in range(n):
+            for c in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += H[a, k] * Vp[k, c]
+                Hb[a, c] = s
+        for a in range(n):
+            for c in range(a, n):
+                s = 0.0
+                for k in range(n):
+                    s += Vp[k, a] * Hb[k, c]
+                H[a, c] = s
+                H[c, a] = s
+        jacobi_eigh(H, n, lam, V)
+        for a in range(n):
+            for c in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += Vp[a, k] * V[k, c]
+                Hb[a, c] = s
+        for a in range(n):
+            for c in range(n):
+                V[a, c] = Hb[a, c]
+    else:
+        jacobi_eigh(H, n, lam, V)
+    if keep:
+        for a in range(n):
+            for c in range(n):
+                Vp[a, c] = V[a, c]
+
+
+@inline_kernel
 def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, mu, gain, accelerate, v, pz,
                     pc, dx, dn):  # type: ignore[no-untyped-def]
     """:func:`_iterate`'s step (added to ``dx``, its null move to ``dn`` if ``accelerate``) when
@@ -551,60 +592,31 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             # more free unknowns than residual rows (a camera on an arm, iCub's neck and eyes):
             # the decomposition is of J_x J_x^T (M x M), whose nonzero eigenvalues are J^T J's
             rows = f > M
-            nd = M if rows else f
             if f > 0 and f == m and exact_v:
                 exact_v = False  # V, lam already hold this decomposition at this u
-            elif f > 0:
-                if rows:
-                    for i in range(M):
-                        for j in range(i, M):
-                            s = 0.0
-                            for a in range(f):
-                                va = idx[a]
-                                s += J[i, va] * J[j, va] / (sw[va] * sw[va])
-                            H[i, j] = s
-                            H[j, i] = s
-                else:
-                    for a in range(f):
-                        for c in range(a, f):
-                            s = 0.0
-                            for i in range(M):
-                                s += J[i, idx[a]] * J[i, idx[c]]
-                            s /= sw[idx[a]] * sw[idx[c]]
-                            H[a, c] = s
-                            H[c, a] = s
-                if f == m and have_v:
-                    # warm start: in the last step's eigenbasis H is nearly diagonal, so the
-                    # Jacobi sweeps are few; the eigenvectors are then Vp times those found
-                    for a in range(nd):
-                        for c in range(nd):
-                            s = 0.0
-                            for k in range(nd):
-                                s += H[a, k] * Vp[k, c]
-                            Hb[a, c] = s
-                    for a in range(nd):
-                        for c in range(a, nd):
-                            s = 0.0
-                            for k in range(nd):
-                                s += Vp[k, a] * Hb[k, c]
-                            H[a, c] = s
-                            H[c, a] = s
-                    jacobi_eigh(H, nd, lam, V)
-                    for a in range(nd):
-                        for c in range(nd):
-                            s = 0.0
-                            for k in range(nd):
-                                s += Vp[a, k] * V[k, c]
-                            Hb[a, c] = s
-                    for a in range(nd):
-                        for c in range(nd):
-                            V[a, c] = Hb[a, c]
-                else:
-                    jacobi_eigh(H, nd, lam, V)
+            elif rows:
+                for i in range(M):
+                    for j in range(i, M):
+                        s = 0.0
+                        for a in range(f):
+                            va = idx[a]
+                            s += J[i, va] * J[j, va] / (sw[va] * sw[va])
+                        H[i, j] = s
+                        H[j, i] = s
+                _eigh_warm(H, M, lam, V, Vp, Hb, f == m and have_v, f == m)
                 if f == m:
-                    for a in range(nd):
-                        for c in range(nd):
-                            Vp[a, c] = V[a, c]
+                    have_v = True
+            elif f > 0:
+                for a in range(f):
+                    for c in range(a, f):
+                        s = 0.0
+                        for i in range(M):
+                            s += J[i, idx[a]] * J[i, idx[c]]
+                        s /= sw[idx[a]] * sw[idx[c]]
+                        H[a, c] = s
+                        H[c, a] = s
+                _eigh_warm(H, f, lam, V, Vp, Hb, f == m and have_v, f == m)
+                if f == m:
                     have_v = True
             if f > 0 and rows:
                 vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, DAMPING * rr,
