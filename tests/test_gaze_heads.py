@@ -19,7 +19,7 @@ from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels, solver_for
-from cpc2urdf.validation.gaze.batch import BATCH_MAX_ITERATIONS, THREADED_BATCH
+from cpc2urdf.validation.gaze.batch import BATCH_MAX_ITERATIONS, THREADED_BATCH, VERSION_WEIGHT
 from cpc2urdf.validation.gaze.solver import pointing_tolerance
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -343,14 +343,19 @@ def test_answers_are_the_policys_constrained_minimum(case):
     assert nulls > 0, f"{case.name}: no null space at any answer: the check chose nothing"
 
 
-def _svd_step(comp, p, u0, ws):
+def _svd_step(comp, p, u0, ws, version=None):
     """The policy phase's task-priority step at ``u0`` (unknowns), from numpy's SVD of the scaled
     Jacobian ``J_x = J / sw = U diag(s) V^T``: on the singular directions with ``s^2`` above the
     cut the damped Gauss-Newton step ``-v s (u . r) / (s^2 + mu)`` (``= -v (v . g) / (s^2 + mu)``,
     ``g = J_x^T r``, in the form whose error does not grow with ``s_max / s``), on the others
-    the policy's offset from home, removed. Returns the step and the weakest kept ``s^2`` over
-    the largest, or None when a singular value is within 10x of the cut (which side of it a
-    direction falls on is then rounding)."""
+    the policy's offset ``z`` from home, removed. With ``version = (c, w)`` (a zero-version row
+    over the unknowns and its weight, as ``kernels.pack`` takes them) the null-space move is the
+    Newton step of ``|z|^2 / 2 + w (c . (u - home))^2 / 2`` that leaves the version zero after
+    the whole step, by Sherman-Morrison without the ``w^2`` terms (``kernels._iterate``):
+    ``-P z + k P c_x`` with ``k = w (P c_x . z - ver - c_x . dx_range) / (1 + w |P c_x|^2)``,
+    ``c_x = c / sw``, ``P`` the projector off the kept directions. Returns the step and the
+    weakest kept ``s^2`` over the largest, or None when a singular value is within 10x of the
+    cut (which side of it a direction falls on is then rounding)."""
     chain = comp.chain
     rr = kernels.residual(comp.ch, u0.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
     U, s, Vt = np.linalg.svd(ws[8] / comp.sw)
@@ -362,18 +367,25 @@ def _svd_step(comp, p, u0, ws):
     V = Vt[:k].T
     dx = -V @ (s[:k] * (U[:, :k].T @ ws[7]) / (lam[:k] + kernels.DAMPING * rr))
     z = comp.sw * (u0 - comp.home_u)
-    dx -= kernels.SECONDARY_GAIN * (z - V @ (V.T @ z))
+    null_z = z - V @ (V.T @ z)
+    if version is not None:
+        c, w = version
+        cx = c / comp.sw
+        null_c = cx - V @ (V.T @ cx)
+        kv = w * (null_c @ z - c @ (u0 - comp.home_u) - cx @ dx) / (1.0 + w * (null_c @ null_c))
+        dx += kernels.SECONDARY_GAIN * kv * null_c
+    dx -= kernels.SECONDARY_GAIN * null_z
     return dx / comp.sw, lam[k - 1] / lam[0]
 
 
-def _one_iteration_off(comp, p, u0, reference, ws):
+def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
     """How far (largest component of the unit vectors) the kernel's first policy-phase step from
-    ``u0`` points from ``reference``; None where the step was clipped at a bound or refused (its
-    direction is then not the step's)."""
+    ``u0`` (on the packed chain ``ch``; default the solver's) points from ``reference``; None
+    where the step was clipped at a bound or refused (its direction is then not the step's)."""
     chain = comp.chain
     u = u0.copy()
-    kernels._iterate(comp.ch, p, chain.b.copy(), u, comp.home_u, chain.lower, chain.upper, comp.sw,
-                     kernels.SECONDARY_GAIN, comp.null_rel, 1, ws)
+    kernels._iterate(comp.ch if ch is None else ch, p, chain.b.copy(), u, comp.home_u, chain.lower, chain.upper,
+                     comp.sw, kernels.SECONDARY_GAIN, comp.null_rel, 1, ws)
     move = u - u0
     if not (np.all(u > chain.lower) and np.all(u < chain.upper) and np.any(move)):
         return None
@@ -438,6 +450,38 @@ def test_the_step_stays_accurate_where_the_pointing_jacobian_loses_rank(case):
     assert worst < 1e-8, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max / s"
     if case.name == "icub":
         assert weakest < 1e-9, f"iCub: no weak direction near the cut (weakest kept s^2 / s_max^2 {weakest:.1g})"
+
+
+@pytest.mark.parametrize("case", ["icub"], indirect=True)
+def test_the_zero_version_task_takes_the_svds_step_in_the_rows_form(case):
+    """The zero-version task (the nominal IIS-head's cyclopean policy) in the ``J J^T`` form
+    (``kernels._step_from_rows``): no head shape reaches it (an IIS-head solves 4 unknowns
+    against 6 rows), so iCub's chain (9 unknowns, 6 rows) gets a version row on its ``version``
+    unknown, at the solver's weight. Its first step from seeded postures must point where the
+    SVD's does (:func:`_svd_step` with the version task), to 1e-10 times ``s_max^2 / s^2`` as in
+    :func:`test_one_iteration_takes_the_task_priority_step_of_an_svd`, and differ from the step
+    without the task."""
+    comp = case.solver._fast
+    chain = comp.chain
+    c = np.zeros(chain.m)
+    c[chain.variables.index("version")] = 1.0
+    ch = kernels.pack(chain, c, VERSION_WEIGHT)
+    ws = kernels.workspace(chain)
+    rng = np.random.default_rng(12)
+    P, _ = case.reachable_targets(60, seed=4)
+    compared, worst, moved = 0, 0.0, 0.0
+    for p in P:
+        u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
+        step = _svd_step(comp, p, u0, ws, (c, VERSION_WEIGHT))
+        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws, ch)
+        if off is not None:
+            compared += 1
+            worst = max(worst, off * step[1])
+            plain = _svd_step(comp, p, u0, ws)[0]
+            moved = max(moved, float(np.abs(step[0] / np.linalg.norm(step[0]) - plain / np.linalg.norm(plain)).max()))
+    assert compared >= 30, f"only {compared} postures compared"
+    assert moved > 1e-2, f"the version task changed no step (by {moved:.2g}): the check chose nothing"
+    assert worst < 1e-10, f"the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
 
 
 @pytest.mark.parametrize("sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)])

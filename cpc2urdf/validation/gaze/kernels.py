@@ -589,7 +589,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 for v in range(m):
                     dn[v] = 0.0
             vmove = 0.0  # squared length of the null-space (policy) move, scaled
-            # more free unknowns than residual rows (a camera on an arm, iCub's neck and eyes):
+            # more free unknowns than residual rows (a camera on an arm, iCub, TALOS's torso and head):
             # the decomposition is of J_x J_x^T (M x M), whose nonzero eigenvalues are J^T J's
             rows = f > M
             if f > 0 and f == m and exact_v:
