@@ -401,19 +401,25 @@ def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _product(A, B, out, n):  # type: ignore[no-untyped-def]
+    """``out[:n, :n] = A[:n, :n] B[:n, :n]``."""
+    for a in range(n):
+        for c in range(n):
+            s = 0.0
+            for k in range(n):
+                s += A[a, k] * B[k, c]
+            out[a, c] = s
+
+
+@inline_kernel
 def _eigh_warm(H, n, lam, V, Vp, Hb, warm, keep):  # type: ignore[no-untyped-def]
     """:func:`jacobi_eigh` of ``H[:n, :n]``, warm-started from the eigenvectors in ``Vp`` when
     ``warm`` (the last step's, every unknown free): in that basis ``H`` is nearly diagonal, so the
     sweeps are few, and the eigenvectors are then ``Vp`` times those found. ``keep``: ``Vp``
     takes the result (for the next step's warm start)."""
     if warm:
-        for a in range(n):
-            for c in range(n):
-                s = 0.0
-                for k in range(n):
-                    s += H[a, k] * Vp[k, c]
-                Hb[a, c] = s
-        for a in range(n):
+        _product(H, Vp, Hb, n)
+        for a in range(n):  # H = Vp^T (H Vp), symmetric
             for c in range(a, n):
                 s = 0.0
                 for k in range(n):
@@ -421,12 +427,7 @@ def _eigh_warm(H, n, lam, V, Vp, Hb, warm, keep):  # type: ignore[no-untyped-def
                 H[a, c] = s
                 H[c, a] = s
         jacobi_eigh(H, n, lam, V)
-        for a in range(n):
-            for c in range(n):
-                s = 0.0
-                for k in range(n):
-                    s += Vp[a, k] * V[k, c]
-                Hb[a, c] = s
+        _product(Vp, V, Hb, n)
         for a in range(n):
             for c in range(n):
                 V[a, c] = Hb[a, c]
