@@ -401,6 +401,30 @@ def _policy_allowance(dx, sw, scale, gain, m):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _version(vc, vw_ref, u):  # type: ignore[no-untyped-def]
+    """The version ``c . (u - home)`` of the zero-version task (``vw_ref = c . home``)."""
+    ver = -vw_ref
+    for v in range(u.shape[0]):
+        ver += vc[v] * u[v]
+    return ver
+
+
+@inline_kernel
+def _zero_version_gain(aa, ab, ver, vr, vw_w, gain):  # type: ignore[no-untyped-def]
+    """The null move's coefficient ``k`` along ``P c_x`` of the zero-version task, from ``aa =
+    |P c_x|^2`` and ``ab = P c_x . z`` (sums over the null directions), the version ``ver`` and
+    what the pointing step moves it by, ``vr``. Sherman-Morrison on ``(I + w a a^T) z = -(b + w a
+    (ver + vr))``, without the ``w^2`` terms: the version after the whole step is zero. The
+    polish (``gain == 0``) zeroes the version alone (the least null move), and only where the
+    policy phase left it near zero."""
+    if gain > 0.0 or abs(ver) <= VERSION_POLISH:
+        if gain == 0.0:
+            ab = 0.0
+        return vw_w * (ab - ver - vr) / (1.0 + vw_w * aa)
+    return 0.0
+
+
+@inline_kernel
 def _product(A, B, out, n):  # type: ignore[no-untyped-def]
     """``out[:n, :n] = A[:n, :n] B[:n, :n]``."""
     for a in range(n):
@@ -508,13 +532,7 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
         for a in range(f):
             aa += pc[a] * pc[a]
             ab += pc[a] * pz[a]
-        ver = -vw_ref
-        for i in range(u.shape[0]):
-            ver += vc[i] * u[i]
-        if gain > 0.0 or abs(ver) <= VERSION_POLISH:
-            if gain == 0.0:
-                ab = 0.0
-            kv = vw_w * (ab - ver - vr) / (1.0 + vw_w * aa)
+        kv = _zero_version_gain(aa, ab, _version(vc, vw_ref, u), vr, vw_w, gain)
     # the null move: -gain P z + k P c_x (the column form's sum of v_e s_e over the null directions)
     k = (gain if gain > 0.0 else 1.0) * kv
     vmove = 0.0
@@ -564,18 +582,11 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     it = 0
     while it < max_it:
         if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
-            ver = -vw_ref
-            for v in range(m):
-                ver += vc[v] * u[v]
+            ver = _version(vc, vw_ref, u)
             if vw_w == 0.0 or abs(ver) <= VERSION_SETTLED or abs(ver) > VERSION_POLISH:
                 break
         it += 1
-        # gradient in scaled unknowns: g = J_x^T r, J_x = J / sw
-        for v in range(m):
-            s = 0.0
-            for i in range(M):
-                s += J[i, v] * r[i]
-            g[v] = s / sw[v]
+        have_g = False  # g = J_x^T r (J_x = J / sw) at this u: the column form's, made once when first needed
         for v in range(m):
             free[v] = True
         for _ in range(m + 1):  # active set: hold unknowns at a bound that the step pushes out
@@ -619,10 +630,17 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 _eigh_warm(H, f, lam, V, Vp, Hb, f == m and have_v, f == m)
                 if f == m:
                     have_v = True
-            if f > 0 and rows:
+            if rows:
                 vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, DAMPING * rr,
                                         gain, accelerate, Hb[0], null_z, null_c, dx, dn)
             elif f > 0:
+                if not have_g:
+                    for v in range(m):
+                        s = 0.0
+                        for i in range(M):
+                            s += J[i, v] * r[i]
+                        g[v] = s / sw[v]
+                    have_g = True
                 cut = null_rel * max(lam[f - 1], 1e-300)
                 mu = DAMPING * rr
                 # the pointing step along the strong directions (Gauss-Newton, damped), and
@@ -655,15 +673,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                                 b_e += V[a, e] * sw[va] * (u[va] - u_ref[va])
                             aa += a_e * a_e
                             ab += a_e * b_e
-                    ver = -vw_ref
-                    for v in range(m):
-                        ver += vc[v] * u[v]
-                    if gain > 0.0 or abs(ver) <= VERSION_POLISH:
-                        if gain == 0.0:  # the polish: version to exact zero alone (the least null
-                            ab = 0.0  # move), only where the policy phase left it near zero
-                        # Sherman-Morrison on (I + w a a^T) z = -(b + w a (ver + vr)), without
-                        # the w^2 terms: the version after the whole step is zero
-                        kv = vw_w * (ab - ver - vr) / (1.0 + vw_w * aa)
+                    kv = _zero_version_gain(aa, ab, _version(vc, vw_ref, u), vr, vw_w, gain)
                 for e in range(f):
                     if lam[e] <= cut:
                         s = 0.0
