@@ -341,6 +341,7 @@ def gaze_solver(
     rigid: str = "cyclopean",
     tolerance: float | None = None,
     focal_px: float | None = None,
+    min_distance: float | None = None,
 ) -> GazeSolver:
     """A gaze solver (``cpc2urdf gaze``) for a model, model file, robot spec, shipped robot or
     URDF path, pointing the optical axes of ``cameras``.
@@ -361,10 +362,15 @@ def gaze_solver(
         focal_px: Instead of ``tolerance``, the cameras' focal length [px] when known: a target
             counts as fixated within :data:`cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` (0.1) of a
             pixel, ``atan(0.1 / focal_px)`` rad.
+        min_distance: Nearest [m] the policy brings a camera to the target where the pointing
+            task leaves it the choice (a camera on an arm could otherwise be walked onto it);
+            default 0.1 m, 0 for no limit. A target that only a nearer camera can fixate is
+            still fixated.
     """
     ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
     return solver_for(ref, cameras, viewing_distance=viewing_distance, joints=joints,
-                      coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px)
+                      coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
+                      min_distance=min_distance)
 
 
 def reachable_region(

@@ -272,17 +272,20 @@ def test_tolerance_from_the_cameras_focal_length():
     assert sol.reachable and sol.status == "fixated" and np.array_equal(sol.q, b0.q[1])
 
 
-def _policy_kkt(case, Q, P, margin):
+def _policy_kkt(case, Q, P, margin, d_margin=1e-6):
     """First-order optimality of each answer (rows of ``Q``, robot readings) for the policy
-    ``|sw (u - home)|^2 / 2`` subject to fixating ``P`` and the bounds: the policy's gradient
-    ``g`` (scaled unknowns) must be ``J_x^T lambda + mu`` with ``mu`` on the unknowns within
-    ``margin`` of a bound only, of the sign that holds them there (>= 0 at a lower bound, <= 0
-    at an upper one). Returns per answer the stationarity residual and the worst wrong-signed
-    multiplier, and the dimension of the pointing task's null space over the free unknowns."""
+    ``|sw (u - home)|^2 / 2`` subject to fixating ``P``, the bounds and the minimum viewing
+    distance ``d_min``: the policy's gradient ``g`` (scaled unknowns) must be ``J_x^T lambda +
+    mu + nu a`` with ``mu`` on the unknowns within ``margin`` of a bound only, of the sign that
+    holds them there (>= 0 at a lower bound, <= 0 at an upper one), and ``nu >= 0`` on the
+    gradient ``a`` of the nearest camera's distance (:func:`_distance_gradient`) where it is
+    within ``d_margin`` [m] of ``d_min`` (else ``nu = 0``). Returns per answer the stationarity
+    residual and the worst wrong-signed multiplier, the dimension of the pointing task's null
+    space over the free unknowns, and whether the distance was held."""
     comp = case.solver._fast
     chain = comp.chain
     ws = kernels.workspace(chain)
-    res, sign, null = [], [], []
+    res, sign, null, close = [], [], [], []
     for q, p in zip(Q, P, strict=True):
         u = chain.u_from_q(q)
         kernels.residual(comp.ch, u.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
@@ -292,15 +295,20 @@ def _policy_kkt(case, Q, P, margin):
         at_hi = u > chain.upper - margin
         held = np.flatnonzero(at_lo | at_hi)
         A = np.hstack([Jx.T, np.eye(len(u))[:, held]])
+        d, grad = _distance_gradient(comp, p, u)
+        near = comp.min_distance > 0.0 and d < comp.min_distance + d_margin
+        if near:
+            A = np.hstack([A, (grad / comp.sw)[:, None]])
         sol, *_ = np.linalg.lstsq(A, g, rcond=1e-10)
         res.append(float(np.abs(g - A @ sol).max()))
-        mu = sol[Jx.shape[0]:]
-        wrong = np.concatenate([-mu[at_lo[held]], mu[at_hi[held]], [0.0]])
+        mu = sol[Jx.shape[0]:Jx.shape[0] + len(held)]
+        wrong = np.concatenate([-mu[at_lo[held]], mu[at_hi[held]], [-sol[-1] if near else 0.0, 0.0]])
+        close.append(near)
         sign.append(float(wrong.max()))
         free = ~(at_lo | at_hi)
         sv = np.linalg.svd(Jx[:, free], compute_uv=False) if free.any() else np.zeros(0)
         null.append(int(free.sum() - np.sum(sv > 1e-9 * sv[0])) if sv.size else 0)
-    return np.array(res), np.array(sign), np.array(null)
+    return np.array(res), np.array(sign), np.array(null), np.array(close)
 
 
 # the head shapes whose policy is the distance from home and whose pointing task leaves a null
@@ -333,7 +341,7 @@ def test_answers_are_the_policys_constrained_minimum(case):
         assert batch.reachable.all()
         converged = batch.iterations < BATCH_MAX_ITERATIONS
         assert converged.mean() > 0.95, f"{case.name}: {np.sum(~converged)} answers at the iteration cap"
-        res, sign, null = _policy_kkt(case, batch.q[converged], P[converged], margin)
+        res, sign, null, _ = _policy_kkt(case, batch.q[converged], P[converged], margin)
         nulls += int(null.sum())
         worst = int(np.argmax(res))
         assert res[worst] < tol, (
@@ -343,7 +351,27 @@ def test_answers_are_the_policys_constrained_minimum(case):
     assert nulls > 0, f"{case.name}: no null space at any answer: the check chose nothing"
 
 
-def _svd_step(comp, p, u0, ws, version=None):
+def _distance_gradient(comp, p, u):
+    """The distance from target ``p`` of the solved camera nearest it at unknowns ``u``, and its
+    gradient by ``u``: Richardson-extrapolated central differences of the FK (h = 1e-4, error
+    ~1e-12), independent of the kernel's analytic gradient."""
+    cams = comp.chain.solve_cameras
+
+    def dist(x):
+        return np.linalg.norm(p - comp._fk(x)[1][cams], axis=1)
+
+    d = dist(u)
+    near = int(np.argmin(d))
+    h = 1e-4
+    grad = np.empty(len(u))
+    for v in range(len(u)):
+        e = np.zeros(len(u))
+        e[v] = h
+        grad[v] = (8.0 * (dist(u + e)[near] - dist(u - e)[near]) - (dist(u + 2 * e)[near] - dist(u - 2 * e)[near])) / (12 * h)
+    return float(d[near]), grad
+
+
+def _svd_step(comp, p, u0, ws, version=None, min_distance=None):
     """The policy phase's task-priority step at ``u0`` (unknowns), from numpy's SVD of the scaled
     Jacobian ``J_x = J / sw = U diag(s) V^T``: on the singular directions with ``s^2`` above the
     cut the damped Gauss-Newton step ``-v s (u . r) / (s^2 + mu)`` (``= -v (v . g) / (s^2 + mu)``,
@@ -353,9 +381,17 @@ def _svd_step(comp, p, u0, ws, version=None):
     Newton step of ``|z|^2 / 2 + w (c . (u - home))^2 / 2`` that leaves the version zero after
     the whole step, by Sherman-Morrison without the ``w^2`` terms (``kernels._iterate``):
     ``-P z + k P c_x`` with ``k = w (P c_x . z - ver - c_x . dx_range) / (1 + w |P c_x|^2)``,
-    ``c_x = c / sw``, ``P`` the projector off the kept directions. Returns the step and the
-    weakest kept ``s^2`` over the largest, or None when a singular value is within 10x of the
-    cut (which side of it a direction falls on is then rounding)."""
+    ``c_x = c / sw``, ``P`` the projector off the kept directions. With a minimum viewing
+    distance ``d_min`` (default the solver's), where the step (capped at ``kernels.MAX_STEP``)
+    would take the nearest camera nearer the target (to first order, gradient ``a`` by scaled
+    unknowns from
+    :func:`_distance_gradient`) and its null move alone would too, the null move gains ``k P a``
+    that ends the null move at ``d_min``: ``k = (d_min - d - P a . dx) / |P a|^2``, its largest
+    unknown's change capped at
+    ``kernels.MAX_STEP``; not where ``|P a|^2 <= kernels.DISTANCE_REACH |a|^2``. Returns the
+    step, the weakest kept ``s^2`` over the largest, and whether the distance held the step; or
+    None when a singular value is within 10x of the cut (which side of it a direction falls on
+    is then rounding)."""
     chain = comp.chain
     rr = kernels.residual(comp.ch, u0.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
     U, s, Vt = np.linalg.svd(ws[8] / comp.sw)
@@ -375,7 +411,20 @@ def _svd_step(comp, p, u0, ws, version=None):
         kv = w * (null_c @ z - c @ (u0 - comp.home_u) - cx @ dx) / (1.0 + w * (null_c @ null_c))
         dx += kernels.SECONDARY_GAIN * kv * null_c
     dx -= kernels.SECONDARY_GAIN * null_z
-    return dx / comp.sw, lam[k - 1] / lam[0]
+    d_min = comp.min_distance if min_distance is None else min_distance
+    held = False
+    if d_min > 0.0:
+        d, grad = _distance_gradient(comp, p, u0)
+        a = grad / comp.sw
+        null_a = a - V @ (V.T @ a)
+        short = d_min - (d + null_a @ dx)  # the null move's own approach (null_a . dx_range = 0)
+        scale = min(1.0, kernels.MAX_STEP / np.abs(dx / comp.sw).max())  # the step's cap
+        if d + scale * (a @ dx) < d_min and short > 0.0 and null_a @ null_a > kernels.DISTANCE_REACH * (a @ a):
+            kd = short / (null_a @ null_a)
+            kd *= min(1.0, kernels.MAX_STEP / np.abs(kd * null_a / comp.sw).max())
+            dx += kd * null_a
+            held = True
+    return dx / comp.sw, lam[k - 1] / lam[0], held
 
 
 def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
@@ -452,6 +501,71 @@ def test_the_step_stays_accurate_where_the_pointing_jacobian_loses_rank(case):
         assert weakest < 1e-9, f"iCub: no weak direction near the cut (weakest kept s^2 / s_max^2 {weakest:.1g})"
 
 
+@pytest.mark.parametrize("case", POLICY_HEADS, indirect=True)
+def test_the_minimum_viewing_distance_holds_the_step_as_the_svd_does(case):
+    """Targets 0.05-0.15 m ahead of the cameras at seeded postures, each first step from 0.02
+    rad (or m) off that posture: where the step would take the nearest camera nearer than the
+    solver's minimum viewing distance, the kernel's step (``kernels._hold_off``, both forms:
+    TIAGo's ``J^T J``, the others' ``J J^T``) must point where the SVD's does with the distance
+    held (:func:`_svd_step`, the distance's gradient by finite differences), to 1e-10 times
+    ``s_max^2 / s^2`` as the step without it. Seen: 6e-12 or less. And the hold must matter: the
+    step without it (the chain packed with no minimum) is off the held reference by more than
+    1e-3 there."""
+    comp = case.solver._fast
+    chain = comp.chain
+    ws = kernels.workspace(chain)
+    unheld = kernels.pack(chain, None, 0.0, 0.0)
+    cams = chain.solve_cameras
+    rng = np.random.default_rng(13)
+    compared, held, worst, without = 0, 0, 0.0, np.inf
+    for _ in range(60):
+        u1 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
+        R, o = comp._fk(u1)
+        z = R[cams][:, :, 2].sum(axis=0)
+        p = o[cams].mean(axis=0) + rng.uniform(0.05, 0.15) * z / np.linalg.norm(z)
+        u0 = u1 + rng.normal(0.0, 0.02, chain.m)
+        step = _svd_step(comp, p, u0, ws)
+        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
+        if off is None:
+            continue
+        compared += 1
+        worst = max(worst, off * step[1])
+        if step[2]:
+            held += 1
+            off0 = _one_iteration_off(comp, p, u0, step[0], ws, unheld)
+            without = min(without, np.inf if off0 is None else off0)
+    assert compared >= 30 and held >= 5, f"{case.name}: {compared} postures compared, {held} held"
+    assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    assert without > 1e-3, f"{case.name}: the step without the hold is as near the held one ({without:.2g})"
+
+
+@pytest.mark.parametrize("case", ["panda_camera"], indirect=True)
+def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
+    """The policy's nearest posture can lie beyond the target along the optical axis: without
+    the minimum viewing distance the walk ends with the camera on the target (2,000 reachable
+    targets of seed 5: 5 answers within 1 cm of it, the nearest 0.1 mm). With it, every answer
+    is fixated, at least ``min_distance`` away (1e-5 relative; the polish moves it by ~1e-8),
+    and the held answers are the policy's minimum on that constraint (KKT with the distance as
+    an inequality: :func:`_policy_kkt`)."""
+    comp = case.solver._fast
+    assert comp.min_distance == 0.1
+    P, _ = case.reachable_targets(2000, seed=5)
+    bare = GazeSolver(case.urdf, case.cameras, min_distance=0.0).solve_many(P)
+    O, _ = case.axes(bare.q)
+    assert np.sum(np.linalg.norm(P[:, None] - O, axis=2).min(axis=1) < 0.01) >= 3
+    batch = case.solver.solve_many(P)
+    assert batch.reachable.all()
+    O, _ = case.axes(batch.q)
+    dist = np.linalg.norm(P[:, None] - O, axis=2).min(axis=1)
+    assert dist.min() > comp.min_distance * (1 - 1e-5), f"target {int(np.argmin(dist))}: {dist.min():.6g} m"
+    converged = batch.iterations < BATCH_MAX_ITERATIONS
+    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
+    res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], 10 * kernels.POLICY_STEP_TOL)
+    assert close.sum() >= 5, f"only {close.sum()} answers at the minimum viewing distance"
+    assert res[close].max() < tol, f"a held answer is not stationary: {res[close].max():.3g}"
+    assert sign[close].max() < tol, f"the distance holds an answer the policy would pull away ({sign[close].max():.3g})"
+
+
 @pytest.mark.parametrize("case", ["icub"], indirect=True)
 def test_the_zero_version_task_takes_the_svds_step_in_the_rows_form(case):
     """The zero-version task (the nominal IIS-head's cyclopean policy) in the ``J J^T`` form
@@ -465,7 +579,7 @@ def test_the_zero_version_task_takes_the_svds_step_in_the_rows_form(case):
     chain = comp.chain
     c = np.zeros(chain.m)
     c[chain.variables.index("version")] = 1.0
-    ch = kernels.pack(chain, c, VERSION_WEIGHT)
+    ch = kernels.pack(chain, c, VERSION_WEIGHT, comp.min_distance)
     ws = kernels.workspace(chain)
     rng = np.random.default_rng(12)
     P, _ = case.reachable_targets(60, seed=4)

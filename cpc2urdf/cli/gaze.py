@@ -75,6 +75,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                      help="pointing error [rad] below which a target counts as fixated (default 1e-9: exact)")
     tol.add_argument("--focal-px", type=float, metavar="F",
                      help="the cameras' focal length [px]: a target counts as fixated within 0.1 px")
+    p.add_argument("--min-distance", type=float, metavar="M",
+                   help="nearest [m] the policy brings a camera to the target where it has the choice, "
+                   "e.g. a camera on an arm (default 0.1; 0: no limit)")
     p.add_argument("--json", action="store_true", help="print the solution as JSON (SI units)")
     p.set_defaults(run=run)
 
@@ -90,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
-    tol = {"tolerance": args.tolerance, "focal_px": args.focal_px}
+    tol = {"tolerance": args.tolerance, "focal_px": args.focal_px, "min_distance": args.min_distance}
     if args.joints:
         solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints,
                             **tol)

@@ -15,7 +15,12 @@ reference readings (``q_current``, or the middle of the limits) in a weighted me
 radian of a joint shared by both cameras (the neck) costs 1, of an eye joint
 :data:`~cpc2urdf.validation.gaze.chain.EYE_WEIGHT` and one metre of a prismatic joint
 :data:`~cpc2urdf.validation.gaze.chain.PRISMATIC_WEIGHT`: the neck turns to face the target and
-the eyes stay near their middle (the cyclopean axis faces the target), the table stays.
+the eyes stay near their middle (the cyclopean axis faces the target), the table stays. The
+policy keeps every solved camera at least ``min_distance`` from the target where its null space
+can (:data:`MIN_VIEWING_DISTANCE` unless stated): on a redundant chain (a camera on an arm) the
+nearest posture can lie beyond the target along the optical axis, and the walk towards it would
+end with the camera on the target. A target that only a nearer camera can fixate is still
+fixated (the limit is the policy's, not a reachability test).
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ MAX_SOLVE_ITERATIONS = 2 * N_STARTS * (BATCH_MAX_ITERATIONS + kernels.POLISH_ITE
 EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
 VERSION_WEIGHT = 1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
 NEAR_NULL = 1e-5  # [-]: null_rel on binocular heads that cannot (the weak direction is the policy's)
+MIN_VIEWING_DISTANCE = 0.1  # [m]: default nearest approach of a camera to its target the policy makes (a camera's near focus)
 THREADED_BATCH = 64  # targets per thread from which solve_many splits the work over the cores
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -110,13 +116,26 @@ class CompiledGaze:
         chain: The head.
         tolerance: [rad] pointing error below which an axis is on the target; None:
             :data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL`.
+        version_row: The zero-version task's row over the unknowns (None: no such task).
+        min_distance: [m] nearest the policy brings a solved camera to the target (0: no
+            limit); None: :data:`MIN_VIEWING_DISTANCE`.
+
+    Raises:
+        ConfigurationError: ``min_distance`` negative or not finite.
     """
 
     def __init__(
-        self, chain: HeadChain, tolerance: float | None = None, version_row: Array | None = None
+        self,
+        chain: HeadChain,
+        tolerance: float | None = None,
+        version_row: Array | None = None,
+        min_distance: float | None = None,
     ) -> None:
         self.chain = chain
-        self.ch = kernels.pack(chain, version_row, VERSION_WEIGHT)
+        self.min_distance = MIN_VIEWING_DISTANCE if min_distance is None else float(min_distance)
+        if not (math.isfinite(self.min_distance) and self.min_distance >= 0.0):
+            raise ConfigurationError(f"min_distance must be a finite distance >= 0 [m], got {min_distance!r}")
+        self.ch = kernels.pack(chain, version_row, VERSION_WEIGHT, self.min_distance)
         self.version_row = version_row
         self.tolerance = GAZE_POINTING_TOL if tolerance is None else float(tolerance)
         self.sw = np.sqrt(chain.weight)

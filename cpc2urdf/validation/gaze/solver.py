@@ -107,9 +107,14 @@ class GazeSolver:
         focal_px: Instead of ``tolerance``: the cameras' focal length [px]; fixated within
             :data:`~cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` of a pixel
             (:func:`pointing_tolerance`). Neither: exact fixation (``GAZE_POINTING_TOL``).
+        min_distance: Nearest [m] the policy brings a camera to the target where the pointing
+            task leaves it the choice (a camera on an arm); 0: no limit; None:
+            :data:`~cpc2urdf.validation.gaze.batch.MIN_VIEWING_DISTANCE` (0.1 m). A target only a
+            nearer camera can fixate is still fixated.
 
     Raises:
-        ConfigurationError: Both ``tolerance`` and ``focal_px``, or either not positive.
+        ConfigurationError: Both ``tolerance`` and ``focal_px``, or either not positive;
+            ``min_distance`` negative.
         InputFileError: An unreadable URDF, or joints with more than one degree of freedom
             (continuous, floating, planar).
         UnknownNameError: A camera frame the URDF does not have.
@@ -136,6 +141,7 @@ class GazeSolver:
         rigid: str = "cyclopean",
         tolerance: float | None = None,
         focal_px: float | None = None,
+        min_distance: float | None = None,
     ) -> None:
         tolerance = pointing_tolerance(tolerance, focal_px)
         self.tolerance = tolerance
@@ -150,7 +156,8 @@ class GazeSolver:
         self.n = robot.n_joints
         # The compiled solver: every head shape (one camera, two eyes, a rigid pair, couplings).
         self.chain: HeadChain = build_chain(robot, self.cameras, joints, coupling, rigid)
-        self.compiled = CompiledGaze(self.chain, tolerance)
+        self.compiled = CompiledGaze(self.chain, tolerance, min_distance=min_distance)
+        self.min_distance = self.compiled.min_distance
         # The Python solver with its four policies: two independent eyes, every joint free.
         self._head: GazeHead | None = None
         if self.chain.kind == KIND_BINOCULAR and joints is None and coupling is None and self._neck_and_eyes():
@@ -170,7 +177,8 @@ class GazeSolver:
         if self._head is not None and self.compiled.disparity_head:
             free = self._free_joints["cyclopean"]
             self._posture = CompiledGaze(
-                build_chain(robot, self.cameras, [self.joint_names[i] for i in free]), tolerance
+                build_chain(robot, self.cameras, [self.joint_names[i] for i in free]), tolerance,
+                min_distance=min_distance,
             )
         # the cyclopean policy of a head that can: the compiled loop over neck and eyes with the
         # Python solver's secondary task, zero version (then the weighted home)
@@ -180,7 +188,7 @@ class GazeSolver:
             vchain = build_chain(robot, self.cameras, [self.joint_names[i] for i in free])
             row = self._head.version_row
             vrow = np.array([row[robot.joint_index(v)] for v in vchain.variables])
-            self._version = CompiledGaze(vchain, tolerance, vrow)
+            self._version = CompiledGaze(vchain, tolerance, vrow, min_distance)
         # the compiled solver of the cyclopean policy (solve_checked's choice; solve_many's)
         self._fast: CompiledGaze = self._posture or self._version or self.compiled
 
@@ -531,6 +539,7 @@ def solver_for(
     rigid: str = "cyclopean",
     tolerance: float | None = None,
     focal_px: float | None = None,
+    min_distance: float | None = None,
 ) -> GazeSolver:
     """A solver for a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot name
     or a :class:`~cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`; ``continuous`` joints off
@@ -538,6 +547,7 @@ def solver_for(
     return GazeSolver(
         PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, viewing_distance=viewing_distance,
         joints=joints, coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
+        min_distance=min_distance,
     )
 
 
