@@ -27,7 +27,8 @@ neck and eyes far from the policy's posture, is left to the policy). With a zero
 ``c`` (:func:`pack`; the nominal binocular head's cyclopean policy) the null-space move is the
 Newton step of ``|x - x_ref|^2 / 2 + w (c . (u - home))^2 / 2`` over the null directions
 (Sherman-Morrison, ``w`` large: version held at zero), and the polish zeroes a small remaining
-version exactly. Joints at a bound whose step
+version exactly. With a minimum viewing distance (:func:`pack`) the null move keeps the solved
+camera nearest the target from coming nearer than it (:func:`_hold_off`). Joints at a bound whose step
 points outward are held (active set); the step is capped and projected on the bounds. With more
 free unknowns than residual rows (a camera on an arm, iCub's torso, neck and eyes, TALOS's torso
 and head) the same step comes from ``J_x J_x^T`` (``M x M``, ``M = 3S``) instead
@@ -82,11 +83,12 @@ STATIONARY = 1e-4
 HISTORY = 2  # pairs (x, step) the policy phase's Anderson acceleration uses (its 2x2 solve: 2 only)
 ACCELERATE_BELOW = 1e-6  # [-]: |r|^2 under which the policy phase is accelerated (pointing error ~1e-3 rad)
 START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) distance from u_ref
-# ... and on a one-camera head with spare joints (more than its 3 residual rows: a camera on an arm,
-# TALOS's torso and head): a start that faces the target from far off the reference walks far in
-# the null space (Panda camera, 8,000 reachable targets: mean iterations 16.9 -> 11.9, p99 52 ->
-# 29, at the cap 43 -> 7, policy cost 6 % lower; TALOS 6.11 -> 5.84, the same answers). Before
-# the minimum viewing distance (_hold_off) it walked more answers onto their target: not kept then
+# the same on a one-camera head with spare joints (more than its 3 residual rows: a camera on an
+# arm, TALOS's torso and head), where a start that faces the target from far off the reference
+# walks far in the null space (Panda camera, 8,000 reachable targets: mean iterations 16.9 ->
+# 11.9, p99 52 -> 29, at the iteration cap 43 -> 7, policy cost 6 % lower; TALOS 6.11 -> 5.84,
+# the same answers). Without the minimum viewing distance (_hold_off) it walked more answers
+# onto their target
 START_DISTANCE_REDUNDANT = 0.1
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
@@ -604,26 +606,31 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
 
 @inline_kernel
 def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, v, pa, a, dx, dn):  # type: ignore[no-untyped-def]
-    """The minimum viewing distance ``d_min`` [m] of the policy phase, on the step ``dx`` (its
-    null move also in ``dn`` if ``accelerate``): where the step, capped at :data:`MAX_STEP`,
-    would take the solved camera nearest the target (``Pc``: :func:`residual`) nearer than
-    ``d_min`` (to first order, along the gradient ``a`` of its distance, scaled unknowns) and
-    its null move alone would too, the
-    null move gains ``k P a`` with ``k`` such that the null move ends at ``d_min``: the part of
-    ``a`` in the null space (:func:`_null_part`) moves the distance and leaves pointing as it
-    is, to first order. Held so, the policy walks along the distance's level set to the nearest
-    posture at ``d_min``. The pointing step's own change of the distance is not held (far from
-    fixation it is large and its first-order prediction poor: held against it, a camera on an
-    arm took 60 iterations of steps halved 7 times); the next step's null move takes back
-    what it took. Judged on the capped step: a long walk towards a home beyond the target is
-    held only once it nears ``d_min`` (held from the start, the walk along the level set is
-    curved, its steps halved: 8,000 Panda targets, the one that ends at the iteration cap nearer
-    than ``d_min`` ended 0.047 m from the target, now 0.070).
-    Nothing where the null space cannot move the distance (a pan-tilt, a binocular head's eyes:
-    ``|P a|^2`` at most :data:`DISTANCE_REACH` ``|a|^2``). The move is capped at
-    :data:`MAX_STEP` per unknown. Returns whether it held the step. Without it a camera on an
-    arm is walked onto its target: the policy's nearest posture lies beyond the target, along
-    the optical axis, and the walk ends with the camera on the target."""
+    """The minimum viewing distance ``d_min`` [m] of the policy phase, applied to the step
+    ``dx`` (and to its null move in ``dn`` if ``accelerate``). Returns whether it held the step.
+
+    Without it a camera on an arm is walked onto its target: the pointing task's null space
+    includes sliding the camera along its optical axis, and where the policy's nearest posture
+    lies beyond the target, the walk ends with the camera on it.
+
+    ``a`` is the gradient of the distance of the solved camera nearest the target (``Pc``:
+    :func:`residual`) by the scaled unknowns, ``P a`` its part in the null space
+    (:func:`_null_part`): moving along ``P a`` changes the distance and, to first order, not the
+    pointing. The hold acts where the step, capped at :data:`MAX_STEP`, would take the camera
+    nearer than ``d_min`` to first order, and the null move alone would too. The null move then
+    gains ``k P a``, with ``k`` such that the null move ends at ``d_min`` (the gain's largest
+    unknown's change capped at :data:`MAX_STEP`). Held so, the policy walks along the distance's
+    level set to the nearest posture there.
+
+    - The pointing step's own change of the distance is not held: far from fixation it is large
+      and its first-order prediction poor (held against it, a Panda target took 60 iterations of
+      steps halved 7 times). The next step's null move takes back what it took.
+    - Judged on the capped step, a long walk towards a home beyond the target is held only once it
+      nears ``d_min``. Held from its first step, the walk along the curved level set had its steps
+      halved: of 8,000 Panda targets, the one that ends at the iteration cap nearer than ``d_min``
+      ended 0.047 m from its target (0.070 m so).
+    - Nothing where the null space cannot move the distance (``|P a|^2`` at most
+      :data:`DISTANCE_REACH` ``|a|^2``: a pan-tilt, most binocular postures)."""
     S = Pc.shape[0]
     m = dx.shape[0]
     near = 0
@@ -1498,7 +1505,8 @@ def _largest(a):  # type: ignore[no-untyped-def]
 
 @inline_kernel
 def _without_version(ch):  # type: ignore[no-untyped-def]
-    """The chain tuple ``ch`` without its zero-version task (weight 0)."""
+    """The chain tuple ``ch`` without its zero-version task (weight 0; the minimum viewing
+    distance kept)."""
     return (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
             np.array([0.0, 0.0, ch[13][2]]))
 
