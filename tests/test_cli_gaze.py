@@ -62,6 +62,8 @@ def test_unreachable_exit_1(capsys):
         ["gaze", "iis_head", "--target", "1", "2", "3", "--focal-px", "0"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "nan"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "1e-3", "--focal-px", "500"],
+        ["gaze", "iis_head", "--target", "1", "2", "3", "--min-distance", "-0.1"],
+        ["gaze", "iis_head", "--target", "1", "2", "3", "--min-distance", "nan"],
     ],
 )
 def test_bad_input_exit_2(argv, capsys):
@@ -105,6 +107,8 @@ def test_one_camera_and_joints(capsys):
     assert "fixated" in out.splitlines()[0] and "pointing error:" in out
     assert main([*argv[:-3], "nope"]) == 2
     assert "nope" in capsys.readouterr().err
+    assert main([*argv, "--min-distance", "0"]) == 0  # no minimum viewing distance: same answer ahead
+    assert capsys.readouterr().out == out
 
 
 def test_report_of_the_head_alone(capsys):
