@@ -544,9 +544,10 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
     """The policy's nearest posture can lie beyond the target along the optical axis: without
     the minimum viewing distance the walk ends with the camera on the target (2,000 reachable
     targets of seed 5: 5 answers within 1 cm of it, the nearest 0.1 mm). With it, every answer
-    is fixated, at least ``min_distance`` away (1e-5 relative; the polish moves it by ~1e-8),
-    and the held answers are the policy's minimum on that constraint (KKT with the distance as
-    an inequality: :func:`_policy_kkt`)."""
+    is fixated, at least ``min_distance`` away (1e-5 relative; the polish moves it by a few
+    1e-6 m), and every answer short of the iteration cap is the policy's minimum on the bounds
+    and that constraint (KKT with the distance as an inequality: :func:`_policy_kkt`; seen:
+    residual 1.0e-5 over 1,998 answers, 9 held, bound 1e-4)."""
     comp = case.solver._fast
     assert comp.min_distance == 0.1
     P, _ = case.reachable_targets(2000, seed=5)
@@ -560,10 +561,12 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
     assert dist.min() > comp.min_distance * (1 - 1e-5), f"target {int(np.argmin(dist))}: {dist.min():.6g} m"
     converged = batch.iterations < BATCH_MAX_ITERATIONS
     tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
-    res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], 10 * kernels.POLICY_STEP_TOL)
+    # held answers end within a few 1e-6 m of min_distance (the polish moves them): a 1e-4 m margin
+    res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], 10 * kernels.POLICY_STEP_TOL, 1e-4)
     assert close.sum() >= 5, f"only {close.sum()} answers at the minimum viewing distance"
-    assert res[close].max() < tol, f"a held answer is not stationary: {res[close].max():.3g}"
-    assert sign[close].max() < tol, f"the distance holds an answer the policy would pull away ({sign[close].max():.3g})"
+    worst = int(np.argmax(res))
+    assert res[worst] < tol, f"answer {worst} (held: {close[worst]}) is not stationary: {res[worst]:.3g}"
+    assert sign.max() < tol, f"the distance or a bound holds an answer the policy would pull off it ({sign.max():.3g})"
 
 
 @pytest.mark.parametrize("case", ["icub"], indirect=True)
