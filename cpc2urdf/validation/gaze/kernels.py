@@ -85,11 +85,11 @@ ACCELERATE_BELOW = 1e-6  # [-]: |r|^2 under which the policy phase is accelerate
 START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) distance from u_ref
 # the same on a one-camera head with spare joints (more than its 3 residual rows: a camera on an
 # arm, TALOS's torso and head), where a start that faces the target from far off the reference
-# walks far in the null space (Panda camera, 8,000 reachable targets: mean iterations 16.9 ->
-# 11.9, p99 52 -> 29, at the iteration cap 43 -> 7, policy cost 6 % lower; TALOS 6.11 -> 5.84,
-# the same answers). Without the minimum viewing distance (_hold_off) it walked more answers
-# onto their target
-START_DISTANCE_REDUNDANT = 0.1
+# walks far in the null space. Panda camera, 8,000 reachable targets, 0.01 / 0.1 / 0.3 / 1.0:
+# mean iterations 16.9 / 11.9 / 10.9 / 11.0, at the iteration cap 43 / 7 / 3 / 4; mean policy
+# cost (2,000 targets) 1.40 / 1.32 / 1.20 / 1.20. TALOS 6.11 / 5.84 / 5.91 / 6.56 (answers within
+# 2e-5). Without the minimum viewing distance (_hold_off) it walked more answers onto their target
+START_DISTANCE_REDUNDANT = 0.3
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
 
