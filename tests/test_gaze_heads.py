@@ -326,7 +326,7 @@ def test_answers_are_the_policys_constrained_minimum(case):
     used to end where every trial was refused because the step took an unknown a few 1e-5 from
     its bound through it (iCub: 3 to 10 of 200 targets per seed ended far from the minimum,
     policy gradient up to 0.7). Which local minimum is not checked. Answers that used up the
-    iteration cap are fixated but may stop short (a camera on an arm: 7 of 8,000); they are
+    iteration cap are fixated but may stop short (a camera on an arm: 3 of 8,000); they are
     counted, not checked."""
     comp = case.solver._fast
     assert comp.version_row is None and not comp.disparity_head  # the policy is the distance from home
