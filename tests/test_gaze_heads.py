@@ -272,7 +272,7 @@ def test_tolerance_from_the_cameras_focal_length():
     assert sol.reachable and sol.status == "fixated" and np.array_equal(sol.q, b0.q[1])
 
 
-def _policy_kkt(case, Q, P, margin, d_margin=1e-6):
+def _policy_kkt(case, Q, P, margin, d_margin=1e-4):
     """First-order optimality of each answer (rows of ``Q``, robot readings) for the policy
     ``|sw (u - home)|^2 / 2`` subject to fixating ``P``, the bounds and the minimum viewing
     distance ``d_min``: the policy's gradient ``g`` (scaled unknowns) must be ``J_x^T lambda +
@@ -386,8 +386,8 @@ def _svd_step(comp, p, u0, ws, version=None):
     nearest camera nearer the target than ``d_min`` (to first order; ``a``, the gradient of its
     distance by the scaled unknowns, from :func:`_distance_gradient`) and its null move alone
     would too, the null move gains ``k P a``, ``k = (d_min - d - P a . dx) / |P a|^2`` (the null
-    move ends at ``d_min``), its largest unknown's change capped at ``kernels.MAX_STEP``; not
-    where ``|P a|^2 <= kernels.DISTANCE_REACH |a|^2``. Returns the step, the weakest kept
+    move ends at ``d_min``); not where ``|P a|^2 <= kernels.DISTANCE_REACH |a|^2``; with the version task, ``P a`` less its
+    part along ``P c_x`` (the task outranks the distance). Returns the step, the weakest kept
     ``s^2`` over the largest, and whether the distance held the step; or None when a singular
     value is within 10x of the cut (which side of it a direction falls on is then rounding)."""
     chain = comp.chain
@@ -417,10 +417,10 @@ def _svd_step(comp, p, u0, ws, version=None):
         null_a = a - V @ (V.T @ a)
         short = d_min - (d + null_a @ dx)  # the null move's own approach (null_a . dx_range = 0)
         scale = min(1.0, kernels.MAX_STEP / np.abs(dx / comp.sw).max())  # the step's cap
+        if version is not None and null_c @ null_c > kernels.DISTANCE_REACH * (cx @ cx):
+            null_a = null_a - (null_a @ null_c) / (null_c @ null_c) * null_c  # the version task outranks it
         if d + scale * (a @ dx) < d_min and short > 0.0 and null_a @ null_a > kernels.DISTANCE_REACH * (a @ a):
-            kd = short / (null_a @ null_a)
-            kd *= min(1.0, kernels.MAX_STEP / np.abs(kd * null_a / comp.sw).max())
-            dx += kd * null_a
+            dx += short / (null_a @ null_a) * null_a
             held = True
     return dx / comp.sw, lam[k - 1] / lam[0], held
 
@@ -552,6 +552,9 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
     bare = GazeSolver(case.urdf, case.cameras, min_distance=0.0).solve_many(P)
     O, _ = case.axes(bare.q)
     assert np.sum(np.linalg.norm(P[:, None] - O, axis=2).min(axis=1) < 0.01) >= 3
+    far = solver_for(case.urdf, case.cameras, min_distance=0.3).solve_many(P)  # a stated distance
+    O, _ = case.axes(far.q)
+    assert far.reachable.all() and np.linalg.norm(P[:, None] - O, axis=2).min() > 0.3 * (1 - 1e-5)
     batch = case.solver.solve_many(P)
     assert batch.reachable.all()
     O, _ = case.axes(batch.q)

@@ -16,8 +16,9 @@ radian of a joint shared by both cameras (the neck) costs 1, of an eye joint
 :data:`~cpc2urdf.validation.gaze.chain.EYE_WEIGHT` and one metre of a prismatic joint
 :data:`~cpc2urdf.validation.gaze.chain.PRISMATIC_WEIGHT`: the neck turns to face the target and
 the eyes stay near their middle (the cyclopean axis faces the target), the table stays. The
-policy keeps every solved camera at least ``min_distance`` from the target where its null space
-can (:data:`MIN_VIEWING_DISTANCE` unless stated): on a redundant chain (a camera on an arm) the
+policy keeps the solved camera nearest the target at least ``min_distance`` from it where its
+null space can (:data:`MIN_VIEWING_DISTANCE` unless stated; the zero-version task outranks it):
+on a redundant chain (a camera on an arm) the
 nearest posture can lie beyond the target along the optical axis, and the walk towards it would
 end with the camera on the target. A target that only a nearer camera can fixate is still
 fixated (the limit is the policy's, not a reachability test).

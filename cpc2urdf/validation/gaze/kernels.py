@@ -88,7 +88,7 @@ START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) di
 # walks far in the null space. Panda camera, 8,000 reachable targets, 0.01 / 0.1 / 0.3 / 1.0:
 # mean iterations 16.9 / 11.9 / 10.9 / 11.0, at the iteration cap 43 / 7 / 3 / 4; mean policy
 # cost (2,000 targets) 1.40 / 1.32 / 1.20 / 1.20. TALOS 6.11 / 5.84 / 5.91 / 6.56 (answers within
-# 2e-5). Without the minimum viewing distance (_hold_off) it walked more answers onto their target
+# 2e-5). Without the minimum viewing distance (_hold_off) it walked more answers onto their target.
 START_DISTANCE_REDUNDANT = 0.3
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
@@ -272,8 +272,9 @@ def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
 def _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
-    the target ``Pc`` (S, 4 + m): ``p_cam``, ``|p_cam|`` and (``want_jac``) the gradient of
-    ``|p_cam|`` by ``u``. Returns ``|r|^2``."""
+    the target ``Pc`` (S, 5 + m): ``p_cam``, ``|p_cam|``, and with the Jacobian (``want_jac``:
+    columns 4 on, left as they are by a trial's evaluation) ``|p_cam|`` again and its gradient
+    by ``u``. Returns ``|r|^2``."""
     _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co)
     return residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc)
 
@@ -317,7 +318,8 @@ def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
             J[3 * s, v] = 0.0
             J[3 * s + 1, v] = 0.0
             J[3 * s + 2, v] = 0.0
-            Pc[s, 4 + v] = 0.0
+            Pc[s, 5 + v] = 0.0
+        Pc[s, 4] = nrm
         for k in range(K):
             # d(p - o) x w - v in world, then R^T, then the projector (I - u u^T) / |p_cam|
             wx, wy, wz = Jc[3, k], Jc[4, k], Jc[5, k]
@@ -335,7 +337,7 @@ def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
                     J[3 * s, v] += hx * a
                     J[3 * s + 1, v] += hy * a
                     J[3 * s + 2, v] += hz * a
-                    Pc[s, 4 + v] += d * a
+                    Pc[s, 5 + v] += d * a
     return rr
 
 
@@ -605,7 +607,8 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
 
 
 @inline_kernel
-def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, v, pa, a, dx, dn):  # type: ignore[no-untyped-def]
+def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, vc, vw_w, accelerate, v, pa, a, cx, pc, dx,
+              dn):  # type: ignore[no-untyped-def]
     """The minimum viewing distance ``d_min`` [m] of the policy phase, applied to the step
     ``dx`` (and to its null move in ``dn`` if ``accelerate``). Returns whether it held the step.
 
@@ -618,9 +621,10 @@ def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, v
     (:func:`_null_part`): moving along ``P a`` changes the distance and, to first order, not the
     pointing. The hold acts where the step, capped at :data:`MAX_STEP`, would take the camera
     nearer than ``d_min`` to first order, and the null move alone would too. The null move then
-    gains ``k P a``, with ``k`` such that the null move ends at ``d_min`` (the gain's largest
-    unknown's change capped at :data:`MAX_STEP`). Held so, the policy walks along the distance's
-    level set to the nearest posture there.
+    gains ``k P a``, with ``k`` such that the null move ends at ``d_min``; the whole step is then
+    capped as any other (not the gain alone: capped on its own, it cancelled a policy pull along
+    ``P a`` as long as itself, and the walk stopped 0.1 m short of a stated 0.3 m). Held so, the
+    policy walks along the distance's level set to the nearest posture there.
 
     - The pointing step's own change of the distance is not held: far from fixation it is large
       and its first-order prediction poor (held against it, a Panda target took 60 iterations of
@@ -629,20 +633,27 @@ def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, v
       nears ``d_min``. Held from its first step, the walk along the curved level set had its steps
       halved: of 8,000 Panda targets, the one that ends at the iteration cap nearer than ``d_min``
       ended 0.047 m from its target (0.070 m so).
+    - With the zero-version task (``vw_w > 0``) ``P a`` loses its part along ``P c_x``: the task
+      outranks the distance (held against it, the nominal IIS-head's cyclopean answers to targets
+      nearer than ``d_min`` turned the version by up to 0.15 rad).
     - Nothing where the null space cannot move the distance (``|P a|^2`` at most
-      :data:`DISTANCE_REACH` ``|a|^2``: a pan-tilt, most binocular postures)."""
+      :data:`DISTANCE_REACH` ``|a|^2``: a pan-tilt, most binocular postures).
+    - ``d`` and ``a`` are taken where ``J`` was (``Pc`` columns 4 on): a probe that ends on a
+      refused trial leaves that trial's distance in columns 0-3.
+
+    Scratch: ``v``, ``pa``, ``pc`` (f,), ``a``, ``cx`` (m,)."""
     S = Pc.shape[0]
     m = dx.shape[0]
     near = 0
     for s in range(1, S):
-        if Pc[s, 3] < Pc[near, 3]:
+        if Pc[s, 4] < Pc[near, 4]:
             near = s
-    if Pc[near, 3] < MIN_TARGET_DISTANCE:  # on the camera centre: no gradient
+    d = Pc[near, 4]  # at the Jacobian's u (columns 0-3 may hold a refused trial's)
+    if d < MIN_TARGET_DISTANCE:  # on the camera centre: no gradient
         return False
-    d = Pc[near, 3]
     ahead = 0.0
     for w in range(m):
-        a[w] = Pc[near, 4 + w] / sw[w]
+        a[w] = Pc[near, 5 + w] / sw[w]
         ahead += a[w] * dx[w]
     if d + _capped(dx, sw, m)[1] * ahead >= d_min:
         return False
@@ -652,14 +663,28 @@ def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, v
     for i in range(f):
         a2 += a[idx[i]] * a[idx[i]]
         short -= pa[i] * dx[idx[i]]
-    if short <= 0.0 or aa <= DISTANCE_REACH * a2:
+    if short <= 0.0:
         return False
-    k = short / aa
-    big = 0.0
-    for i in range(f):
-        big = max(big, abs(k * pa[i] / sw[idx[i]]))
-    if big > MAX_STEP:
-        k *= MAX_STEP / big
+    if vw_w > 0.0:
+        # the zero-version task outranks the distance: P a loses its part along P c_x (the
+        # nominal IIS-head's null space is one direction, the version's: nothing is left)
+        for w in range(m):
+            cx[w] = vc[w] / sw[w]
+        cc = _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, cx, v, pc)
+        c2 = 0.0
+        for i in range(f):
+            c2 += cx[idx[i]] * cx[idx[i]]
+        if cc > DISTANCE_REACH * c2:
+            ac = 0.0
+            for i in range(f):
+                ac += pa[i] * pc[i]
+            aa = 0.0
+            for i in range(f):
+                pa[i] -= ac / cc * pc[i]
+                aa += pa[i] * pa[i]
+    if aa <= DISTANCE_REACH * a2:
+        return False
+    k = short / aa  # P a . (k pa) = k |pa|^2: pa is P a less a part orthogonal to it
     for i in range(f):
         t = k * pa[i]
         dx[idx[i]] += t
@@ -814,8 +839,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                                 dn[idx[a]] += V[a, e] * s
             held_off = False
             if d_min > 0.0 and gain > 0.0 and f > 0:
-                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, accelerate, null_z,
-                                     null_c, Hb[0], dx, dn)
+                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, vc, vw_w, accelerate,
+                                     null_z, null_c, Hb[0], trial, Hb[1 % m], dx, dn)  # m >= 2 with a version row
             changed = False
             for v in range(m):
                 if free[v]:
@@ -1033,7 +1058,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
     solve makes its workspace on every call, and 44 allocations cost ~1.3 us of it."""
     M = 3 * S
-    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (4 + m) * S + M + M * m + M + M * m + m + 4 * m * m
+    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + M + M * m + M + M * m + m + 4 * m * m
                  + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + n_top + 3 + K + m + m + n_top * m
                  + m + S + m + S + m + m + S + m + m + m)
     ints = np.empty(m + n_top, dtype=np.int64)
@@ -1043,7 +1068,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     CR, o = _carve(f, o, 9 * C)
     Co, o = _carve(f, o, 3 * C)
     Jc, o = _carve(f, o, 6 * K)
-    Pc, o = _carve(f, o, (4 + m) * S)
+    Pc, o = _carve(f, o, (5 + m) * S)
     r, o = _carve(f, o, M)
     J, o = _carve(f, o, M * m)
     r2, o = _carve(f, o, M)
@@ -1089,7 +1114,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         CR.reshape((C, 3, 3)),
         Co.reshape((C, 3)),
         Jc.reshape((6, K)),
-        Pc.reshape((S, 4 + m)),
+        Pc.reshape((S, 5 + m)),
         r,
         J.reshape((M, m)),
         r2,

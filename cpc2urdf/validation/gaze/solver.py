@@ -114,7 +114,7 @@ class GazeSolver:
 
     Raises:
         ConfigurationError: Both ``tolerance`` and ``focal_px``, or either not positive;
-            ``min_distance`` negative.
+            ``min_distance`` negative or not finite.
         InputFileError: An unreadable URDF, or joints with more than one degree of freedom
             (continuous, floating, planar).
         UnknownNameError: A camera frame the URDF does not have.
