@@ -483,12 +483,25 @@ def _eigh_warm(H, n, lam, V, Vp, Hb, warm, keep):  # type: ignore[no-untyped-def
 
 
 @inline_kernel
+def _range_direction(J, W, root, e, M, f, idx, sw, v):  # type: ignore[no-untyped-def]
+    """``v[:f]``: the range direction ``v_e = J_x^T w_e / sqrt(l_e)`` (``root = sqrt(l_e)``) of
+    ``J_x^T J_x`` over the free unknowns ``idx[:f]``, from the eigenvector ``w_e`` (column ``e``
+    of ``W``) of ``J_x J_x^T`` (``J_x = J / sw``)."""
+    for a in range(f):
+        va = idx[a]
+        t = 0.0
+        for i in range(M):
+            t += J[i, va] * W[i, e]
+        v[a] = t / (root * sw[va])
+
+
+@inline_kernel
 def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, mu, gain, accelerate, v, pz,
                     pc, dx, dn):  # type: ignore[no-untyped-def]
     """:func:`_iterate`'s step (added to ``dx``, its null move to ``dn`` if ``accelerate``) when
     the free unknowns ``idx[:f]`` outnumber the ``M`` residual rows, from ``J_x J_x^T = W diag(l)
     W^T`` (``J_x = J / sw``): the range directions of ``J_x^T J_x`` are ``v_e = J_x^T w_e /
-    sqrt(l_e)`` (each in turn in ``v``), its null directions are everything orthogonal to them, and
+    sqrt(l_e)`` (:func:`_range_direction`, each in turn in ``v``), its null directions are everything orthogonal to them, and
     each null-space sum of the column form is a projection by ``P = I - sum_e v_e v_e^T``. The
     same step as the column form's, from an M x M eigen-problem instead of f x f. Returns the
     null move's squared length.
@@ -515,17 +528,12 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
         if lam[e] <= cut:
             continue
         root = math.sqrt(lam[e])
+        _range_direction(J, W, root, e, M, f, idx, sw, v)
         a_e = 0.0
         bz = 0.0
         for a in range(f):
-            va = idx[a]
-            t = 0.0
-            for i in range(M):
-                t += J[i, va] * W[i, e]
-            t /= root * sw[va]
-            v[a] = t
-            a_e += t * pc[a]
-            bz += t * pz[a]
+            a_e += v[a] * pc[a]
+            bz += v[a] * pz[a]
         # the pointing step along v_e (Gauss-Newton, damped) and the version it moves by; z and
         # c_x lose their v_e component (Gram-Schmidt, one range direction at a time)
         s = 0.0
@@ -570,7 +578,7 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
     moves in, over the free unknowns ``idx[:f]``, from the step's decomposition (``V``,
     ``lam``): in the column form the sum of ``v_e (v_e . a)`` over its null directions, in the
     rows form (``rows``) ``a`` less its range part ``v_e (v_e . a)``, ``v_e = J_x^T w_e /
-    sqrt(l_e)`` (each in turn in ``v``; :func:`_step_from_rows`). Returns ``|pa|^2``."""
+    sqrt(l_e)`` (:func:`_range_direction`, each in turn in ``v``). Returns ``|pa|^2``."""
     if rows:
         cut = null_rel * max(lam[M - 1], 1e-300)
         for i in range(f):
@@ -578,15 +586,10 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
         for e in range(M):
             if lam[e] <= cut:
                 continue
-            root = math.sqrt(lam[e])
+            _range_direction(J, V, math.sqrt(lam[e]), e, M, f, idx, sw, v)
             va = 0.0
             for i in range(f):
-                t = 0.0
-                for k in range(M):
-                    t += J[k, idx[i]] * V[k, e]
-                t /= root * sw[idx[i]]
-                v[i] = t
-                va += t * a[idx[i]]
+                va += v[i] * a[idx[i]]
             for i in range(f):
                 pa[i] -= va * v[i]
     else:

@@ -128,6 +128,7 @@ class GazeSolver:
             ``upper``, ``velocity_limit``, ``home``, ``baseline``.
         redundant: Whether fixation by neck and eyes leaves spare freedom for the policy.
         tolerance: Pointing error [rad] below which a target counts as fixated.
+        min_distance: Nearest [m] the compiled solver's policy brings a camera to the target.
     """
 
     def __init__(
