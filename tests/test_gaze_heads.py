@@ -432,7 +432,7 @@ def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
     chain = comp.chain
     u = u0.copy()
     kernels._iterate(comp.ch if ch is None else ch, p, chain.b.copy(), u, comp.home_u, chain.lower, chain.upper,
-                     comp.sw, kernels.SECONDARY_GAIN, comp.null_rel, 1, ws)
+                     comp.sw, kernels.SECONDARY_GAIN, comp.null_rel, 1, ws, -1.0)
     move = u - u0
     if not (np.all(u > chain.lower) and np.all(u < chain.upper) and np.any(move)):
         return None

@@ -697,11 +697,12 @@ def _hold_off(J, V, lam, rows, M, f, idx, sw, null_rel, Pc, d_min, vc, vw_w, acc
 
 
 @kernel_without_refcounts
-def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u=-1.0):  # type: ignore[no-untyped-def]
+def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u):  # type: ignore[no-untyped-def]
     """Task-priority Gauss-Newton from ``u`` (updated in place); returns (iterations, |r|^2),
     with the residual and its Jacobian at the returned ``u`` left in the workspace. Given
     ``rr_at_u >= 0`` (the previous phase's return), they are taken from there, not
-    re-evaluated."""
+    re-evaluated; -1.0: evaluated at ``u``. (No argument has a default, and callers pass the
+    cap as a runtime int: see :func:`solve_one`.)"""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws[:25]
     null_z, null_c = ws[42], ws[43]
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
@@ -1187,11 +1188,16 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     u = ws[25]
     best_rr = rr_to_beat
     total = 0
+    # every call below compiles to one _iterate (~85 kB of machine code): numba types a module
+    # constant as a literal and an omitted argument as its default, and compiles a copy of the
+    # callee for each (four, before), which a solve right after other work loads from memory
+    probe_it, polish_it = np.int64(PROBE_ITERATIONS), np.int64(POLISH_ITERATIONS)
     for k in range(starts.shape[0]):
         for v in range(m):
             u[v] = starts[k, v]
         if k == 0 and best_rr == np.inf:
-            it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws)
+            it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel, max_it, ws,
+                               -1.0)
         else:
             # a further start is probed first: it goes on only if it already does better than
             # the best answer so far (an unreachable target costs a few iterations per start,
@@ -1201,7 +1207,7 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
                 u_near[v] = u_out[v]
             ws[21][2] = 1.0
             it1, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
-                               PROBE_ITERATIONS, ws)
+                               probe_it, ws, -1.0)
             ws[21][2] = 0.0
             near = 0.0
             for v in range(m):
@@ -1209,15 +1215,15 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
             if near < SAME_BASIN:  # on its way to the best answer: nothing new
                 total += it1
                 continue
-            if it1 == PROBE_ITERATIONS:
+            if it1 == probe_it:
                 if rr >= best_rr:
                     total += it1
                     continue
                 it1b, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, SECONDARY_GAIN, null_rel,
-                                    max_it - PROBE_ITERATIONS, ws, rr)
+                                    max_it - probe_it, ws, rr)
                 it1 += it1b
         # polish: pointing alone (same near-null space), to the rounding floor
-        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, POLISH_ITERATIONS, ws, rr)
+        it2, rr = _iterate(ch, p_solve, b, u, u_ref, lower, upper, sw, 0.0, null_rel, polish_it, ws, rr)
         total += it1 + it2
         if rr < best_rr:
             best_rr = rr
