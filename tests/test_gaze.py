@@ -370,6 +370,63 @@ def test_the_compiled_solve_releases_every_array():
     assert before + ")" == "(" + after, f"live numba allocations (arrays, meminfos) grew: {done.stdout.strip()}"
 
 
+def _kernel_calls_with_another_signature() -> list[str]:
+    """Calls, inside ``kernels.py``, of a kernel that is not inlined which would make numba compile
+    another copy of it: an omitted argument (typed as its default) or a module integer constant
+    or integer literal (typed as a literal). A literal bool is allowed: it selects a branch of a
+    small kernel at compile time (``residual``'s ``want_jac``)."""
+    import ast
+    import inspect
+
+    from cpc2urdf.validation.gaze import kernels
+
+    tree = ast.parse(inspect.getsource(kernels))
+    constants = set()
+    for node in tree.body:
+        if not isinstance(node, ast.Assign):
+            continue
+        for target in node.targets:  # NAME = 1, A, B = 1, 2
+            if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple):
+                pairs = list(zip(target.elts, node.value.elts, strict=True))
+            else:
+                pairs = [(target, node.value)]
+            constants |= {
+                n.id for n, v in pairs
+                if isinstance(n, ast.Name) and isinstance(v, ast.Constant) and type(v.value) is int
+            }
+    functions = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+    def decorated(fn: ast.FunctionDef, kinds: tuple[str, ...]) -> bool:
+        return any(isinstance(d, ast.Name) and d.id in kinds for d in fn.decorator_list)
+
+    compiled = {name for name, fn in functions.items() if decorated(fn, ("kernel", "kernel_without_refcounts"))}
+    found = []
+    for name, fn in functions.items():
+        if not decorated(fn, ("kernel", "kernel_without_refcounts", "inline_kernel")):
+            continue  # Python calls a kernel with its ints typed int64, never a literal
+        for call in ast.walk(fn):
+            if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in compiled):
+                continue
+            n_params = len(functions[call.func.id].args.args)
+            where = f"{name} -> {call.func.id} (line {call.lineno})"
+            if len(call.args) != n_params or call.keywords:
+                found.append(f"{where}: {len(call.args)} of {n_params} arguments")
+            for a in call.args:
+                if isinstance(a, ast.Name) and a.id in constants:
+                    found.append(f"{where}: the constant {a.id}")
+                elif isinstance(a, ast.Constant) and type(a.value) is int:
+                    found.append(f"{where}: the literal {a.value}")
+    return found
+
+
+def test_every_kernel_is_compiled_for_one_signature():
+    """numba compiles a kernel once per argument signature, and types a module constant as a
+    literal and an omitted argument as its default: ``solve_one`` once called ``_iterate`` (~85 kB
+    of machine code) with four signatures, four copies that doubled the cold compile (183 s ->
+    87 s without them) and that a solve after other work fetched from memory. The calls between
+    the kernels that are not inlined pass every argument, and no integer constant."""
+    assert _kernel_calls_with_another_signature() == []
+
+
 def test_a_target_written_by_another_thread_during_solve(solver):
     """solve() copies the caller's array before the kernel runs without the GIL: with another
     thread writing it (a finite target, then NaN, over and over), every call either refuses a
