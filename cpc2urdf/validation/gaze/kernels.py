@@ -742,7 +742,10 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
         for v in range(m):
             free[v] = True
         for _ in range(m + 1):  # active set: hold unknowns at a bound that the step pushes out
-            f = 0
+            # the count of free unknowns; np.int64, not 0: numba's inference first sees the literal 0
+            # and compiled seven of the calls below for it too (jacobi_eigh, _eigh_warm, the step's
+            # helpers), overloads the solve never used
+            f = np.int64(0)
             for v in range(m):
                 if free[v]:
                     idx[f] = v
