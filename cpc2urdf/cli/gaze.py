@@ -93,12 +93,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
-    tol = {"tolerance": args.tolerance, "focal_px": args.focal_px, "min_distance": args.min_distance}
+    options = {"tolerance": args.tolerance, "focal_px": args.focal_px, "min_distance": args.min_distance}
     if args.joints:
         solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints,
-                            **tol)
+                            **options)
     else:
-        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **tol)
+        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
     head = None
     if args.report:
         from cpc2urdf.validation.gaze.head_report import format_head_report, head_report

@@ -483,6 +483,14 @@ def _eigh_warm(H, n, lam, V, Vp, Hb, warm, keep):  # type: ignore[no-untyped-def
 
 
 @inline_kernel
+def _null_cut(lam, n, null_rel):  # type: ignore[no-untyped-def]
+    """The eigenvalue at or below which a direction of the step's decomposition (``n``
+    eigenvalues ``lam``, ascending) is in the pointing task's null space: ``null_rel`` of the
+    largest. The step (both forms) and the minimum viewing distance's null part share it."""
+    return null_rel * max(lam[n - 1], 1e-300)
+
+
+@inline_kernel
 def _range_direction(J, W, root, e, M, f, idx, sw, v):  # type: ignore[no-untyped-def]
     """``v[:f]``: the range direction ``v_e = J_x^T w_e / sqrt(l_e)`` (``root = sqrt(l_e)``) of
     ``J_x^T J_x`` over the free unknowns ``idx[:f]``, from the eigenvector ``w_e`` (column ``e``
@@ -518,7 +526,7 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
     ``l_max``, just above the cut): the first made 2 of 2,000 targets end at a limit, and the
     second moved their unit direction there by up to 0.3 (largest component).
     """
-    cut = null_rel * max(lam[M - 1], 1e-300)
+    cut = _null_cut(lam, M, null_rel)
     for a in range(f):  # the policy's offset z = sw (u - u_ref) and the version row c_x = c / sw
         va = idx[a]
         pz[a] = sw[va] * (u[va] - u_ref[va])
@@ -580,7 +588,7 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
     rows form (``rows``) ``a`` less its range part ``v_e (v_e . a)``, ``v_e = J_x^T w_e /
     sqrt(l_e)`` (:func:`_range_direction`, each in turn in ``v``). Returns ``|pa|^2``."""
     if rows:
-        cut = null_rel * max(lam[M - 1], 1e-300)
+        cut = _null_cut(lam, M, null_rel)
         for i in range(f):
             pa[i] = a[idx[i]]
         for e in range(M):
@@ -593,7 +601,7 @@ def _null_part(J, V, lam, rows, M, f, idx, sw, null_rel, a, v, pa):  # type: ign
             for i in range(f):
                 pa[i] -= va * v[i]
     else:
-        cut = null_rel * max(lam[f - 1], 1e-300)
+        cut = _null_cut(lam, f, null_rel)
         for i in range(f):
             pa[i] = 0.0
         for e in range(f):
@@ -796,7 +804,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                             s += J[i, v] * r[i]
                         g[v] = s / sw[v]
                     have_g = True
-                cut = null_rel * max(lam[f - 1], 1e-300)
+                cut = _null_cut(lam, f, null_rel)
                 mu = DAMPING * rr
                 # the pointing step along the strong directions (Gauss-Newton, damped), and
                 # the version it moves by, vr = c_x . dx_range (the null move makes up for it)
