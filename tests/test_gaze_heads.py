@@ -619,3 +619,36 @@ def test_workspace_views_tile_their_buffers(sizes):
     assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (3 * S, m)
     assert ws[26].shape == (G + 1,) and ws[33].shape == (n_top, m) and ws[28].dtype == np.int64
     assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[41], np.ones(m))
+
+
+def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):
+    """iCub's eyes with no coupling stated: two independent eyes behind seven revolute joints
+    both share (torso, neck, eye tilt). The Python solver's start table is a grid over those
+    joints (37 x 13^6 x 5 rows here: more memory than the machine has, and a user's process
+    killed with no message); such a head gets the compiled solver alone, which fixates exactly
+    (checked on Pinocchio's FK), and the Python solver's policies are refused in one line."""
+    from gaze_heads import ICUB, ICUB_EYES, _insert, _write
+
+    path = _write(tmp_path, "icub_eyes", _insert(ICUB, ICUB_EYES))
+    cams = ("l_eye_optical", "r_eye_optical")
+    solver = GazeSolver(PinocchioRobot.from_urdf(path), cams)
+    assert solver.kind == "binocular"
+    with pytest.raises(ConfigurationError, match="only the compiled solver"):
+        solver.head  # noqa: B018
+    model = solver.robot.model
+    data = model.createData()
+    fids = [solver.robot.frame_id(c) for c in cams]
+    pin.framesForwardKinematics(model, data, solver.home)
+    o = np.mean([data.oMf[f].translation for f in fids], axis=0)
+    z = np.sum([data.oMf[f].rotation[:, 2] for f in fids], axis=0)
+    for distance, side in ((0.8, 0.0), (1.2, 0.15), (0.6, -0.1)):
+        p = o + distance * z / np.linalg.norm(z) + np.array([0.0, side, 0.5 * side])
+        sol = solver.solve(p)
+        assert sol.status == "fixated", (p, sol.status, sol.pointing_error)
+        pin.framesForwardKinematics(model, data, sol.q)
+        for f in fids:
+            d = p - data.oMf[f].translation
+            axis = data.oMf[f].rotation[:, 2]
+            assert math.atan2(np.linalg.norm(np.cross(axis, d)), axis @ d) < 1e-9
+    with pytest.raises(ConfigurationError, match="at most 2 joints shared by them"):
+        solver.solve(p, policy="eyes-only")

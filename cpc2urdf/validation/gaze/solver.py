@@ -67,6 +67,12 @@ from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 _FLOAT64 = np.dtype(np.float64)  # numpy's one float64 descriptor: an `is` test (not ==, ~2x slower)
 
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
+# [-]: most neck joints (revolute joints shared by both eyes) of a head the Python solver takes.
+# Its start table (guess.GuessTable) is a grid over the neck readings, 37 x 13^(k-1) x 5 rows for
+# k neck joints, each made by FK: ~2,400 rows for a pan-tilt neck, 31,000 (tens of seconds) for
+# 3, and for iCub's torso, neck and eye tilt (7) more memory than the machine has. Such a head
+# gets the compiled solver alone, as every other shape does.
+PYTHON_SOLVER_MAX_NECK = 2
 
 
 def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
@@ -162,8 +168,10 @@ class GazeSolver:
         # The Python solver with its four policies: two independent eyes, every joint free.
         self._head: GazeHead | None = None
         if self.chain.kind == KIND_BINOCULAR and joints is None and coupling is None and self._neck_and_eyes():
-            self._legacy(GazeHead(robot, self.cameras), viewing_distance)
-        else:
+            head = GazeHead(robot, self.cameras)
+            if len(head.neck) <= PYTHON_SOLVER_MAX_NECK:
+                self._legacy(head, viewing_distance)
+        if self._head is None:
             self.lower = robot.lower.copy()
             self.upper = robot.upper.copy()
             self.velocity_limit = robot.velocity_limit.copy()
@@ -396,7 +404,8 @@ class GazeSolver:
     ) -> GazeSolution:
         if policy not in ("cyclopean", "min-motion"):
             raise ConfigurationError(
-                f"policy {policy!r} needs two independent eyes with every joint free; this head "
+                f"policy {policy!r} needs two independent eyes with every joint free and at most "
+                f"{PYTHON_SOLVER_MAX_NECK} joints shared by them (a pan-tilt neck); this head "
                 f"({self.chain.kind}) takes cyclopean or min-motion"
             )
         comp = comp or self._posture or self.compiled
