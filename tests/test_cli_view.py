@@ -67,10 +67,33 @@ def test_html_with_target_nominal_measurements_and_q(
     assert html.stat().st_size > 100_000  # meshcat's viewer script is inline
 
 
+def test_html_with_a_target_on_a_rigid_pair_and_on_one_camera(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A rigid stereo pair (its cyclopean axis is pointed: one pointing error) and a one-camera
+    head (look-at) with --target: the page, and the summary's error per solved axis."""
+    from gaze_heads import STEREO_PAN_TILT
+
+    urdf = tmp_path / "stereo.urdf"
+    urdf.write_text(STEREO_PAN_TILT)
+    target = ["--target", "2", "0.5", "1.2"]
+    pair, one = tmp_path / "pair.html", tmp_path / "one.html"
+    argv = ["view", str(urdf), "--cameras", "left_optical", "right_optical", *target]
+    assert main([*argv, "--html", str(pair)]) == 0
+    out = capsys.readouterr().out
+    assert "fixated" in out and "pointing error cyclopean axis" in out
+    assert pair.stat().st_size > 100_000
+    assert main(["view", str(urdf), "--camera", "left_optical", *target, "--html", str(one)]) == 0
+    out = capsys.readouterr().out
+    assert "fixated" in out and "pointing error left_optical" in out
+    assert one.stat().st_size > 100_000
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         (["missing.json"], "missing.json"),
+        (["iis_head", "--cameras", "a", "b", "c"], "--camera takes one or two optical frames, got 3"),
         (["missing.urdf"], "missing.urdf: no such file"),
         (["iis_head", "--target", "1", "2", "x"], "must be numbers, got 'x'"),
         (["iis_head", "--target", "1", "2"], "expected 3 arguments"),

@@ -88,11 +88,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "[rad]/[m]; with --target, where the gaze solve starts",
     )
     p.add_argument(
+        "--camera",
         "--cameras",
-        nargs=2,
-        metavar=("LEFT", "RIGHT"),
+        dest="cameras",
+        nargs="+",
+        metavar="FRAME",
         default=["camera_left_optical", "camera_right_optical"],
-        help="camera optical frames for the gaze (default: %(default)s)",
+        help="camera optical frames for the gaze: one (look-at) or two (left right: two eyes, or "
+        "a rigid pair) (default: %(default)s)",
     )
     p.add_argument(
         "--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)"
@@ -137,6 +140,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
+    if len(args.cameras) > 2:
+        raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     target = _numbers(args.target, "--target X Y Z") if args.target else None
     robot = load_view_robot(args.robot, package_dirs=args.package_path)
     options: dict[str, Any] = {

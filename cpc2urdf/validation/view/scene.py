@@ -129,7 +129,8 @@ def build_view(
         ghost: Another model of the same robot (e.g. the nominal one) drawn translucent, in the
             same joint readings (joints matched by name).
         measurements: A :class:`cpc2urdf.measurements.MeasurementSet` of this robot.
-        cameras: The two camera optical frames (left, right) used for the gaze.
+        cameras: The camera optical frames used for the gaze: one (look-at), or two (left, right:
+            two eyes, or a rigid pair whose cyclopean axis is pointed).
         policy: The gaze solver's redundancy policy (``"cyclopean"``, ``"min-motion"``, ...).
         sweep: Add the joint sweep animation (paused at t = 0).
         upright: For a head (camera frames), turn the scene so that its first revolute joint's

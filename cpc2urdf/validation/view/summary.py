@@ -33,7 +33,7 @@ class ViewSummary:
         camera_position: Where the viewer camera was placed [m], shape (3,), in world.
         camera_target: The point it looks at [m], shape (3,), in world.
         up: The world direction shown upwards, unit, shape (3,).
-        cameras: The two camera optical frames (left, right) of the gaze.
+        cameras: The camera optical frames of the gaze (one, or left and right).
         link_changes: With a ghost (the nominal model) and change colours: how far calibration
             moved each link, link name -> :class:`~cpc2urdf.validation.view.change.LinkChange`
             (:mod:`cpc2urdf.validation.view.change`); empty otherwise.
@@ -107,9 +107,11 @@ class ViewSummary:
         """A few lines for a terminal."""
         lines = [f"robot {self.robot}: " + ", ".join(f"{k}={v:.6g}" for k, v in self.q.items())]
         if self.target is not None and self.gaze is not None:
+            errors = self.gaze.pointing_error.tolist()
+            # one error per solved axis: each camera's, or a rigid pair's one cyclopean axis
+            axes = self.cameras if len(errors) == len(self.cameras) else ("cyclopean axis",) * len(errors)
             err = ", ".join(
-                f"{k} {math.degrees(v):.3g} deg"
-                for k, v in zip(self.cameras, self.gaze.pointing_error.tolist(), strict=True)
+                f"{k} {math.degrees(v):.3g} deg" for k, v in zip(axes, errors, strict=True)
             )
             lines.append(
                 f"target {np.array2string(self.target, precision=4)} m: {self.gaze.status}"
