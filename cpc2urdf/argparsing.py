@@ -7,9 +7,12 @@ CLI contract is one line and exit code 2, returned by ``main`` rather than raise
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from collections.abc import Sequence
 from typing import Any, NoReturn
+
+from cpc2urdf.errors import ConfigurationError
 
 # What argparse takes for a negative number rather than an option: its own pattern knows only
 # -1 and -1.5, so "--target -1e-3 0 1" was "expected 3 arguments"; exponents, -inf and -nan too
@@ -55,3 +58,34 @@ def exit_code(e: SystemExit) -> int:
 
 
 __all__ = ["NEGATIVE_NUMBER", "OneLineParser", "exit_code"]
+
+
+def finite_numbers(values: Sequence[str], what: str) -> list[float]:
+    """``values`` as floats; :class:`ConfigurationError` naming ``what`` (e.g. ``"--target X Y
+    Z"``) for one that is not a number or not finite."""
+    out = []
+    for v in values:
+        try:
+            x = float(v)
+        except ValueError:
+            raise ConfigurationError(f"{what} must be numbers, got {v!r}") from None
+        if not math.isfinite(x):
+            raise ConfigurationError(f"{what} must be finite, got {v!r}")
+        out.append(x)
+    return out
+
+
+def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float] | list[float] | None:
+    """Joint readings given to ``option`` (e.g. ``"--q"``): ``{joint: value}`` from
+    ``NAME=VALUE`` items, or a list of values in the robot's joint order; None if none given."""
+    if not values:
+        return None
+    if all("=" in v for v in values):
+        out: dict[str, float] = {}
+        for item in values:
+            name, _, value = item.partition("=")
+            out[name] = finite_numbers([value], f"{option} {name}")[0]
+        return out
+    if any("=" in v for v in values):
+        raise ConfigurationError(f"{option} takes either NAME=VALUE pairs or one number per joint, not both")
+    return finite_numbers(values, f"{option} values")

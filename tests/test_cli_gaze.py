@@ -38,6 +38,24 @@ def test_urdf_file_and_policies(tmp_path, capsys):
         assert "fixated" in capsys.readouterr().out
     q = ["0.5", "0.25", "1.6", "0.03", "0.7", "0.86"]
     assert main(["gaze", str(path), "--target", *AHEAD, "--policy", "min-motion", "--q-current", *q]) == 0
+    capsys.readouterr()
+
+
+def test_q_current_by_name(capsys):
+    """--q-current NAME=VALUE: the named joints at those readings, the others at the middle of
+    their limits; the same answer as the full list in the solver's joint order."""
+    from cpc2urdf.api import gaze_solver
+
+    solver = gaze_solver("iis_head")
+    q = solver.home.copy()
+    q[solver.robot.joint_index("pan")] = 1.2
+    argv = ["gaze", "iis_head", "--target", *AHEAD, "--policy", "eyes-only", "--json", "--q-current"]
+    assert main([*argv, "pan=1.2"]) in (0, 1)
+    by_name = json.loads(capsys.readouterr().out)
+    assert main([*argv, *map(repr, q.tolist())]) in (0, 1)
+    by_order = json.loads(capsys.readouterr().out)
+    assert by_name == by_order
+    assert by_name["joints"]["pan"] == pytest.approx(1.2)  # eyes-only: the neck stays where it is
 
 
 def test_unreachable_exit_1(capsys):

@@ -652,3 +652,19 @@ def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):
             assert math.atan2(np.linalg.norm(np.cross(axis, d)), axis @ d) < 1e-9
     with pytest.raises(ConfigurationError, match="at most 2 joints shared by them"):
         solver.solve(p, policy="eyes-only")
+
+
+def test_continuous_joints_off_the_head_are_read_and_on_it_refused(tmp_path):
+    """GazeSolver on a URDF path reads continuous joints (TIAGo's wheels, off the camera's path)
+    as revolute ones without limits, as solver_for does; a continuous joint on a camera's path
+    (here the stereo pan-tilt's pan) is refused in one line naming it."""
+    from gaze_heads import ERD, STEREO_PAN_TILT
+
+    solver = GazeSolver(ERD / "tiago_description/robots/tiago.urdf", ("xtion_rgb_optical_frame",))
+    assert solver.kind == "look-at" and solver.solve([2.0, 0.3, 1.0]).status == "fixated"
+    text = STEREO_PAN_TILT.replace('<joint name="pan" type="revolute">', '<joint name="pan" type="continuous">')
+    text = text.replace('<limit lower="-2.5" upper="2.5" effort="1" velocity="2"/>', '<limit effort="1" velocity="2"/>')
+    path = tmp_path / "continuous_pan.urdf"
+    path.write_text(text)
+    with pytest.raises(SpecError, match=r"\['pan'\] need finite <limit lower/upper>"):
+        GazeSolver(path, ("left_optical", "right_optical"))

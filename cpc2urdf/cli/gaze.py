@@ -44,9 +44,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument(
         "--q-current",
         nargs="+",
-        type=float,
         metavar="Q",
-        help="current readings [rad]/[m], one per joint in URDF order (default: middle of the limits)",
+        help="current readings [rad]/[m]: NAME=VALUE pairs (the joints not named at the middle of their "
+        "limits), or one value per joint in the order the solution lists them (Pinocchio's model order, "
+        "not the order of the URDF file) (default: the middle of the limits)",
     )
     p.add_argument(
         "--viewing-distance",
@@ -84,6 +85,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import gaze_solver
+    from cpc2urdf.argparsing import joint_readings
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.validation.gaze import solver_for
 
@@ -110,7 +112,13 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({"head": head}, indent=2))
         return 0
-    sol = solver.solve(args.target, args.q_current, args.policy)
+    q_current = joint_readings(args.q_current, "--q-current")
+    if isinstance(q_current, dict):  # the joints not named: the middle of their limits
+        q = solver.home.copy()
+        for name, value in q_current.items():
+            q[solver.robot.joint_index(name)] = value
+        q_current = q.tolist()
+    sol = solver.solve(args.target, q_current, args.policy)
     if args.json:
         print(json.dumps(sol.to_json() if head is None else {"head": head, "solution": sol.to_json()}, indent=2))
         return 0 if sol.reachable else 1

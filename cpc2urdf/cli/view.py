@@ -10,9 +10,9 @@ in headless Chromium. See ``docs/view.md``.
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Any
 
+from cpc2urdf.argparsing import finite_numbers, joint_readings
 from cpc2urdf.errors import ConfigurationError, OutputError
 
 OWN_NOMINAL = ""  # --nominal without a value: the URDF the model was identified from
@@ -104,36 +104,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run)
 
 
-def _numbers(values: list[str], what: str) -> list[float]:
-    out = []
-    for v in values:
-        try:
-            x = float(v)
-        except ValueError:
-            raise ConfigurationError(f"{what} must be numbers, got {v!r}") from None
-        if not math.isfinite(x):
-            raise ConfigurationError(f"{what} must be finite, got {v!r}")
-        out.append(x)
-    return out
-
-
-def parse_q(values: list[str] | None) -> dict[str, float] | list[float] | None:
-    """``--q`` as ``{joint: value}`` (``NAME=VALUE`` items) or a list of values in joint order."""
-    if not values:
-        return None
-    if all("=" in v for v in values):
-        out: dict[str, float] = {}
-        for item in values:
-            name, _, value = item.partition("=")
-            out[name] = _numbers([value], f"--q {name}")[0]
-        return out
-    if any("=" in v for v in values):
-        raise ConfigurationError(
-            "--q takes either NAME=VALUE pairs or one number per joint, not both"
-        )
-    return _numbers(values, "--q values")
-
-
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.view import load_view_robot, screenshot_html, write_view_html
     from cpc2urdf.validation.view.robot import own_nominal
@@ -142,10 +112,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
     if len(args.cameras) > 2:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
-    target = _numbers(args.target, "--target X Y Z") if args.target else None
+    target = finite_numbers(args.target, "--target X Y Z") if args.target else None
     robot = load_view_robot(args.robot, package_dirs=args.package_path)
     options: dict[str, Any] = {
-        "q": parse_q(args.q),
+        "q": joint_readings(args.q, "--q"),
         "target": target,
         "cameras": tuple(args.cameras),
         "policy": args.policy,

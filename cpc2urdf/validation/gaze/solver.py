@@ -152,7 +152,9 @@ class GazeSolver:
     ) -> None:
         tolerance = pointing_tolerance(tolerance, focal_px)
         self.tolerance = tolerance
-        robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf)
+        # continuous joints read as revolute without limits: a robot's wheels are off the head's
+        # paths; one on a path is refused by build_chain (no finite limits), naming it
+        robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
         if robot.cpc_model is not None:
             for name in cameras:
                 robot.cpc_model.structure.frame(name)  # UnknownNameError with the model's frame names
