@@ -179,15 +179,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"   no target found where this head's two optical axes meet exactly: {e}")
         reachable = ahead
     else:
-        print("   a target where this calibrated head's two optical axes can meet (found from its FK):")
+        print("   a target where this calibrated head's two optical axes can meet (found from its FK), with the\n"
+              "   min-motion policy, which fixates it exactly:")
         _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in reachable), "--q-current", *home,
-             ok=(0, 1))
+             "--policy", "min-motion", ok=(0, 1))
     print("   a target 0.6 m straight ahead of the cameras:")
     _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in ahead), "--q-current", *home, ok=(0, 1))
     print(
         "   (a calibrated head whose two eyes do not sweep exactly one plane can make both optical\n"
-        "    axes meet only on a thin set of targets; elsewhere the solver returns the in-limit\n"
-        "    readings with the least pointing error and says so; docs/gaze.md)"
+        "    axes meet only on a thin set of targets. The default policy, cyclopean, answers every\n"
+        "    target with the neck facing it and the error the head cannot remove split between the\n"
+        "    eyes: status disparity, exit code 1, even where an exact fixation exists with the neck\n"
+        "    turned away; docs/gaze.md)"
     )
     st.done()
 

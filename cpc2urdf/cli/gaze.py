@@ -2,8 +2,9 @@
 ``cpc2urdf gaze HEAD --report``: the head itself (kind; for two eyes, whether they can fixate
 exactly and their vertical disparity over the workspace ahead).
 
-Exit codes: 0 the target is fixated (or the report alone), 1 it is not reachable (the best
-in-limit readings and the residual are still printed), 2 bad input.
+Exit codes: 0 the target is fixated (or the report alone), 1 it is not fixated within the
+tolerance: unreachable, or on a head that cannot fixate exactly the policy's posture (status
+``disparity``); the best in-limit readings and the residual are still printed. 2 bad input.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         description="Point both camera optical axes at a target (world frame, metres) on a head "
         "given as a .urdf file, a model file, a robot spec or a shipped robot name (e.g. "
         "iis_head). Prints the readings, reachability and residuals; moves nothing. Exit code "
-        "0 fixated, 1 unreachable, 2 bad input.",
+        "0 fixated, 1 not fixated within the tolerance (unreachable, or the posture of a head that cannot "
+        "fixate exactly: status disparity), 2 bad input.",
     )
     p._negative_number_matcher = NEGATIVE_NUMBER  # --target -1 -2e3 0
     p.add_argument("head", metavar="URDF_OR_MODEL", help=".urdf file, model file, robot spec or shipped robot name")
