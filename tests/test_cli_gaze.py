@@ -164,3 +164,19 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "cannot fixate exactly (vertical disparity): pointing error left per eye over 200 targets" in out
     assert "median" in out and "max" in out
+
+
+def test_text_output_lists_the_head_joints(capsys):
+    """On a whole robot (TIAGo: 48 joints) the text answer lists the joints on the camera's path
+    and counts the others; --json lists every joint."""
+    from gaze_heads import ERD
+
+    urdf = str(ERD / "tiago_description/robots/tiago.urdf")
+    argv = ["gaze", urdf, "--camera", "xtion_rgb_optical_frame", "--target", "2", "0.3", "1.0"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    listed = [line.split()[0] for line in out.splitlines() if line.startswith("  ") and not line.startswith("  (")]
+    assert set(listed) == {"torso_lift_joint", "head_1_joint", "head_2_joint"}, out
+    assert "(45 other joints, off the cameras' paths" in out
+    assert main([*argv, "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["joints"]) == 48

@@ -127,10 +127,18 @@ def run(args: argparse.Namespace) -> int:
     t = ", ".join(f"{v:.10g}" for v in sol.target)
     print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")
     kinds = solver.joint_kinds
-    for name, v in sol.joints.items():
+    # the joints on the cameras' paths; the others (a robot's arms, wheels) keep their readings
+    on_path = {solver.joint_names[i] for i in solver.chain.joint_index.tolist()}
+    names = [name for name in sol.joints if name in on_path]
+    width = max(16, *(len(name) for name in names))
+    for name in names:
+        v = sol.joints[name]
         shown = f"{math.degrees(v):10.4f} deg" if kinds[name] == "revolute" else f"{v:10.6f} m"
         flag = "  (at limit)" if name in sol.at_limit else ""
-        print(f"  {name:16s} {shown}{flag}")
+        print(f"  {name:{width}s} {shown}{flag}")
+    if len(names) < len(sol.joints):
+        print(f"  ({len(sol.joints) - len(names)} other joints, off the cameras' paths, at --q-current or the middle "
+              "of their limits; --json lists every joint)")
     e, m = sol.pointing_error, sol.miss_distance
     if len(e) == 2:
         print(f"pointing error: left {e[0]:.3g} rad, right {e[1]:.3g} rad")
