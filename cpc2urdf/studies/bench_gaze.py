@@ -315,19 +315,22 @@ def _reference_solver(solver: GazeSolver) -> Callable[[Array, Array], tuple[Arra
     """scipy least_squares on the same residual and Pinocchio Jacobians (cyclopean free joints)."""
     from scipy.optimize import least_squares
 
+    from cpc2urdf.validation.gaze.fixation import evaluate_fixation
+
     free = solver.free_joints("cyclopean")
     lo, hi = solver.lower[free], solver.upper[free]
+    head = solver.head  # the residual itself, without GazeSolver.evaluate's conversions
 
     def solve(p: Array, q0: Array) -> tuple[Array, int]:
         q = q0.copy()
 
         def fun(x: Array) -> Array:
             q[free] = x
-            return solver.evaluate(q, p, jacobian=False).r
+            return evaluate_fixation(head, q, p, False).r
 
         def jac(x: Array) -> Array:
             q[free] = x
-            return solver.evaluate(q, p).J[:, free]
+            return evaluate_fixation(head, q, p, True).J[:, free]
 
         x0 = np.clip(q0[free], lo + 1e-12, hi - 1e-12)
         res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)

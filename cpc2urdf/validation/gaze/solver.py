@@ -318,12 +318,17 @@ class GazeSolver:
             return np.flatnonzero(np.abs(self.chain.robot_A).sum(axis=1) > 0)
         return self._free_joints[policy]
 
-    def evaluate(self, q: Array, p_world: Array, jacobian: bool = True) -> FixationState:
+    def evaluate(self, q: ArrayLike, p_world: ArrayLike, jacobian: bool = True) -> FixationState:
         """The fixation state (residual ``r``, shape (6,), ``|r|^2``, the target in each camera
         frame, and the (6, n) Jacobian ``J``) at readings ``q`` (shape (n,)) for target
         ``p_world`` (world) [m], shape (3,); the Jacobian now (``jacobian``) or when first used.
-        Unchecked: ``q`` and ``p_world`` must be finite float arrays."""
-        return evaluate_fixation(self.head, q, p_world, jacobian)
+        Not checked beyond their conversion to float arrays: ``q`` and ``p_world`` must be finite.
+
+        Raises:
+            ConfigurationError: A head without the Python solver (see :attr:`head`): the
+                compiled solver's answers carry their pointing errors instead.
+        """
+        return evaluate_fixation(self.head, np.asarray(q, dtype=float), np.asarray(p_world, dtype=float), jacobian)
 
     def initial_guess(self, p_world: ArrayLike, q_current: ArrayLike | None = None) -> Array:
         """The geometric starting point of :meth:`solve` (table from ``q_current`` or home).
