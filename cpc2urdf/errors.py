@@ -7,6 +7,11 @@ Python API lets it propagate. Messages name the file, the field or joint, and wh
 
 from __future__ import annotations
 
+import difflib
+
+# names an UnknownNameError lists in full; with more, the half most like the one asked for
+UNKNOWN_NAME_LISTED = 24
+
 
 class Cpc2UrdfError(Exception):
     """Base class of every error cpc2urdf raises on purpose."""
@@ -43,7 +48,15 @@ class UnknownNameError(Cpc2UrdfError):
         self.kind = kind
         self.name = name
         self.known = list(known)
-        super().__init__(f"unknown {kind} {name!r}; known {kind}s: {', '.join(self.known)}")
+        if len(self.known) <= UNKNOWN_NAME_LISTED:
+            listed = f"known {kind}s: {', '.join(self.known)}"
+        else:  # a whole robot (TIAGo: ~180 frames): the most alike, not a 3 kB line
+            close = difflib.get_close_matches(name, self.known, n=UNKNOWN_NAME_LISTED // 2, cutoff=0.5)
+            if close:
+                listed = f"closest known {kind}s: {', '.join(close)} (of {len(self.known)})"
+            else:
+                listed = f"known {kind}s: {', '.join(self.known[:UNKNOWN_NAME_LISTED])}, ... ({len(self.known)} in all)"
+        super().__init__(f"unknown {kind} {name!r}; {listed}")
 
 
 class OutputError(Cpc2UrdfError):

@@ -180,3 +180,15 @@ def test_text_output_lists_the_head_joints(capsys):
     assert "(45 other joints, off the cameras' paths" in out
     assert main([*argv, "--json"]) == 0
     assert len(json.loads(capsys.readouterr().out)["joints"]) == 48
+
+
+def test_a_misspelt_camera_on_a_whole_robot_names_the_closest_frames(capsys):
+    """TIAGo has 156 frames: the one line names the most alike, not all of them."""
+    from gaze_heads import ERD
+
+    urdf = str(ERD / "tiago_description/robots/tiago.urdf")
+    assert main(["gaze", urdf, "--camera", "xtion_rgb_optical", "--target", "2", "0.3", "1.0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and len(err) < 600, err
+    assert "unknown frame 'xtion_rgb_optical'; closest known frames: " in err and "xtion_rgb_optical_frame" in err
+    assert "(of 156)" in err
