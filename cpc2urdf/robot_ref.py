@@ -5,7 +5,7 @@ path means the same thing everywhere: a measurement file's ``"robot"``, ``--robo
 ``check``, ``gaze``, ``view``, ``simulate``. A relative path inside a file is tried against that
 file's folder first (``relative_to``).
 
-A path ending in ``.urdf`` is read as a URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot,
+A path ending in ``.urdf``, or any other file whose text is XML (not ``.json``), is read as a URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot,
 every link reachable from the root through calibratable joints a frame; a measurement file then
 restricts it to the sub-tree of the links it measures.
 """
@@ -39,8 +39,20 @@ def looks_like_path(ref: str) -> bool:
 
 
 def is_urdf_ref(ref: str | os.PathLike[str]) -> bool:
-    """True if ``ref`` names a URDF file (``.urdf`` suffix, any case)."""
-    return Path(os.fspath(ref)).suffix.lower() == ".urdf"
+    """True if ``ref`` names a URDF file: a ``.urdf`` suffix (any case), or an existing file
+    not named ``.json`` whose text starts with ``<`` (XML: a URDF saved as ``.xml``, or with no
+    suffix, is read as one, not refused as 'not valid JSON')."""
+    path = Path(os.fspath(ref))
+    if path.suffix.lower() == ".urdf":
+        return True
+    if path.suffix.lower() == ".json" or not path.is_file():
+        return False
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        return False  # reading it again names the problem
+    return head.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"<")
 
 
 def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = None) -> RobotSpec:

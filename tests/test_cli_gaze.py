@@ -192,3 +192,16 @@ def test_a_misspelt_camera_on_a_whole_robot_names_the_closest_frames(capsys):
     assert len(err.splitlines()) == 1 and len(err) < 600, err
     assert "unknown frame 'xtion_rgb_optical'; closest known frames: " in err and "xtion_rgb_optical_frame" in err
     assert "(of 156)" in err
+
+
+def test_a_urdf_not_named_urdf_is_read_as_one(tmp_path, capsys):
+    """A URDF saved as .xml, or with no suffix, is read as a URDF (its text is XML), not refused
+    as 'not valid JSON'; a .json file is still read as JSON."""
+    text = write_urdf(load_model("iis_head"), tmp_path / "head.urdf").read_text()
+    for name in ("head.xml", "head"):
+        (tmp_path / name).write_text(text)
+        assert main(["gaze", str(tmp_path / name), "--target", *AHEAD]) == 0, name
+        assert "fixated" in capsys.readouterr().out
+    (tmp_path / "head.json").write_text(text)
+    assert main(["gaze", str(tmp_path / "head.json"), "--target", *AHEAD]) == 2
+    assert "head.json: not valid JSON" in capsys.readouterr().err
