@@ -181,6 +181,11 @@ def test_cli_reach_writes_png_and_json(tmp_path, capsys):
         (["no_such_head.urdf", "-o", "{d}/r.png"], "no_such_head"),
         (["iis_head", "-o", "{d}/missing/r.png"], "missing"),
         (["iis_head", "-o", "{d}/r.png", "--json", "{d}/missing/r.json"], "missing"),
+        (["iis_head", "--joints", "pan", "neck", "-o", "{d}/r.png"], "unknown joint 'neck'"),
+        (["iis_head", "--tolerance", "0", "-o", "{d}/r.png"], "pointing tolerance"),
+        (["iis_head", "--focal-px", "nan", "-o", "{d}/r.png"], "focal length"),
+        (["iis_head", "--tolerance", "1e-3", "--focal-px", "500", "-o", "{d}/r.png"], "not allowed with"),
+        (["iis_head", "--min-distance", "-1", "-o", "{d}/r.png"], "min_distance"),
     ],
 )
 def test_cli_reach_bad_input(tmp_path, capsys, args, match):
@@ -258,3 +263,27 @@ def test_region_on_a_real_head(tmp_path):
     assert np.all((np.abs(az) > math.radians(60.0)) | (np.abs(el) > math.radians(40.0)) | fixated)
     draw_region(r, tmp_path / "tiago.png", "tiago")
     assert (tmp_path / "tiago.png").stat().st_size > 10_000
+
+
+def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
+    """--focal-px (or --tolerance) and --joints, as gaze takes them: on a calibrated head (its eyes
+    cannot fixate exactly: every target 'disparity') a target counts as fixated within 0.1 px of a
+    200 px camera; with the neck held (--joints on the eyes only) fewer targets are fixated."""
+    from cpc2urdf.model_file import save_model
+    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+
+    model = save_model(calibrated_iis_head(0), tmp_path / "calibrated.json")
+    grid = ["--samples", "2", "5", "3", "--range", "0.6", "2"]
+
+    def counts(*options):
+        js = tmp_path / "r.json"
+        assert main(["reach", str(model), *grid, *options, "-o", str(tmp_path / "r.png"), "--json", str(js)]) == 0
+        capsys.readouterr()
+        return json.loads(js.read_text())["counts"]
+
+    exact, loose = counts(), counts("--focal-px", "200")
+    assert exact.get("fixated", 0) == 0 and exact.get("disparity", 0) > 0
+    assert loose.get("fixated", 0) > 0
+    assert counts("--tolerance", "1.0")["fixated"] > 0
+    eyes = counts("--focal-px", "200", "--joints", "vergence_left", "vergence_right")
+    assert eyes.get("fixated", 0) < loose["fixated"]
