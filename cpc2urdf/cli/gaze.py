@@ -14,6 +14,8 @@ import json
 import math
 import re
 
+from cpc2urdf.cli._gaze_options import add_solver_options, solver_options
+
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
 # cpc2urdf.validation.gaze.
 POLICIES = ("cyclopean", "min-motion", "eyes-only", "use-table")
@@ -67,20 +69,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="one camera optical frame (look-at) or two (left right: binocular, or a rigid pair) "
         f"(default {' '.join(DEFAULT_CAMERAS)})",
     )
-    p.add_argument(
-        "--joints",
-        nargs="+",
-        metavar="JOINT",
-        help="the joints that may move (default: every joint on the paths to the cameras)",
-    )
-    tol = p.add_mutually_exclusive_group()
-    tol.add_argument("--tolerance", type=float, metavar="RAD",
-                     help="pointing error [rad] below which a target counts as fixated (default 1e-9: exact)")
-    tol.add_argument("--focal-px", type=float, metavar="F",
-                     help="the cameras' focal length [px]: a target counts as fixated within 0.1 px")
-    p.add_argument("--min-distance", type=float, metavar="M",
-                   help="nearest [m] the policy brings a camera to the target where it has the choice, "
-                   "e.g. a camera on an arm (default 0.1; 0: no limit)")
+    add_solver_options(p)
     p.add_argument("--json", action="store_true", help="print the solution as JSON (SI units)")
     p.set_defaults(run=run)
 
@@ -97,10 +86,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
-    options = {"tolerance": args.tolerance, "focal_px": args.focal_px, "min_distance": args.min_distance}
+    options = solver_options(args)
     if args.joints:
-        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, joints=args.joints,
-                            **options)
+        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
     else:
         solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
     head = None

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpc2urdf.cli._gaze_options import add_solver_options, solver_options
+
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
 # cpc2urdf.validation.gaze.reach.
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
@@ -53,21 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="samples per axis: distance, azimuth, elevation (box: forward, lateral, vertical); "
         f"default {' '.join(str(k) for k in DEFAULT_SAMPLES)}",
     )
-    p.add_argument(
-        "--joints",
-        nargs="+",
-        metavar="JOINT",
-        help="the joints that may move (default: every joint on the paths to the cameras; the others "
-        "stay at the middle of their limits)",
-    )
-    tol = p.add_mutually_exclusive_group()
-    tol.add_argument("--tolerance", type=float, metavar="RAD",
-                     help="pointing error [rad] below which a target counts as fixated (default 1e-9: exact)")
-    tol.add_argument("--focal-px", type=float, metavar="F",
-                     help="the cameras' focal length [px]: a target counts as fixated within 0.1 px")
-    p.add_argument("--min-distance", type=float, metavar="M",
-                   help="nearest [m] the policy brings a camera to the target where it has the choice, "
-                   "e.g. a camera on an arm (default 0.1; 0: no limit)")
+    add_solver_options(p)
     p.add_argument("-o", "--output", required=True, metavar="REGION.png", help="the PNG to write")
     p.add_argument("--json", metavar="REGION.json", help="also write every target's point, status and error")
     p.set_defaults(run=run)
@@ -92,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output)
     if args.json:
         check_output_path(args.json)
-    solver = gaze_solver(args.robot, tuple(args.camera), joints=args.joints, tolerance=args.tolerance,
-                         focal_px=args.focal_px, min_distance=args.min_distance)
+    solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
     # render both outputs before writing either: a failure leaves nothing behind

@@ -1,0 +1,32 @@
+"""The gaze solver's options, the same on every command that solves gaze (``gaze``, ``reach``):
+which joints may move, when a target counts as fixated, and how near the policy brings a camera."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+
+def add_solver_options(p: argparse.ArgumentParser) -> None:
+    """``--joints``, ``--tolerance`` or ``--focal-px``, and ``--min-distance`` on parser ``p``."""
+    p.add_argument(
+        "--joints",
+        nargs="+",
+        metavar="JOINT",
+        help="the joints that may move (default: every joint on the paths to the cameras; the others are held)",
+    )
+    tol = p.add_mutually_exclusive_group()
+    tol.add_argument("--tolerance", type=float, metavar="RAD",
+                     help="pointing error [rad] below which a target counts as fixated (default 1e-9: exact)")
+    tol.add_argument("--focal-px", type=float, metavar="F",
+                     help="the cameras' focal length [px]: a target counts as fixated within 0.1 px")
+    p.add_argument("--min-distance", type=float, metavar="M",
+                   help="nearest [m] the policy brings a camera to the target where it has the choice, "
+                   "e.g. a camera on an arm (default 0.1; 0: no limit)")
+
+
+def solver_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of :func:`cpc2urdf.api.gaze_solver` from :func:`add_solver_options`'s
+    options."""
+    return {"joints": args.joints, "tolerance": args.tolerance, "focal_px": args.focal_px,
+            "min_distance": args.min_distance}
