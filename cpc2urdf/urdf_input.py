@@ -11,8 +11,7 @@ expected, e.g. ``head.urdf: joint 'pan': origin xyz 'nan 0 0' is not finite (lin
   whose root is a named ``<robot>``;
 - links, joints and materials named and unique, at least one link;
 - every joint of a URDF type, with ``<parent link>`` and ``<child link>`` naming links of the file;
-  revolute and prismatic joints with a ``<limit effort velocity>``, its ``lower`` not above its
-  ``upper``; a moving joint's axis not zero;
+  revolute and prismatic joints with a ``<limit effort velocity>``; a moving joint's axis not zero;
 - the links form one tree: each link the child of at most one joint, one root, no cycle;
 - visuals and collisions with one known shape (box, cylinder, sphere, mesh) and its attributes;
   inertials with a mass and the six inertia values;
@@ -256,9 +255,6 @@ class _Checker:
                         self.add(owner, f"limit has no {attr} attribute", limit)
                     elif _DECIMAL.match(limit.attrib[attr].strip()) and float(limit.attrib[attr]) < 0:
                         self.add(owner, f"limit {attr} {_quote(limit.attrib[attr])} is negative", limit)
-                lo, hi = limit.attrib.get("lower", "0").strip(), limit.attrib.get("upper", "0").strip()
-                if _DECIMAL.match(lo) and _DECIMAL.match(hi) and float(lo) > float(hi):
-                    self.add(owner, f"limit lower {_quote(lo)} is above upper {_quote(hi)}", limit)
         mimic = el.first("mimic")
         if mimic is not None and mimic.attrib.get("joint") not in joints:
             self.add(owner, f"mimic joint {_quote(mimic.attrib.get('joint', ''))} is not a joint of this URDF", mimic)

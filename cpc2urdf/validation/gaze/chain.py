@@ -252,6 +252,14 @@ def build_chain(
     m = len(variables)
     if m == 0:
         raise SpecError(f"no joint moves the cameras {list(cameras)}")
+    for name in moving:
+        i = robot.joint_index(name)
+        if robot.lower[i] > robot.upper[i]:  # PyBullet's way of writing "no limit"
+            raise SpecError(
+                f"{robot.source}: joint {name!r}: limit lower {robot.lower[i]:.9g} is above upper "
+                f"{robot.upper[i]:.9g} (PyBullet reads that as no limit); gaze control needs finite "
+                "limits with lower <= upper"
+            )
     n = len(names)
     lower = np.empty(m)
     upper = np.empty(m)
