@@ -205,3 +205,11 @@ def test_a_urdf_not_named_urdf_is_read_as_one(tmp_path, capsys):
     (tmp_path / "head.json").write_text(text)
     assert main(["gaze", str(tmp_path / "head.json"), "--target", *AHEAD]) == 2
     assert "head.json: not valid JSON" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("q", [["x"], ["pan=9"], ["neck=0.1"], ["0.5", "0.25"]])
+def test_a_bad_q_current_is_refused_before_any_output(q, capsys):
+    """With --report, a bad --q-current used to be refused after the report was printed."""
+    assert main(["gaze", "iis_head", "--report", "--target", *AHEAD, "--q-current", *q]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.strip().splitlines()) == 1

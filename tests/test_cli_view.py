@@ -87,13 +87,16 @@ def test_html_with_a_target_on_a_rigid_pair_and_on_one_camera(
     out = capsys.readouterr().out
     assert "fixated" in out and "pointing error left_optical" in out
     assert one.stat().st_size > 100_000
+    # --cameras takes exactly two, before the robot as well
+    assert main(["view", "--cameras", "left_optical", "right_optical", str(urdf), *target, "--html", str(pair)]) == 0
+    assert "pointing error cyclopean axis" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         (["missing.json"], "missing.json"),
-        (["iis_head", "--cameras", "a", "b", "c"], "--camera takes one or two optical frames, got 3"),
+        (["iis_head", "--camera", "a", "b", "c"], "--camera takes one or two optical frames, got 3"),
         (["missing.urdf"], "missing.urdf: no such file"),
         (["iis_head", "--target", "1", "2", "x"], "must be numbers, got 'x'"),
         (["iis_head", "--target", "1", "2"], "expected 3 arguments"),

@@ -86,11 +86,20 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
+    q_given = joint_readings(args.q_current, "--q-current")  # refused before anything is loaded or printed
     options = solver_options(args)
     if args.joints:
         solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
     else:
         solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
+    q_current = None
+    if isinstance(q_given, dict):  # the joints not named: the middle of their limits
+        q = solver.home.copy()
+        for name, value in q_given.items():
+            q[solver.robot.joint_index(name)] = value
+        q_current = solver.check_q(q)
+    elif q_given is not None:
+        q_current = solver.check_q(q_given)
     head = None
     if args.report:
         from cpc2urdf.validation.gaze.head_report import format_head_report, head_report
@@ -102,12 +111,6 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({"head": head}, indent=2))
         return 0
-    q_current = joint_readings(args.q_current, "--q-current")
-    if isinstance(q_current, dict):  # the joints not named: the middle of their limits
-        q = solver.home.copy()
-        for name, value in q_current.items():
-            q[solver.robot.joint_index(name)] = value
-        q_current = q.tolist()
     sol = solver.solve(args.target, q_current, args.policy)
     if args.json:
         print(json.dumps(sol.to_json() if head is None else {"head": head, "solution": sol.to_json()}, indent=2))

@@ -87,15 +87,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="configuration: NAME=VALUE pairs (others mid-range) or one value per joint in order "
         "[rad]/[m]; with --target, where the gaze solve starts",
     )
+    # --cameras takes exactly two, as it always has (so "--cameras L R ROBOT" still parses);
+    # --camera one or two
+    p.add_argument(
+        "--cameras",
+        dest="cameras",
+        nargs=2,
+        metavar=("LEFT", "RIGHT"),
+        default=["camera_left_optical", "camera_right_optical"],
+        help="the two camera optical frames of the gaze (two eyes, or a rigid pair) (default: %(default)s)",
+    )
     p.add_argument(
         "--camera",
-        "--cameras",
         dest="cameras",
         nargs="+",
         metavar="FRAME",
-        default=["camera_left_optical", "camera_right_optical"],
-        help="camera optical frames for the gaze: one (look-at) or two (left right: two eyes, or "
-        "a rigid pair) (default: %(default)s)",
+        help="instead of --cameras: one camera optical frame (look-at), or two",
     )
     p.add_argument(
         "--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)"

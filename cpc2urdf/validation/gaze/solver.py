@@ -69,10 +69,11 @@ _FLOAT64 = np.dtype(np.float64)  # numpy's one float64 descriptor: an `is` test 
 RETRIES = 2  # further starts tried when the first one ends in a local minimum
 # [-]: most neck joints (revolute joints shared by both eyes) of a head the Python solver takes.
 # Its start table (guess.GuessTable) is a grid over the neck readings, 37 x 13^(k-1) x 5 rows for
-# k neck joints, each made by FK: ~2,400 rows for a pan-tilt neck, 31,000 (tens of seconds) for
-# 3, and for iCub's torso, neck and eye tilt (7) more memory than the machine has. Such a head
-# gets the compiled solver alone, as every other shape does.
-PYTHON_SOLVER_MAX_NECK = 2
+# k neck joints, each made by FK: 2,405 rows for a pan-tilt neck (the IIS-head), 31,265 for a
+# yaw-pitch-roll neck (2.3 s to build), 406,445 for 4 (a CLI call took 42 s), 886 million for
+# iCub's torso, neck and eye tilt (7: more memory than the machine has). A head with more gets
+# the compiled solver alone, as every other shape does.
+PYTHON_SOLVER_MAX_NECK = 3
 
 
 def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
@@ -230,7 +231,9 @@ class GazeSolver:
 
         Raises:
             ConfigurationError: A head of another shape (one camera, a rigid pair, stated joints or
-                a coupling): only the compiled solver (:meth:`solve`, :meth:`solve_many`) serves it.
+                a coupling, a joint without finite limits, more than
+                :data:`PYTHON_SOLVER_MAX_NECK` revolute joints shared by the eyes): only the
+                compiled solver (:meth:`solve`, :meth:`solve_many`) serves it.
         """
         if self._head is None:
             raise ConfigurationError(
@@ -411,8 +414,8 @@ class GazeSolver:
     ) -> GazeSolution:
         if policy not in ("cyclopean", "min-motion"):
             raise ConfigurationError(
-                f"policy {policy!r} needs two independent eyes with every joint free and at most "
-                f"{PYTHON_SOLVER_MAX_NECK} joints shared by them (a pan-tilt neck); this head "
+                f"policy {policy!r} needs two independent eyes, every joint free with finite limits, and "
+                f"at most {PYTHON_SOLVER_MAX_NECK} revolute joints shared by the eyes; this head "
                 f"({self.chain.kind}) takes cyclopean or min-motion"
             )
         comp = comp or self._posture or self.compiled
