@@ -57,9 +57,6 @@ def exit_code(e: SystemExit) -> int:
     return 0 if e.code is None else 2
 
 
-__all__ = ["NEGATIVE_NUMBER", "OneLineParser", "exit_code"]
-
-
 def finite_numbers(values: Sequence[str], what: str) -> list[float]:
     """``values`` as floats; :class:`ConfigurationError` naming ``what`` (e.g. ``"--target X Y
     Z"``) for one that is not a number or not finite."""
@@ -89,3 +86,6 @@ def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float
     if any("=" in v for v in values):
         raise ConfigurationError(f"{option} takes either NAME=VALUE pairs or one number per joint, not both")
     return finite_numbers(values, f"{option} values")
+
+
+__all__ = ["NEGATIVE_NUMBER", "OneLineParser", "exit_code", "finite_numbers", "joint_readings"]

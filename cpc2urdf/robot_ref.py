@@ -61,8 +61,9 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
     Args:
         ref: A :class:`~cpc2urdf.spec.RobotSpec` (returned as is), a shipped robot name (e.g.
             ``"iis_head"``), or the path of a robot spec (``cpc2urdf/robot@1``), model file
-            (``cpc2urdf/model@1``; its model becomes the spec's nominal model) or URDF (``.urdf``:
-            a :class:`~cpc2urdf.urdf_robot.UrdfRobot` whose nominal model remembers the file).
+            (``cpc2urdf/model@1``; its model becomes the spec's nominal model) or URDF (``.urdf``,
+            or XML text in a file not named ``.json``: :func:`is_urdf_ref`; a
+            :class:`~cpc2urdf.urdf_robot.UrdfRobot` whose nominal model remembers the file).
         relative_to: Folder against which a relative path is tried first (the folder of the file
             that named the robot).
 

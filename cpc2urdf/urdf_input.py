@@ -307,6 +307,10 @@ class _Checker:
             return
         if "name" not in root.attrib:
             self.add("", "<robot> has no name attribute", root)
+        macro = next((el for el in root.children if el.tag.startswith("xacro:")), None)
+        if macro is not None:  # (an expanded file may keep xmlns:xacro on <robot>: not a sign)
+            self.add("", f"is a xacro file (<{macro.tag}>), not a URDF: expand it first (xacro FILE > FILE.urdf)", macro)
+            return
         if root.attrib.get("version", "1.0") != "1.0":  # urdfdom reads only version 1.0
             self.add("", f"<robot> version {_quote(root.attrib['version'])} is not 1.0", root)
         links: dict[str, _Element] = {}

@@ -451,6 +451,8 @@ def _check() -> list[Case]:
         Case("check-no-model", ("check", "{urdf}"), "--model"),
         Case("check-joint-zero-axis", argv, "{bad}: joint 'pan': axis xyz '0 0 0' is zero",
              lambda c: _in_joint(c.urdf, "pan", '<axis xyz="', '<axis xyz="0 0 0" old="'), name="bad.urdf"),
+        Case("check-xacro", argv, "{bad}: is a xacro file (<xacro:property>), not a URDF: expand it first (xacro FILE > FILE.urdf) (line",
+             lambda c: c.urdf.replace("<link ", '<xacro:property name="r" value="0.1"/><link ', 1), name="bad.urdf"),
         Case("check-joint-type-unknown", argv, "{bad}: joint 'pan': type 'hinge'",
              lambda c: _in_joint(c.urdf, "pan", 'type="revolute"', 'type="hinge"'), name="bad.urdf"),
         Case("check-negative-box", argv, "{bad}: link 'base': visual 'base_plate' geometry box size '0.12 -0.12 0.01' is negative",

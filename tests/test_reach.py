@@ -284,6 +284,9 @@ def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
     exact, loose = counts(), counts("--focal-px", "200")
     assert exact.get("fixated", 0) == 0 and exact.get("disparity", 0) > 0
     assert loose.get("fixated", 0) > 0
+    doc = json.loads((tmp_path / "r.json").read_text())  # the last run's options are recorded
+    assert doc["tolerance_rad"] == pytest.approx(math.atan(0.1 / 200))
+    assert doc["moving"] == ["pan", "tilt", "vergence_left", "vergence_right"] and doc["min_distance_m"] == 0.1
     assert counts("--tolerance", "1.0")["fixated"] > 0
     eyes = counts("--focal-px", "200", "--joints", "vergence_left", "vergence_right")
     assert eyes.get("fixated", 0) < loose["fixated"]

@@ -180,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
         reachable = ahead
     else:
         print("   a target where this calibrated head's two optical axes can meet (found from its FK), with the\n"
-              "   min-motion policy, which fixates it exactly:")
+              "   min-motion policy, which keeps an exact fixation where one exists:")
         _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in reachable), "--q-current", *home,
              "--policy", "min-motion", ok=(0, 1))
     print("   a target 0.6 m straight ahead of the cameras:")

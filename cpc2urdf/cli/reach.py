@@ -87,7 +87,10 @@ def run(args: argparse.Namespace) -> int:
     png = region_figure_png(region, title=Path(args.robot).name)
     files: dict[str, str | bytes] = {args.output: png}
     if args.json:
-        doc = {"format": "cpc2urdf/reach@1", "robot": str(args.robot), "cameras": list(solver.cameras), **region.to_json()}
+        # what "fixated" meant: the tolerance, the unknowns that moved, the policy's nearest approach
+        doc = {"format": "cpc2urdf/reach@1", "robot": str(args.robot), "cameras": list(solver.cameras),
+               "tolerance_rad": solver.tolerance, "moving": list(solver.moving),
+               "min_distance_m": solver.min_distance, **region.to_json()}
         files[args.json] = dumps(doc)
     write_all_atomic(files)
     counts = region.counts()

@@ -243,8 +243,8 @@ class PinocchioRobot:
         visuals: bool = False,
         continuous_as_revolute: bool = False,
     ) -> PinocchioRobot:
-        """The robot ``ref`` names: a :class:`~cpc2urdf.model.CPCModel`, a ``.urdf`` file (any
-        case, :func:`cpc2urdf.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
+        """The robot ``ref`` names: a :class:`~cpc2urdf.model.CPCModel`, a URDF file (``.urdf`` in
+        any case, or XML text in a file not named ``.json``: :func:`cpc2urdf.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
         robot name (:func:`cpc2urdf.robot_ref.load_model`). ``continuous_as_revolute`` as in
         :meth:`from_urdf`.
 

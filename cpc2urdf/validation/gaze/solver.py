@@ -243,6 +243,12 @@ class GazeSolver:
         return self._head
 
     @property
+    def moving(self) -> tuple[str, ...]:
+        """What :meth:`solve_many` and the cyclopean policy move: the names of the compiled
+        solve's unknowns (joints, or a coupling's variables; an IIS-shaped head's table stays)."""
+        return self._fast.chain.variables
+
+    @property
     def kind(self) -> str:
         """The head's shape: ``"look-at"``, ``"binocular"`` or ``"rigid-stereo"``."""
         return self.chain.kind
