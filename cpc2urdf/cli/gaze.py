@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     # the joints on the cameras' paths; the others (a robot's arms, wheels) keep their readings
     on_path = {solver.joint_names[i] for i in solver.chain.joint_index.tolist()}
     names = [name for name in sol.joints if name in on_path]
-    width = max(16, *(len(name) for name in names))
+    width = max([16, *(len(name) for name in names)])
     for name in names:
         v = sol.joints[name]
         shown = f"{math.degrees(v):10.4f} deg" if kinds[name] == "revolute" else f"{v:10.6f} m"
