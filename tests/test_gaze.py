@@ -655,3 +655,12 @@ def test_one_robot_resolver_and_one_pinocchio_model(tmp_path):
         robot.frame_id("nope")
     with pytest.raises(UnknownNameError, match="unknown joint 'neck'"):
         robot.joint_index("neck")
+
+
+def test_evaluate_takes_lists_as_solve_does(solver):
+    """GazeSolver.evaluate on lists (a target as solve takes it): the same state as on arrays."""
+    sol = solver.solve(AHEAD)
+    on_lists = solver.evaluate(sol.q.tolist(), list(AHEAD))
+    on_arrays = solver.evaluate(sol.q, np.asarray(AHEAD, dtype=float))
+    assert on_lists.rr == on_arrays.rr and np.array_equal(on_lists.J, on_arrays.J)
+    assert on_lists.rr < 1e-20  # the solve's own answer fixates
