@@ -5,9 +5,10 @@ path means the same thing everywhere: a measurement file's ``"robot"``, ``--robo
 ``check``, ``gaze``, ``view``, ``simulate``. A relative path inside a file is tried against that
 file's folder first (``relative_to``).
 
-A path ending in ``.urdf``, or any other file whose text is XML (not ``.json``), is read as a URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot,
-every link reachable from the root through calibratable joints a frame; a measurement file then
-restricts it to the sub-tree of the links it measures.
+A path ending in ``.urdf``, or any other file whose text is XML (not ``.json``), is read as a
+URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot, every link reachable from the root
+through calibratable joints a frame; a measurement file then restricts it to the sub-tree of the
+links it measures.
 """
 
 from __future__ import annotations

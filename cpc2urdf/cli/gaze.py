@@ -92,14 +92,9 @@ def run(args: argparse.Namespace) -> int:
         solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
     else:
         solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
-    q_current = None
     if isinstance(q_given, dict):  # the joints not named: the middle of their limits
-        q = solver.home.copy()
-        for name, value in q_given.items():
-            q[solver.robot.joint_index(name)] = value
-        q_current = solver.check_q(q)
-    elif q_given is not None:
-        q_current = solver.check_q(q_given)
+        q_given = {**dict(zip(solver.joint_names, solver.home.tolist(), strict=True)), **q_given}
+    q_current = solver.check_q(q_given)  # refused before the report is printed
     head = None
     if args.report:
         from cpc2urdf.validation.gaze.head_report import format_head_report, head_report
