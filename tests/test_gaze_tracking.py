@@ -23,10 +23,13 @@ from cpc2urdf.validation.gaze import GazeSolver
 from cpc2urdf.validation.gaze.tracking import (
     MIN_JERK_PEAK_ACCELERATION,
     MIN_JERK_PEAK_VELOCITY,
+    SACCADE_STATUSES,
     GazeTracker,
     SaccadeRule,
     minimum_jerk,
+    quintic_peaks,
     track,
+    velocity_blend,
 )
 
 DT = 1e-3
@@ -157,7 +160,8 @@ def test_saccade_then_pursuit_of_a_moving_target(head):
     assert np.all(v <= vmax * (1 + 1e-12))
     sac = np.flatnonzero(tr.saccade)
     assert sac.size and sac[0] == 100 and np.all(np.diff(sac) == 1)
-    # a saccade is ballistic: afterwards pursuit catches up and stays locked on the moving target
+    # the target moves within the threshold during the saccade (no re-aim): afterwards pursuit
+    # catches up and stays locked on the moving target
     tail = slice(sac[-1] + 150, None)
     assert tr.q.shape[0] - (sac[-1] + 150) >= 100
     assert tr.locked[tail].all()
@@ -202,6 +206,212 @@ def test_bad_input(head):
         GazeTracker(solver, 0.0)
     with pytest.raises(ConfigurationError, match="target"):
         GazeTracker(solver, DT).step([0.0, math.nan, 1.0])
+
+
+def _quintic(q0, v0, q1, T):
+    """The quintic with q(0) = q0, q'(0) = v0, q''(0) = 0, q(T) = q1, q'(T) = q''(T) = 0 (one
+    joint), from its six boundary conditions solved by numpy: independent of minimum_jerk and
+    velocity_blend."""
+    rows = []
+    for t, d in ((0.0, 0), (0.0, 1), (0.0, 2), (T, 0), (T, 1), (T, 2)):
+        rows.append([np.polynomial.Polynomial(np.eye(6)[k]).deriv(d)(t) for k in range(6)])
+    coef = np.linalg.solve(np.array(rows), [q0, v0, 0.0, q1, 0.0, 0.0])
+    return np.polynomial.Polynomial(coef)
+
+
+def test_quintic_from_a_velocity_and_its_peaks():
+    """velocity_blend carries a start velocity into the rest-to-rest move (the profile is the
+    quintic of its boundary conditions), and quintic_peaks are that quintic's largest speed and
+    acceleration (dense sampling from below, to 1e-6)."""
+    rng = np.random.default_rng(5)
+    t_dense = np.linspace(0.0, 1.0, 200_001)
+    for _ in range(40):
+        D, v0, T = rng.uniform(-1.5, 1.5), rng.uniform(-3.0, 3.0), rng.uniform(0.05, 2.0)
+        if rng.uniform() < 0.2:
+            v0 = 0.0
+        poly = _quintic(0.0, v0, D, T)
+        s = t_dense
+        f = minimum_jerk(s)[0]
+        h = velocity_blend(s)[0]
+        np.testing.assert_allclose(D * f + v0 * T * h, poly(s * T), atol=1e-12 * (1 + abs(D) + abs(v0) * T))
+        vpk, apk = quintic_peaks(np.array([D]), np.array([v0]), T)
+        v = np.abs(poly.deriv(1)(s * T)).max()
+        a = np.abs(poly.deriv(2)(s * T)).max()
+        assert v <= vpk[0] * (1 + 1e-12) + 1e-15 and vpk[0] <= v * (1 + 1e-6)
+        assert a <= apk[0] * (1 + 1e-12) + 1e-15 and apk[0] <= a * (1 + 1e-6)
+
+
+def test_duration_from_a_velocity_is_the_fewest_samples():
+    """SaccadeRule.duration from a start velocity: the fewest samples whose quintic (the
+    boundary-condition one) keeps within the speed and acceleration limits, by dense sampling."""
+    rng = np.random.default_rng(8)
+    dt = 1e-3
+    grid = np.linspace(0.0, 1.0, 20_001)
+
+    def fits(D, v0, n, vmax, amax):
+        T = n * dt
+        ok = True
+        for j in range(len(D)):
+            poly = _quintic(0.0, v0[j], D[j], T)
+            ok &= np.abs(poly.deriv(1)(grid * T)).max() <= vmax[j] * (1 + 1e-6)
+            if amax is not None:
+                ok &= np.abs(poly.deriv(2)(grid * T)).max() <= amax * (1 + 1e-6)
+        return ok
+
+    for k in range(12):
+        vmax = rng.uniform(0.5, 3.0, 3)
+        D = rng.uniform(-1.0, 1.0, 3)
+        v0 = rng.uniform(-1.0, 1.0, 3) * vmax * 0.99
+        amax = 40.0 if k % 2 else None
+        rule = SaccadeRule(max_acceleration=amax)
+        n = rule.duration(D, vmax, dt, v0)
+        assert fits(D, v0, n, vmax, amax)
+        assert n == 1 or (n - 1) * dt < rule.min_duration or not fits(D, v0, n - 1, vmax, None if amax is None else amax * (1 - 1e-4))
+    # from rest: the closed form, as before
+    assert SaccadeRule().duration(np.array([1.0]), np.array([2.0]), dt, np.zeros(1)) == math.ceil(15 / 16 / dt - 1e-9)
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_a_saccade_re_aims_when_the_target_moves_on(head):
+    """A, then B, then C while the saccade to B is under way: the saccade re-aims at C from the
+    readings and velocity it has (no jump of either: every sampled speed and acceleration within
+    the limits), its new part is the quintic from that velocity, and it ends exactly at C's answer."""
+    model, solver = head
+    A, B = _two_targets(model)
+    C = A + np.array([0.0, 0.0, 0.05])
+    hold, jump = 20, 120
+    P = np.vstack([np.repeat(A[None], hold, axis=0), np.repeat(B[None], jump - hold, axis=0),
+                   np.repeat(C[None], 900, axis=0)])
+    amax = 40.0
+    q0 = solver.solve(A).q
+    vmax = FAST * solver.velocity_limit
+    tr = track(solver, P, DT, vmax, q_current=q0, saccades=SaccadeRule(max_acceleration=amax))
+    sac = np.flatnonzero(tr.saccade)
+    assert sac[0] == hold and np.all(np.diff(sac) == 1) and sac[-1] > jump  # one chain of samples
+    Q = np.vstack([q0, tr.q])  # Q[k + 1] is sample k
+    v = np.diff(Q, axis=0) / DT
+    a = np.diff(Q, n=2, axis=0) / DT**2
+    assert np.all(np.abs(v) <= vmax * (1 + 1e-9))
+    assert np.all(np.abs(a[: sac[-1] + 1]) <= amax * (1 + 1e-6))
+    assert np.array_equal(tr.q[sac[-1]], tr.q_goal[sac[-1]])  # ends exactly at C's answer
+    assert np.abs(tr.q_goal[sac[-1]] - tr.q_goal[jump]).max() < 1e-9
+    assert tr.locked[sac[-1] + 1 :].all() and tr.pointing_error[-1].max() < GAZE_POINTING_TOL
+    # the re-aimed part: the quintic from the velocity the first profile had at its last sample
+    k = int(np.argmax(np.abs(tr.q[sac[-1]] - tr.q[jump - 1])))
+    first = np.polynomial.Polynomial.fit(np.arange(hold - 1, jump) * DT, Q[hold : jump + 1, k], 5)
+    n = sac[-1] - jump + 1
+    t = np.arange(n + 1) * DT
+    seg = Q[jump : sac[-1] + 2, k]
+    second = np.polynomial.Polynomial.fit(t, seg, 5)
+    span = np.abs(seg - seg[0]).max()
+    assert np.max(np.abs(second(t) - seg)) < 1e-9 * span
+    assert abs(second.deriv(1)(0.0) - first.deriv(1)((jump - 1) * DT)) < 1e-6 * np.max(vmax)
+    assert abs(second.deriv(1)(t[-1])) < 1e-6 * span / t[-1] and abs(second.deriv(2)(t[-1])) < 1e-4 * span / t[-1] ** 2
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_no_saccade_towards_a_target_the_head_cannot_point_at(head):
+    """A target behind the head: pursued towards the best answer, never a saccade; back ahead,
+    a saccade again."""
+    model, solver = head
+    A, _ = _two_targets(model)
+    behind = np.array([0.0, 2.0, 0.7])
+    assert solver.solve(behind).status not in SACCADE_STATUSES
+    P = np.vstack([np.repeat(A[None], 20, axis=0), np.repeat(behind[None], 150, axis=0),
+                   np.repeat(A[None], 800, axis=0)])
+    tr = track(solver, P, DT, FAST * solver.velocity_limit, q_current=solver.solve(A).q, saccades=SaccadeRule())
+    assert not tr.saccade[:170].any() and not tr.reachable[20:170].any()
+    assert tr.saccade[170:].any() and tr.locked[-1]
+
+
+MIMIC_HEAD = """<?xml version="1.0"?>
+<robot name="mimic_head">
+  <link name="world"/><link name="lift_link"/><link name="pan_link"/><link name="tilt_link"/>
+  <link name="tilt2_link"/><link name="cam_optical"/><link name="gripper"/>
+  <joint name="lift" type="prismatic"><origin xyz="0 0 1.0"/><axis xyz="0 0 1"/>
+    <parent link="world"/><child link="lift_link"/><limit lower="0" upper="0.3" effort="1" velocity="0.1"/></joint>
+  <joint name="pan" type="revolute"><origin xyz="0 0 0.2"/><axis xyz="0 0 1"/>
+    <parent link="lift_link"/><child link="pan_link"/><limit lower="-2.5" upper="2.5" effort="1" velocity="2"/></joint>
+  <joint name="tilt" type="revolute"><origin xyz="0.02 0 0.08"/><axis xyz="0 1 0"/>
+    <parent link="pan_link"/><child link="tilt_link"/><limit lower="-0.6" upper="0.6" effort="1" velocity="2"/></joint>
+  <joint name="tilt2" type="revolute"><origin xyz="0.03 0 0.02"/><axis xyz="0 1 0"/>
+    <parent link="tilt_link"/><child link="tilt2_link"/><limit lower="-0.3" upper="0.3" effort="1" velocity="2"/>
+    <mimic joint="tilt" multiplier="0.5" offset="0"/></joint>
+  <joint name="cam_joint" type="fixed"><origin xyz="0.05 0 0.03" rpy="-1.5707963267948966 0 -1.5707963267948966"/>
+    <parent link="tilt2_link"/><child link="cam_optical"/></joint>
+  <joint name="gripper_joint" type="prismatic"><origin xyz="1 0 0"/><axis xyz="1 0 0"/>
+    <parent link="world"/><child link="gripper"/><limit lower="0" upper="0.04" effort="1" velocity="0"/></joint>
+</robot>
+"""
+
+
+@pytest.fixture(scope="module")
+def mimic_head(tmp_path_factory):
+    from cpc2urdf.validation.gaze import solver_for
+
+    path = tmp_path_factory.mktemp("mimic") / "mimic_head.urdf"
+    path.write_text(MIMIC_HEAD)
+    return path, solver_for(path, ["cam_optical"])
+
+
+def test_pursuit_keeps_a_mimic_relation(mimic_head):
+    """A URDF <mimic> follower moves with its driver on every pursuit sample (one fraction of
+    their steps), within both joints' speed limits; the other joints move on their own."""
+    _, solver = mimic_head
+    names = solver.joint_names
+    it, i2, ip = names.index("tilt"), names.index("tilt2"), names.index("pan")
+    assert [sorted(g.tolist()) for g in solver.motion_groups] == [sorted([it, i2])]
+    a, b = np.array([2.0, 0.0, 1.3]), np.array([0.8, 1.2, 0.7])
+    qa = solver.solve(a).q
+    P = np.vstack([np.repeat(a[None], 10, axis=0), np.repeat(b[None], 1200, axis=0)])  # tilt: 0.28 rad to go
+    vmax = {"tilt": 0.3}  # the driver slower than its follower's share: the pair moves at the driver's pace
+    tr = solver.track(P, DT, vmax, q_current=qa)
+    assert np.abs(tr.q[:, i2] - 0.5 * tr.q[:, it]).max() < 1e-12
+    step = np.abs(np.diff(np.vstack([qa, tr.q]), axis=0))
+    assert np.all(step[:, it] <= 0.3 * DT * (1 + 1e-12)) and np.all(step[:, i2] <= 2.0 * DT * (1 + 1e-12))
+    assert np.isclose(step[:, ip], 2.0 * DT).any()  # pan alone at its own limit
+    assert tr.locked[-1] and tr.reachable[-1]
+
+
+def test_speed_limits_named_joint_by_joint(mimic_head):
+    """max_velocity as {joint: limit}, per joint or one scalar over joints of one kind; a joint the
+    head moves needs a positive limit (named when it has none), one it does not move may have
+    none (the gripper's URDF velocity="0")."""
+    from cpc2urdf.validation.gaze import solver_for
+    from cpc2urdf.validation.gaze.tracking import speed_limits
+
+    path, solver = mimic_head
+    names = solver.joint_names
+    moved = solver.free_joints("cyclopean")
+    assert names.index("gripper_joint") not in moved.tolist()
+    v = GazeTracker(solver, DT).max_velocity  # URDF limits; the gripper's 0 is not moved
+    assert v[names.index("lift")] == 0.1 and v[names.index("gripper_joint")] == 0.0
+    v = speed_limits(solver, {"pan": 0.5}, moved)
+    assert v[names.index("pan")] == 0.5 and v[names.index("tilt")] == 2.0 and v[names.index("lift")] == 0.1
+    with pytest.raises(ConfigurationError, match="rad/s on revolute joints and m/s on prismatic ones .lift"):
+        GazeTracker(solver, DT, 1.0)
+    with pytest.raises(ConfigurationError, match="unknown joint 'nope'"):
+        GazeTracker(solver, DT, {"nope": 1.0})
+    zero = np.ones(len(names))
+    zero[names.index("lift")] = 0.0
+    with pytest.raises(ConfigurationError, match=r"joint .lift. moves the cameras .* \(from max_velocity\)"):
+        GazeTracker(solver, DT, zero)
+    no_lift_speed = path.with_name("no_lift_speed.urdf")
+    no_lift_speed.write_text(MIMIC_HEAD.replace('upper="0.3" effort="1" velocity="0.1"', 'upper="0.3" effort="1" velocity="0"'))
+    with pytest.raises(ConfigurationError, match="joint 'lift' .* URDF <limit velocity>"):
+        GazeTracker(solver_for(no_lift_speed, ["cam_optical"]), DT)
+    # one kind of joint: a scalar is every moved joint's limit
+    pan_tilt = solver_for(path, ["cam_optical"], joints=["pan", "tilt"])
+    v = GazeTracker(pan_tilt, DT, 1.5).max_velocity
+    assert v[names.index("pan")] == v[names.index("tilt")] == 1.5 and v[names.index("lift")] == 0.0
+    # numbers as numpy gives them; not a bool, not a rule of another type, not degrees
+    assert GazeTracker(solver, np.float32(1e-3)).dt == pytest.approx(1e-3)
+    with pytest.raises(ConfigurationError, match="dt"):
+        GazeTracker(solver, True)
+    with pytest.raises(ConfigurationError, match="SaccadeRule"):
+        GazeTracker(solver, DT, saccades=True)
+    with pytest.raises(ConfigurationError, match=r"\[0, pi\)"):
+        GazeTracker(solver, DT, saccades=SaccadeRule(threshold=5.0))
 
 
 # ---- every head shape: one camera (TIAGo), a rigid stereo pair; checked on yourdfpy's FK ----

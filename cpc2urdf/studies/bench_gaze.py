@@ -852,7 +852,7 @@ def run_benchmark(
         unreachable: Unreachable targets per head (:func:`unreachable_targets`,
             :func:`generic_unreachable_targets`).
         reference: How many of the reachable targets the scipy reference solves.
-        track_seconds: Length of the 1 kHz tracking run [s] (heads with two independent eyes).
+        track_seconds: Length of the 1 kHz tracking run [s] (every head).
         urdf: Also this URDF (named by its file stem), with ``cameras``.
         cameras: The camera frames of ``urdf``.
 

@@ -327,6 +327,29 @@ class GazeSolver:
             return np.flatnonzero(np.abs(self.chain.robot_A).sum(axis=1) > 0)
         return self._free_joints[policy]
 
+    @property
+    def motion_groups(self) -> tuple[Index, ...]:
+        """Robot joints (indices into ``q``) that move only together: a URDF ``<mimic>`` follower
+        with its driver, the joints of a stated coupling (readings ``q = A u + b`` sharing an
+        unknown). Groups of two or more joints; the other joints move on their own."""
+        A = np.abs(self.chain.robot_A) > 0.0
+        group = list(range(self.n))  # union-find over the joints that share an unknown
+
+        def root(i: int) -> int:
+            while group[i] != i:
+                group[i] = group[group[i]]
+                i = group[i]
+            return i
+
+        for col in A.T:
+            rows = np.flatnonzero(col).tolist()
+            for i in rows[1:]:
+                group[root(i)] = root(rows[0])
+        members: dict[int, list[int]] = {}
+        for i in range(self.n):
+            members.setdefault(root(i), []).append(i)
+        return tuple(np.array(g) for g in members.values() if len(g) > 1)
+
     def evaluate(self, q: ArrayLike, p_world: ArrayLike, jacobian: bool = True) -> FixationState:
         """The fixation state (residual ``r``, shape (6,), ``|r|^2``, the target in each camera
         frame, and the (6, n) Jacobian ``J``) at readings ``q`` (shape (n,)) for target
@@ -512,7 +535,7 @@ class GazeSolver:
         self,
         targets: ArrayLike,
         dt: float,
-        max_velocity: ArrayLike | None = None,
+        max_velocity: ArrayLike | Mapping[str, float] | None = None,
         *,
         q_current: ArrayLike | None = None,
         policy: str = "cyclopean",
@@ -523,8 +546,9 @@ class GazeSolver:
         Args:
             targets: Target positions (world) [m], shape (T, 3), one per sample.
             dt: Sample period [s].
-            max_velocity: Per-joint speed limit [rad/s]/[m/s], shape (n,) or a scalar; None: the
-                URDF velocity limits.
+            max_velocity: Speed limits (see :class:`~cpc2urdf.validation.gaze.tracking.GazeTracker`):
+                ``{joint: limit}``, per joint (shape (n,)), or a scalar over joints of one kind;
+                None: the URDF velocity limits.
             q_current: Readings at the first sample, shape (n,); None: the first solution.
             policy: Redundancy policy.
             saccades: None: smooth pursuit only; a :class:`~cpc2urdf.validation.gaze.tracking.SaccadeRule`:

@@ -17,8 +17,25 @@ commanded readings towards that answer:
   at ``s = (3 -+ sqrt(3)) / 6``. The duration ``T`` is the shortest whole number of samples at
   which no joint exceeds its velocity limit (nor, when given, its acceleration limit), and at
   least the rule's ``min_duration``. The last sample of a saccade is exactly the answer it aimed
-  at; smooth pursuit takes over from there. The saccade is ballistic: it aims at the answer for
-  the target at its onset, and the solves during it only record where the target went.
+  at; smooth pursuit takes over from there. A saccade starts only towards an answer that points
+  at the target (status ``fixated``, or ``disparity`` on a head that cannot fixate exactly); an
+  unreachable target is pursued. It re-aims when the target moves on: when its end point misses
+  the sample's target by more than the threshold beyond the sample's own answer, a new profile
+  starts from the commanded readings and velocity of that sample (position and velocity stay
+  continuous) to the new answer, the quintic with ``q(0) = q0``, ``q'(0) = v0 T``,
+  ``q''(0) = 0`` and ``q1``, rest at the end::
+
+      q(t) = q0 + (q1 - q0) f(s) + v0 T h(s),    h(s) = s - 6 s^3 + 8 s^4 - 3 s^5,
+
+  its duration the fewest samples at which its exact peaks (velocity and, when given,
+  acceleration: the roots of their derivatives) stay within the limits; or, towards an answer
+  that does not point at the target, it ends and pursuit takes over.
+
+Pursuit moves joints that move only together (a URDF ``<mimic>`` follower and its driver, the
+joints of a stated coupling: :attr:`WarmStartSolver.motion_groups`) by one common fraction of
+their steps, so their relation holds on every sample; the other joints move on their own. The
+acceleration limit of a :class:`SaccadeRule` bounds its saccades only: pursuit is
+velocity-limited.
 
 :class:`GazeTracker` is one control loop (``step`` per sample); :func:`track` runs it over a
 whole target trajectory.
@@ -27,6 +44,8 @@ whole target trajectory.
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -38,10 +57,12 @@ from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.fixation import target_point
 from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
 from cpc2urdf.validation.gaze.policies import check_policy
-from cpc2urdf.validation.gaze.result import GazeSolution
+from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, GazeSolution
 
+MAX_SACCADE_SAMPLES = 1 << 24  # [-]: a re-aimed saccade longer than this is refused (4.7 h at 1 kHz)
 MIN_JERK_PEAK_VELOCITY = 15.0 / 8.0  # peak of d/ds (10 s^3 - 15 s^4 + 6 s^5), at s = 1/2
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)  # peak of its |d2/ds2|, at s = (3 -+ sqrt 3) / 6
+SACCADE_STATUSES = (STATUS_FIXATED, STATUS_DISPARITY)  # answers a saccade aims at: they point at the target
 DEFAULT_SACCADE_THRESHOLD = math.radians(5.0)  # [rad]: pointing error that starts a saccade
 DEFAULT_SACCADE_MIN_DURATION = 0.02  # [s]: the shortest saccade
 WARM_START_ANGLE = math.radians(5.0)  # [rad]: a last answer missing the new target by more is not a start
@@ -57,8 +78,32 @@ class WarmStartSolver(Protocol):
         ...
 
     @property
+    def lower(self) -> Array:
+        """Per-joint lower limits [rad]/[m], shape (n,) (``upper``: the upper ones)."""
+        ...
+
+    @property
+    def upper(self) -> Array:
+        """Per-joint upper limits [rad]/[m], shape (n,)."""
+        ...
+
+    @property
     def velocity_limit(self) -> Array:
         """Per-joint URDF velocity limits [rad/s]/[m/s], shape (n,)."""
+        ...
+
+    @property
+    def joint_kinds(self) -> Mapping[str, str]:
+        """``{joint: "revolute" | "prismatic"}``."""
+        ...
+
+    @property
+    def motion_groups(self) -> tuple[NDArray[np.intp], ...]:
+        """Robot joints (indices into the readings) that move only together (mimic, coupling)."""
+        ...
+
+    def free_joints(self, policy: str) -> NDArray[np.intp]:
+        """Indices of the joints ``policy`` lets move."""
         ...
 
     def check_q(self, q: ArrayLike | None) -> Array | None:
@@ -76,6 +121,11 @@ class WarmStartSolver(Protocol):
         ...
 
 
+def _is_real(x: object) -> bool:
+    """A real number (numpy's too), not a bool."""
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
 def minimum_jerk(s: ArrayLike) -> tuple[Array, Array, Array]:
     """The minimum-jerk profile and its first two derivatives by ``s`` at ``s`` in [0, 1].
 
@@ -90,6 +140,60 @@ def minimum_jerk(s: ArrayLike) -> tuple[Array, Array, Array]:
     df = 30.0 * x**2 * (1.0 - x) ** 2
     ddf = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x)
     return f, df, ddf
+
+
+def velocity_blend(s: ArrayLike) -> tuple[Array, Array, Array]:
+    """The quintic that carries a start velocity into a rest-to-rest move, and its first two
+    derivatives by ``s`` at ``s`` in [0, 1].
+
+    ``h(s) = s - 6 s^3 + 8 s^4 - 3 s^5``: ``h(0) = h(1) = 0``, ``h'(0) = 1``, ``h''(0) = 0``,
+    ``h'(1) = h''(1) = 0``; ``q0 + D f(s) + V h(s)`` (:func:`minimum_jerk`'s ``f``) goes from
+    ``q0`` at velocity ``V`` (by ``s``) and no acceleration to rest at ``q0 + D``.
+    """
+    x = np.clip(np.asarray(s, dtype=float), 0.0, 1.0)
+    h = x * (1.0 + x * x * (-6.0 + x * (8.0 - 3.0 * x)))
+    dh = 1.0 + x * x * (-18.0 + x * (32.0 - 15.0 * x))
+    ddh = x * (-36.0 + x * (96.0 - 60.0 * x))
+    return h, dh, ddh
+
+
+def _roots_in_unit(c2: Array, c1: Array, c0: Array) -> tuple[Array, Array]:
+    """The real roots of ``c2 s^2 + c1 s + c0`` per element, 0.0 where there is none in [0, 1]
+    (0 is a candidate of every peak below anyway)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = c1 * c1 - 4.0 * c2 * c0
+        q = -0.5 * (c1 + np.copysign(np.sqrt(np.maximum(disc, 0.0)), c1))
+        r1 = np.where(c2 != 0.0, q / c2, -c0 / c1)
+        r2 = np.where(q != 0.0, c0 / q, np.nan)
+    out = []
+    for r in (r1, r2):
+        ok = (disc >= 0.0) & np.isfinite(r) & (r >= 0.0) & (r <= 1.0)
+        out.append(np.where(ok, r, 0.0))
+    return out[0], out[1]
+
+
+def quintic_peaks(delta: Array, v0: Array, T: float) -> tuple[Array, Array]:
+    """Exact peak speed and peak acceleration per joint of ``q0 + delta f(s) + v0 T h(s)``,
+    ``s = t / T`` (:func:`minimum_jerk`, :func:`velocity_blend`): the velocity
+    ``delta f'(s) / T + v0 h'(s)`` and the acceleration ``(delta f''(s) / T + v0 h''(s)) / T``
+    at both ends and at the roots of their derivatives in ``s`` (quadratics once the velocity's
+    root at ``s = 0`` is divided out)."""
+    d = delta / T
+    # d/ds of the velocity: s [60 d (1 - 3 s + 2 s^2) + v0 (-36 + 96 s - 60 s^2)]
+    a1, a2 = _roots_in_unit(120.0 * d - 60.0 * v0, -180.0 * d + 96.0 * v0, 60.0 * d - 36.0 * v0)
+    # d/ds of the acceleration (times T): 60 d (1 - 6 s + 6 s^2) + v0 (-36 + 192 s - 180 s^2)
+    j1, j2 = _roots_in_unit(360.0 * d - 180.0 * v0, -360.0 * d + 192.0 * v0, 60.0 * d - 36.0 * v0)
+    vpk = np.zeros_like(d)
+    apk = np.zeros_like(d)
+    for s in (np.zeros_like(d), np.ones_like(d), a1, a2):
+        _, df, _ = minimum_jerk(s)
+        _, dh, _ = velocity_blend(s)
+        vpk = np.maximum(vpk, np.abs(d * df + v0 * dh))
+    for s in (np.zeros_like(d), np.ones_like(d), j1, j2):
+        _, _, ddf = minimum_jerk(s)
+        _, _, ddh = velocity_blend(s)
+        apk = np.maximum(apk, np.abs(d * ddf + v0 * ddh) / T)
+    return vpk, apk
 
 
 @dataclass(frozen=True)
@@ -109,28 +213,64 @@ class SaccadeRule:
     max_acceleration: float | tuple[float, ...] | None = None
     min_duration: float = DEFAULT_SACCADE_MIN_DURATION
 
-    def duration(self, delta: Array, max_velocity: Array, dt: float) -> int:
+    def duration(self, delta: Array, max_velocity: Array, dt: float, v0: Array | None = None) -> int:
         """Samples of a saccade over ``delta`` (shape (n,)) [rad]/[m]: the fewest whole samples of
-        ``dt`` [s] whose minimum-jerk profile stays within ``max_velocity`` (shape (n,)) and the
-        acceleration limits, and lasts at least ``min_duration``; at least one."""
+        ``dt`` [s] whose profile stays within ``max_velocity`` (shape (n,)) and the acceleration
+        limits, and lasts at least ``min_duration``; at least one. From rest (``v0`` None or
+        zero) the minimum-jerk profile's peaks in closed form; from velocity ``v0`` (a re-aimed
+        saccade) the quintic's exact peaks (:func:`quintic_peaks`), the fewest samples found by
+        doubling, then bisection."""
         a = np.abs(delta)
-        T = max(self.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * a / max_velocity)))
+        vmax = np.asarray(max_velocity, dtype=float)
+        moving = vmax > 0.0  # joints with no speed (not moved by the head) have no step
+        T = max(self.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * a[moving] / vmax[moving], initial=0.0)))
+        amax = None
         if self.max_acceleration is not None:
             amax = np.broadcast_to(np.asarray(self.max_acceleration, dtype=float), a.shape)
             T = max(T, math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * a / amax))))
         # the continuous peaks bound the sampled ones: a sample's mean velocity is at most the peak
-        return max(1, math.ceil(T / dt - 1e-9))
+        n0 = max(1, math.ceil(T / dt - 1e-9))
+        if v0 is None or not np.any(v0):
+            return n0
+        # rounding slack: v0 is a sample of a profile that kept within the limits
+        vlim = vmax * (1.0 + 1e-9)
+        alim = None if amax is None else amax * (1.0 + 1e-9)
+
+        def fits(n: int) -> bool:
+            if n * dt < self.min_duration * (1.0 - 1e-12):
+                return False
+            vpk, apk = quintic_peaks(delta, v0, n * dt)
+            return bool(np.all(vpk <= vlim) and (alim is None or np.all(apk <= alim)))
+
+        lo, hi = 0, n0
+        while not fits(hi):
+            if hi > MAX_SACCADE_SAMPLES:
+                raise ConfigurationError(
+                    f"no saccade of at most {MAX_SACCADE_SAMPLES} samples keeps within the speed limits "
+                    f"from velocity {np.asarray(v0).tolist()}"
+                )
+            lo, hi = hi, 2 * hi
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if fits(mid):
+                hi = mid
+            else:
+                lo = mid
+        return hi
 
     def check(self, n: int) -> None:
         """:class:`ConfigurationError` unless the rule's numbers are usable for ``n`` joints."""
-        if not (math.isfinite(self.threshold) and self.threshold >= 0.0):
-            raise ConfigurationError(f"saccade threshold must be a finite angle >= 0 [rad], got {self.threshold!r}")
-        if not (math.isfinite(self.min_duration) and self.min_duration >= 0.0):
+        if not (_is_real(self.threshold) and 0.0 <= self.threshold < math.pi):
+            raise ConfigurationError(
+                f"saccade threshold must be an angle in [0, pi) [rad] (a pointing error never exceeds pi: "
+                f"no saccade would start; degrees? math.radians), got {self.threshold!r}"
+            )
+        if not (_is_real(self.min_duration) and math.isfinite(self.min_duration) and self.min_duration >= 0.0):
             raise ConfigurationError(f"saccade min_duration must be finite and >= 0 [s], got {self.min_duration!r}")
         if self.max_acceleration is not None:
             try:
                 amax = np.broadcast_to(np.asarray(self.max_acceleration, dtype=float), (n,))
-            except ValueError as e:
+            except (TypeError, ValueError) as e:
                 raise ConfigurationError(
                     f"saccade max_acceleration must be a scalar or {n} values, got {self.max_acceleration!r}"
                 ) from e
@@ -165,38 +305,38 @@ class GazeTracker:
     Args:
         solver: The gaze solver (warm-started solves).
         dt: Sample period [s].
-        max_velocity: Per-joint speed limit [rad/s]/[m/s], shape (n,) or a scalar; None: the URDF
-            velocity limits.
-        q_current: Readings at the first sample, shape (n,); None: the first solution.
+        max_velocity: Speed limits [rad/s] (revolute) / [m/s] (prismatic): ``{joint: limit}``
+            for some joints (the others keep their URDF limits), per joint (shape (n,)), or one
+            scalar for every joint (refused when the joints the head moves mix revolute and
+            prismatic ones: one number in two units); None: the URDF velocity limits.
+        q_current: Readings at the first sample, shape (n,); None: the first solution (the
+            first command jumps there).
         policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.policies.POLICIES`).
         saccades: None: smooth pursuit only; a :class:`SaccadeRule`: minimum-jerk saccades too.
 
     Raises:
-        ConfigurationError: A bad ``dt``, speed limit, ``q_current``, policy or saccade rule.
+        ConfigurationError: A bad ``dt``, speed limit (a joint the head moves with no positive
+            finite limit is named), ``q_current``, policy or saccade rule.
     """
 
     def __init__(
         self,
         solver: WarmStartSolver,
         dt: float,
-        max_velocity: ArrayLike | None = None,
+        max_velocity: ArrayLike | Mapping[str, float] | None = None,
         *,
         q_current: ArrayLike | None = None,
         policy: str = "cyclopean",
         saccades: SaccadeRule | None = None,
     ) -> None:
         check_policy(policy)
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+        if not (_is_real(dt) and math.isfinite(dt) and dt > 0):
             raise ConfigurationError(f"dt must be a positive number of seconds, got {dt!r}")
+        if saccades is not None and not isinstance(saccades, SaccadeRule):
+            raise ConfigurationError(f"saccades must be None or a SaccadeRule, got {saccades!r}")
         n = len(solver.joint_names)
-        try:
-            vmax = solver.velocity_limit if max_velocity is None else np.broadcast_to(
-                np.asarray(max_velocity, dtype=float), (n,)
-            )
-        except ValueError as e:
-            raise ConfigurationError(f"max_velocity must be a scalar or {n} values, got {max_velocity!r}") from e
-        if not (np.all(np.isfinite(vmax)) and np.all(vmax > 0)):
-            raise ConfigurationError(f"max_velocity must be positive and finite, got {np.asarray(vmax).tolist()}")
+        moved = solver.free_joints(policy)
+        vmax = speed_limits(solver, max_velocity, moved)
         if saccades is not None:
             saccades.check(n)
         self.solver = solver
@@ -204,12 +344,13 @@ class GazeTracker:
         self.dt = float(dt)
         self.policy = policy
         self.saccades = saccades
-        self.max_velocity: Array = np.array(vmax, dtype=float)
+        self.max_velocity: Array = vmax
         self._step_limit: Array = self.max_velocity * self.dt
+        self._groups = solver.motion_groups
         self.q: Array | None = solver.check_q(q_current)  # commanded readings; None before the first sample
         self.goal: Array | None = None
-        # the saccade under way: start, end, number of samples, samples done
-        self._saccade: tuple[Array, Array, int] | None = None
+        # the saccade under way: start readings q0, start velocity v0, end q1, samples; samples done
+        self._saccade: tuple[Array, Array, Array, int] | None = None
         self._saccade_done = 0
 
     @property
@@ -233,25 +374,49 @@ class GazeTracker:
         )
         goal = sol.q
         self.goal = goal
+        aims = sol.status in SACCADE_STATUSES  # an answer that points at the target
+        if q_prev is not None and self._saccade is not None and self._saccade_stale(p, sol):
+            # the target moved on: re-aim from this sample's readings and velocity, or (towards an
+            # answer that does not point at it) end the saccade and pursue
+            v_now = self._saccade_velocity()
+            self._saccade = None
+            if aims:
+                assert self.saccades is not None
+                n_samples = self.saccades.duration(goal - q_prev, self.max_velocity, self.dt, v_now)
+                self._saccade = (q_prev.copy(), v_now, goal.copy(), n_samples)
+                self._saccade_done = 0
         in_saccade = False
         if q_prev is None:
             q_cmd = goal.copy()
         elif self._saccade is not None:
             q_cmd = self._saccade_sample()
             in_saccade = True
-        elif self.saccades is not None and self._saccade_wanted(q_prev, p, sol):
+        elif self.saccades is not None and aims and self._saccade_wanted(q_prev, p, sol):
             n_samples = self.saccades.duration(goal - q_prev, self.max_velocity, self.dt)
-            self._saccade = (q_prev.copy(), goal.copy(), n_samples)
+            self._saccade = (q_prev.copy(), np.zeros_like(q_prev), goal.copy(), n_samples)
             self._saccade_done = 0
             q_cmd = self._saccade_sample()
             in_saccade = True
-        else:  # smooth pursuit: velocity-limited
-            q_cmd = q_prev + np.clip(goal - q_prev, -self._step_limit, self._step_limit)
+        else:
+            q_cmd = self._pursuit(q_prev, goal)
         locked = bool(np.all(np.abs(goal - q_cmd) <= LOCK_TOL))
         if locked:
             q_cmd = goal.copy()
         self.q = q_cmd
         return TrackingStep(q_cmd, goal, sol.reachable, self.solver.pointing_errors(q_cmd, p), locked, in_saccade)
+
+    def _pursuit(self, q_prev: Array, goal: Array) -> Array:
+        """Smooth pursuit: at most ``max_velocity * dt`` per joint; joints that move only
+        together (:attr:`WarmStartSolver.motion_groups`) by one fraction of their steps."""
+        step = goal - q_prev
+        q_cmd = q_prev + np.clip(step, -self._step_limit, self._step_limit)
+        for g in self._groups:
+            big = np.abs(step[g])
+            with np.errstate(divide="ignore"):
+                k = float(np.min(np.where(big > 0.0, self._step_limit[g] / big, np.inf)))
+            if k < 1.0:
+                q_cmd[g] = q_prev[g] + k * step[g]
+        return q_cmd
 
     def _miss(self, q: Array, p: Array) -> float:
         """The largest pointing error [rad] of readings ``q`` at target ``p``."""
@@ -262,17 +427,94 @@ class GazeTracker:
         gain = self._miss(q_prev, p) - float(np.max(sol.pointing_error))
         return gain > self.saccades.threshold
 
+    def _saccade_stale(self, p: Array, sol: GazeSolution) -> bool:
+        """Whether the saccade under way ends off this sample's target: its end point misses
+        ``p`` by more than the threshold beyond the sample's answer ``sol``."""
+        assert self._saccade is not None and self.saccades is not None
+        gain = self._miss(self._saccade[2], p) - float(np.max(sol.pointing_error))
+        return gain > self.saccades.threshold
+
+    def _saccade_velocity(self) -> Array:
+        """The commanded velocity [rad/s]/[m/s] at the last sample of the saccade under way."""
+        assert self._saccade is not None
+        q0, v0, q1, n_samples = self._saccade
+        T = n_samples * self.dt
+        s = self._saccade_done / n_samples
+        _, df, _ = minimum_jerk(s)
+        _, dh, _ = velocity_blend(s)
+        return (q1 - q0) * (float(df) / T) + v0 * float(dh)
+
     def _saccade_sample(self) -> Array:
         """The next sample of the saccade under way; its last one is exactly its end."""
         assert self._saccade is not None
-        q0, q1, n_samples = self._saccade
+        q0, v0, q1, n_samples = self._saccade
         self._saccade_done += 1
         k = self._saccade_done
         if k >= n_samples:
             self._saccade = None
             return q1.copy()
         f, _, _ = minimum_jerk(k / n_samples)
-        return q0 + (q1 - q0) * float(f)
+        q = q0 + (q1 - q0) * float(f)
+        if np.any(v0):
+            h, _, _ = velocity_blend(k / n_samples)
+            # a re-aimed profile may overshoot its start along v0: commanded readings stay in the limits
+            q = np.clip(q + v0 * (n_samples * self.dt * float(h)), self.solver.lower, self.solver.upper)
+        return q
+
+
+def speed_limits(
+    solver: WarmStartSolver, max_velocity: ArrayLike | Mapping[str, float] | None, moved: NDArray[np.intp]
+) -> Array:
+    """Per-joint speed limits [rad/s]/[m/s], shape (n,), from ``max_velocity`` (see
+    :class:`GazeTracker`) and the URDF's, checked on the joints the head moves (``moved``):
+    each a positive finite limit. Joints it does not move get 0 (they never move).
+
+    Raises:
+        ConfigurationError: A malformed ``max_velocity``, an unknown joint name, a scalar over
+            revolute and prismatic joints together, or a moved joint without a usable limit
+            (named, with where its limit came from).
+    """
+    names = solver.joint_names
+    n = len(names)
+    vmax = np.array(solver.velocity_limit, dtype=float)
+    given = np.zeros(n, dtype=bool)
+    if isinstance(max_velocity, Mapping):
+        for name, value in max_velocity.items():
+            if name not in names:
+                raise ConfigurationError(f"max_velocity names an unknown joint {name!r}")
+            if not _is_real(value):
+                raise ConfigurationError(f"max_velocity[{name!r}] must be a number [rad/s]/[m/s], got {value!r}")
+            i = names.index(name)
+            vmax[i] = float(value)
+            given[i] = True
+    elif max_velocity is not None:
+        try:
+            v = np.asarray(max_velocity, dtype=float)
+            vmax = np.array(np.broadcast_to(v, (n,)))
+        except (TypeError, ValueError) as e:
+            raise ConfigurationError(
+                f"max_velocity must be a scalar, {n} values or {{joint: limit}}, got {max_velocity!r}"
+            ) from e
+        given[:] = True
+        if v.ndim == 0:
+            kinds = {solver.joint_kinds[names[i]] for i in moved.tolist()}
+            if len(kinds) > 1:
+                prismatic = [names[i] for i in moved.tolist() if solver.joint_kinds[names[i]] == "prismatic"]
+                raise ConfigurationError(
+                    f"a scalar max_velocity would be rad/s on revolute joints and m/s on prismatic ones "
+                    f"({', '.join(prismatic)}): give {{joint: limit}} or {n} values"
+                )
+    bad = [i for i in moved.tolist() if not (math.isfinite(vmax[i]) and vmax[i] > 0.0)]
+    if bad:
+        i = bad[0]
+        where = "max_velocity" if given[i] else "its URDF <limit velocity>"
+        raise ConfigurationError(
+            f"joint {names[i]!r} moves the cameras but its speed limit is {float(vmax[i])} (from {where}): "
+            f"give it a positive limit in max_velocity={{{names[i]!r}: ...}}"
+        )
+    out = np.zeros(n)
+    out[moved] = vmax[moved]
+    return out
 
 
 @dataclass(frozen=True)
@@ -305,7 +547,7 @@ def track(
     solver: WarmStartSolver,
     targets: ArrayLike,
     dt: float,
-    max_velocity: ArrayLike | None = None,
+    max_velocity: ArrayLike | Mapping[str, float] | None = None,
     *,
     q_current: ArrayLike | None = None,
     policy: str = "cyclopean",
@@ -313,7 +555,7 @@ def track(
 ) -> Trajectory:
     """Follow a moving target: a :class:`GazeTracker` run over every sample.
 
-    Each sample solves for the target from the previous goal (one or two iterations when the
+    Each sample solves for the target from the previous goal (about three iterations when the
     target moves little), then moves the commanded readings towards the goal by at most
     ``max_velocity * dt`` per joint, or along a minimum-jerk saccade (``saccades``).
 
@@ -321,8 +563,8 @@ def track(
         solver: The gaze solver.
         targets: Target positions (world) [m], shape (T, 3), one per sample.
         dt: Sample period [s].
-        max_velocity: Per-joint speed limit [rad/s]/[m/s], shape (n,) or a scalar; None: the
-            URDF velocity limits.
+        max_velocity: Speed limits (see :class:`GazeTracker`): ``{joint: limit}``, per joint
+            (shape (n,)), or a scalar over joints of one kind; None: the URDF velocity limits.
         q_current: Readings at the first sample, shape (n,); None: the first solution.
         policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.policies.POLICIES`).
         saccades: None: smooth pursuit only; a :class:`SaccadeRule`: minimum-jerk saccades too.
@@ -357,11 +599,16 @@ __all__ = [
     "WARM_START_ANGLE",
     "MIN_JERK_PEAK_ACCELERATION",
     "MIN_JERK_PEAK_VELOCITY",
+    "MAX_SACCADE_SAMPLES",
+    "SACCADE_STATUSES",
     "GazeTracker",
     "SaccadeRule",
     "TrackingStep",
     "Trajectory",
     "WarmStartSolver",
     "minimum_jerk",
+    "quintic_peaks",
+    "speed_limits",
     "track",
+    "velocity_blend",
 ]
