@@ -331,13 +331,14 @@ def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixtur
     assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 0
     out = capfd.readouterr().out
     assert "gaze head (camera_left_optical, camera_right_optical): binocular" in out
-    assert "the two eyes can fixate exactly" in out
+    assert "the two eyes' axes can meet exactly" in out
     model = calibrated_iis_head(0)
     mpath = save_model(model, tmp_path / "calibrated.json")
     upath = write_urdf(model, tmp_path / "calibrated.urdf")
     assert main(["check", str(upath), "--model", str(mpath), "-n", "3"]) == 0
     out = capfd.readouterr().out
-    assert "cannot fixate exactly (vertical disparity)" in out
+    assert "the two eyes' axes meet only on a curve (vertical disparity)" in out
+    assert "fixation alone (policy min-motion)" in out
     assert main(["check", str(upath), "--model", str(mpath), "-n", "3", "--json"]) == 0
     head = json.loads(capfd.readouterr().out)["gaze_head"]
     expected = GazeSolver.from_model(model).disparity_report(200, 0)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
+from gaze_heads import model_pointing_errors
 
 from cpc2urdf.cli import gaze as cli_gaze
 from cpc2urdf.cli import main
@@ -135,7 +137,7 @@ def test_report_of_the_head_alone(capsys):
     assert main(["gaze", "iis_head", "--report"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("gaze head (camera_left_optical, camera_right_optical): binocular")
-    assert "can fixate exactly" in out[1] and len(out) == 2
+    assert "the two eyes' axes can meet exactly: 200 of 200 targets 0.4-3 m ahead fixated" in out[1] and len(out) == 2
     assert main(["gaze", "iis_head", "--report", "--json"]) == 0
     head = json.loads(capsys.readouterr().out)["head"]
     assert head["kind"] == "binocular" and head["exact"] is True
@@ -161,9 +163,26 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     assert head["disparity"]["median_rad"] == pytest.approx(expected["median_rad"], rel=1e-9)
     assert 1e-4 < head["disparity"]["median_rad"] <= head["disparity"]["max_rad"] < 0.05
     assert main(["gaze", str(path), "--report"]) == 0
-    out = capsys.readouterr().out
-    assert "cannot fixate exactly (vertical disparity): pointing error left per eye over 200 targets" in out
-    assert "median" in out and "max" in out
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].endswith("moving pan, tilt, vergence_left, vergence_right")  # what the solver moves: not the table
+    assert "meet only on a curve (vertical disparity): with the head facing the target (cyclopean policy)" in out[1]
+    assert "over 200 of 200 targets 0.4-3 m ahead (200 answered with status disparity, 0 within the tolerance)" in out[1]
+    # the head can still fixate exactly, turned away from the target: said, and checked on the CPC model's FK
+    assert "fixation alone (policy min-motion) fixates" in out[2] and "from the facing posture" in out[2]
+    assert main(["gaze", str(path), "--report", "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)["head"]["fixation_alone"]
+    assert alone["fixated"] >= 150 and alone["turn_median_rad"] > math.radians(5.0)
+    solver = GazeSolver.from_model(model)
+    P = solver.ahead_targets(200, 0)[:5]
+    Q = np.array([solver.solve(p, policy="min-motion").q for p in P])
+    assert np.max(model_pointing_errors(model, Q, P)) < 1e-9
+    # the report follows the tolerance: every target within 0.01 rad counts as fixated
+    assert main(["gaze", str(path), "--report", "--tolerance", "0.01"]) == 0
+    assert "(0 answered with status disparity, 200 within the tolerance)" in capsys.readouterr().out
+    # the eyes alone point at none of the targets ahead: no claim about exactness
+    assert main(["gaze", str(path), "--report", "--joints", "vergence_left", "vergence_right"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1] == "  none of 200 targets 0.4-3 m ahead is pointed at with the moving joints (no_solution 200)"
 
 
 def test_text_output_lists_the_head_joints(capsys):

@@ -358,11 +358,10 @@ class CompiledGaze:
             tolerance=self.tolerance,
         )
 
-    def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, Any]:
-        """The head's vertical disparity over a workspace ahead: targets 0.4-3 m in front of the
-        home cyclopean axis within 30 deg of it, each solved; the pointing error left (max over
-        the two eyes) [rad]: ``{"exact": bool, "median_rad", "p95_rad", "max_rad", "targets"}``.
-        A head that can fixate exactly reports ``exact`` True (and its errors at the rounding floor)."""
+    def ahead_targets(self, n: int = 400, seed: int = 0) -> Array:
+        """``n`` seeded targets (world) [m], shape (n, 3): 0.4-3 m in front of the home cyclopean
+        centre, within 30 deg of the home cyclopean axis (uniform over that cone's solid angle
+        near the axis)."""
         rng = np.random.default_rng(seed)
         R, o = self._fk(self.home_u)
         cams = self.chain.solve_cameras
@@ -376,14 +375,33 @@ class CompiledGaze:
         phi = rng.uniform(0, 2 * math.pi, n)
         dist = rng.uniform(0.4, 3.0, n)
         d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y)
-        batch = self.solve_many(c + dist[:, None] * d)
+        return c + dist[:, None] * d  # type: ignore[no-any-return]
+
+    def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, Any]:
+        """The pointing error this solver leaves over a workspace ahead (:meth:`ahead_targets`),
+        each target solved: on a head that cannot fixate exactly, the policy's posture (the
+        cyclopean axis facing the target) and the residual it leaves, not the least the head
+        could reach turned another way (``cpc2urdf.validation.gaze.head_report`` measures that).
+
+        Returns:
+            ``{"exact", "median_rad", "p95_rad", "max_rad", "targets", "answered", "statuses"}``:
+            ``exact`` whether the head can fixate exactly (no weak direction at home); the error
+            statistics (max over the two eyes) [rad] over the ``answered`` targets (status
+            fixated or disparity: those the policy points at; None if there is none); the
+            count of each status.
+        """
+        batch = self.solve_many(self.ahead_targets(n, seed))
         e = batch.pointing_error.max(axis=1)
+        names = list(batch.status_names)
+        pointed = np.isin(batch.status, [names.index("fixated"), names.index("disparity")])
+        ep = e[pointed]
         return {
             "exact": not self.disparity_head,
-            "median_rad": float(np.median(e)),
-            "p95_rad": float(np.quantile(e, 0.95)),
-            "max_rad": float(e.max()),
+            "median_rad": float(np.median(ep)) if ep.size else None,
+            "p95_rad": float(np.quantile(ep, 0.95)) if ep.size else None,
+            "max_rad": float(ep.max()) if ep.size else None,
             "targets": n,
+            "answered": int(ep.size),
             "statuses": batch.counts(),
         }
 

@@ -260,9 +260,14 @@ class GazeSolver:
         return self.compiled.disparity_head
 
     def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, object]:
-        """The pointing error the head cannot remove over a workspace ahead
-        (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.disparity_report`)."""
+        """The pointing error the cyclopean policy leaves over a workspace ahead (the head
+        facing each target; :meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.disparity_report`)."""
         return (self._posture or self.compiled).disparity_report(n, seed)
+
+    def ahead_targets(self, n: int = 400, seed: int = 0) -> Array:
+        """The targets of :meth:`disparity_report` (world) [m], shape (n, 3)
+        (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.ahead_targets`)."""
+        return (self._posture or self.compiled).ahead_targets(n, seed)
 
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets`` (N, 3), world [m]) through the compiled loop, from
