@@ -274,7 +274,8 @@ def check_output_path(path: str | os.PathLike[str]) -> Path:
     if p.is_dir():
         raise OutputError(f"{p}: is a folder, expected a file path")
     if not folder.is_dir():
-        raise OutputError(f"{p}: cannot write, folder {folder} does not exist")
+        what = "is a file, not a folder" if folder.exists() else "does not exist"
+        raise OutputError(f"{p}: cannot write, folder {folder} {what}")
     return p
 
 

@@ -747,6 +747,8 @@ def _reach() -> list[Case]:
         Case("reach-output-missing-folder", ("reach", "iis_head", "-o", "{tmp}/no/r.png"), "folder {tmp}/no does not exist"),
         Case("reach-json-missing-folder", (*r, "--json", "{tmp}/no/r.json", "--samples", "2", "2", "2"), "folder {tmp}/no does not exist"),
         Case("reach-robot-unknown", ("reach", "no_such_robot", "-o", "{out}.png"), "no_such_robot"),
+        Case("reach-output-folder-is-a-file", ("reach", "iis_head", "-o", "{bad}/r.png"), "folder {bad} is a file, not a folder",
+             lambda c: "not a folder", name="afile"),
         Case("reach-urdf-not-xml", ("reach", "{bad}", "-o", "{out}.png"), "{bad}: not well-formed XML", lambda c: "<robot", name="bad.urdf"),
     ]
 

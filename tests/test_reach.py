@@ -186,6 +186,10 @@ def test_cli_reach_writes_png_and_json(tmp_path, capsys):
         (["iis_head", "--focal-px", "nan", "-o", "{d}/r.png"], "focal length"),
         (["iis_head", "--tolerance", "1e-3", "--focal-px", "500", "-o", "{d}/r.png"], "not allowed with"),
         (["iis_head", "--min-distance", "-1", "-o", "{d}/r.png"], "min_distance"),
+        (["iis_head", "--range", "1", "1e7", "-o", "{d}/r.png"], "range must lie within 0.001..1000 m"),
+        (["iis_head", "--range", "1e-9", "1e-8", "-o", "{d}/r.png"], "range must lie within 0.001..1000 m"),
+        (["iis_head", "--samples", "1000", "1000", "1000", "-o", "{d}/r.png"], "1000000000 targets; at most 1000000"),
+        (["iis_head", "-o", "{d}/r.png", "--json", "{d}/r.png"], "the same file as -o"),
     ],
 )
 def test_cli_reach_bad_input(tmp_path, capsys, args, match):
@@ -194,6 +198,22 @@ def test_cli_reach_bad_input(tmp_path, capsys, args, match):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0]
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_slices_are_named_where_they_lie_and_large_grids_solve_in_chunks(monkeypatch):
+    """An even number of elevations has no plane at 0: the top view's slice is the nearest
+    (-12 deg of 6 over +-60 deg), and says so; a grid solved in chunks under a progress bar gives
+    the answers of one batch."""
+    solver = GazeSolver.from_model(load_model("iis_head"))
+    grid = make_grid(solver, "shell", 0.4, 2.0, (3, 8, 6))
+    level, where = reach._slice_mask(grid, 2)
+    assert where == "elevation -12 deg" and level.sum() == 3 * 8
+    assert np.allclose(np.degrees(np.arcsin(grid.points_head[level, 2] / np.linalg.norm(grid.points_head[level], axis=1))), -12.0)
+    assert reach._slice_mask(make_grid(solver, "box", 0.4, 2.0, (3, 5, 4)), 1)[1] == "left 0 m"
+    whole = reachable_region(solver, grid)
+    monkeypatch.setattr(reach, "PROGRESS_CHUNK", 50)
+    chunked = reachable_region(solver, grid)
+    assert np.array_equal(whole.status, chunked.status) and np.array_equal(whole.q, chunked.q)
 
 
 def test_cli_defaults_match_the_module():

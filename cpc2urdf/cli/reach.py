@@ -23,7 +23,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="draw the reachable region of a head: where its cameras can fixate a target",
         description="Solve gaze for a grid of targets in front of a head (a .urdf file, a model "
         "file, a robot spec or a shipped robot name) and draw which ones are fixated, and why the "
-        "others are not (disparity, joint limits, behind, too close), as a PNG. The grid lies in "
+        "others are not (disparity, joint limits, behind, too close, no solution), as a PNG. The grid lies in "
         "the head frame: the cameras' mid-point at the middle of every joint's limits, x along "
         "the mean optical axis, z up. shell (default): distances NEAR..FAR, azimuth +-90 deg, "
         "elevation +-60 deg; box: forward NEAR..FAR, lateral +-FAR, vertical +-FAR/2. Exit code "
@@ -62,6 +62,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
     from pathlib import Path
 
     from cpc2urdf.api import gaze_solver
@@ -80,11 +81,17 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output)
     if args.json:
         check_output_path(args.json)
+        if Path(args.json).resolve() == Path(args.output).resolve():
+            raise ConfigurationError(f"--json {args.json}: the same file as -o; give the JSON its own path")
     solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
     # render both outputs before writing either: a failure leaves nothing behind
-    png = region_figure_png(region, title=Path(args.robot).name)
+    moved = set(solver.free_joints("cyclopean").tolist())
+    held = [solver.joint_names[i] for i in solver.chain.joint_index.tolist() if i not in moved]
+    notes = [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
+             + f"; fixated: every axis within {math.degrees(solver.tolerance):.3g} deg"]
+    png = region_figure_png(region, title=Path(args.robot).name, notes=notes)
     files: dict[str, str | bytes] = {args.output: png}
     if args.json:
         # what "fixated" meant: the tolerance, the unknowns that moved, the policy's nearest approach

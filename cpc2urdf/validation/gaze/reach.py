@@ -6,8 +6,10 @@ cameras' mean y axis (REP-103: y down), y left) is solved in one batch, and ever
 one of :data:`REGION_CATEGORIES`:
 
 - ``fixated``: every camera points at it;
-- ``disparity``: the head cannot fixate it exactly with both cameras (a calibrated head's
-  vertical disparity); the answer's pointing error is kept;
+- ``disparity``: with the head facing it (the cyclopean policy) the two cameras cannot both
+  fixate it exactly (a calibrated head's vertical disparity); the answer's pointing error is
+  kept. Exact fixation may still exist turned away from the target: ``cpc2urdf gaze ROBOT
+  --report`` says how often and how far;
 - ``joint_limits``: a joint limit stops the head;
 - ``behind``: a camera would have to look away;
 - ``too_close``: nearer a camera than the baseline (or on a camera centre);
@@ -15,7 +17,9 @@ one of :data:`REGION_CATEGORIES`:
 
 :func:`reachable_region` returns the points, statuses, categories, errors and readings
 (:class:`Region`; :meth:`Region.colours` gives an RGB colour per point for a 3D view);
-:func:`draw_region` draws two slices and a front projection to a PNG.
+:func:`draw_region` draws a horizontal and a vertical slice through the head frame's origin
+(the grid planes nearest it, their elevation/azimuth or height/offset in the panel titles) and
+the pointing error of the horizontal slice's targets not fixated, to a PNG.
 """
 
 from __future__ import annotations
@@ -65,6 +69,9 @@ DEFAULT_SAMPLES = (16, 37, 25)  # distances x azimuths x elevations (shell); for
 SHELL_AZIMUTH = math.radians(90.0)  # [rad]: the shell spans +-90 deg about forward
 SHELL_ELEVATION = math.radians(60.0)  # [rad]: and +-60 deg of elevation
 GRID_KINDS = ("shell", "box")
+MAX_GRID_TARGETS = 1_000_000  # [-]: a grid of more targets is refused (1e6: ~30 s, ~1 GB on the 2-core machine)
+GRID_RANGE = (1e-3, 1e3)  # [m]: NEAR and FAR of a grid lie within (a head's targets; plots of wider spans fail)
+PROGRESS_CHUNK = 20_000  # [-]: targets solved between two redraws of the progress bar of a large grid
 
 
 class BatchSolver(Protocol):
@@ -209,12 +216,20 @@ class Grid:
 
 
 def check_grid_args(near: float, far: float, samples: Sequence[int]) -> None:
-    """:class:`ConfigurationError` unless ``0 < near < far`` [m] (finite) and ``samples`` are
-    three whole numbers >= 2."""
+    """:class:`ConfigurationError` unless ``near < far`` [m] lie in :data:`GRID_RANGE` and
+    ``samples`` are three whole numbers >= 2 whose product is at most :data:`MAX_GRID_TARGETS`."""
+    lo, hi = GRID_RANGE
     if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
         raise ConfigurationError(f"range must be two finite distances 0 < NEAR < FAR [m], got {near!r} {far!r}")
+    if near < lo or far > hi:
+        raise ConfigurationError(f"range must lie within {lo:g}..{hi:g} m, got {near!r} {far!r}")
     if len(samples) != 3 or any(int(k) != k or k < 2 for k in samples):
         raise ConfigurationError(f"samples must be three whole numbers >= 2 (one per axis), got {list(samples)}")
+    total = math.prod(int(k) for k in samples)
+    if total > MAX_GRID_TARGETS:
+        raise ConfigurationError(
+            f"samples {' '.join(str(int(k)) for k in samples)} make {total} targets; at most {MAX_GRID_TARGETS}"
+        )
 
 
 def shell_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DEFAULT_RANGE[1],
@@ -304,9 +319,22 @@ class Region:
         }
 
 
-def reachable_region(solver: BatchSolver, grid: Grid) -> Region:
-    """Solve every target of ``grid`` (:func:`solve_batch`) and sort it into a category."""
-    ans = solve_batch(solver, grid.points)
+def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True) -> Region:
+    """Solve every target of ``grid`` (:func:`solve_batch`) and sort it into a category; a grid
+    of more than :data:`PROGRESS_CHUNK` targets is solved in chunks under a progress bar."""
+    P = grid.points
+    if P.shape[0] <= PROGRESS_CHUNK or not show_progress:
+        ans = solve_batch(solver, P)
+    else:
+        from cpc2urdf.progress import progress_checked
+
+        chunks = [P[a : a + PROGRESS_CHUNK] for a in range(0, P.shape[0], PROGRESS_CHUNK)]
+        parts = []
+        with progress_checked(chunks, f"solving {P.shape[0]} targets ({PROGRESS_CHUNK} a step)") as it:
+            for chunk in it:
+                parts.append(solve_batch(solver, chunk))
+        ans = BatchAnswer(*(np.concatenate([getattr(a, f) for a in parts]) for f in
+                            ("q", "reachable", "pointing_error", "status", "iterations")))
     lookup = {s: REGION_CATEGORIES.index(category_of_status(s)) for s in set(ans.status.tolist())}
     category = np.array([lookup[s] for s in ans.status.tolist()], dtype=np.intp)
     return Region(
@@ -320,17 +348,25 @@ def reachable_region(solver: BatchSolver, grid: Grid) -> Region:
     )
 
 
-def _slice_mask(grid: Grid, axis: int) -> NDArray[np.bool_]:
-    """Targets on the grid plane nearest zero along ``axis`` (1: azimuth/lateral, 2: elevation/vertical)."""
+def _slice_mask(grid: Grid, axis: int) -> tuple[NDArray[np.bool_], str]:
+    """Targets on the grid plane nearest zero along ``axis`` (1: azimuth/lateral, 2:
+    elevation/vertical), and where that plane is ("elevation -12 deg", "up 0.15 m")."""
     values = grid.axes[axis]
     k = int(np.argmin(np.abs(values)))
     idx = np.unravel_index(np.arange(grid.points.shape[0]), grid.shape)[axis]
-    return np.asarray(idx == k)
+    v = float(values[k])
+    if grid.kind == "shell":
+        where = f"{'azimuth' if axis == 1 else 'elevation'} {math.degrees(v):.3g} deg"
+    else:
+        where = f"{'left' if axis == 1 else 'up'} {v:.3g} m"
+    return np.asarray(idx == k), where
 
 
-def region_figure_png(region: Region, title: str = "") -> bytes:
+def region_figure_png(region: Region, title: str = "", notes: Sequence[str] = ()) -> bytes:
     """The region drawn as PNG bytes: top view (horizontal slice), side view (vertical slice),
-    and the pointing error of the targets not fixated in the horizontal slice."""
+    and the pointing error of the targets not fixated in the horizontal slice; the slices' planes
+    in the panel titles, the legend's counts over the whole grid, ``notes`` (lines: what was
+    held, the tolerance) under the title."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -341,13 +377,13 @@ def region_figure_png(region: Region, title: str = "") -> bytes:
     ph = region.grid.points_head
     colours = region.colours()
     counts = region.counts()
-    fig, axs = plt.subplots(1, 3, figsize=(17, 5.6))
-    level = _slice_mask(region.grid, 2)
-    upright = _slice_mask(region.grid, 1)
+    fig, axs = plt.subplots(1, 3, figsize=(17, 6.2))
+    level, level_at = _slice_mask(region.grid, 2)
+    upright, upright_at = _slice_mask(region.grid, 1)
     size = max(6.0, 12000.0 / max(1, int(level.sum())))  # [pt^2]: fewer points, bigger squares
     for ax, mask, (i, j), (xl, yl), name in (
-        (axs[0], level, (0, 1), ("forward [m]", "left [m]"), "horizontal slice (top view)"),
-        (axs[1], upright, (0, 2), ("forward [m]", "up [m]"), "vertical slice (side view)"),
+        (axs[0], level, (0, 1), ("forward [m]", "left [m]"), f"top view: slice at {level_at}"),
+        (axs[1], upright, (0, 2), ("forward [m]", "up [m]"), f"side view: slice at {upright_at}"),
     ):
         ax.scatter(ph[mask, i], ph[mask, j], c=colours[mask], s=size, marker="s", linewidths=0)
         ax.plot([0.0], [0.0], "k+", markersize=12)
@@ -369,7 +405,7 @@ def region_figure_png(region: Region, title: str = "") -> bytes:
     ax.set_aspect("equal")
     ax.set_xlabel("forward [m]")
     ax.set_ylabel("left [m]")
-    ax.set_title("pointing error where not fixated (horizontal slice)")
+    ax.set_title("pointing error where not fixated (top view's slice)")
     dis = region.category == REGION_CATEGORIES.index("disparity")
     labels = []
     for c in REGION_CATEGORIES:
@@ -379,11 +415,14 @@ def region_figure_png(region: Region, title: str = "") -> bytes:
             text += f" (error median {np.median(e):.3g} deg, max {e.max():.3g} deg)"
         labels.append(text)
     handles = [Line2D([], [], marker="s", linestyle="", color=CATEGORY_COLOURS[c]) for c in REGION_CATEGORIES]
-    fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False)
+    fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False, title="whole grid")
     n = region.points.shape[0]
-    fig.suptitle(f"{title}{': ' if title else ''}reachable region, {n} targets ({region.grid.kind} grid), "
-                 f"{counts['fixated']} fixated")
-    fig.tight_layout(rect=(0.0, 0.1, 1.0, 0.95))
+    frame = ("head frame: the cameras' mid-point at home, x forward along their mean optical axis, "
+             "z up (against their image y)")
+    fig.suptitle("\n".join([f"{title}{': ' if title else ''}reachable region, {n} targets "
+                            f"({region.grid.kind} grid), {counts['fixated']} fixated", frame, *notes]),
+                 fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.12, 1.0, 0.97 - 0.03 * (1 + len(notes))))
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     plt.close(fig)
@@ -403,6 +442,9 @@ __all__ = [
     "DEFAULT_RANGE",
     "DEFAULT_SAMPLES",
     "GRID_KINDS",
+    "GRID_RANGE",
+    "MAX_GRID_TARGETS",
+    "PROGRESS_CHUNK",
     "REGION_CATEGORIES",
     "SHELL_AZIMUTH",
     "SHELL_ELEVATION",
