@@ -27,9 +27,7 @@ from cpc2urdf.validation.gaze.tracking import (
     GazeTracker,
     SaccadeRule,
     minimum_jerk,
-    quintic_peaks,
     track,
-    velocity_blend,
 )
 
 DT = 1e-3
@@ -208,105 +206,48 @@ def test_bad_input(head):
         GazeTracker(solver, DT).step([0.0, math.nan, 1.0])
 
 
-def _quintic(q0, v0, q1, T):
-    """The quintic with q(0) = q0, q'(0) = v0, q''(0) = 0, q(T) = q1, q'(T) = q''(T) = 0 (one
-    joint), from its six boundary conditions solved by numpy: independent of minimum_jerk and
-    velocity_blend."""
-    rows = []
-    for t, d in ((0.0, 0), (0.0, 1), (0.0, 2), (T, 0), (T, 1), (T, 2)):
-        rows.append([np.polynomial.Polynomial(np.eye(6)[k]).deriv(d)(t) for k in range(6)])
-    coef = np.linalg.solve(np.array(rows), [q0, v0, 0.0, q1, 0.0, 0.0])
-    return np.polynomial.Polynomial(coef)
-
-
-def test_quintic_from_a_velocity_and_its_peaks():
-    """velocity_blend carries a start velocity into the rest-to-rest move (the profile is the
-    quintic of its boundary conditions), and quintic_peaks are that quintic's largest speed and
-    acceleration (dense sampling from below, to 1e-6)."""
-    rng = np.random.default_rng(5)
-    t_dense = np.linspace(0.0, 1.0, 200_001)
-    for _ in range(40):
-        D, v0, T = rng.uniform(-1.5, 1.5), rng.uniform(-3.0, 3.0), rng.uniform(0.05, 2.0)
-        if rng.uniform() < 0.2:
-            v0 = 0.0
-        poly = _quintic(0.0, v0, D, T)
-        s = t_dense
-        f = minimum_jerk(s)[0]
-        h = velocity_blend(s)[0]
-        np.testing.assert_allclose(D * f + v0 * T * h, poly(s * T), atol=1e-12 * (1 + abs(D) + abs(v0) * T))
-        vpk, apk = quintic_peaks(np.array([D]), np.array([v0]), T)
-        v = np.abs(poly.deriv(1)(s * T)).max()
-        a = np.abs(poly.deriv(2)(s * T)).max()
-        assert v <= vpk[0] * (1 + 1e-12) + 1e-15 and vpk[0] <= v * (1 + 1e-6)
-        assert a <= apk[0] * (1 + 1e-12) + 1e-15 and apk[0] <= a * (1 + 1e-6)
-
-
-def test_duration_from_a_velocity_is_the_fewest_samples():
-    """SaccadeRule.duration from a start velocity: the fewest samples whose quintic (the
-    boundary-condition one) keeps within the speed and acceleration limits, by dense sampling."""
-    rng = np.random.default_rng(8)
-    dt = 1e-3
-    grid = np.linspace(0.0, 1.0, 20_001)
-
-    def fits(D, v0, n, vmax, amax):
-        T = n * dt
-        ok = True
-        for j in range(len(D)):
-            poly = _quintic(0.0, v0[j], D[j], T)
-            ok &= np.abs(poly.deriv(1)(grid * T)).max() <= vmax[j] * (1 + 1e-6)
-            if amax is not None:
-                ok &= np.abs(poly.deriv(2)(grid * T)).max() <= amax * (1 + 1e-6)
-        return ok
-
-    for k in range(12):
-        vmax = rng.uniform(0.5, 3.0, 3)
-        D = rng.uniform(-1.0, 1.0, 3)
-        v0 = rng.uniform(-1.0, 1.0, 3) * vmax * 0.99
-        amax = 40.0 if k % 2 else None
-        rule = SaccadeRule(max_acceleration=amax)
-        n = rule.duration(D, vmax, dt, v0)
-        assert fits(D, v0, n, vmax, amax)
-        assert n == 1 or (n - 1) * dt < rule.min_duration or not fits(D, v0, n - 1, vmax, None if amax is None else amax * (1 - 1e-4))
-    # from rest: the closed form, as before
-    assert SaccadeRule().duration(np.array([1.0]), np.array([2.0]), dt, np.zeros(1)) == math.ceil(15 / 16 / dt - 1e-9)
-
-
 @pytest.mark.parametrize("head", ["nominal"], indirect=True)
-def test_a_saccade_re_aims_when_the_target_moves_on(head):
-    """A, then B, then C while the saccade to B is under way: the saccade re-aims at C from the
-    readings and velocity it has (no jump of either: every sampled speed and acceleration within
-    the limits), its new part is the quintic from that velocity, and it ends exactly at C's answer."""
+@pytest.mark.parametrize("turn", ["on", "back"])
+def test_a_saccade_re_aims_when_the_target_moves_on(head, turn):
+    """A, then B, then C while the saccade to B is under way (C further on, or back past A): the
+    saccade re-aims at C by adding a second minimum-jerk profile for the change of goal (the
+    commanded readings less the first profile, computed here from its closed form, are one
+    minimum-jerk profile from rest); every sampled speed and acceleration within the limits, no
+    joint past the span of A's, B's and C's answers, and it ends exactly at C's answer."""
     model, solver = head
     A, B = _two_targets(model)
-    C = A + np.array([0.0, 0.0, 0.05])
+    C = B + 0.5 * (B - A) if turn == "on" else A - 0.5 * (B - A)
     hold, jump = 20, 120
     P = np.vstack([np.repeat(A[None], hold, axis=0), np.repeat(B[None], jump - hold, axis=0),
-                   np.repeat(C[None], 900, axis=0)])
+                   np.repeat(C[None], 1500, axis=0)])
     amax = 40.0
+    rule = SaccadeRule(max_acceleration=amax)
     q0 = solver.solve(A).q
     vmax = FAST * solver.velocity_limit
-    tr = track(solver, P, DT, vmax, q_current=q0, saccades=SaccadeRule(max_acceleration=amax))
+    tr = track(solver, P, DT, vmax, q_current=q0, saccades=rule)
     sac = np.flatnonzero(tr.saccade)
     assert sac[0] == hold and np.all(np.diff(sac) == 1) and sac[-1] > jump  # one chain of samples
     Q = np.vstack([q0, tr.q])  # Q[k + 1] is sample k
-    v = np.diff(Q, axis=0) / DT
-    a = np.diff(Q, n=2, axis=0) / DT**2
-    assert np.all(np.abs(v) <= vmax * (1 + 1e-9))
-    assert np.all(np.abs(a[: sac[-1] + 1]) <= amax * (1 + 1e-6))
-    assert np.array_equal(tr.q[sac[-1]], tr.q_goal[sac[-1]])  # ends exactly at C's answer
-    assert np.abs(tr.q_goal[sac[-1]] - tr.q_goal[jump]).max() < 1e-9
+    assert np.all(np.abs(np.diff(Q, axis=0)) / DT <= vmax * (1 + 1e-9))
+    assert np.all(np.abs(np.diff(Q[: sac[-1] + 2], n=2, axis=0)) / DT**2 <= amax * (1 + 1e-6))
+    goals = np.vstack([q0, tr.q_goal[hold], tr.q_goal[-1]])
+    assert np.all(Q >= goals.min(axis=0) - 1e-12) and np.all(Q <= goals.max(axis=0) + 1e-12)
+    assert np.array_equal(tr.q[sac[-1]], tr.q_goal[sac[-1]]) and np.array_equal(tr.q_goal[sac[-1]], tr.q_goal[-1])
     assert tr.locked[sac[-1] + 1 :].all() and tr.pointing_error[-1].max() < GAZE_POINTING_TOL
-    # the re-aimed part: the quintic from the velocity the first profile had at its last sample
-    k = int(np.argmax(np.abs(tr.q[sac[-1]] - tr.q[jump - 1])))
-    first = np.polynomial.Polynomial.fit(np.arange(hold - 1, jump) * DT, Q[hold : jump + 1, k], 5)
-    n = sac[-1] - jump + 1
-    t = np.arange(n + 1) * DT
-    seg = Q[jump : sac[-1] + 2, k]
-    second = np.polynomial.Polynomial.fit(t, seg, 5)
-    span = np.abs(seg - seg[0]).max()
-    assert np.max(np.abs(second(t) - seg)) < 1e-9 * span
-    assert abs(second.deriv(1)(0.0) - first.deriv(1)((jump - 1) * DT)) < 1e-6 * np.max(vmax)
-    assert abs(second.deriv(1)(t[-1])) < 1e-6 * span / t[-1] and abs(second.deriv(2)(t[-1])) < 1e-4 * span / t[-1] ** 2
+    # the first profile, in closed form: from A's answer to B's over the duration rule's samples
+    d1 = tr.q_goal[hold] - q0
+    n1 = rule.duration(d1, vmax, DT)
+    k = np.arange(len(P)) - hold + 1.0  # samples since the saccade's start (1 at its first sample)
+    first = q0 + minimum_jerk(k / n1)[0][:, None] * d1
+    rest = (tr.q - first)[jump - 1 : sac[-1] + 1]  # from the last sample before the re-aim
+    j = int(np.argmax(np.abs(rest[-1])))
+    assert np.max(np.abs(rest[0])) < 1e-12 * np.max(np.abs(d1))  # nothing added before the re-aim
+    t = np.arange(rest.shape[0]) * DT
+    second = np.polynomial.Polynomial.fit(t, rest[:, j], 5)
+    span = abs(rest[-1, j])
+    assert span > 0.05 and np.max(np.abs(second(t) - rest[:, j])) < 1e-9 * span
+    for end in (0.0, t[-1]):
+        assert abs(second.deriv(1)(end)) < 1e-6 * span / t[-1] and abs(second.deriv(2)(end)) < 1e-4 * span / t[-1] ** 2
 
 
 @pytest.mark.parametrize("head", ["nominal"], indirect=True)
@@ -412,6 +353,13 @@ def test_speed_limits_named_joint_by_joint(mimic_head):
         GazeTracker(solver, DT, saccades=True)
     with pytest.raises(ConfigurationError, match=r"\[0, pi\)"):
         GazeTracker(solver, DT, saccades=SaccadeRule(threshold=5.0))
+    for bad in (True, [True] * len(names), ["1"] * len(names)):
+        with pytest.raises(ConfigurationError, match="max_velocity must be"):
+            GazeTracker(solver, DT, bad)
+    with pytest.raises(ConfigurationError, match="max_acceleration"):
+        GazeTracker(solver, DT, saccades=SaccadeRule(max_acceleration="5"))  # type: ignore[arg-type]
+    with pytest.raises(ConfigurationError, match="reaim_interval"):
+        GazeTracker(solver, DT, saccades=SaccadeRule(reaim_interval=0.0))
 
 
 # ---- every head shape: one camera (TIAGo), a rigid stereo pair; checked on yourdfpy's FK ----
@@ -498,3 +446,26 @@ def test_public_names_are_exported():
         assert getattr(gaze, name) is getattr(tracking, name) and name in gaze.__all__
     for name in ("Region", "reachable_region", "make_grid"):
         assert getattr(gaze, name) is getattr(reach, name) and name in gaze.__all__
+
+
+def test_a_policy_that_frees_off_path_joints_needs_no_speed_for_them(tmp_path):
+    """use-table frees every joint of a two-eye head, a gripper off the cameras' paths too: its
+    URDF velocity="0" does not stop tracking, and the gripper keeps still."""
+    import re
+
+    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.validation.gaze import solver_for
+
+    text = write_urdf(load_model("iis_head"), tmp_path / "head.urdf").read_text()
+    root = re.search(r'<link name="([^"]+)"', text).group(1)
+    grip = (f'<link name="grip_link"/><joint name="grip" type="prismatic"><parent link="{root}"/>'
+            '<child link="grip_link"/><axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="1" velocity="0"/></joint>')
+    path = tmp_path / "head_grip.urdf"
+    path.write_text(text.replace("</robot>", grip + "</robot>"))
+    solver = solver_for(path)
+    ig = solver.joint_names.index("grip")
+    assert ig in solver.free_joints("use-table").tolist() and ig not in solver.path_joints.tolist()
+    A, _ = _two_targets(load_model("iis_head"))
+    tr = solver.track(np.repeat(A[None], 5, axis=0), DT, policy="use-table")
+    assert np.all(tr.q[:, ig] == tr.q[0, ig])
+    assert GazeTracker(solver, DT, policy="use-table").max_velocity[ig] == 0.0

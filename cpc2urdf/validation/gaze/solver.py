@@ -333,6 +333,11 @@ class GazeSolver:
         return self._free_joints[policy]
 
     @property
+    def path_joints(self) -> Index:
+        """Indices (into ``q``) of the joints on the cameras' paths: the only ones that move a camera."""
+        return np.unique(self.chain.joint_index)
+
+    @property
     def motion_groups(self) -> tuple[Index, ...]:
         """Robot joints (indices into ``q``) that move only together: a URDF ``<mimic>`` follower
         with its driver, the joints of a stated coupling (readings ``q = A u + b`` sharing an

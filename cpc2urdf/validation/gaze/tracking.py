@@ -19,17 +19,21 @@ commanded readings towards that answer:
   least the rule's ``min_duration``. The last sample of a saccade is exactly the answer it aimed
   at; smooth pursuit takes over from there. A saccade starts only towards an answer that points
   at the target (status ``fixated``, or ``disparity`` on a head that cannot fixate exactly); an
-  unreachable target is pursued. It re-aims when the target moves on: when its end point misses
-  the sample's target by more than the threshold beyond the sample's own answer, a new profile
-  starts from the commanded readings and velocity of that sample (position and velocity stay
-  continuous) to the new answer, the quintic with ``q(0) = q0``, ``q'(0) = v0 T``,
-  ``q''(0) = 0`` and ``q1``, rest at the end::
+  unreachable target is pursued. It re-aims when the target moves on (checked every
+  ``reaim_interval``): when its end point misses the sample's target by more than the threshold
+  beyond the sample's own answer, a second minimum-jerk profile for the change of goal is added
+  to the one under way, from that sample on (superposition, as in double-step reaching: Flash
+  and Henis 1991)::
 
-      q(t) = q0 + (q1 - q0) f(s) + v0 T h(s),    h(s) = s - 6 s^3 + 8 s^4 - 3 s^5,
+      q(t) = q0 + (q1 - q0) f(s1) + (q2 - q1) f(s2),    s_i = (t - t_i) / T_i clipped to [0, 1],
 
-  its duration the fewest samples at which its exact peaks (velocity and, when given,
-  acceleration: the roots of their derivatives) stay within the limits; or, towards an answer
-  that does not point at the target, it ends and pursuit takes over.
+  so position, velocity and acceleration stay continuous and the head turns towards the new
+  answer without first carrying its speed past it. ``T2`` is the fewest samples (from the
+  from-rest duration, longer by steps of 1/4) at which the sum's sampled readings, speeds and
+  accelerations keep within the limits while the new profile runs (after it, the sum moves as
+  the plan before it did); if none of 12 lengths does, the saccade ends there and pursuit
+  takes over. A re-aim towards an answer that does not point at the target ends the
+  saccade the same way.
 
 Pursuit moves joints that move only together (a URDF ``<mimic>`` follower and its driver, the
 joints of a stated coupling: :attr:`WarmStartSolver.motion_groups`) by one common fraction of
@@ -59,12 +63,13 @@ from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
 from cpc2urdf.validation.gaze.policies import check_policy
 from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, GazeSolution
 
-MAX_SACCADE_SAMPLES = 1 << 24  # [-]: a re-aimed saccade longer than this is refused (4.7 h at 1 kHz)
+MAX_REAIM_TRIES = 12  # [-]: lengths a re-aim's profile tries (each 1/4 longer: up to 14.6x) before the saccade ends
 MIN_JERK_PEAK_VELOCITY = 15.0 / 8.0  # peak of d/ds (10 s^3 - 15 s^4 + 6 s^5), at s = 1/2
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)  # peak of its |d2/ds2|, at s = (3 -+ sqrt 3) / 6
 SACCADE_STATUSES = (STATUS_FIXATED, STATUS_DISPARITY)  # answers a saccade aims at: they point at the target
 DEFAULT_SACCADE_THRESHOLD = math.radians(5.0)  # [rad]: pointing error that starts a saccade
 DEFAULT_SACCADE_MIN_DURATION = 0.02  # [s]: the shortest saccade
+DEFAULT_REAIM_INTERVAL = 0.02  # [s]: a saccade under way checks its aim this often
 WARM_START_ANGLE = math.radians(5.0)  # [rad]: a last answer missing the new target by more is not a start
 LOCK_TOL = 1e-15  # [rad]/[m]: commanded readings this close to the answer are locked on it
 
@@ -106,6 +111,11 @@ class WarmStartSolver(Protocol):
         """Indices of the joints ``policy`` lets move."""
         ...
 
+    @property
+    def path_joints(self) -> NDArray[np.intp]:
+        """Indices of the joints on the cameras' paths (the others never move a camera)."""
+        ...
+
     def check_q(self, q: ArrayLike | None) -> Array | None:
         """Readings as an in-limit array of shape (n,), or None."""
         ...
@@ -142,60 +152,6 @@ def minimum_jerk(s: ArrayLike) -> tuple[Array, Array, Array]:
     return f, df, ddf
 
 
-def velocity_blend(s: ArrayLike) -> tuple[Array, Array, Array]:
-    """The quintic that carries a start velocity into a rest-to-rest move, and its first two
-    derivatives by ``s`` at ``s`` in [0, 1].
-
-    ``h(s) = s - 6 s^3 + 8 s^4 - 3 s^5``: ``h(0) = h(1) = 0``, ``h'(0) = 1``, ``h''(0) = 0``,
-    ``h'(1) = h''(1) = 0``; ``q0 + D f(s) + V h(s)`` (:func:`minimum_jerk`'s ``f``) goes from
-    ``q0`` at velocity ``V`` (by ``s``) and no acceleration to rest at ``q0 + D``.
-    """
-    x = np.clip(np.asarray(s, dtype=float), 0.0, 1.0)
-    h = x * (1.0 + x * x * (-6.0 + x * (8.0 - 3.0 * x)))
-    dh = 1.0 + x * x * (-18.0 + x * (32.0 - 15.0 * x))
-    ddh = x * (-36.0 + x * (96.0 - 60.0 * x))
-    return h, dh, ddh
-
-
-def _roots_in_unit(c2: Array, c1: Array, c0: Array) -> tuple[Array, Array]:
-    """The real roots of ``c2 s^2 + c1 s + c0`` per element, 0.0 where there is none in [0, 1]
-    (0 is a candidate of every peak below anyway)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        disc = c1 * c1 - 4.0 * c2 * c0
-        q = -0.5 * (c1 + np.copysign(np.sqrt(np.maximum(disc, 0.0)), c1))
-        r1 = np.where(c2 != 0.0, q / c2, -c0 / c1)
-        r2 = np.where(q != 0.0, c0 / q, np.nan)
-    out = []
-    for r in (r1, r2):
-        ok = (disc >= 0.0) & np.isfinite(r) & (r >= 0.0) & (r <= 1.0)
-        out.append(np.where(ok, r, 0.0))
-    return out[0], out[1]
-
-
-def quintic_peaks(delta: Array, v0: Array, T: float) -> tuple[Array, Array]:
-    """Exact peak speed and peak acceleration per joint of ``q0 + delta f(s) + v0 T h(s)``,
-    ``s = t / T`` (:func:`minimum_jerk`, :func:`velocity_blend`): the velocity
-    ``delta f'(s) / T + v0 h'(s)`` and the acceleration ``(delta f''(s) / T + v0 h''(s)) / T``
-    at both ends and at the roots of their derivatives in ``s`` (quadratics once the velocity's
-    root at ``s = 0`` is divided out)."""
-    d = delta / T
-    # d/ds of the velocity: s [60 d (1 - 3 s + 2 s^2) + v0 (-36 + 96 s - 60 s^2)]
-    a1, a2 = _roots_in_unit(120.0 * d - 60.0 * v0, -180.0 * d + 96.0 * v0, 60.0 * d - 36.0 * v0)
-    # d/ds of the acceleration (times T): 60 d (1 - 6 s + 6 s^2) + v0 (-36 + 192 s - 180 s^2)
-    j1, j2 = _roots_in_unit(360.0 * d - 180.0 * v0, -360.0 * d + 192.0 * v0, 60.0 * d - 36.0 * v0)
-    vpk = np.zeros_like(d)
-    apk = np.zeros_like(d)
-    for s in (np.zeros_like(d), np.ones_like(d), a1, a2):
-        _, df, _ = minimum_jerk(s)
-        _, dh, _ = velocity_blend(s)
-        vpk = np.maximum(vpk, np.abs(d * df + v0 * dh))
-    for s in (np.zeros_like(d), np.ones_like(d), j1, j2):
-        _, _, ddf = minimum_jerk(s)
-        _, _, ddh = velocity_blend(s)
-        apk = np.maximum(apk, np.abs(d * ddf + v0 * ddh) / T)
-    return vpk, apk
-
-
 @dataclass(frozen=True)
 class SaccadeRule:
     """When a saccade starts and how long it lasts (see the module docstring).
@@ -207,56 +163,29 @@ class SaccadeRule:
             None: none (URDFs carry no acceleration limits), the velocity limits alone set the
             duration.
         min_duration: The shortest saccade [s].
+        reaim_interval: How often a saccade under way checks whether to re-aim [s] (at most
+            one re-aim per interval: a target that keeps moving adds a profile per interval).
     """
 
     threshold: float = DEFAULT_SACCADE_THRESHOLD
     max_acceleration: float | tuple[float, ...] | None = None
     min_duration: float = DEFAULT_SACCADE_MIN_DURATION
+    reaim_interval: float = DEFAULT_REAIM_INTERVAL
 
-    def duration(self, delta: Array, max_velocity: Array, dt: float, v0: Array | None = None) -> int:
+    def duration(self, delta: Array, max_velocity: Array, dt: float) -> int:
         """Samples of a saccade over ``delta`` (shape (n,)) [rad]/[m]: the fewest whole samples of
-        ``dt`` [s] whose profile stays within ``max_velocity`` (shape (n,)) and the acceleration
-        limits, and lasts at least ``min_duration``; at least one. From rest (``v0`` None or
-        zero) the minimum-jerk profile's peaks in closed form; from velocity ``v0`` (a re-aimed
-        saccade) the quintic's exact peaks (:func:`quintic_peaks`), the fewest samples found by
-        doubling, then bisection."""
+        ``dt`` [s] whose minimum-jerk profile stays within ``max_velocity`` (shape (n,); joints
+        with 0 do not move) and the acceleration limits, and lasts at least ``min_duration``; at
+        least one."""
         a = np.abs(delta)
         vmax = np.asarray(max_velocity, dtype=float)
-        moving = vmax > 0.0  # joints with no speed (not moved by the head) have no step
+        moving = vmax > 0.0
         T = max(self.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * a[moving] / vmax[moving], initial=0.0)))
-        amax = None
         if self.max_acceleration is not None:
             amax = np.broadcast_to(np.asarray(self.max_acceleration, dtype=float), a.shape)
             T = max(T, math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * a / amax))))
         # the continuous peaks bound the sampled ones: a sample's mean velocity is at most the peak
-        n0 = max(1, math.ceil(T / dt - 1e-9))
-        if v0 is None or not np.any(v0):
-            return n0
-        # rounding slack: v0 is a sample of a profile that kept within the limits
-        vlim = vmax * (1.0 + 1e-9)
-        alim = None if amax is None else amax * (1.0 + 1e-9)
-
-        def fits(n: int) -> bool:
-            if n * dt < self.min_duration * (1.0 - 1e-12):
-                return False
-            vpk, apk = quintic_peaks(delta, v0, n * dt)
-            return bool(np.all(vpk <= vlim) and (alim is None or np.all(apk <= alim)))
-
-        lo, hi = 0, n0
-        while not fits(hi):
-            if hi > MAX_SACCADE_SAMPLES:
-                raise ConfigurationError(
-                    f"no saccade of at most {MAX_SACCADE_SAMPLES} samples keeps within the speed limits "
-                    f"from velocity {np.asarray(v0).tolist()}"
-                )
-            lo, hi = hi, 2 * hi
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if fits(mid):
-                hi = mid
-            else:
-                lo = mid
-        return hi
+        return max(1, math.ceil(T / dt - 1e-9))
 
     def check(self, n: int) -> None:
         """:class:`ConfigurationError` unless the rule's numbers are usable for ``n`` joints."""
@@ -267,9 +196,14 @@ class SaccadeRule:
             )
         if not (_is_real(self.min_duration) and math.isfinite(self.min_duration) and self.min_duration >= 0.0):
             raise ConfigurationError(f"saccade min_duration must be finite and >= 0 [s], got {self.min_duration!r}")
+        if not (_is_real(self.reaim_interval) and math.isfinite(self.reaim_interval) and self.reaim_interval > 0.0):
+            raise ConfigurationError(f"saccade reaim_interval must be finite and > 0 [s], got {self.reaim_interval!r}")
         if self.max_acceleration is not None:
             try:
-                amax = np.broadcast_to(np.asarray(self.max_acceleration, dtype=float), (n,))
+                raw = np.asarray(self.max_acceleration)
+                if raw.dtype.kind not in "iuf":  # not bools, strings or objects
+                    raise TypeError(raw.dtype)
+                amax = np.broadcast_to(raw.astype(float), (n,))
             except (TypeError, ValueError) as e:
                 raise ConfigurationError(
                     f"saccade max_acceleration must be a scalar or {n} values, got {self.max_acceleration!r}"
@@ -297,6 +231,90 @@ class TrackingStep:
     pointing_error: Array
     locked: bool
     saccade: bool
+
+
+class Saccade:
+    """A saccade under way: minimum-jerk profiles added one after another (a re-aim adds one for
+    the change of goal), sampled every ``dt`` from its start.
+
+    Args:
+        q0: Readings at its start (sample 0), shape (n,).
+        goal: Where it ends, shape (n,).
+        n_samples: Its length in samples (the first profile's).
+    """
+
+    def __init__(self, q0: Array, goal: Array, n_samples: int) -> None:
+        self.q0 = q0.copy()
+        self.goal = goal.copy()
+        self.parts: list[tuple[int, Array, int]] = [(0, goal - q0, n_samples)]  # (start sample, delta, length)
+        self.done = 0  # samples commanded
+        self.last_check = 0  # the sample of its start or of the last check of its aim
+
+    @property
+    def length(self) -> int:
+        """The sample at which every profile has ended."""
+        return max(k + n for k, _, n in self.parts)
+
+    def positions(self, k: Array, parts: list[tuple[int, Array, int]] | None = None) -> Array:
+        """Readings at samples ``k`` (shape (L,)), shape (L, n): ``q0`` plus every profile's
+        ``delta f(s)``, ``s = (k - start) / length`` clipped to [0, 1] (:func:`minimum_jerk`)."""
+        parts = self.parts if parts is None else parts
+        start = np.array([k0 for k0, _, _ in parts], dtype=float)
+        length = np.array([n for _, _, n in parts], dtype=float)
+        D = np.array([delta for _, delta, _ in parts])  # (parts, n)
+        f, _, _ = minimum_jerk((k[:, None] - start[None, :]) / length[None, :])
+        return self.q0[None, :] + f @ D  # type: ignore[no-any-return]
+
+    def next_sample(self) -> Array:
+        """The next commanded readings; the last sample is exactly ``goal``."""
+        self.done += 1
+        if self.done >= self.length:
+            return self.goal.copy()
+        # profiles that have ended are folded into q0 (their whole delta): the sum holds fewer terms
+        ended = [part for part in self.parts if part[0] + part[2] <= self.done]
+        if ended:
+            for _, delta, _ in ended:
+                self.q0 += delta
+            self.parts = [part for part in self.parts if part[0] + part[2] > self.done]
+        return self.positions(np.array([float(self.done)]))[0]
+
+    @property
+    def finished(self) -> bool:
+        """Whether its last sample has been commanded."""
+        return self.done >= self.length
+
+    def reaim(
+        self, goal: Array, rule: SaccadeRule, max_velocity: Array, dt: float, lower: Array, upper: Array
+    ) -> bool:
+        """Add a profile from the current sample to ``goal``: the fewest samples (the from-rest
+        duration of the change, then 1/4 longer a try, :data:`MAX_REAIM_TRIES` tries) at which
+        the sum's sampled readings stay within ``lower``..``upper`` and its speeds and
+        accelerations within the limits, from the last commanded sample to the new profile's
+        end (after that the sum moves as the plan before it, shifted by the change). False
+        (nothing added) if none does."""
+        delta = goal - self.goal
+        moving = max_velocity > 0.0
+        vlim = max_velocity[moving] * (1.0 + 1e-9)
+        amax = None
+        if rule.max_acceleration is not None:
+            amax = np.broadcast_to(np.asarray(rule.max_acceleration, dtype=float), delta.shape)[moving] * (1.0 + 1e-9)
+        lo, hi = lower[moving] - 1e-12, upper[moving] + 1e-12
+        n = rule.duration(delta, max_velocity, dt)
+        k = self.done
+        for _ in range(MAX_REAIM_TRIES):
+            parts = [*self.parts, (k, delta, n)]
+            ks = np.arange(max(k - 1, 0), k + n + 1, dtype=float)  # from the last two commanded samples on
+            q = self.positions(ks, parts)[:, moving]
+            v = np.diff(q, axis=0) / dt
+            ok = bool(np.all(np.abs(v) <= vlim) and np.all(q >= lo) and np.all(q <= hi))
+            if ok and amax is not None and q.shape[0] > 2:
+                ok = bool(np.all(np.abs(np.diff(q, n=2, axis=0)) / (dt * dt) <= amax))
+            if ok:
+                self.parts = parts
+                self.goal = goal.copy()
+                return True
+            n = int(math.ceil(1.25 * n))
+        return False
 
 
 class GazeTracker:
@@ -335,7 +353,8 @@ class GazeTracker:
         if saccades is not None and not isinstance(saccades, SaccadeRule):
             raise ConfigurationError(f"saccades must be None or a SaccadeRule, got {saccades!r}")
         n = len(solver.joint_names)
-        moved = solver.free_joints(policy)
+        # the joints this policy moves that move a camera (a policy may free off-path joints too: they keep still)
+        moved = np.intersect1d(solver.free_joints(policy), solver.path_joints)
         vmax = speed_limits(solver, max_velocity, moved)
         if saccades is not None:
             saccades.check(n)
@@ -349,9 +368,8 @@ class GazeTracker:
         self._groups = solver.motion_groups
         self.q: Array | None = solver.check_q(q_current)  # commanded readings; None before the first sample
         self.goal: Array | None = None
-        # the saccade under way: start readings q0, start velocity v0, end q1, samples; samples done
-        self._saccade: tuple[Array, Array, Array, int] | None = None
-        self._saccade_done = 0
+        self._saccade: Saccade | None = None  # the saccade under way
+        self._reaim_samples = 0 if saccades is None else max(1, round(saccades.reaim_interval / self.dt))
 
     @property
     def in_saccade(self) -> bool:
@@ -375,16 +393,18 @@ class GazeTracker:
         goal = sol.q
         self.goal = goal
         aims = sol.status in SACCADE_STATUSES  # an answer that points at the target
-        if q_prev is not None and self._saccade is not None and self._saccade_stale(p, sol):
-            # the target moved on: re-aim from this sample's readings and velocity, or (towards an
-            # answer that does not point at it) end the saccade and pursue
-            v_now = self._saccade_velocity()
-            self._saccade = None
-            if aims:
-                assert self.saccades is not None
-                n_samples = self.saccades.duration(goal - q_prev, self.max_velocity, self.dt, v_now)
-                self._saccade = (q_prev.copy(), v_now, goal.copy(), n_samples)
-                self._saccade_done = 0
+        sac = self._saccade
+        if q_prev is not None and sac is not None and sac.done - sac.last_check >= self._reaim_samples:
+            sac.last_check = sac.done
+        else:
+            sac = None  # not checked on this sample
+        if sac is not None and self._saccade_stale(p, sol):
+            # the target moved on: a profile towards its answer is added from this sample (or, towards
+            # an answer that does not point at it or with no length within the limits, pursuit)
+            assert self.saccades is not None
+            if not (aims and sac.reaim(goal, self.saccades, self.max_velocity, self.dt,
+                                       self.solver.lower, self.solver.upper)):
+                self._saccade = None
         in_saccade = False
         if q_prev is None:
             q_cmd = goal.copy()
@@ -392,9 +412,7 @@ class GazeTracker:
             q_cmd = self._saccade_sample()
             in_saccade = True
         elif self.saccades is not None and aims and self._saccade_wanted(q_prev, p, sol):
-            n_samples = self.saccades.duration(goal - q_prev, self.max_velocity, self.dt)
-            self._saccade = (q_prev.copy(), np.zeros_like(q_prev), goal.copy(), n_samples)
-            self._saccade_done = 0
+            self._saccade = Saccade(q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt))
             q_cmd = self._saccade_sample()
             in_saccade = True
         else:
@@ -431,34 +449,15 @@ class GazeTracker:
         """Whether the saccade under way ends off this sample's target: its end point misses
         ``p`` by more than the threshold beyond the sample's answer ``sol``."""
         assert self._saccade is not None and self.saccades is not None
-        gain = self._miss(self._saccade[2], p) - float(np.max(sol.pointing_error))
+        gain = self._miss(self._saccade.goal, p) - float(np.max(sol.pointing_error))
         return gain > self.saccades.threshold
-
-    def _saccade_velocity(self) -> Array:
-        """The commanded velocity [rad/s]/[m/s] at the last sample of the saccade under way."""
-        assert self._saccade is not None
-        q0, v0, q1, n_samples = self._saccade
-        T = n_samples * self.dt
-        s = self._saccade_done / n_samples
-        _, df, _ = minimum_jerk(s)
-        _, dh, _ = velocity_blend(s)
-        return (q1 - q0) * (float(df) / T) + v0 * float(dh)
 
     def _saccade_sample(self) -> Array:
         """The next sample of the saccade under way; its last one is exactly its end."""
         assert self._saccade is not None
-        q0, v0, q1, n_samples = self._saccade
-        self._saccade_done += 1
-        k = self._saccade_done
-        if k >= n_samples:
+        q = self._saccade.next_sample()
+        if self._saccade.finished:
             self._saccade = None
-            return q1.copy()
-        f, _, _ = minimum_jerk(k / n_samples)
-        q = q0 + (q1 - q0) * float(f)
-        if np.any(v0):
-            h, _, _ = velocity_blend(k / n_samples)
-            # a re-aimed profile may overshoot its start along v0: commanded readings stay in the limits
-            q = np.clip(q + v0 * (n_samples * self.dt * float(h)), self.solver.lower, self.solver.upper)
         return q
 
 
@@ -489,7 +488,10 @@ def speed_limits(
             given[i] = True
     elif max_velocity is not None:
         try:
-            v = np.asarray(max_velocity, dtype=float)
+            raw = np.asarray(max_velocity)
+            if raw.dtype.kind not in "iuf":  # not bools, strings or objects
+                raise TypeError(raw.dtype)
+            v = raw.astype(float)
             vmax = np.array(np.broadcast_to(v, (n,)))
         except (TypeError, ValueError) as e:
             raise ConfigurationError(
@@ -599,7 +601,8 @@ __all__ = [
     "WARM_START_ANGLE",
     "MIN_JERK_PEAK_ACCELERATION",
     "MIN_JERK_PEAK_VELOCITY",
-    "MAX_SACCADE_SAMPLES",
+    "MAX_REAIM_TRIES",
+    "DEFAULT_REAIM_INTERVAL",
     "SACCADE_STATUSES",
     "GazeTracker",
     "SaccadeRule",
@@ -607,8 +610,7 @@ __all__ = [
     "Trajectory",
     "WarmStartSolver",
     "minimum_jerk",
-    "quintic_peaks",
     "speed_limits",
     "track",
-    "velocity_blend",
+    "Saccade",
 ]
