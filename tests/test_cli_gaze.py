@@ -179,6 +179,9 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     # the report follows the tolerance: every target within 0.01 rad counts as fixated
     assert main(["gaze", str(path), "--report", "--tolerance", "0.01"]) == 0
     assert "(0 answered with status disparity, 200 within the tolerance)" in capsys.readouterr().out
+    # the same joints named: the compiled solver alone, no min-motion of its own to compare with
+    assert main(["gaze", str(path), "--report", "--json", "--joints", "pan", "tilt", "vergence_left", "vergence_right"]) == 0
+    assert "fixation_alone" not in json.loads(capsys.readouterr().out)["head"]
     # the eyes alone point at none of the targets ahead: no claim about exactness
     assert main(["gaze", str(path), "--report", "--joints", "vergence_left", "vergence_right"]) == 0
     out = capsys.readouterr().out.splitlines()

@@ -210,6 +210,8 @@ def test_slices_are_named_where_they_lie_and_large_grids_solve_in_chunks(monkeyp
     assert where == "elevation -12 deg" and level.sum() == 3 * 8
     assert np.allclose(np.degrees(np.arcsin(grid.points_head[level, 2] / np.linalg.norm(grid.points_head[level], axis=1))), -12.0)
     assert reach._slice_mask(make_grid(solver, "box", 0.4, 2.0, (3, 5, 4)), 1)[1] == "left 0 m"
+    box = make_grid(solver, "box", 0.1, 2.9, (2, 19, 19))  # linspace's middle value is -2.2e-16, not 0
+    assert reach._slice_mask(box, 1)[1] == "left 0 m" and reach._slice_mask(box, 2)[1] == "up 0 m"
     whole = reachable_region(solver, grid)
     monkeypatch.setattr(reach, "PROGRESS_CHUNK", 50)
     chunked = reachable_region(solver, grid)

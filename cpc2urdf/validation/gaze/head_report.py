@@ -23,7 +23,7 @@ import numpy as np
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.validation.gaze.chain import KIND_BINOCULAR
-from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED
+from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, STATUS_LIMITS
 from cpc2urdf.validation.gaze.solver import GazeSolver
 
 REPORT_TARGETS = 200  # targets of the disparity report (a few ms of compiled solves)
@@ -34,10 +34,11 @@ def head_report(solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_
     """``{"cameras", "kind", "joints"}`` (``joints``: what the solver moves) and, on a two-eye
     (``binocular``) head, ``"exact"`` (whether the eyes' axes can meet exactly), ``"disparity"``
     (:meth:`GazeSolver.disparity_report` over ``n`` seeded targets ahead) and, where they cannot
-    and the head has the min-motion policy, ``"fixation_alone"``: over the same targets, how many
-    fixation alone fixates, the median and max pointing error it leaves [rad], and how far it
-    turns a joint from the facing posture (median and max over the targets of the largest change
-    of a revolute joint) [rad]."""
+    and the head has the Python solver's min-motion policy, ``"fixation_alone"``: over the same
+    targets, how many fixation alone fixates, its statuses, and over the ``answered`` ones (fixated,
+    or its best held by a limit; not the failed ones) the median and max pointing error it leaves
+    [rad] and how far it turns a joint from the facing posture (median and max over the targets
+    of the largest change of a revolute joint) [rad]."""
     rep: dict[str, Any] = {
         "cameras": list(solver.cameras),
         "kind": solver.kind,
@@ -55,27 +56,34 @@ def head_report(solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_
 
 
 def _fixation_alone(solver: GazeSolver, n: int, seed: int) -> dict[str, Any] | None:
-    """The ``fixation_alone`` part of :func:`head_report`; None on a head without the min-motion policy."""
+    """The ``fixation_alone`` part of :func:`head_report`; None on a head without the Python
+    solver's min-motion policy (there the compiled solver answers min-motion with its own
+    posture policy, the facing answer: nothing to compare)."""
+    try:
+        solver.head  # noqa: B018 (ConfigurationError: no Python solver on this head)
+    except ConfigurationError:
+        return None
     P = solver.ahead_targets(n, seed)
     facing = solver.solve_many(P)
     revolute = np.array([solver.joint_kinds[j] == "revolute" for j in solver.joint_names])
-    errors, turns, fixated = [], [], 0
+    errors, turns, statuses = [], [], []
     for i, p in enumerate(P):
-        try:
-            sol = solver.solve(p, policy="min-motion")
-        except ConfigurationError:
-            return None  # the compiled solver alone: no fixation-alone policy on this head
-        fixated += sol.status == STATUS_FIXATED
+        sol = solver.solve(p, policy="min-motion")
+        statuses.append(sol.status)
         errors.append(float(np.max(sol.pointing_error)))
         turns.append(float(np.max(np.abs(sol.q - facing.q[i])[revolute], initial=0.0)))
-    e, t = np.array(errors), np.array(turns)
+    # its best in-limit answers (fixated, or held by a limit); not the failed ones (no solution, behind)
+    kept = np.array([st in (STATUS_FIXATED, STATUS_LIMITS, STATUS_DISPARITY) for st in statuses])
+    e, t = np.array(errors)[kept], np.array(turns)[kept]
     return {
         "targets": n,
-        "fixated": int(fixated),
-        "median_rad": float(np.median(e)),
-        "max_rad": float(e.max()),
-        "turn_median_rad": float(np.median(t)),
-        "turn_max_rad": float(t.max()),
+        "fixated": int(sum(st == STATUS_FIXATED for st in statuses)),
+        "answered": int(kept.sum()),
+        "median_rad": float(np.median(e)) if e.size else None,
+        "max_rad": float(e.max()) if e.size else None,
+        "turn_median_rad": float(np.median(t)) if t.size else None,
+        "turn_max_rad": float(t.max()) if t.size else None,
+        "statuses": {st: statuses.count(st) for st in sorted(set(statuses))},
     }
 
 
@@ -108,11 +116,13 @@ def format_head_report(rep: dict[str, Any]) -> list[str]:
         f"tolerance){tail}"
     )
     a = rep.get("fixation_alone")
-    if a is not None:
+    if a is not None and a["answered"]:
+        failed = a["targets"] - a["answered"]
         lines.append(
             f"  turned away from facing, fixation alone (policy min-motion) fixates {a['fixated']} of them within the tolerance "
-            f"(pointing error median {math.degrees(a['median_rad']):.3g} deg, max {math.degrees(a['max_rad']):.3g} deg); "
-            f"it turns a joint by median {math.degrees(a['turn_median_rad']):.3g} deg, "
+            f"(pointing error median {math.degrees(a['median_rad']):.3g} deg, max {math.degrees(a['max_rad']):.3g} deg"
+            + (f", over the {a['answered']} it answers in the limits; {failed} failed" if failed else "")
+            + f"); it turns a joint by median {math.degrees(a['turn_median_rad']):.3g} deg, "
             f"max {math.degrees(a['turn_max_rad']):.3g} deg from the facing posture"
         )
     return lines

@@ -354,7 +354,9 @@ def _slice_mask(grid: Grid, axis: int) -> tuple[NDArray[np.bool_], str]:
     values = grid.axes[axis]
     k = int(np.argmin(np.abs(values)))
     idx = np.unravel_index(np.arange(grid.points.shape[0]), grid.shape)[axis]
+    span = float(np.max(np.abs(values)))
     v = float(values[k])
+    v = 0.0 if abs(v) <= 1e-9 * span else v  # a plane through 0 up to rounding (linspace: -2.2e-16)
     if grid.kind == "shell":
         where = f"{'azimuth' if axis == 1 else 'elevation'} {math.degrees(v):.3g} deg"
     else:

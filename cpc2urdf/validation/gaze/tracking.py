@@ -19,21 +19,13 @@ commanded readings towards that answer:
   least the rule's ``min_duration``. The last sample of a saccade is exactly the answer it aimed
   at; smooth pursuit takes over from there. A saccade starts only towards an answer that points
   at the target (status ``fixated``, or ``disparity`` on a head that cannot fixate exactly); an
-  unreachable target is pursued. It re-aims when the target moves on (checked every
-  ``reaim_interval``): when its end point misses the sample's target by more than the threshold
-  beyond the sample's own answer, a second minimum-jerk profile for the change of goal is added
-  to the one under way, from that sample on (superposition, as in double-step reaching: Flash
-  and Henis 1991)::
-
-      q(t) = q0 + (q1 - q0) f(s1) + (q2 - q1) f(s2),    s_i = (t - t_i) / T_i clipped to [0, 1],
-
-  so position, velocity and acceleration stay continuous and the head turns towards the new
-  answer without first carrying its speed past it. ``T2`` is the fewest samples (from the
-  from-rest duration, longer by steps of 1/4) at which the sum's sampled readings, speeds and
-  accelerations keep within the limits while the new profile runs (after it, the sum moves as
-  the plan before it did); if none of 12 lengths does, the saccade ends there and pursuit
-  takes over. A re-aim towards an answer that does not point at the target ends the
-  saccade the same way.
+  unreachable target is pursued. A saccade whose target moves on ends: every
+  ``reaim_interval`` it checks its end point, and when that misses the sample's target by more
+  than the threshold beyond the sample's own answer, pursuit takes over from the commanded
+  readings (towards the new answer, velocity-limited), and a new saccade may start after
+  another ``reaim_interval``. Readings stay continuous and inside the limits; the commanded
+  velocity can step at that sample (by up to the joints' speed limits), as at any hand-over to
+  pursuit.
 
 Pursuit moves joints that move only together (a URDF ``<mimic>`` follower and its driver, the
 joints of a stated coupling: :attr:`WarmStartSolver.motion_groups`) by one common fraction of
@@ -63,7 +55,6 @@ from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
 from cpc2urdf.validation.gaze.policies import check_policy
 from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, GazeSolution
 
-MAX_REAIM_TRIES = 12  # [-]: lengths a re-aim's profile tries (each 1/4 longer: up to 14.6x) before the saccade ends
 MIN_JERK_PEAK_VELOCITY = 15.0 / 8.0  # peak of d/ds (10 s^3 - 15 s^4 + 6 s^5), at s = 1/2
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)  # peak of its |d2/ds2|, at s = (3 -+ sqrt 3) / 6
 SACCADE_STATUSES = (STATUS_FIXATED, STATUS_DISPARITY)  # answers a saccade aims at: they point at the target
@@ -163,8 +154,8 @@ class SaccadeRule:
             None: none (URDFs carry no acceleration limits), the velocity limits alone set the
             duration.
         min_duration: The shortest saccade [s].
-        reaim_interval: How often a saccade under way checks whether to re-aim [s] (at most
-            one re-aim per interval: a target that keeps moving adds a profile per interval).
+        reaim_interval: How often a saccade under way checks its end point [s], and how long
+            pursuit runs after one is ended before a new saccade may start.
     """
 
     threshold: float = DEFAULT_SACCADE_THRESHOLD
@@ -234,87 +225,28 @@ class TrackingStep:
 
 
 class Saccade:
-    """A saccade under way: minimum-jerk profiles added one after another (a re-aim adds one for
-    the change of goal), sampled every ``dt`` from its start.
-
-    Args:
-        q0: Readings at its start (sample 0), shape (n,).
-        goal: Where it ends, shape (n,).
-        n_samples: Its length in samples (the first profile's).
-    """
+    """A saccade under way: the minimum-jerk profile from ``q0`` to ``goal`` over ``n_samples``
+    samples of ``dt``, sampled from its start."""
 
     def __init__(self, q0: Array, goal: Array, n_samples: int) -> None:
         self.q0 = q0.copy()
         self.goal = goal.copy()
-        self.parts: list[tuple[int, Array, int]] = [(0, goal - q0, n_samples)]  # (start sample, delta, length)
+        self.n_samples = n_samples
         self.done = 0  # samples commanded
-        self.last_check = 0  # the sample of its start or of the last check of its aim
-
-    @property
-    def length(self) -> int:
-        """The sample at which every profile has ended."""
-        return max(k + n for k, _, n in self.parts)
-
-    def positions(self, k: Array, parts: list[tuple[int, Array, int]] | None = None) -> Array:
-        """Readings at samples ``k`` (shape (L,)), shape (L, n): ``q0`` plus every profile's
-        ``delta f(s)``, ``s = (k - start) / length`` clipped to [0, 1] (:func:`minimum_jerk`)."""
-        parts = self.parts if parts is None else parts
-        start = np.array([k0 for k0, _, _ in parts], dtype=float)
-        length = np.array([n for _, _, n in parts], dtype=float)
-        D = np.array([delta for _, delta, _ in parts])  # (parts, n)
-        f, _, _ = minimum_jerk((k[:, None] - start[None, :]) / length[None, :])
-        return self.q0[None, :] + f @ D  # type: ignore[no-any-return]
+        self.last_check = 0  # the sample of its start or of the last check of its end point
 
     def next_sample(self) -> Array:
         """The next commanded readings; the last sample is exactly ``goal``."""
         self.done += 1
-        if self.done >= self.length:
+        if self.done >= self.n_samples:
             return self.goal.copy()
-        # profiles that have ended are folded into q0 (their whole delta): the sum holds fewer terms
-        ended = [part for part in self.parts if part[0] + part[2] <= self.done]
-        if ended:
-            for _, delta, _ in ended:
-                self.q0 += delta
-            self.parts = [part for part in self.parts if part[0] + part[2] > self.done]
-        return self.positions(np.array([float(self.done)]))[0]
+        f, _, _ = minimum_jerk(self.done / self.n_samples)
+        return self.q0 + (self.goal - self.q0) * float(f)
 
     @property
     def finished(self) -> bool:
         """Whether its last sample has been commanded."""
-        return self.done >= self.length
-
-    def reaim(
-        self, goal: Array, rule: SaccadeRule, max_velocity: Array, dt: float, lower: Array, upper: Array
-    ) -> bool:
-        """Add a profile from the current sample to ``goal``: the fewest samples (the from-rest
-        duration of the change, then 1/4 longer a try, :data:`MAX_REAIM_TRIES` tries) at which
-        the sum's sampled readings stay within ``lower``..``upper`` and its speeds and
-        accelerations within the limits, from the last commanded sample to the new profile's
-        end (after that the sum moves as the plan before it, shifted by the change). False
-        (nothing added) if none does."""
-        delta = goal - self.goal
-        moving = max_velocity > 0.0
-        vlim = max_velocity[moving] * (1.0 + 1e-9)
-        amax = None
-        if rule.max_acceleration is not None:
-            amax = np.broadcast_to(np.asarray(rule.max_acceleration, dtype=float), delta.shape)[moving] * (1.0 + 1e-9)
-        lo, hi = lower[moving] - 1e-12, upper[moving] + 1e-12
-        n = rule.duration(delta, max_velocity, dt)
-        k = self.done
-        for _ in range(MAX_REAIM_TRIES):
-            parts = [*self.parts, (k, delta, n)]
-            ks = np.arange(max(k - 1, 0), k + n + 1, dtype=float)  # from the last two commanded samples on
-            q = self.positions(ks, parts)[:, moving]
-            v = np.diff(q, axis=0) / dt
-            ok = bool(np.all(np.abs(v) <= vlim) and np.all(q >= lo) and np.all(q <= hi))
-            if ok and amax is not None and q.shape[0] > 2:
-                ok = bool(np.all(np.abs(np.diff(q, n=2, axis=0)) / (dt * dt) <= amax))
-            if ok:
-                self.parts = parts
-                self.goal = goal.copy()
-                return True
-            n = int(math.ceil(1.25 * n))
-        return False
+        return self.done >= self.n_samples
 
 
 class GazeTracker:
@@ -369,6 +301,7 @@ class GazeTracker:
         self.q: Array | None = solver.check_q(q_current)  # commanded readings; None before the first sample
         self.goal: Array | None = None
         self._saccade: Saccade | None = None  # the saccade under way
+        self._pursuit_only = 0  # samples before a saccade may start again (after one was ended)
         self._reaim_samples = 0 if saccades is None else max(1, round(saccades.reaim_interval / self.dt))
 
     @property
@@ -396,27 +329,24 @@ class GazeTracker:
         sac = self._saccade
         if q_prev is not None and sac is not None and sac.done - sac.last_check >= self._reaim_samples:
             sac.last_check = sac.done
-        else:
-            sac = None  # not checked on this sample
-        if sac is not None and self._saccade_stale(p, sol):
-            # the target moved on: a profile towards its answer is added from this sample (or, towards
-            # an answer that does not point at it or with no length within the limits, pursuit)
-            assert self.saccades is not None
-            if not (aims and sac.reaim(goal, self.saccades, self.max_velocity, self.dt,
-                                       self.solver.lower, self.solver.upper)):
+            if not aims or self._saccade_stale(p, sol):
+                # the target moved on (or can no longer be pointed at): pursuit from here, a new
+                # saccade only after another interval
                 self._saccade = None
+                self._pursuit_only = self._reaim_samples
         in_saccade = False
         if q_prev is None:
             q_cmd = goal.copy()
         elif self._saccade is not None:
             q_cmd = self._saccade_sample()
             in_saccade = True
-        elif self.saccades is not None and aims and self._saccade_wanted(q_prev, p, sol):
+        elif self.saccades is not None and aims and self._pursuit_only == 0 and self._saccade_wanted(q_prev, p, sol):
             self._saccade = Saccade(q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt))
             q_cmd = self._saccade_sample()
             in_saccade = True
         else:
             q_cmd = self._pursuit(q_prev, goal)
+        self._pursuit_only = max(0, self._pursuit_only - 1)
         locked = bool(np.all(np.abs(goal - q_cmd) <= LOCK_TOL))
         if locked:
             q_cmd = goal.copy()
@@ -601,7 +531,6 @@ __all__ = [
     "WARM_START_ANGLE",
     "MIN_JERK_PEAK_ACCELERATION",
     "MIN_JERK_PEAK_VELOCITY",
-    "MAX_REAIM_TRIES",
     "DEFAULT_REAIM_INTERVAL",
     "SACCADE_STATUSES",
     "GazeTracker",
