@@ -241,17 +241,40 @@ def test_a_saccade_whose_target_moves_on_hands_over_to_pursuit(head, turn):
 
 @pytest.mark.parametrize("head", ["nominal"], indirect=True)
 def test_no_saccade_towards_a_target_the_head_cannot_point_at(head):
-    """A target behind the head: pursued towards the best answer, never a saccade; back ahead,
-    a saccade again."""
+    """A target behind the head: pursued towards the best answer, never a saccade; back ahead
+    once the head has come to rest there, a saccade again."""
     model, solver = head
     A, _ = _two_targets(model)
     behind = np.array([0.0, 2.0, 0.7])
     assert solver.solve(behind).status not in SACCADE_STATUSES
-    P = np.vstack([np.repeat(A[None], 20, axis=0), np.repeat(behind[None], 150, axis=0),
+    away = 20 + 1500
+    P = np.vstack([np.repeat(A[None], 20, axis=0), np.repeat(behind[None], away - 20, axis=0),
                    np.repeat(A[None], 800, axis=0)])
     tr = track(solver, P, DT, FAST * solver.velocity_limit, q_current=solver.solve(A).q, saccades=SaccadeRule())
-    assert not tr.saccade[:170].any() and not tr.reachable[20:170].any()
-    assert tr.saccade[170:].any() and tr.locked[-1]
+    assert not tr.saccade[:away].any() and not tr.reachable[20:away].any()
+    assert tr.locked[away - 1]  # at rest on the best answer behind
+    assert tr.saccade[away] and tr.locked[-1]
+
+
+@pytest.mark.parametrize("head", ["nominal"], indirect=True)
+def test_a_head_pursuing_at_speed_starts_no_saccade(head):
+    """A target running away faster than pursuit follows: the head pursues at its speed limit and
+    no saccade starts (one from rest would stop it, then be ended when its end point went stale:
+    stop and go every interval, worse than pursuit alone). The commands are pursuit's."""
+    model, solver = head
+    A, _ = _two_targets(model)
+    q0 = solver.solve(A).q
+    R, o = solver.camera_poses(q0)[0][:3, :3], solver.camera_poses(q0)[0][:3, 3]
+    d = float(np.linalg.norm(A - o))
+    t = np.arange(800) * DT
+    w = 2 * math.pi * 1.5  # [rad/s] about the left camera: faster than the head turns
+    P = o + d * (np.cos(w * t)[:, None] * (A - o) / d + np.sin(w * t)[:, None] * R[:, 0])
+    vmax = solver.velocity_limit
+    with_saccades = track(solver, P, DT, vmax, q_current=q0, saccades=SaccadeRule())
+    pursuit = track(solver, P, DT, vmax, q_current=q0)
+    assert not with_saccades.saccade.any()
+    np.testing.assert_array_equal(with_saccades.q, pursuit.q)
+    assert np.median(pursuit.pointing_error.max(axis=1)) > SaccadeRule().threshold  # it does run away
 
 
 MIMIC_HEAD = """<?xml version="1.0"?>

@@ -19,13 +19,16 @@ commanded readings towards that answer:
   least the rule's ``min_duration``. The last sample of a saccade is exactly the answer it aimed
   at; smooth pursuit takes over from there. A saccade starts only towards an answer that points
   at the target (status ``fixated``, or ``disparity`` on a head that cannot fixate exactly); an
-  unreachable target is pursued. A saccade whose target moves on ends: every
-  ``reaim_interval`` it checks its end point, and when that misses the sample's target by more
-  than the threshold beyond the sample's own answer, pursuit takes over from the commanded
-  readings (towards the new answer, velocity-limited), and a new saccade may start after
-  another ``reaim_interval``. Readings stay continuous and inside the limits; the commanded
-  velocity can step at that sample (by up to the joints' speed limits), as at any hand-over to
-  pursuit.
+  unreachable target is pursued. A saccade starts only from rest (the last commanded step at
+  most :data:`REST_FRACTION` of every joint's speed limit): a head already pursuing at speed
+  keeps pursuing, and a saccade's zero start velocity is the commanded one. A saccade whose
+  target moves on ends: every ``reaim_interval`` it checks its end point, and when that misses
+  the sample's target by more than the threshold (and :data:`STALE_FLOOR`) beyond the sample's
+  own answer, or that answer no longer points at the target, pursuit takes over from the
+  commanded readings (towards the new answer, velocity-limited), and a new saccade may start
+  after another ``reaim_interval``. Readings stay continuous and inside the limits; the
+  commanded velocity can step at that sample by up to twice the speed limits (a reversal at a
+  saccade's peak speed).
 
 Pursuit moves joints that move only together (a URDF ``<mimic>`` follower and its driver, the
 joints of a stated coupling: :attr:`WarmStartSolver.motion_groups`) by one common fraction of
@@ -61,6 +64,8 @@ SACCADE_STATUSES = (STATUS_FIXATED, STATUS_DISPARITY)  # answers a saccade aims 
 DEFAULT_SACCADE_THRESHOLD = math.radians(5.0)  # [rad]: pointing error that starts a saccade
 DEFAULT_SACCADE_MIN_DURATION = 0.02  # [s]: the shortest saccade
 DEFAULT_REAIM_INTERVAL = 0.02  # [s]: a saccade under way checks its aim this often
+REST_FRACTION = 0.1  # [-]: a saccade starts only when the last step is at most this of every joint's speed limit
+STALE_FLOOR = 1e-6  # [rad]: a saccade's end point must miss by more than this beyond the answer to end it (not rounding)
 WARM_START_ANGLE = math.radians(5.0)  # [rad]: a last answer missing the new target by more is not a start
 LOCK_TOL = 1e-15  # [rad]/[m]: commanded readings this close to the answer are locked on it
 
@@ -302,11 +307,12 @@ class GazeTracker:
         self.goal: Array | None = None
         self._saccade: Saccade | None = None  # the saccade under way
         self._pursuit_only = 0  # samples before a saccade may start again (after one was ended)
+        self._last_step: Array | None = None  # the last commanded change of the readings
         self._reaim_samples = 0 if saccades is None else max(1, round(saccades.reaim_interval / self.dt))
 
     @property
     def in_saccade(self) -> bool:
-        """Whether a saccade is under way (the next sample continues it)."""
+        """Whether a saccade is under way (the next sample continues it, unless its check ends it)."""
         return self._saccade is not None
 
     def step(self, p_world: ArrayLike) -> TrackingStep:
@@ -340,7 +346,8 @@ class GazeTracker:
         elif self._saccade is not None:
             q_cmd = self._saccade_sample()
             in_saccade = True
-        elif self.saccades is not None and aims and self._pursuit_only == 0 and self._saccade_wanted(q_prev, p, sol):
+        elif (self.saccades is not None and aims and self._pursuit_only == 0 and self._at_rest(q_prev)
+              and self._saccade_wanted(q_prev, p, sol)):
             self._saccade = Saccade(q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt))
             q_cmd = self._saccade_sample()
             in_saccade = True
@@ -350,6 +357,7 @@ class GazeTracker:
         locked = bool(np.all(np.abs(goal - q_cmd) <= LOCK_TOL))
         if locked:
             q_cmd = goal.copy()
+        self._last_step = q_cmd - q_prev if q_prev is not None else None
         self.q = q_cmd
         return TrackingStep(q_cmd, goal, sol.reachable, self.solver.pointing_errors(q_cmd, p), locked, in_saccade)
 
@@ -370,6 +378,12 @@ class GazeTracker:
         """The largest pointing error [rad] of readings ``q`` at target ``p``."""
         return float(np.max(self.solver.pointing_errors(q, p)))
 
+    def _at_rest(self, q_prev: Array) -> bool:
+        """Whether the last commanded step is at most :data:`REST_FRACTION` of every joint's
+        speed limit (a head pursuing at speed is not: a saccade from rest would stop it)."""
+        step = self._last_step
+        return step is None or bool(np.all(np.abs(step) <= REST_FRACTION * self._step_limit + 1e-15))
+
     def _saccade_wanted(self, q_prev: Array, p: Array, sol: GazeSolution) -> bool:
         assert self.saccades is not None
         gain = self._miss(q_prev, p) - float(np.max(sol.pointing_error))
@@ -380,7 +394,7 @@ class GazeTracker:
         ``p`` by more than the threshold beyond the sample's answer ``sol``."""
         assert self._saccade is not None and self.saccades is not None
         gain = self._miss(self._saccade.goal, p) - float(np.max(sol.pointing_error))
-        return gain > self.saccades.threshold
+        return gain > max(self.saccades.threshold, STALE_FLOOR)
 
     def _saccade_sample(self) -> Array:
         """The next sample of the saccade under way; its last one is exactly its end."""
@@ -532,6 +546,8 @@ __all__ = [
     "MIN_JERK_PEAK_ACCELERATION",
     "MIN_JERK_PEAK_VELOCITY",
     "DEFAULT_REAIM_INTERVAL",
+    "REST_FRACTION",
+    "STALE_FLOOR",
     "SACCADE_STATUSES",
     "GazeTracker",
     "SaccadeRule",
