@@ -346,7 +346,7 @@ class GazeTracker:
         elif self._saccade is not None:
             q_cmd = self._saccade_sample()
             in_saccade = True
-        elif (self.saccades is not None and aims and self._pursuit_only == 0 and self._at_rest(q_prev)
+        elif (self.saccades is not None and aims and self._pursuit_only == 0 and self._at_rest()
               and self._saccade_wanted(q_prev, p, sol)):
             self._saccade = Saccade(q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt))
             q_cmd = self._saccade_sample()
@@ -378,7 +378,7 @@ class GazeTracker:
         """The largest pointing error [rad] of readings ``q`` at target ``p``."""
         return float(np.max(self.solver.pointing_errors(q, p)))
 
-    def _at_rest(self, q_prev: Array) -> bool:
+    def _at_rest(self) -> bool:
         """Whether the last commanded step is at most :data:`REST_FRACTION` of every joint's
         speed limit (a head pursuing at speed is not: a saccade from rest would stop it)."""
         step = self._last_step
