@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")
     kinds = solver.joint_kinds
     # the joints on the cameras' paths; the others (a robot's arms, wheels) keep their readings
-    on_path = {solver.joint_names[i] for i in solver.chain.joint_index.tolist()}
+    on_path = {solver.joint_names[i] for i in solver.path_joints.tolist()}
     names = [name for name in sol.joints if name in on_path]
     width = max([16, *(len(name) for name in names)])
     for name in names:

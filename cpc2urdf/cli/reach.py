@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     region = reachable_region(solver, grid)
     # render both outputs before writing either: a failure leaves nothing behind
     moved = set(solver.free_joints("cyclopean").tolist())
-    held = [solver.joint_names[i] for i in solver.chain.joint_index.tolist() if i not in moved]
+    held = [solver.joint_names[i] for i in solver.path_joints.tolist() if i not in moved]
     notes = [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
              + f"; fixated: every axis within {math.degrees(solver.tolerance):.3g} deg"]
     png = region_figure_png(region, title=Path(args.robot).name, notes=notes)

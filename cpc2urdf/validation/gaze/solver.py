@@ -23,6 +23,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.sparse.csgraph import connected_components
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
@@ -342,23 +343,10 @@ class GazeSolver:
         """Robot joints (indices into ``q``) that move only together: a URDF ``<mimic>`` follower
         with its driver, the joints of a stated coupling (readings ``q = A u + b`` sharing an
         unknown). Groups of two or more joints; the other joints move on their own."""
-        A = np.abs(self.chain.robot_A) > 0.0
-        group = list(range(self.n))  # union-find over the joints that share an unknown
-
-        def root(i: int) -> int:
-            while group[i] != i:
-                group[i] = group[group[i]]
-                i = group[i]
-            return i
-
-        for col in A.T:
-            rows = np.flatnonzero(col).tolist()
-            for i in rows[1:]:
-                group[root(i)] = root(rows[0])
-        members: dict[int, list[int]] = {}
-        for i in range(self.n):
-            members.setdefault(root(i), []).append(i)
-        return tuple(np.array(g) for g in members.values() if len(g) > 1)
+        A = (np.abs(self.chain.robot_A) > 0.0).astype(float)
+        _, label = connected_components(A @ A.T > 0.0, directed=False)  # joints linked by a shared unknown
+        groups = (np.flatnonzero(label == k) for k in np.unique(label))
+        return tuple(g for g in groups if len(g) > 1)
 
     def evaluate(self, q: ArrayLike, p_world: ArrayLike, jacobian: bool = True) -> FixationState:
         """The fixation state (residual ``r``, shape (6,), ``|r|^2``, the target in each camera

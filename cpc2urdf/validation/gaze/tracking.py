@@ -79,16 +79,6 @@ class WarmStartSolver(Protocol):
         ...
 
     @property
-    def lower(self) -> Array:
-        """Per-joint lower limits [rad]/[m], shape (n,) (``upper``: the upper ones)."""
-        ...
-
-    @property
-    def upper(self) -> Array:
-        """Per-joint upper limits [rad]/[m], shape (n,)."""
-        ...
-
-    @property
     def velocity_limit(self) -> Array:
         """Per-joint URDF velocity limits [rad/s]/[m/s], shape (n,)."""
         ...
