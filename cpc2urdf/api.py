@@ -22,6 +22,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -62,6 +63,7 @@ from cpc2urdf.validation.gaze.chain import Coupling
 from cpc2urdf.validation.gaze.reach import Region, make_grid
 from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
 from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
+from cpc2urdf.validation.view.region import view_cameras
 
 PathLike = str | os.PathLike[str]
 
@@ -408,8 +410,10 @@ def write_view(
     package_dirs: Sequence[PathLike] = (),
     change_colours: bool = True,
     align: str = "auto",
+    region: Region | None = None,
 ) -> ViewSummary:
-    """A self-contained meshcat page of the robot (``cpc2urdf view --html``).
+    """A self-contained meshcat page of the robot (``cpc2urdf view --html``; with ``region``,
+    ``cpc2urdf reach --html``).
 
     Args:
         path: The HTML file to write (atomically).
@@ -424,15 +428,22 @@ def write_view(
             robot's base link), or ``"auto"`` (on the base only when the two worlds differ by at
             least 50 mm or 5 degrees, e.g. a model in the rig's world against its gravity-aligned
             export). The page's legend says which was used.
+        region: A reachable region of this robot (:func:`reachable_region`), drawn as one point
+            cloud per category (:mod:`cpc2urdf.validation.view.region`), with its legend.
     """
 
     def view_robot(ref: CPCModel | RobotRef) -> ViewRobot:
         src = ref.nominal_model() if isinstance(ref, RobotSpec) else ref
         return load_view_robot(src, package_dirs=tuple(os.fspath(p) for p in package_dirs))
 
-    return write_view_html(path, view_robot(robot), target=target, q=q,
+    shown = view_robot(robot)
+    options: dict[str, Any] = {}
+    if region is not None:
+        options["region"] = region
+        options["cameras"] = view_cameras(shown, region.cameras)
+    return write_view_html(path, shown, target=target, q=q,
                            ghost=None if ghost is None else view_robot(ghost), change_colours=change_colours,
-                           align=align)
+                           align=align, **options)
 
 
 __all__ = [

@@ -1,4 +1,6 @@
-"""``cpc2urdf reach ROBOT -o region.png``: draw where a head's cameras can fixate.
+"""``cpc2urdf reach ROBOT -o region.png [--json REGION.json] [--html REGION.html [--screenshot
+VIEW.png]]``: draw where a head's cameras can fixate, as slices (PNG) and in the 3D view (a
+self-contained meshcat page with the robot's own meshes and one point cloud per category).
 
 Exit codes: 0 the region was drawn, 2 bad input (one line, nothing written).
 """
@@ -58,6 +60,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     add_solver_options(p)
     p.add_argument("-o", "--output", required=True, metavar="REGION.png", help="the PNG to write")
     p.add_argument("--json", metavar="REGION.json", help="also write every target's point, status and error")
+    p.add_argument(
+        "--html",
+        metavar="REGION.html",
+        help="also write the region in the 3D view: one self-contained page (no server, no network) "
+        "with the robot from its URDF visuals and own meshes at the middle of its limits, and every "
+        "target as a point coloured by category (the PNG's colours; not fixated: translucent), each "
+        "category a node under 'reach' in meshcat's controls",
+    )
+    p.add_argument("--screenshot", metavar="VIEW.png", help="with --html: also render the page in headless Chromium")
+    p.add_argument(
+        "--package-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="with --html: where package://NAME/... meshes are found (as for cpc2urdf view); repeatable",
+    )
     p.set_defaults(run=run)
 
 
@@ -74,15 +92,31 @@ def run(args: argparse.Namespace) -> int:
         reachable_region,
         region_figure_png,
     )
+    from cpc2urdf.validation.view import load_view_robot, screenshot_html, static_view_html
+    from cpc2urdf.validation.view.region import view_cameras
 
     if Path(args.output).suffix.lower() != ".png":
         raise ConfigurationError(f"-o {args.output}: the region is drawn as PNG, expected a .png path")
     check_grid_args(args.range[0], args.range[1], args.samples)
     check_output_path(args.output)
-    if args.json:
-        check_output_path(args.json)
-        if Path(args.json).resolve() == Path(args.output).resolve():
-            raise ConfigurationError(f"--json {args.json}: the same file as -o; give the JSON its own path")
+    if args.screenshot and not args.html:
+        raise ConfigurationError("--screenshot needs --html (the page to render)")
+    if args.package_path and not args.html:
+        raise ConfigurationError("--package-path needs --html (meshes are drawn only in the 3D view)")
+    if args.screenshot and Path(args.screenshot).suffix.lower() != ".png":
+        raise ConfigurationError(f"--screenshot {args.screenshot}: the view is rendered as PNG, expected a .png path")
+    outputs = {"-o": args.output, "--json": args.json, "--html": args.html, "--screenshot": args.screenshot}
+    seen: dict[Path, str] = {}
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        check_output_path(path)
+        where = Path(path).resolve()
+        if where in seen:
+            raise ConfigurationError(f"{option} {path}: the same file as {seen[where]}; give each output its own path")
+        seen[where] = option
+    # the robot as drawn (its meshes) loads before the grid is solved: a missing mesh fails at once
+    view_robot = load_view_robot(args.robot, package_dirs=args.package_path) if args.html else None
     solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
@@ -99,9 +133,20 @@ def run(args: argparse.Namespace) -> int:
                "tolerance_rad": solver.tolerance, "moving": list(solver.moving),
                "min_distance_m": solver.min_distance, **region.to_json()}
         files[args.json] = dumps(doc)
+    view = None
+    if view_robot is not None:
+        page, view = static_view_html(view_robot, region=region, region_notes=notes,
+                                      cameras=view_cameras(view_robot, region.cameras))
+        files[args.html] = page
     write_all_atomic(files)
     counts = region.counts()
     total = region.points.shape[0]
     parts = ", ".join(f"{n} {c.replace('_', ' ')}" for c, n in counts.items() if n)
     print(f"{args.output}: {total} targets ({args.grid} grid): {parts}")
+    if view is not None:
+        print(f"{args.html}: the region in the 3D view (self-contained; open it in a browser)")
+        if view.meshes is not None and view.meshes.n_meshes:
+            print(f"  {view.meshes.format()}")
+        if args.screenshot:
+            print(f"wrote {screenshot_html(args.html, args.screenshot)}")
     return 0

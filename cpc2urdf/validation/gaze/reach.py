@@ -168,17 +168,22 @@ class HeadFrame:
         return (p_world - self.origin) @ self.R_world_head
 
 
-def head_frame(solver: BatchSolver) -> HeadFrame:
-    """The head frame at the home posture (the middle of every joint's limits; 0 for a joint
-    without finite limits), module docstring."""
+def home_posture(lower: Array, upper: Array) -> Array:
+    """The home posture: the middle of every joint's limits, 0 for a joint without finite limits
+    [rad]/[m], shape (n,)."""
+    limited = np.isfinite(lower) & np.isfinite(upper)
+    return np.where(limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0)
+
+
+def head_frame_at(model: Any, cameras: Sequence[str], q: Array) -> HeadFrame:
+    """The head frame (module docstring) of the camera frames ``cameras`` of the Pinocchio
+    ``model`` at readings ``q`` (shape (nq,)): origin at the cameras' mid-point, x along the sum
+    of their optical (z) axes, z against the sum of their image y axes (REP-103: y down)."""
     import pinocchio as pin
 
-    model = solver.model
     data = model.createData()
-    limited = np.isfinite(solver.lower) & np.isfinite(solver.upper)
-    q = np.where(limited, 0.5 * (np.where(limited, solver.lower, 0.0) + np.where(limited, solver.upper, 0.0)), 0.0)
-    pin.framesForwardKinematics(model, data, q)
-    poses = [data.oMf[model.getFrameId(name)].homogeneous for name in solver.cameras]
+    pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
+    poses = [data.oMf[model.getFrameId(name)].homogeneous for name in cameras]
     origin = np.mean([T[:3, 3] for T in poses], axis=0)
     x = np.sum([T[:3, 2] for T in poses], axis=0)
     down = np.sum([T[:3, 1] for T in poses], axis=0)
@@ -186,6 +191,11 @@ def head_frame(solver: BatchSolver) -> HeadFrame:
     z = -(down - (down @ x) * x)
     z = z / np.linalg.norm(z)
     return HeadFrame(origin, np.column_stack([x, np.cross(z, x), z]))
+
+
+def head_frame(solver: BatchSolver) -> HeadFrame:
+    """The head frame of the solver's cameras at the home posture (:func:`home_posture`)."""
+    return head_frame_at(solver.model, solver.cameras, home_posture(solver.lower, solver.upper))
 
 
 @dataclass(frozen=True)
@@ -280,6 +290,7 @@ class Region:
         error: The largest pointing error over the cameras per target [rad], shape (N,).
         q: The answer's readings [rad]/[m], shape (N, n).
         joint_names: The columns of ``q``.
+        cameras: The camera optical frames the grid's head frame was taken from.
     """
 
     grid: Grid
@@ -289,6 +300,7 @@ class Region:
     error: Array
     q: Array
     joint_names: tuple[str, ...]
+    cameras: tuple[str, ...]
 
     def colours(self) -> Array:
         """An RGB colour in [0, 1] per target (by category), shape (N, 3): for a 3D view."""
@@ -345,6 +357,7 @@ def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True
         error=np.max(ans.pointing_error, axis=1),
         q=ans.q,
         joint_names=tuple(solver.joint_names),
+        cameras=tuple(solver.cameras),
     )
 
 
@@ -460,6 +473,8 @@ __all__ = [
     "check_grid_args",
     "draw_region",
     "head_frame",
+    "head_frame_at",
+    "home_posture",
     "make_grid",
     "reachable_region",
     "region_figure_png",

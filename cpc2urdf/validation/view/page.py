@@ -3,13 +3,15 @@
 The page holds meshcat's viewer script inline, followed by every scene command inline (decoded
 synchronously, no ``fetch``), animations last, so it opens without a network and without a
 server and renders completely in the first frame. A view with change colours (a calibrated robot
-and its nominal ghost) also carries their legend (:func:`~.change.legend_html`), over the scene.
+and its nominal ghost) also carries their legend (:func:`~.change.legend_html`), over the scene,
+and a view of a reachable region its own (:func:`~.region.region_legend_html`).
 """
 
 from __future__ import annotations
 
 import base64
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -19,6 +21,7 @@ from meshcat.servers.tree import SceneTree, find_node, walk
 
 from cpc2urdf.fileio import write_atomic
 from cpc2urdf.validation.view.change import LEGEND_CSS, legend_html
+from cpc2urdf.validation.view.region import REGION_LEGEND_CSS, region_legend_html
 from cpc2urdf.validation.view.robot import RobotSource, ViewRobot
 from cpc2urdf.validation.view.scene import build_view
 from cpc2urdf.validation.view.summary import ViewSummary
@@ -92,7 +95,7 @@ class StaticWindow:
         return _PAGE.format(
             viewer_js=viewer_js.replace("</script", "<\\/script"),
             blobs=blobs,
-            css=LEGEND_CSS if self.overlay else "",
+            css=LEGEND_CSS + "\n" + REGION_LEGEND_CSS if self.overlay else "",
             overlay=self.overlay,
         )
 
@@ -129,17 +132,24 @@ def static_visualizer() -> meshcat.Visualizer:
     return meshcat.Visualizer(window=StaticWindow())
 
 
-def static_view_html(robot: ViewRobot | RobotSource, **options: Any) -> tuple[str, ViewSummary]:
-    """The self-contained HTML page of :func:`build_view` (same options) and its summary."""
+def static_view_html(
+    robot: ViewRobot | RobotSource, *, region_notes: Sequence[str] = (), **options: Any
+) -> tuple[str, ViewSummary]:
+    """The self-contained HTML page of :func:`build_view` (same options) and its summary; with a
+    ``region``, its legend carries ``region_notes`` (lines: which joints moved, the tolerance)."""
     vis = static_visualizer()
     summary = build_view(vis, robot, **options)
+    overlay = []
     if summary.link_changes and summary.ghost is not None:
-        vis.window.overlay = legend_html(
+        overlay.append(legend_html(
             summary.link_changes,
             os.path.basename(summary.ghost),
             summary.unmatched_links,
             anchor=summary.ghost_anchor if summary.ghost_aligned else None,
-        )
+        ))
+    if summary.region is not None:
+        overlay.append(region_legend_html(summary.region, region_notes))
+    vis.window.overlay = "\n".join(overlay)
     return vis.static_html(), summary
 
 

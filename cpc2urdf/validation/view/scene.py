@@ -15,6 +15,8 @@ target and optical rays, a ghost model, measured plate positions, and a joint sw
 - with measurements: each measured plate origin (small dark sphere) and a bar from it to the
   model's prediction at that record's joint readings, coloured by length (yellow = smallest,
   red = largest); bars are magnified so that the longest is visible (the factor is reported);
+- with a reachable region (``cpc2urdf reach --html``): its targets as one point cloud per
+  category under ``/meshcat/reach`` (:mod:`.region`), framed whole;
 - an animation (meshcat's "Animations" panel, paused at t = 0): a sweep of one joint at a time
   around the shown configuration, which also works in the static HTML page.
 """
@@ -41,6 +43,7 @@ from cpc2urdf.model import BASE
 from cpc2urdf.transforms import Array, inverse, rotation_error
 from cpc2urdf.urdf_robot import urdf_source
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
+from cpc2urdf.validation.gaze.reach import Region
 from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
 from cpc2urdf.validation.view.change import (
     CHANGE_GHOST_RGBA,
@@ -57,6 +60,7 @@ from cpc2urdf.validation.view.geometry import (
     residual_rgba,
     translation,
 )
+from cpc2urdf.validation.view.region import draw_region
 from cpc2urdf.validation.view.robot import RobotSource, ViewRobot, load_view_robot
 from cpc2urdf.validation.view.summary import ViewSummary
 
@@ -116,8 +120,9 @@ def build_view(
     upright: bool = True,
     change_colours: bool = True,
     align: str = "auto",
+    region: Region | None = None,
 ) -> ViewSummary:
-    """Draw the head (and target, ghost, measurements) into a meshcat visualizer.
+    """Draw the head (and target, ghost, measurements, reachable region) into a meshcat visualizer.
 
     Args:
         vis: A ``meshcat.Visualizer`` (served, or :func:`static_visualizer` for a page).
@@ -141,6 +146,10 @@ def build_view(
             :attr:`ViewSummary.link_changes`); False keeps the URDF colours.
         align: How the ghost is placed: ``"auto"``, ``"base"`` or ``"world"``
             (:func:`ghost_alignment`; :attr:`ViewSummary.alignment` says what was done).
+        region: A reachable region of this robot's cameras
+            (:func:`cpc2urdf.validation.gaze.reach.reachable_region`), drawn as points
+            (:func:`cpc2urdf.validation.view.region.draw_region`, numbers in
+            :attr:`ViewSummary.region`); the view frames it whole.
 
     Raises:
         UnknownNameError: A camera or measured frame, or a joint, the robot does not have.
@@ -217,6 +226,10 @@ def build_view(
 
     if measurements is not None:
         points.extend(_draw_measurements(vis["measurements"], robot, measurements, summary))
+
+    if region is not None:
+        summary.region, outer = draw_region(vis, robot, region)
+        points.extend(outer)
 
     if sweep:
         _sweep(vis, robot, q0, ghost_robot, T_align)

@@ -13,6 +13,7 @@ from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution
 from cpc2urdf.validation.view.camera import VIEWER_FOV
 from cpc2urdf.validation.view.change import CHANGE_GREEN, CHANGE_RED, LinkChange
 from cpc2urdf.validation.view.meshes import VisualMeshes
+from cpc2urdf.validation.view.region import RegionShown
 
 
 @dataclass
@@ -45,6 +46,7 @@ class ViewSummary:
         ghost_aligned: Whether the ghost was put on the anchor (links compared relative to it);
             False: compared in one world.
         meshes: What the robot's visuals are made of (mesh count, files, triangles).
+        region: The reachable region drawn (counts, point size, where it was put), or None.
     """
 
     robot: str
@@ -67,6 +69,7 @@ class ViewSummary:
     ghost_offset: Array = field(default_factory=lambda: np.eye(4))
     ghost_aligned: bool = False
     meshes: VisualMeshes | None = None
+    region: RegionShown | None = None
 
     def largest_changes(self, n: int = 5) -> list[LinkChange]:
         """The ``n`` links calibration moved most, largest first."""
@@ -140,6 +143,8 @@ class ViewSummary:
                 f"measurements: {self.n_measured} plate positions, residual rms {1e3 * self.residual_rms:.3g} mm,"
                 f" max {1e3 * self.residual_max:.3g} mm (bars magnified x{self.residual_scale:.3g})"
             )
+        if self.region is not None:
+            lines.append(self.region.format())
         if self.skipped_visuals:
             lines.append(
                 f"note: {self.skipped_visuals} URDF visuals could not be drawn (unsupported shape or mesh)"

@@ -1,0 +1,186 @@
+"""The reachable region in the 3D view (cpc2urdf/validation/view/region.py, ``cpc2urdf reach
+--html``): every target drawn where the solver put it, in its category's colour, checked in the
+recorded scene; a model identified from a user's URDF (drawn in the URDF's root frame and names)
+gets the region at the same place relative to its camera; and the page in headless Chromium shows
+the fixated points where the viewer camera projects them."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+from test_view import SIZE, decoded, hue_mask, require_chromium
+
+from cpc2urdf.api import write_view
+from cpc2urdf.cli import main
+from cpc2urdf.robot_ref import load_model
+from cpc2urdf.validation.gaze import GazeSolver, solver_for
+from cpc2urdf.validation.gaze.reach import (
+    CATEGORY_COLOURS,
+    REGION_CATEGORIES,
+    home_posture,
+    make_grid,
+    reachable_region,
+)
+from cpc2urdf.validation.view import (
+    build_view,
+    load_view_robot,
+    screenshot_html,
+    static_view_html,
+    static_visualizer,
+)
+from cpc2urdf.validation.view.region import OTHER_OPACITY, REGION_NODE, framing_points, point_size
+
+
+def clouds(window: object) -> dict[str, dict[str, np.ndarray | dict[str, object]]]:
+    """Category -> {"position": (K, 3), "color": (K, 3), "material": dict} of the drawn region."""
+    out = {}
+    for path, entry in decoded(window).items():
+        parts = path.split("/")
+        if len(parts) == 4 and parts[2] == REGION_NODE and "object" in entry:
+            obj = entry["object"]
+            attrs = obj["geometries"][0]["data"]["attributes"]  # type: ignore[index]
+            arrays = {k: np.frombuffer(attrs[k]["array"].data, dtype=np.float32).reshape(-1, 3)  # type: ignore[index]
+                      for k in ("position", "color")}
+            out[parts[3]] = {**arrays, "material": obj["materials"][0]}  # type: ignore[index]
+    return out
+
+
+@pytest.fixture(scope="module")
+def nominal_region():
+    solver = GazeSolver.from_model(load_model("iis_head"))
+    return reachable_region(solver, make_grid(solver, "shell", 0.3, 2.5, (4, 9, 7)))
+
+
+def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
+    """The IIS-head's spec: solver and view load one model, so each category's cloud holds
+    exactly its targets, at their points (float32), in the PNG's colour; the fixated ones opaque,
+    the others translucent; the summary and the page's legend give the counts."""
+    r = nominal_region
+    vis = static_visualizer()
+    page, summary = static_view_html(load_view_robot("iis_head"), region=r, sweep=False,
+                                     region_notes=["moving pan, tilt"])
+    build_view(vis, "iis_head", region=r, sweep=False)
+    drawn = clouds(vis.window)
+    counts = r.counts()
+    assert 0 < counts["fixated"] < r.points.shape[0] and counts["joint_limits"] > 0
+    assert set(drawn) == {c for c, k in counts.items() if k}
+    for k, name in enumerate(REGION_CATEGORIES):
+        if name not in drawn:
+            continue
+        mask = r.category == k
+        np.testing.assert_allclose(drawn[name]["position"], r.points[mask], atol=1e-6)
+        np.testing.assert_allclose(drawn[name]["color"], np.tile(CATEGORY_COLOURS[name], (mask.sum(), 1)), atol=1e-7)
+        material = drawn[name]["material"]
+        assert material["size"] == pytest.approx(point_size(r))
+        assert material.get("opacity", 1.0) == (1.0 if name == "fixated" else OTHER_OPACITY)
+    assert summary.region is not None and summary.region.counts == counts
+    assert summary.region.offset < 1e-12  # one model: the same world
+    assert f"fixated: {counts['fixated']}" in page and f"joint limits: {counts['joint_limits']}" in page
+    assert "moving pan, tilt" in page and "reachable region" in summary.format()
+    # the shell's smallest spacing near its middle: 20 deg of azimuth at 1.4 m (vs 0.733 m of distance)
+    assert point_size(r) == pytest.approx(0.4 * 1.4 * math.radians(20.0))
+
+
+def test_the_view_frames_the_whole_region(nominal_region):
+    """The outer faces of the grid frame the view: every target's extreme along each head axis
+    is among them, and every target projects into the screenshot's window."""
+    r = nominal_region
+    outer = framing_points(r, r.points)
+    ph = r.grid.frame.from_world(outer)
+    assert np.allclose(ph.max(axis=0), r.grid.points_head.max(axis=0))
+    assert np.allclose(ph.min(axis=0), r.grid.points_head.min(axis=0))
+    _, summary = static_view_html(load_view_robot("iis_head"), region=r, sweep=False)
+    uv = np.array([summary.pixel(p, *SIZE) for p in r.points])
+    assert (uv >= 0).all() and (uv[:, 0] <= SIZE[0]).all() and (uv[:, 1] <= SIZE[1]).all()
+
+
+def test_a_model_identified_from_a_users_urdf_gets_the_region_on_its_camera(tmp_path: Path) -> None:
+    """TIAGo identified with a plate (its frame pointed as the 'camera'): the view draws the
+    written-back URDF in its root link's frame and names (torso_lift_joint, not torso_lift); the
+    region is drawn at the same place relative to that frame as the solver put it relative to the
+    model's, at the home posture; the change of world between the two is reported."""
+    from test_view_meshes import SHARE
+    from test_view_writeback import identified_tiago
+
+    _, model, model_file = identified_tiago(tmp_path)
+    solver = solver_for(model_file, ("calib_plate",))
+    r = reachable_region(solver, make_grid(solver, "shell", 0.5, 2.0, (3, 7, 5)))
+    robot = load_view_robot(model_file, package_dirs=[SHARE])
+    assert "torso_lift_joint" in robot.joint_names and "torso_lift" in solver.joint_names
+    vis = static_visualizer()
+    summary = build_view(vis, robot, region=r, cameras=("calib_plate",), sweep=False)
+    drawn = np.concatenate([c["position"] for c in clouds(vis.window).values()])
+    order = np.concatenate([np.flatnonzero(r.category == k) for k in range(len(REGION_CATEGORIES))])
+    T_view = robot.link_poses(robot.default_q())["calib_plate"]
+    T_model = model.fk(home_posture(solver.lower, solver.upper), ["calib_plate"])["calib_plate"]
+    in_view = (drawn.astype(float) - T_view[:3, 3]) @ T_view[:3, :3]
+    in_model = (r.points[order] - T_model[:3, 3]) @ T_model[:3, :3]
+    np.testing.assert_allclose(in_view, in_model, atol=2e-6)  # float32 points
+    moved = np.linalg.norm((r.points[order] - drawn.astype(float)), axis=1).max()
+    assert summary.region is not None and summary.region.offset == pytest.approx(moved, abs=1e-5)
+
+
+def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``reach --html --screenshot`` writes the PNG, the page and its picture; in the picture the
+    fixated targets are green where the viewer camera projects them, and the translucent
+    joint-limit ones blue; the legend is in the page."""
+    require_chromium()
+    args = ["--samples", "4", "9", "7", "--range", "0.3", "2.5"]
+    png, page, shot = tmp_path / "r.png", tmp_path / "r.html", tmp_path / "v.png"
+    assert main(["reach", "iis_head", *args, "-o", str(png), "--html", str(page), "--screenshot", str(shot)]) == 0
+    out = capsys.readouterr().out
+    assert f"{page}: the region in the 3D view" in out and str(shot) in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.html", "r.png", "v.png"]
+    text = page.read_text()
+    assert "reachable region" in text and "fixated: " in text and "moving pan, tilt, vergence_left" in text
+    # the same page through the API, for where each target lands on screen
+    solver = GazeSolver.from_model(load_model("iis_head"))
+    r = reachable_region(solver, make_grid(solver, "shell", 0.3, 2.5, (4, 9, 7)))
+    summary = write_view(tmp_path / "api.html", "iis_head", region=r)
+    assert summary.region is not None and summary.region.counts == r.counts()
+    img = matplotlib.image.imread(str(screenshot_html(tmp_path / "api.html", tmp_path / "api.png", size=SIZE)))[..., :3]
+    # green, also seen through the translucent blue points in front ((0.15, 0.58, 0.33))
+    green = (img[..., 1] > img[..., 0] + 0.2) & (img[..., 1] > img[..., 2] + 0.1)
+    blue = hue_mask(img, CATEGORY_COLOURS["joint_limits"], 15.0) | (
+        (img[..., 2] > img[..., 0] + 0.08) & (img[..., 2] > img[..., 1] + 0.02))  # blended with the background
+    # the nearest shell (0.3 m) lies among the head's parts, which hide some of it
+    away = np.linalg.norm(r.grid.points_head, axis=1) > 0.5
+    fixated = (r.category == REGION_CATEGORIES.index("fixated")) & away
+
+    def hits(mask: np.ndarray, points: np.ndarray) -> float:
+        ok = []
+        for p in points:
+            u, v = summary.pixel(p, *SIZE)
+            if 40 < v < SIZE[1] - 130 and 4 < u < SIZE[0] - 4:  # away from the controls bar and the legends
+                ok.append(mask[int(v) - 2 : int(v) + 3, int(u) - 2 : int(u) + 3].any())
+        assert len(ok) > 20
+        return float(np.mean(ok))
+
+    assert hits(green, r.points[fixated]) > 0.95
+    limits = (r.category == REGION_CATEGORIES.index("joint_limits")) & away
+    assert hits(blue, r.points[limits]) > 0.5  # translucent, some behind fixated ones
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--screenshot", "{d}/v.png"], "--screenshot needs --html"),
+        (["--package-path", "{d}"], "--package-path needs --html"),
+        (["--html", "{d}/r.png"], "the same file as -o"),
+        (["--html", "{d}/v.html", "--json", "{d}/v.html"], "the same file as --json"),
+        (["--html", "{d}/v.html", "--screenshot", "{d}/v.jpg"], "expected a .png path"),
+        (["--html", "{d}/missing/v.html"], "missing"),
+    ],
+)
+def test_cli_reach_html_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
+                                  match: str) -> None:
+    argv = ["reach", "iis_head", "--samples", "2", "3", "3", "-o", str(tmp_path / "r.png"),
+            *(a.format(d=tmp_path) for a in extra)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and match in err[0], err
+    assert list(tmp_path.iterdir()) == []  # nothing written
