@@ -88,7 +88,8 @@ def test_bench_fk_small(capsys):
 def test_demo_runs(demo_run):
     d, code, out = demo_run
     assert code == 0, out
-    for name in ("nominal.urdf", "stage1_model.json", "model.json", "head.urdf", "view.html"):
+    for name in ("nominal.urdf", "stage1_model.json", "model.json", "head.urdf", "view.html", "reach.png",
+                 "reach.html"):
         assert (d / name).is_file(), name
     assert out.count("result: all parsers agree with the CPC model") == 3
     assert "predicted rms" in out and "policy cyclopean:" in out

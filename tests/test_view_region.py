@@ -32,7 +32,13 @@ from cpc2urdf.validation.view import (
     static_view_html,
     static_visualizer,
 )
-from cpc2urdf.validation.view.region import OTHER_OPACITY, REGION_NODE, framing_points, point_size
+from cpc2urdf.validation.view.region import (
+    OTHER_OPACITY,
+    POINTED,
+    REGION_NODE,
+    framing_points,
+    point_size,
+)
 
 
 def clouds(window: object) -> dict[str, dict[str, np.ndarray | dict[str, object]]]:
@@ -58,7 +64,7 @@ def nominal_region():
 def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
     """The IIS-head's spec: solver and view load one model, so each category's cloud holds
     exactly its targets, at their points (float32), in the PNG's colour; the fixated ones opaque,
-    the others translucent; the summary and the page's legend give the counts."""
+    the others (not pointed at) translucent; the summary and the page's legend give the counts."""
     r = nominal_region
     vis = static_visualizer()
     page, summary = static_view_html(load_view_robot("iis_head"), region=r, sweep=False,
@@ -76,7 +82,7 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
         np.testing.assert_allclose(drawn[name]["color"], np.tile(CATEGORY_COLOURS[name], (mask.sum(), 1)), atol=1e-7)
         material = drawn[name]["material"]
         assert material["size"] == pytest.approx(point_size(r))
-        assert material.get("opacity", 1.0) == (1.0 if name == "fixated" else OTHER_OPACITY)
+        assert material.get("opacity", 1.0) == (1.0 if name in POINTED else OTHER_OPACITY)
     assert summary.region is not None and summary.region.counts == counts
     assert summary.region.offset < 1e-12  # one model: the same world
     assert f"fixated: {counts['fixated']}" in page and f"joint limits: {counts['joint_limits']}" in page

@@ -12,7 +12,8 @@ its artefacts into the output folder, and the demo stops at the first stage that
    refinement of AX = ZB; ``handeye --method all`` shows Tsai, the paper's choice, and the others
    side by side) -> calibrated model with camera frames -> ``export`` -> ``check``;
 6. ``gaze``: fixate targets with the calibrated head (Pinocchio IK);
-7. ``view``: a self-contained meshcat page of the calibrated head fixating a target.
+7. ``view``: a self-contained meshcat page of the calibrated head fixating a target;
+8. ``reach``: where the calibrated head can point its eyes, as slices (PNG) and in the 3D view.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "demo",
         help="run the pipeline on the built-in IIS-head example",
         description="Run the pipeline on the built-in IIS-head example (simulate -> identify -> "
-        "export -> check -> accuracy -> hand-eye -> gaze -> view) and write every artefact into "
+        "export -> check -> accuracy -> hand-eye -> gaze -> view -> reach) and write every artefact into "
         "the output folder.",
     )
     p.add_argument("-o", "--output", default="demo-out", help="output folder (default: demo-out)")
@@ -204,6 +205,13 @@ def run(args: argparse.Namespace) -> int:
     if find_chromium():
         screenshot_html(out / "view.html", out / "view.png")
         print(f"   wrote {out / 'view.png'} (headless Chromium screenshot)")
+    st.done()
+
+    st.start("reach: where the calibrated head can point its eyes (slices as PNG, and in the 3D view)")
+    shot = ["--screenshot", f"{d}/reach_view.png"] if find_chromium() else []
+    _cli("reach", f"{d}/model.json", "-o", f"{d}/reach.png", "--html", f"{d}/reach.html", *shot)
+    print("   (disparity: pointed at with the head facing the target, each eye off by the vertical\n"
+          "    disparity of this calibrated head; joint limits: the tilt or pan range stops it)")
     st.done()
 
     print(f"\ndemo finished: the calibrated head is {d}/model.json and {d}/head.urdf")

@@ -65,7 +65,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         metavar="REGION.html",
         help="also write the region in the 3D view: one self-contained page (no server, no network) "
         "with the robot from its URDF visuals and own meshes at the middle of its limits, and every "
-        "target as a point coloured by category (the PNG's colours; not fixated: translucent), each "
+        "target as a point coloured by category (the PNG's colours; not pointed at: translucent), each "
         "category a node under 'reach' in meshcat's controls",
     )
     p.add_argument("--screenshot", metavar="VIEW.png", help="with --html: also render the page in headless Chromium")

@@ -1,7 +1,8 @@
 """The reachable region in the 3D view (``cpc2urdf reach --html``): a
 :class:`~cpc2urdf.validation.gaze.reach.Region` drawn as one point cloud per category, in the
-PNG's colours, under ``/meshcat/reach/<category>`` (each can be hidden in meshcat's "Open
-Controls"), and its legend for the static page.
+PNG's colours (fixated and disparity opaque, the others translucent), under
+``/meshcat/reach/<category>`` (each can be hidden in meshcat's "Open Controls"), and its legend
+for the static page.
 
 Where the points go: the grid lies in the *head frame* of the solver's model
 (``Region.grid.points_head``: the cameras' mid-point at the home posture, x along their mean
@@ -37,7 +38,8 @@ from cpc2urdf.validation.view.geometry import hex_colour
 from cpc2urdf.validation.view.robot import ViewRobot
 
 REGION_NODE = "reach"  # /meshcat/reach/<category>
-OTHER_OPACITY = 0.3  # [0-1]: targets not fixated are drawn translucent, so the fixated volume shows through
+POINTED = ("fixated", "disparity")  # categories the head points at (disparity: as well as it can): drawn opaque
+OTHER_OPACITY = 0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
 POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing near its middle
 MAX_FRAMING_POINTS = 20_000  # [-]: the region's outer points that the viewer camera frames, at most
 
@@ -134,7 +136,7 @@ def draw_region(vis: meshcat.Visualizer, robot: ViewRobot, region: Region) -> tu
             continue
         P = points[mask].T.astype(np.float32)
         C = np.repeat(np.array(CATEGORY_COLOURS[name], dtype=np.float32)[:, None], P.shape[1], axis=1)
-        opacity = 1.0 if name == "fixated" else OTHER_OPACITY
+        opacity = 1.0 if name in POINTED else OTHER_OPACITY
         vis[REGION_NODE][name].set_object(mg.Points(mg.PointsGeometry(P, C), _PointsMaterial(size, opacity)))
     offset = float(np.max(np.linalg.norm(points - region.points, axis=1))) if points.size else 0.0
     shown = RegionShown(region.counts(), region.grid.kind, size, frame, offset)
@@ -189,6 +191,7 @@ REGION_LEGEND_CSS = """#cpc2urdf-region { position: absolute; right: 8px; bottom
 __all__ = [
     "MAX_FRAMING_POINTS",
     "OTHER_OPACITY",
+    "POINTED",
     "POINT_FRACTION",
     "REGION_LEGEND_CSS",
     "REGION_NODE",
