@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 from collections.abc import Sequence
 from typing import Any, NoReturn
@@ -88,4 +89,40 @@ def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float
     return finite_numbers(values, f"{option} values")
 
 
-__all__ = ["NEGATIVE_NUMBER", "OneLineParser", "exit_code", "finite_numbers", "joint_readings"]
+# Options that name a file a command writes (``--json`` only where it takes a path, not a flag).
+OUTPUT_OPTIONS = {"output": "-o", "json": "--json", "html": "--html", "screenshot": "--screenshot"}
+
+
+def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
+    """:class:`ConfigurationError` when a file a command would write (:data:`OUTPUT_OPTIONS`) is
+    one it reads: any other argument naming an existing file (``export model.json -o model.json``
+    replaced the model with a URDF). A command that updates a file in place on purpose lists the
+    arguments it may replace in ``args.may_replace`` (``handeye --model M -o M``).
+    """
+    outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str) and v}
+    if not outputs:
+        return
+    allowed = set(getattr(args, "may_replace", ()))
+    inputs: dict[str, str] = {}
+    for dest, value in vars(args).items():
+        if dest in OUTPUT_OPTIONS or dest in allowed or dest in ("run", "command", "may_replace"):
+            continue
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, str) and v and os.path.isfile(v):
+                inputs.setdefault(os.path.realpath(v), dest)
+    for opt, path in outputs.items():
+        read = inputs.get(os.path.realpath(path))
+        if read is not None:
+            raise ConfigurationError(f"{opt} {path}: the same file as the input {read.replace('_', '-')}; "
+                                     "give the output its own path")
+
+
+__all__ = [
+    "NEGATIVE_NUMBER",
+    "OUTPUT_OPTIONS",
+    "OneLineParser",
+    "check_outputs_are_not_inputs",
+    "exit_code",
+    "finite_numbers",
+    "joint_readings",
+]

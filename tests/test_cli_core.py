@@ -1,6 +1,7 @@
 """CLI of the foundation: export, check, bench fk, demo; exit codes and one-line errors."""
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -114,3 +115,39 @@ def test_study_and_bench_options_return_exit_codes(group, capsys):
     assert code == 2 and err.count("\n") == 1 and "unrecognized arguments: --bogus" in err
     code, out, _ = run([*group, "--help"], capsys)
     assert code == 0 and "usage:" in out
+
+
+@pytest.mark.parametrize(
+    "argv, option, read",
+    [
+        (["export", "{m}", "-o", "{m}"], "-o", "model"),  # replaced the model with a URDF
+        (["identify", "{ms}", "-o", "{ms}"], "-o", "measurements"),
+        (["view", "{m}", "--html", "{m}"], "--html", "robot"),
+        (["view", "{u}", "--html", "{d}/v.html", "--screenshot", "{u}"], "--screenshot", "robot"),
+        (["reach", "{m}", "-o", "{d}/r.png", "--json", "{m}"], "--json", "robot"),
+        (["reach", "{m}", "-o", "{d}/r.png", "--html", "{d}/./model.json"], "--html", "robot"),
+    ],
+)
+def test_no_command_writes_over_a_file_it_reads(demo_run, tmp_path, capsys, argv, option, read):
+    """An output naming an input file is refused before anything runs, and the input is intact."""
+    d, _, _ = demo_run
+    files = {"m": tmp_path / "model.json", "ms": tmp_path / "measurements.json", "u": tmp_path / "head.urdf"}
+    for key, source in (("m", d / "model.json"), ("ms", d / "sim" / "measurements.json"), ("u", d / "head.urdf")):
+        shutil.copy(source, files[key])
+    before = {p: p.read_bytes() for p in files.values()}
+    args = [a.format(d=tmp_path, **{k: str(v) for k, v in files.items()}) for a in argv]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{option} " in err[0] and f"the same file as the input {read}" in err[0], err
+    assert {p: p.read_bytes() for p in files.values()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["head.urdf", "measurements.json", "model.json"]
+
+
+def test_handeye_may_update_its_model_in_place(demo_run, tmp_path, capsys):
+    """``handeye --model M -o M`` adds the camera frame to M, as its help says (atomically)."""
+    d, _, _ = demo_run
+    model = tmp_path / "stage1.json"
+    shutil.copy(d / "stage1_model.json", model)
+    assert main(["handeye", str(d / "handeye_camera_left_optical.json"), "--model", str(model), "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert "camera_left_optical" in [f.name for f in load_model(model).structure.frames]

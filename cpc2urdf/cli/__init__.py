@@ -5,7 +5,9 @@ which registers the command and sets ``run=<function(args) -> int>``. Heavy impo
 ``run`` so that ``cpc2urdf --help`` stays fast.
 
 Exit codes: 0 success, 1 a check failed (e.g. ``check`` found a discrepancy), 2 bad input (one
-line on stderr naming the problem, no traceback, no partial output file).
+line on stderr naming the problem, no traceback, no partial output file). No command writes over
+a file it reads (:func:`cpc2urdf.argparsing.check_outputs_are_not_inputs`), except where it
+updates one on purpose (``handeye --model M -o M``).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from cpc2urdf.argparsing import OneLineParser, exit_code
+from cpc2urdf.argparsing import OneLineParser, check_outputs_are_not_inputs, exit_code
 from cpc2urdf.errors import Cpc2UrdfError
 
 # Sub-command modules, in the order `--help` lists them.
@@ -63,6 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as e:  # --help, --version, or a usage error
         return exit_code(e)
     try:
+        check_outputs_are_not_inputs(args)
         return int(args.run(args))
     except SystemExit as e:  # a study's or benchmark's own parser (--help, a usage error)
         return exit_code(e)

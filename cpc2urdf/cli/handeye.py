@@ -42,7 +42,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    help="keep the result of poses the consistency gate finds inconsistent with A X = Z B "
                    "(inverted or transposed poses, wrong units, pairing off by one, outliers; see "
                    "docs/handeye.md): the diagnosis is printed as a warning and stored in the model")
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, may_replace=("model",))  # -o MODEL: the model updated in place, atomically
 
 
 def _pose_line(T: Any) -> str:
