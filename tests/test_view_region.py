@@ -18,10 +18,10 @@ from cpc2urdf.api import write_view
 from cpc2urdf.cli import main
 from cpc2urdf.robot_ref import load_model
 from cpc2urdf.validation.gaze import GazeSolver, solver_for
+from cpc2urdf.validation.gaze.chain import mid_limits
 from cpc2urdf.validation.gaze.reach import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,
-    home_posture,
     make_grid,
     reachable_region,
 )
@@ -37,22 +37,27 @@ from cpc2urdf.validation.view.region import (
     POINTED,
     REGION_NODE,
     framing_points,
-    point_size,
+    point_sizes,
 )
 
 
-def clouds(window: object) -> dict[str, dict[str, np.ndarray | dict[str, object]]]:
-    """Category -> {"position": (K, 3), "color": (K, 3), "material": dict} of the drawn region."""
-    out = {}
+def clouds(window: object) -> dict[str, list[dict[str, object]]]:
+    """Category -> its drawn clouds in grid order (``reach/<category>/<k>``, k the grid's first
+    axis), each {"k": k, "position": (K, 3), "color": (K, 3), "material": dict}."""
+    out: dict[str, list[dict[str, object]]] = {}
     for path, entry in decoded(window).items():
         parts = path.split("/")
-        if len(parts) == 4 and parts[2] == REGION_NODE and "object" in entry:
+        if len(parts) == 5 and parts[2] == REGION_NODE and "object" in entry:
             obj = entry["object"]
             attrs = obj["geometries"][0]["data"]["attributes"]  # type: ignore[index]
             arrays = {k: np.frombuffer(attrs[k]["array"].data, dtype=np.float32).reshape(-1, 3)  # type: ignore[index]
                       for k in ("position", "color")}
-            out[parts[3]] = {**arrays, "material": obj["materials"][0]}  # type: ignore[index]
-    return out
+            out.setdefault(parts[3], []).append({"k": int(parts[4]), **arrays, "material": obj["materials"][0]})  # type: ignore[index]
+    return {c: sorted(v, key=lambda e: e["k"]) for c, v in out.items()}
+
+
+def positions(cloud_list: list[dict[str, object]]) -> np.ndarray:
+    return np.concatenate([c["position"] for c in cloud_list])  # type: ignore[misc]
 
 
 @pytest.fixture(scope="module")
@@ -74,21 +79,30 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
     counts = r.counts()
     assert 0 < counts["fixated"] < r.points.shape[0] and counts["joint_limits"] > 0
     assert set(drawn) == {c for c, k in counts.items() if k}
+    distance = np.linalg.norm(r.grid.points_head, axis=1)
+    sizes = point_sizes(r)
     for k, name in enumerate(REGION_CATEGORIES):
         if name not in drawn:
             continue
         mask = r.category == k
-        np.testing.assert_allclose(drawn[name]["position"], r.points[mask], atol=1e-6)
-        np.testing.assert_allclose(drawn[name]["color"], np.tile(CATEGORY_COLOURS[name], (mask.sum(), 1)), atol=1e-7)
-        material = drawn[name]["material"]
-        assert material["size"] == pytest.approx(point_size(r))
-        assert material.get("opacity", 1.0) == (1.0 if name in POINTED else OTHER_OPACITY)
+        np.testing.assert_allclose(positions(drawn[name]), r.points[mask], atol=1e-6)
+        for cloud in drawn[name]:
+            P = cloud["position"]
+            np.testing.assert_allclose(cloud["color"], np.tile(CATEGORY_COLOURS[name], (len(P), 1)), atol=1e-7)
+            # each cloud holds one shell: its distance, its point size
+            d = distance[mask][np.isclose(distance[mask], r.grid.axes[0][cloud["k"]])]
+            assert len(d) == len(P)
+            material = cloud["material"]
+            assert material["size"] == pytest.approx(sizes[cloud["k"]])
+            assert material.get("opacity", 1.0) == (1.0 if name in POINTED else OTHER_OPACITY)
     assert summary.region is not None and summary.region.counts == counts
     assert summary.region.offset < 1e-12  # one model: the same world
     assert f"fixated: {counts['fixated']}" in page and f"joint limits: {counts['joint_limits']}" in page
     assert "moving pan, tilt" in page and "reachable region" in summary.format()
-    # the shell's smallest spacing near its middle: 20 deg of azimuth at 1.4 m (vs 0.733 m of distance)
-    assert point_size(r) == pytest.approx(0.4 * 1.4 * math.radians(20.0))
+    # 0.4 of the smaller angular spacing (elevation: 20 deg; azimuth 22.5 deg) at each distance,
+    # at most 0.05 of the far range (2.5 m)
+    np.testing.assert_allclose(sizes, np.minimum(0.4 * r.grid.axes[0] * math.radians(20.0), 0.125))
+    assert summary.region.point_sizes == pytest.approx((sizes.min(), sizes.max()))
 
 
 def test_the_view_frames_the_whole_region(nominal_region):
@@ -119,15 +133,18 @@ def test_a_model_identified_from_a_users_urdf_gets_the_region_on_its_camera(tmp_
     assert "torso_lift_joint" in robot.joint_names and "torso_lift" in solver.joint_names
     vis = static_visualizer()
     summary = build_view(vis, robot, region=r, cameras=("calib_plate",), sweep=False)
-    drawn = np.concatenate([c["position"] for c in clouds(vis.window).values()])
+    drawn_clouds = clouds(vis.window)
+    drawn = np.concatenate([positions(drawn_clouds[c]) for c in REGION_CATEGORIES if c in drawn_clouds])
     order = np.concatenate([np.flatnonzero(r.category == k) for k in range(len(REGION_CATEGORIES))])
     T_view = robot.link_poses(robot.default_q())["calib_plate"]
-    T_model = model.fk(home_posture(solver.lower, solver.upper), ["calib_plate"])["calib_plate"]
+    T_model = model.fk(mid_limits(solver.lower, solver.upper), ["calib_plate"])["calib_plate"]
     in_view = (drawn.astype(float) - T_view[:3, 3]) @ T_view[:3, :3]
     in_model = (r.points[order] - T_model[:3, 3]) @ T_model[:3, :3]
     np.testing.assert_allclose(in_view, in_model, atol=2e-6)  # float32 points
     moved = np.linalg.norm((r.points[order] - drawn.astype(float)), axis=1).max()
     assert summary.region is not None and summary.region.offset == pytest.approx(moved, abs=1e-5)
+    assert moved > 1e-3 and f"{1e3 * summary.region.offset:.3g} mm from the solver's" in summary.region.moved()
+    assert summary.region.moved() in summary.format()
 
 
 def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -176,10 +193,11 @@ def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys
     [
         (["--screenshot", "{d}/v.png"], "--screenshot needs --html"),
         (["--package-path", "{d}"], "--package-path needs --html"),
-        (["--html", "{d}/r.png"], "the same file as -o"),
+        (["--html", "{d}/v.html", "--screenshot", "{d}/r.png"], "the same file as -o"),
         (["--html", "{d}/v.html", "--json", "{d}/v.html"], "the same file as --json"),
         (["--html", "{d}/v.html", "--screenshot", "{d}/v.jpg"], "expected a .png path"),
         (["--html", "{d}/missing/v.html"], "missing"),
+        (["--html", "{d}/v.txt"], "expected an .html path"),
     ],
 )
 def test_cli_reach_html_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
@@ -190,3 +208,37 @@ def test_cli_reach_html_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0], err
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_a_far_region_moves_the_viewer_cameras_far_plane() -> None:
+    """meshcat's camera draws nothing beyond 100 m: a grid out to 1 km moves the far plane to
+    twice the farthest target's distance from the viewer camera; the head's usual region keeps
+    meshcat's own."""
+    from cpc2urdf.validation.view.camera import VIEWER_FAR
+
+    solver = GazeSolver.from_model(load_model("iis_head"))
+    far: dict[float, object] = {}
+    for reach_far in (3.0, 1000.0):
+        r = reachable_region(solver, make_grid(solver, "shell", reach_far / 10, reach_far, (2, 5, 3)))
+        vis = static_visualizer()
+        summary = build_view(vis, "iis_head", region=r, sweep=False)
+        props = decoded(vis.window)["/Cameras/default/rotated/<object>"]["properties"]
+        far[reach_far] = [p["value"] for p in props if p["property"] == "far"]  # type: ignore[index]
+        farthest = np.linalg.norm(r.points - summary.camera_position, axis=1).max()
+    assert far[3.0] == []
+    assert len(far[1000.0]) == 1 and far[1000.0][0] == pytest.approx(2 * farthest, rel=1e-6)  # type: ignore[index]
+    assert far[1000.0][0] > 10 * VIEWER_FAR  # type: ignore[index]
+
+
+def test_cli_reach_screenshot_without_chromium_fails_before_solving(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    from cpc2urdf.validation.gaze import reach
+
+    monkeypatch.setenv("CPC2URDF_CHROMIUM", str(tmp_path / "no-chromium"))
+    monkeypatch.setattr(reach, "reachable_region", lambda *a, **k: pytest.fail("solved before checking Chromium"))
+    argv = ["reach", "iis_head", "-o", str(tmp_path / "r.png"), "--html", str(tmp_path / "r.html"),
+            "--screenshot", str(tmp_path / "v.png")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--screenshot needs Chromium" in err[0]
+    assert list(tmp_path.iterdir()) == []

@@ -92,8 +92,9 @@ def run(args: argparse.Namespace) -> int:
         reachable_region,
         region_figure_png,
     )
-    from cpc2urdf.validation.view import load_view_robot, screenshot_html, static_view_html
+    from cpc2urdf.validation.view import load_view_robot, static_view_html
     from cpc2urdf.validation.view.region import view_cameras
+    from cpc2urdf.validation.view.screenshot import require_chromium, screenshot_page
 
     if Path(args.output).suffix.lower() != ".png":
         raise ConfigurationError(f"-o {args.output}: the region is drawn as PNG, expected a .png path")
@@ -103,8 +104,12 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
     if args.package_path and not args.html:
         raise ConfigurationError("--package-path needs --html (meshes are drawn only in the 3D view)")
+    if args.html and Path(args.html).suffix.lower() not in (".html", ".htm"):
+        raise ConfigurationError(f"--html {args.html}: the view is a web page, expected an .html path")
     if args.screenshot and Path(args.screenshot).suffix.lower() != ".png":
         raise ConfigurationError(f"--screenshot {args.screenshot}: the view is rendered as PNG, expected a .png path")
+    if args.screenshot:
+        require_chromium()  # before the solve, not after it
     outputs = {"-o": args.output, "--json": args.json, "--html": args.html, "--screenshot": args.screenshot}
     seen: dict[Path, str] = {}
     for option, path in outputs.items():
@@ -120,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
-    # render both outputs before writing either: a failure leaves nothing behind
+    # render every output before writing any: a failure leaves nothing behind
     moved = set(solver.free_joints("cyclopean").tolist())
     held = [solver.joint_names[i] for i in solver.path_joints.tolist() if i not in moved]
     notes = [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
@@ -138,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
         page, view = static_view_html(view_robot, region=region, region_notes=notes,
                                       cameras=view_cameras(view_robot, region.cameras))
         files[args.html] = page
+        if args.screenshot:
+            files[args.screenshot] = screenshot_page(page)
     write_all_atomic(files)
     counts = region.counts()
     total = region.points.shape[0]
@@ -147,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.html}: the region in the 3D view (self-contained; open it in a browser)")
         if view.meshes is not None and view.meshes.n_meshes:
             print(f"  {view.meshes.format()}")
+        if view.region is not None and view.region.moved():
+            print(f"  {view.region.moved()}")
         if args.screenshot:
-            print(f"wrote {screenshot_html(args.html, args.screenshot)}")
+            print(f"{args.screenshot}: the page in headless Chromium")
     return 0

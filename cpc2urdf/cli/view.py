@@ -112,11 +112,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.validation.view import load_view_robot, screenshot_html, write_view_html
+    from cpc2urdf.fileio import check_output_path, write_all_atomic
+    from cpc2urdf.validation.view import load_view_robot, static_view_html
     from cpc2urdf.validation.view.robot import own_nominal
+    from cpc2urdf.validation.view.screenshot import require_chromium, screenshot_page
 
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
+    for path in (args.html, args.screenshot):
+        if path:
+            check_output_path(path)
+    if args.screenshot:
+        require_chromium()
     if len(args.cameras) > 2:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     target = finite_numbers(args.target, "--target X Y Z") if args.target else None
@@ -138,12 +145,16 @@ def run(args: argparse.Namespace) -> int:
         options["measurements"] = load_measurements(args.measurements)
 
     if args.html:
-        summary = write_view_html(args.html, robot, sweep=not args.no_sweep, **options)
+        # the page and its picture are rendered before either is written: a failure leaves neither
+        page, summary = static_view_html(robot, sweep=not args.no_sweep, **options)
+        files: dict[str, str | bytes] = {args.html: page}
+        if args.screenshot:
+            files[args.screenshot] = screenshot_page(page)
+        write_all_atomic(files)
         print(summary.format())
         print(f"wrote {args.html} (self-contained; open it in a browser)")
         if args.screenshot:
-            png = screenshot_html(args.html, args.screenshot)
-            print(f"wrote {png}")
+            print(f"wrote {args.screenshot}")
         return 0
     return _serve(robot, options, sweep=not args.no_sweep)
 

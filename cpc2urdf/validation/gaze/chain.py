@@ -398,10 +398,16 @@ def _cyclopean_placement(model: pin.Model, fids: list[int], jid: int) -> tuple[A
     return np.column_stack([x, y, z]), o
 
 
+def mid_limits(lower: Array, upper: Array) -> Array:
+    """The middle of every joint's limits ``lower``..``upper`` [rad]/[m], shape (n,); 0 for a
+    joint without finite limits (continuous)."""
+    finite = np.isfinite(lower) & np.isfinite(upper)
+    return np.where(finite, 0.5 * (np.where(finite, lower, 0.0) + np.where(finite, upper, 0.0)), 0.0)
+
+
 def home_readings(robot: PinocchioRobot) -> Array:
-    """The middle of every joint's limits; 0 for a joint without finite limits (continuous)."""
-    finite = np.isfinite(robot.lower) & np.isfinite(robot.upper)
-    return np.where(finite, 0.5 * (np.where(finite, robot.lower, 0.0) + np.where(finite, robot.upper, 0.0)), 0.0)
+    """The home posture: :func:`mid_limits` of the robot's joints."""
+    return mid_limits(robot.lower, robot.upper)
 
 
 def check_joint_names(robot: PinocchioRobot, names: Sequence[str]) -> None:
@@ -425,4 +431,5 @@ __all__ = [
     "build_chain",
     "check_joint_names",
     "home_readings",
+    "mid_limits",
 ]

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.fileio import check_output_path, write_atomic
 from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze.chain import mid_limits
 from cpc2urdf.validation.gaze.result import (
     STATUS_BEHIND,
     STATUS_FIXATED,
@@ -168,13 +169,6 @@ class HeadFrame:
         return (p_world - self.origin) @ self.R_world_head
 
 
-def home_posture(lower: Array, upper: Array) -> Array:
-    """The home posture: the middle of every joint's limits, 0 for a joint without finite limits
-    [rad]/[m], shape (n,)."""
-    limited = np.isfinite(lower) & np.isfinite(upper)
-    return np.where(limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0)
-
-
 def head_frame_at(model: Any, cameras: Sequence[str], q: Array) -> HeadFrame:
     """The head frame (module docstring) of the camera frames ``cameras`` of the Pinocchio
     ``model`` at readings ``q`` (shape (nq,)): origin at the cameras' mid-point, x along the sum
@@ -194,8 +188,9 @@ def head_frame_at(model: Any, cameras: Sequence[str], q: Array) -> HeadFrame:
 
 
 def head_frame(solver: BatchSolver) -> HeadFrame:
-    """The head frame of the solver's cameras at the home posture (:func:`home_posture`)."""
-    return head_frame_at(solver.model, solver.cameras, home_posture(solver.lower, solver.upper))
+    """The head frame of the solver's cameras at the home posture (the middle of every joint's
+    limits: :func:`~cpc2urdf.validation.gaze.chain.mid_limits`)."""
+    return head_frame_at(solver.model, solver.cameras, mid_limits(solver.lower, solver.upper))
 
 
 @dataclass(frozen=True)
@@ -474,7 +469,6 @@ __all__ = [
     "draw_region",
     "head_frame",
     "head_frame_at",
-    "home_posture",
     "make_grid",
     "reachable_region",
     "region_figure_png",

@@ -16,6 +16,7 @@ from cpc2urdf.validation.view.robot import ViewRobot
 
 FRAME_MARGIN = 0.02  # [m]: space around what frames the view
 VIEWER_FOV = 75.0  # [deg]: meshcat's default perspective camera
+VIEWER_FAR = 100.0  # [m]: meshcat's default camera draws nothing farther than this
 
 
 def up_direction(
@@ -95,7 +96,9 @@ def place_camera(
     """Turn and shift the scene so that ``up`` points up on screen, then place meshcat's camera
     beside, a little behind and above ``forward`` (the gaze direction), centred on ``points``
     (shape (K, 3), world [m]) and just far enough for all of them (plus :data:`FRAME_MARGIN`) to
-    fit meshcat's field of view in a 4:3 window.
+    fit meshcat's field of view in a 4:3 window. Where the farthest point lies beyond half of
+    meshcat's far clipping plane (:data:`VIEWER_FAR`), the plane is moved to twice its distance
+    (a reachable region out to 100 m or more was cut off or not drawn at all).
 
     Returns:
         The camera position and the point it looks at, both in world [m], shape (3,).
@@ -140,7 +143,10 @@ def place_camera(
     vis["/Cameras/default/rotated/<object>"].set_property(
         "position", [offset[0], offset[2], -offset[1]]
     )
+    farthest = float(np.max(np.linalg.norm(P - (centre + offset), axis=1)))
+    if 2.0 * farthest > VIEWER_FAR:  # three.js reads the camera's far plane again every frame
+        vis["/Cameras/default/rotated/<object>"].set_property("far", 2.0 * farthest)
     return R.T @ (centre + offset), R.T @ centre
 
 
-__all__ = ["FRAME_MARGIN", "VIEWER_FOV", "focus_points", "place_camera", "up_direction"]
+__all__ = ["FRAME_MARGIN", "VIEWER_FAR", "VIEWER_FOV", "focus_points", "place_camera", "up_direction"]

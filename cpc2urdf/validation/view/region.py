@@ -1,8 +1,9 @@
 """The reachable region in the 3D view (``cpc2urdf reach --html``): a
 :class:`~cpc2urdf.validation.gaze.reach.Region` drawn as one point cloud per category, in the
 PNG's colours (fixated and disparity opaque, the others translucent), under
-``/meshcat/reach/<category>`` (each can be hidden in meshcat's "Open Controls"), and its legend
-for the static page.
+``/meshcat/reach/<category>/<k>`` (a cloud per sample ``k`` of the grid's first axis, each with
+its point size; a category can be hidden in meshcat's "Open Controls"), and its legend for the
+static page.
 
 Where the points go: the grid lies in the *head frame* of the solver's model
 (``Region.grid.points_head``: the cameras' mid-point at the home posture, x along their mean
@@ -40,7 +41,9 @@ from cpc2urdf.validation.view.robot import ViewRobot
 REGION_NODE = "reach"  # /meshcat/reach/<category>
 POINTED = ("fixated", "disparity")  # categories the head points at (disparity: as well as it can): drawn opaque
 OTHER_OPACITY = 0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
-POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing near its middle
+POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing where it lies
+MAX_POINT_FRACTION = 0.05  # [-]: and at most this fraction of the grid's far range (coarse grids)
+SAME_WORLD = 1e-6  # [m]: drawn points this close to the solver's are in its world
 MAX_FRAMING_POINTS = 20_000  # [-]: the region's outer points that the viewer camera frames, at most
 
 
@@ -51,7 +54,8 @@ class RegionShown:
     Attributes:
         counts: Targets per category (:data:`~cpc2urdf.validation.gaze.reach.REGION_CATEGORIES`).
         grid: The grid's kind (``"shell"``, ``"box"``).
-        point_size: Side of each drawn point [m].
+        point_sizes: Side of the smallest and of the largest drawn points [m] (a shell's grow
+            with distance: :func:`point_sizes`).
         frame: The head frame in the view's world (where the grid was put).
         offset: Largest distance [m] between a target as drawn and as the solver placed it in its
             own world: 0 up to rounding when the two are one model, the change of world otherwise
@@ -60,7 +64,7 @@ class RegionShown:
 
     counts: dict[str, int]
     grid: str
-    point_size: float
+    point_sizes: tuple[float, float]
     frame: HeadFrame
     offset: float
 
@@ -72,8 +76,19 @@ class RegionShown:
     def format(self) -> str:
         """One line for a terminal."""
         parts = ", ".join(f"{k} {c.replace('_', ' ')}" for c, k in self.counts.items() if k)
-        return (f"reachable region: {self.n} targets ({self.grid} grid): {parts}; one point cloud per "
-                f"category under '{REGION_NODE}' in meshcat's controls (points {1e3 * self.point_size:.3g} mm)")
+        lo, hi = (1e3 * s for s in self.point_sizes)
+        size = f"{lo:.3g} mm" if hi - lo <= 1e-9 * hi else f"{lo:.3g}-{hi:.3g} mm"
+        line = (f"reachable region: {self.n} targets ({self.grid} grid): {parts}; drawn as points of {size}, "
+                f"one category a node under '{REGION_NODE}' in meshcat's controls")
+        return line + (f"; {self.moved()}" if self.moved() else "")
+
+    def moved(self) -> str:
+        """How far the drawn points lie from where the solver (and ``reach --json``) put them,
+        when the view draws the robot in another world; empty when it is the solver's."""
+        if self.offset <= SAME_WORLD:
+            return ""
+        return (f"the view draws the robot in its URDF's root link frame: the points lie up to "
+                f"{1e3 * self.offset:.3g} mm from the solver's (and --json's) world, at the same place on the head")
 
 
 def view_cameras(robot: ViewRobot, cameras: Sequence[str]) -> tuple[str, ...]:
@@ -95,15 +110,20 @@ def region_in_view(robot: ViewRobot, region: Region) -> tuple[Array, HeadFrame]:
     return frame.to_world(region.grid.points_head), frame
 
 
-def point_size(region: Region) -> float:
-    """Side [m] of a drawn point: :data:`POINT_FRACTION` of the grid's smallest spacing near its
-    middle (a shell's angular spacing taken at its middle distance)."""
+def point_sizes(region: Region) -> Array:
+    """Side [m] of the drawn points at each sample of the grid's first axis, shape (K,):
+    :data:`POINT_FRACTION` of the spacing there, at most :data:`MAX_POINT_FRACTION` of the far
+    range. A shell's points at distance ``d`` take the smaller of its two angular spacings at
+    ``d`` (so the near shells stay clear of the head and the far ones are not dashes); a box's
+    the smallest of its three spacings."""
     a, b, c = (np.asarray(x, dtype=float) for x in region.grid.axes)
     steps = [float(np.ptp(x)) / (x.size - 1) for x in (a, b, c)]
+    cap = MAX_POINT_FRACTION * float(np.max(np.abs(a)))
     if region.grid.kind == "shell":
-        middle = float(np.median(a))
-        steps = [steps[0], middle * steps[1], middle * steps[2]]
-    return POINT_FRACTION * min(s for s in steps if s > 0.0)
+        size = POINT_FRACTION * a * min(steps[1], steps[2])
+    else:
+        size = np.full(a.size, POINT_FRACTION * min(steps))
+    return np.minimum(size, cap)
 
 
 def framing_points(region: Region, points: Array) -> Array:
@@ -118,9 +138,10 @@ def framing_points(region: Region, points: Array) -> Array:
     return np.asarray(P[::step])
 
 
-def draw_region(vis: meshcat.Visualizer, robot: ViewRobot, region: Region) -> tuple[RegionShown, Array]:
-    """Draw ``region`` into ``vis``: under ``/meshcat/reach/<category>`` one point cloud per
-    category that has targets, coloured as the PNG (:data:`CATEGORY_COLOURS`).
+def draw_region_points(vis: meshcat.Visualizer, robot: ViewRobot, region: Region) -> tuple[RegionShown, Array]:
+    """Draw ``region`` into ``vis``: under ``/meshcat/reach/<category>`` the category's targets,
+    coloured as the PNG (:data:`CATEGORY_COLOURS`), as one point cloud per sample of the grid's
+    first axis (``<category>/<k>``: a shell's distances, each with its point size).
 
     Returns:
         What was drawn, and the points to frame (world) [m], shape (K, 3) (:func:`framing_points`).
@@ -129,17 +150,19 @@ def draw_region(vis: meshcat.Visualizer, robot: ViewRobot, region: Region) -> tu
         UnknownNameError: The drawn robot lacks the region's camera frames.
     """
     points, frame = region_in_view(robot, region)
-    size = point_size(region)
+    sizes = point_sizes(region)
+    first = np.unravel_index(np.arange(points.shape[0]), region.grid.shape)[0]  # index along the first axis
     for k, name in enumerate(REGION_CATEGORIES):
-        mask = region.category == k
-        if not mask.any():
-            continue
-        P = points[mask].T.astype(np.float32)
-        C = np.repeat(np.array(CATEGORY_COLOURS[name], dtype=np.float32)[:, None], P.shape[1], axis=1)
         opacity = 1.0 if name in POINTED else OTHER_OPACITY
-        vis[REGION_NODE][name].set_object(mg.Points(mg.PointsGeometry(P, C), _PointsMaterial(size, opacity)))
+        for j, size in enumerate(sizes.tolist()):
+            mask = (region.category == k) & (first == j)
+            if not mask.any():
+                continue
+            P = points[mask].T.astype(np.float32)
+            C = np.repeat(np.array(CATEGORY_COLOURS[name], dtype=np.float32)[:, None], P.shape[1], axis=1)
+            vis[REGION_NODE][name][str(j)].set_object(mg.Points(mg.PointsGeometry(P, C), _PointsMaterial(size, opacity)))
     offset = float(np.max(np.linalg.norm(points - region.points, axis=1))) if points.size else 0.0
-    shown = RegionShown(region.counts(), region.grid.kind, size, frame, offset)
+    shown = RegionShown(region.counts(), region.grid.kind, (float(sizes.min()), float(sizes.max())), frame, offset)
     return shown, framing_points(region, points)
 
 
@@ -190,15 +213,17 @@ REGION_LEGEND_CSS = """#cpc2urdf-region { position: absolute; right: 8px; bottom
 
 __all__ = [
     "MAX_FRAMING_POINTS",
+    "MAX_POINT_FRACTION",
     "OTHER_OPACITY",
     "POINTED",
     "POINT_FRACTION",
     "REGION_LEGEND_CSS",
     "REGION_NODE",
+    "SAME_WORLD",
     "RegionShown",
-    "draw_region",
+    "draw_region_points",
     "framing_points",
-    "point_size",
+    "point_sizes",
     "region_in_view",
     "region_legend_html",
     "view_cameras",

@@ -60,7 +60,7 @@ from cpc2urdf.validation.view.geometry import (
     residual_rgba,
     translation,
 )
-from cpc2urdf.validation.view.region import draw_region
+from cpc2urdf.validation.view.region import draw_region_points
 from cpc2urdf.validation.view.robot import RobotSource, ViewRobot, load_view_robot
 from cpc2urdf.validation.view.summary import ViewSummary
 
@@ -148,7 +148,7 @@ def build_view(
             (:func:`ghost_alignment`; :attr:`ViewSummary.alignment` says what was done).
         region: A reachable region of this robot's cameras
             (:func:`cpc2urdf.validation.gaze.reach.reachable_region`), drawn as points
-            (:func:`cpc2urdf.validation.view.region.draw_region`, numbers in
+            (:func:`cpc2urdf.validation.view.region.draw_region_points`, numbers in
             :attr:`ViewSummary.region`); the view frames it whole.
 
     Raises:
@@ -228,7 +228,7 @@ def build_view(
         points.extend(_draw_measurements(vis["measurements"], robot, measurements, summary))
 
     if region is not None:
-        summary.region, outer = draw_region(vis, robot, region)
+        summary.region, outer = draw_region_points(vis, robot, region)
         points.extend(outer)
 
     if sweep:

@@ -9,7 +9,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from cpc2urdf.errors import InputFileError, OutputError
+from cpc2urdf.errors import ConfigurationError, InputFileError, OutputError
 
 CHROMIUM_FLAGS = (
     "--headless",
@@ -114,4 +114,28 @@ def screenshot_html(
     return png
 
 
-__all__ = ["CHROMIUM_FLAGS", "NO_NETWORK_FLAG", "find_chromium", "screenshot_html"]
+def screenshot_page(html_text: str, *, size: tuple[int, int] = (1024, 768), budget_ms: int = 2000,
+                    timeout: float = 120.0) -> bytes:
+    """The PNG bytes of a page given as text (:func:`screenshot_html` on a temporary copy), so a
+    command can render before it writes anything: a failed screenshot leaves no page behind.
+
+    Raises:
+        OutputError: As :func:`screenshot_html`.
+    """
+    with tempfile.TemporaryDirectory(prefix="cpc2urdf-page-") as folder:
+        page = Path(folder) / "page.html"
+        page.write_text(html_text, encoding="utf-8")
+        png = screenshot_html(page, Path(folder) / "page.png", size=size, budget_ms=budget_ms, timeout=timeout)
+        return png.read_bytes()
+
+
+def require_chromium(option: str = "--screenshot") -> None:
+    """:class:`ConfigurationError` naming ``option`` when no Chromium is found (checked before a
+    long computation whose picture it would take)."""
+    if find_chromium() is None:
+        raise ConfigurationError(f"{option} needs Chromium, and none was found: install it (apt-get install "
+                                 "chromium) or set CPC2URDF_CHROMIUM")
+
+
+__all__ = ["CHROMIUM_FLAGS", "NO_NETWORK_FLAG", "find_chromium", "require_chromium", "screenshot_html",
+           "screenshot_page"]
