@@ -91,30 +91,90 @@ def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float
 
 # Options that name a file a command writes (``--json`` only where it takes a path, not a flag).
 OUTPUT_OPTIONS = {"output": "-o", "json": "--json", "html": "--html", "screenshot": "--screenshot"}
+MAX_REFERENCING_FILE = 64 * 2**20  # [bytes]: JSON inputs larger than this are not searched for files they name
+
+
+def _same_file(a: str, b: str) -> bool:
+    """Whether two paths name one file: the same real path, or (both existing) one file under two
+    names (a case-insensitive file system, a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def referenced_files(path: str) -> list[str]:
+    """Files a JSON input names and a command reads through it: a model's ``urdf.path`` (the URDF
+    it was identified from, written back into) and a ``robot`` that is a file (a measurement
+    file's robot; relative to the JSON's folder). Empty for other files."""
+    if not path.lower().endswith(".json") or os.path.getsize(path) > MAX_REFERENCING_FILE:
+        return []
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, ValueError):
+        return []  # the command itself names what is wrong with it
+    if not isinstance(doc, dict):
+        return []
+    named = [doc.get("robot")]
+    if isinstance(doc.get("urdf"), dict):
+        named.append(doc["urdf"].get("path"))
+    folder = os.path.dirname(path)
+    found = []
+    for v in named:
+        if isinstance(v, str) and v:
+            for candidate in (os.path.join(folder, v), v):
+                if os.path.isfile(candidate):
+                    found.append(candidate)
+                    break
+    return found
 
 
 def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
-    """:class:`ConfigurationError` when a file a command would write (:data:`OUTPUT_OPTIONS`) is
-    one it reads: any other argument naming an existing file (``export model.json -o model.json``
-    replaced the model with a URDF). A command that updates a file in place on purpose lists the
+    """:class:`ConfigurationError` when a file a command would write is one it reads, or two of
+    its outputs are one file.
+
+    Written: the :data:`OUTPUT_OPTIONS` that name a path, and what ``args.written(args)`` adds
+    (``{label: path}``: ``plan``'s PLAN.csv/PLAN.png next to ``-o``, ``simulate``'s files in its
+    folder). Read: every other argument naming an existing file, the files a JSON input names
+    (:func:`referenced_files`: ``export model.json -o <the URDF it was identified from>``
+    replaced the user's URDF), and what ``args.read(args)`` adds (``{label: path}``: ``measure``'s
+    default ``IMAGES_DIR/joints.csv``). A command that updates a file in place on purpose lists the
     arguments it may replace in ``args.may_replace`` (``handeye --model M -o M``).
     """
     outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str) and v}
+    written = getattr(args, "written", None)
+    if callable(written) and outputs:
+        outputs.update({k: v for k, v in written(args).items() if v})
     if not outputs:
         return
+    items = list(outputs.items())
+    for k, (opt, path) in enumerate(items):
+        for opt2, path2 in items[:k]:
+            if _same_file(path, path2):
+                raise ConfigurationError(f"{opt} {path}: the same file as {opt2}; give each output its own path")
     allowed = set(getattr(args, "may_replace", ()))
-    inputs: dict[str, str] = {}
+    hooks = ("run", "command", "may_replace", "written", "read")
+    inputs: list[tuple[str, str]] = []  # (what it is, path)
     for dest, value in vars(args).items():
-        if dest in OUTPUT_OPTIONS or dest in allowed or dest in ("run", "command", "may_replace"):
+        if dest in OUTPUT_OPTIONS or dest in allowed or dest in hooks:
             continue
         for v in value if isinstance(value, (list, tuple)) else [value]:
             if isinstance(v, str) and v and os.path.isfile(v):
-                inputs.setdefault(os.path.realpath(v), dest)
+                label = dest.replace("_", "-")
+                inputs.append((f"the same file as the input {label}", v))
+                inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
+    read = getattr(args, "read", None)
+    if callable(read):
+        inputs.extend((f"the same file as the input {k}", v) for k, v in read(args).items() if v and os.path.isfile(v))
     for opt, path in outputs.items():
-        read = inputs.get(os.path.realpath(path))
-        if read is not None:
-            raise ConfigurationError(f"{opt} {path}: the same file as the input {read.replace('_', '-')}; "
-                                     "give the output its own path")
+        for what, source in inputs:
+            if _same_file(path, source):
+                raise ConfigurationError(f"{opt} {path}: {what}; give the output its own path")
 
 
 __all__ = [
@@ -122,6 +182,7 @@ __all__ = [
     "OUTPUT_OPTIONS",
     "OneLineParser",
     "check_outputs_are_not_inputs",
+    "referenced_files",
     "exit_code",
     "finite_numbers",
     "joint_readings",

@@ -126,21 +126,52 @@ def test_study_and_bench_options_return_exit_codes(group, capsys):
         (["view", "{u}", "--html", "{d}/v.html", "--screenshot", "{u}"], "--screenshot", "robot"),
         (["reach", "{m}", "-o", "{d}/r.png", "--json", "{m}"], "--json", "robot"),
         (["reach", "{m}", "-o", "{d}/r.png", "--html", "{d}/./model.json"], "--html", "robot"),
+        (["simulate", "{d}/truth.json", "-o", "{d}"], "-o (its truth.json)", "robot"),  # replaced its robot
+        (["plan", "iis_head", "--n", "5", "--task-region", "{d}/task.csv", "-o", "{d}/task.json"],
+         "-o (its .csv)", "task-region"),  # wrote its plan's CSV over the task configurations
+        (["measure", "{d}", "--rig", "{d}/rig.yaml", "-o", "{d}/joints.csv"], "-o",
+         "joints (default IMAGES_DIR/joints.csv)"),  # the readings it reads without being named
+        (["bench", "gaze", "--urdf", "{u}", "--camera", "camera_left_optical", "--json", "{u}"], "--json", "urdf"),
     ],
 )
 def test_no_command_writes_over_a_file_it_reads(demo_run, tmp_path, capsys, argv, option, read):
     """An output naming an input file is refused before anything runs, and the input is intact."""
     d, _, _ = demo_run
-    files = {"m": tmp_path / "model.json", "ms": tmp_path / "measurements.json", "u": tmp_path / "head.urdf"}
-    for key, source in (("m", d / "model.json"), ("ms", d / "sim" / "measurements.json"), ("u", d / "head.urdf")):
+    files = {"m": tmp_path / "model.json", "ms": tmp_path / "measurements.json", "u": tmp_path / "head.urdf",
+             "t": tmp_path / "truth.json", "c": tmp_path / "task.csv", "j": tmp_path / "joints.csv",
+             "r": tmp_path / "rig.yaml"}
+    for key, source in (("m", d / "model.json"), ("ms", d / "sim" / "measurements.json"), ("u", d / "head.urdf"),
+                        ("t", d / "sim" / "truth.json")):
         shutil.copy(source, files[key])
+    for key in ("c", "j", "r"):
+        files[key].write_text("stands for a user's file\n")
     before = {p: p.read_bytes() for p in files.values()}
     args = [a.format(d=tmp_path, **{k: str(v) for k, v in files.items()}) for a in argv]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{option} " in err[0] and f"the same file as the input {read}" in err[0], err
     assert {p: p.read_bytes() for p in files.values()} == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["head.urdf", "measurements.json", "model.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in files.values())
+
+
+def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_path, capsys):
+    """A model identified from a user's URDF names that URDF (export writes back into a copy of
+    it); an export over it replaced it and the model could not be exported again. Two outputs
+    naming one file are refused too; an output over an existing file nothing reads is not."""
+    from test_view_writeback import identified_tiago
+
+    urdf, _, model_file = identified_tiago(tmp_path)
+    before = urdf.read_bytes()
+    assert main(["export", str(model_file), "-o", str(urdf)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"the file the input model ({model_file}) refers to" in err[0], err
+    assert urdf.read_bytes() == before
+    assert main(["view", "iis_head", "--html", str(tmp_path / "v.html"), "--screenshot", str(tmp_path / "./v.html")]) == 2
+    assert "--screenshot" in capsys.readouterr().err and not (tmp_path / "v.html").exists()
+    out = tmp_path / "calibrated.urdf"
+    out.write_text("an old export\n")
+    assert main(["export", str(model_file), "-o", str(out)]) == 0  # overwriting an output nothing reads
+    assert out.read_text().startswith("<?xml")
 
 
 def test_handeye_may_update_its_model_in_place(demo_run, tmp_path, capsys):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import matplotlib.image
 import numpy as np
@@ -100,8 +101,11 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
     assert f"fixated: {counts['fixated']}" in page and f"joint limits: {counts['joint_limits']}" in page
     assert "moving pan, tilt" in page and "reachable region" in summary.format()
     # 0.4 of the smaller angular spacing (elevation: 20 deg; azimuth 22.5 deg) at each distance,
-    # at most 0.05 of the far range (2.5 m)
+    # at most 0.8 of the distances' spacing (0.733 m) and 0.05 of the far range (2.5 m)
     np.testing.assert_allclose(sizes, np.minimum(0.4 * r.grid.axes[0] * math.radians(20.0), 0.125))
+    dense = make_grid(GazeSolver.from_model(load_model("iis_head")), "shell", 0.2, 3.0, (101, 9, 7))
+    radial = point_sizes(SimpleNamespace(grid=dense))  # type: ignore[arg-type]
+    assert radial.max() == pytest.approx(0.8 * 0.028)  # 101 distances 28 mm apart
     assert summary.region.point_sizes == pytest.approx((sizes.min(), sizes.max()))
 
 
@@ -242,3 +246,23 @@ def test_cli_reach_screenshot_without_chromium_fails_before_solving(tmp_path: Pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--screenshot needs Chromium" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["reach", "view"])
+def test_a_failed_screenshot_writes_nothing_and_names_the_users_png(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                     monkeypatch: pytest.MonkeyPatch, command: str) -> None:
+    """A Chromium that fails: one line naming the --screenshot path (not a temporary file), and
+    neither the page nor anything else written (the page used to be written first)."""
+    browser = tmp_path / "bin" / "chromium"
+    browser.parent.mkdir()
+    browser.write_text("#!/bin/sh\necho 'GPU process crashed' >&2\nexit 1\n")
+    browser.chmod(0o755)
+    monkeypatch.setenv("CPC2URDF_CHROMIUM", str(browser))
+    out = tmp_path / "out"
+    out.mkdir()
+    extra = ["--samples", "2", "3", "3", "-o", str(out / "r.png")] if command == "reach" else ["--no-sweep"]
+    argv = [command, "iis_head", *extra, "--html", str(out / "v.html"), "--screenshot", str(out / "v.png")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out / 'v.png'}: Chromium failed (exit 1): GPU process crashed" in err[0], err
+    assert list(out.iterdir()) == []

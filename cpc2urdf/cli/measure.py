@@ -62,7 +62,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     g2.add_argument("--camera", action="append", default=[], metavar="NAME=FILE",
                     help="a camera frame and its intrinsics (OpenCV FileStorage: K, D, image_size); "
                     "default: every IMAGES_DIR/<camera>.yaml next to an IMAGES_DIR/<camera>/ folder")
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, read=default_joints)
+
+
+def default_joints(args: argparse.Namespace) -> dict[str, str]:
+    """The joint readings read without being named (checked against ``-o`` before the command runs)."""
+    import os
+
+    return {} if args.joints else {"joints (default IMAGES_DIR/joints.csv)": os.path.join(args.images, "joints.csv")}
 
 
 def _report(problems: list[str], limit: int = 20) -> None:

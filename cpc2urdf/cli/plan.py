@@ -65,7 +65,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--curve", metavar="N,N,...",
                    help="plan sizes of the predicted-error curve (default: the protocol's joints*M+1 for M = 2, 3, 5, 9, "
                    "and the plan's N)")
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, written=companions)
+
+
+def companions(args: argparse.Namespace) -> dict[str, str]:
+    """The files written next to the plan (checked against the inputs before the command runs)."""
+    from pathlib import Path
+
+    plan = Path(args.output)
+    return {"-o (its .csv)": str(plan.with_suffix(".csv")), "-o (its .png)": str(plan.with_suffix(".png"))}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -110,16 +110,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(f"--screenshot {args.screenshot}: the view is rendered as PNG, expected a .png path")
     if args.screenshot:
         require_chromium()  # before the solve, not after it
-    outputs = {"-o": args.output, "--json": args.json, "--html": args.html, "--screenshot": args.screenshot}
-    seen: dict[Path, str] = {}
-    for option, path in outputs.items():
-        if path is None:
-            continue
-        check_output_path(path)
-        where = Path(path).resolve()
-        if where in seen:
-            raise ConfigurationError(f"{option} {path}: the same file as {seen[where]}; give each output its own path")
-        seen[where] = option
+    for path in (args.json, args.html, args.screenshot):  # (two outputs naming one file: refused by the CLI)
+        if path is not None:
+            check_output_path(path)
     # the robot as drawn (its meshes) loads before the grid is solved: a missing mesh fails at once
     view_robot = load_view_robot(args.robot, package_dirs=args.package_path) if args.html else None
     solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
@@ -144,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                                       cameras=view_cameras(view_robot, region.cameras))
         files[args.html] = page
         if args.screenshot:
-            files[args.screenshot] = screenshot_page(page)
+            files[args.screenshot] = screenshot_page(page, args.screenshot)
     write_all_atomic(files)
     counts = region.counts()
     total = region.points.shape[0]

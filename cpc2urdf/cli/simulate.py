@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from cpc2urdf.spec import RobotSpec
 
 
+FILES = ("measurements.json", "truth.json", "heldout.json")  # what simulate writes into its folder
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = subparsers.add_parser(
         "simulate",
@@ -77,7 +79,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    "--noise and its sigmas then do not apply; the held-out file holds the markers' true points)")
     p.add_argument("--marker-sigma-mm", type=float, default=0.1,
                    help="--markers: std of each marker point coordinate [mm] (default 0.1)")
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, written=written_files)
+
+
+def written_files(args: argparse.Namespace) -> dict[str, str]:
+    """The files written into the output folder (checked against the inputs before the command runs)."""
+    return {f"-o (its {name})": os.path.join(args.output, name) for name in FILES}
 
 
 DEFAULT_SIGMA_MM = 0.5  # Fig. 10
@@ -222,11 +229,8 @@ def run(args: argparse.Namespace) -> int:
     if args.markers:
         measured, heldout = _as_markers(exp, args.markers, args.marker_sigma_mm * 1e-3, args.seed)
     # Everything is computed before anything is written; each file is written atomically.
-    texts = {
-        "measurements.json": dumps(measurements_to_json(measured)),
-        "truth.json": dumps(model_to_json(exp.truth)),
-        "heldout.json": dumps(measurements_to_json(heldout)),
-    }
+    texts = dict(zip(FILES, (dumps(measurements_to_json(measured)), dumps(model_to_json(exp.truth)),
+                             dumps(measurements_to_json(heldout))), strict=True))
     make_folder(out)
     write_all_atomic({out / name: t for name, t in texts.items()})
     view = exp.measured.metadata["provenance"]["view"]

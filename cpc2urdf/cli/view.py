@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         page, summary = static_view_html(robot, sweep=not args.no_sweep, **options)
         files: dict[str, str | bytes] = {args.html: page}
         if args.screenshot:
-            files[args.screenshot] = screenshot_page(page)
+            files[args.screenshot] = screenshot_page(page, args.screenshot)
         write_all_atomic(files)
         print(summary.format())
         print(f"wrote {args.html} (self-contained; open it in a browser)")

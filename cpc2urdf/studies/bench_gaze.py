@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cpc2urdf.argparsing import OneLineParser
+from cpc2urdf.argparsing import OneLineParser, check_outputs_are_not_inputs
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.model import CPCModel, CPCParams
 
@@ -936,6 +936,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of targets and calibration errors")
     parser.add_argument("--json", help="also write the numbers to this JSON file")
     args = parser.parse_args(argv)
+    check_outputs_are_not_inputs(args)
     if (args.urdf is None) != (not args.camera):
         raise ConfigurationError("--urdf and --camera go together: a URDF file and its one or two camera frames")
     if args.targets < 1 or args.reference < 1 or args.unreachable < 0:

@@ -43,6 +43,7 @@ POINTED = ("fixated", "disparity")  # categories the head points at (disparity: 
 OTHER_OPACITY = 0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
 POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing where it lies
 MAX_POINT_FRACTION = 0.05  # [-]: and at most this fraction of the grid's far range (coarse grids)
+RADIAL_FRACTION = 0.8  # [-]: a shell's points at most this fraction of the spacing between its distances
 SAME_WORLD = 1e-6  # [m]: drawn points this close to the solver's are in its world
 MAX_FRAMING_POINTS = 20_000  # [-]: the region's outer points that the viewer camera frames, at most
 
@@ -114,13 +115,14 @@ def point_sizes(region: Region) -> Array:
     """Side [m] of the drawn points at each sample of the grid's first axis, shape (K,):
     :data:`POINT_FRACTION` of the spacing there, at most :data:`MAX_POINT_FRACTION` of the far
     range. A shell's points at distance ``d`` take the smaller of its two angular spacings at
-    ``d`` (so the near shells stay clear of the head and the far ones are not dashes); a box's
-    the smallest of its three spacings."""
+    ``d`` (so the near shells stay clear of the head), and at most :data:`RADIAL_FRACTION` of the
+    spacing between distances (dense shells do not merge into spokes; thin ones are not dashes);
+    a box's the smallest of its three spacings."""
     a, b, c = (np.asarray(x, dtype=float) for x in region.grid.axes)
     steps = [float(np.ptp(x)) / (x.size - 1) for x in (a, b, c)]
     cap = MAX_POINT_FRACTION * float(np.max(np.abs(a)))
     if region.grid.kind == "shell":
-        size = POINT_FRACTION * a * min(steps[1], steps[2])
+        size = np.minimum(POINT_FRACTION * a * min(steps[1], steps[2]), RADIAL_FRACTION * steps[0])
     else:
         size = np.full(a.size, POINT_FRACTION * min(steps))
     return np.minimum(size, cap)
@@ -216,6 +218,7 @@ __all__ = [
     "MAX_POINT_FRACTION",
     "OTHER_OPACITY",
     "POINTED",
+    "RADIAL_FRACTION",
     "POINT_FRACTION",
     "REGION_LEGEND_CSS",
     "REGION_NODE",

@@ -114,10 +114,11 @@ def screenshot_html(
     return png
 
 
-def screenshot_page(html_text: str, *, size: tuple[int, int] = (1024, 768), budget_ms: int = 2000,
-                    timeout: float = 120.0) -> bytes:
+def screenshot_page(html_text: str, png_name: str | os.PathLike[str], *, size: tuple[int, int] = (1024, 768),
+                    budget_ms: int = 2000, timeout: float = 120.0) -> bytes:
     """The PNG bytes of a page given as text (:func:`screenshot_html` on a temporary copy), so a
     command can render before it writes anything: a failed screenshot leaves no page behind.
+    Errors name ``png_name``, the PNG the caller will write.
 
     Raises:
         OutputError: As :func:`screenshot_html`.
@@ -125,8 +126,11 @@ def screenshot_page(html_text: str, *, size: tuple[int, int] = (1024, 768), budg
     with tempfile.TemporaryDirectory(prefix="cpc2urdf-page-") as folder:
         page = Path(folder) / "page.html"
         page.write_text(html_text, encoding="utf-8")
-        png = screenshot_html(page, Path(folder) / "page.png", size=size, budget_ms=budget_ms, timeout=timeout)
-        return png.read_bytes()
+        shot = (Path(folder) / "page.png").resolve()
+        try:
+            return screenshot_html(page, shot, size=size, budget_ms=budget_ms, timeout=timeout).read_bytes()
+        except OutputError as e:
+            raise OutputError(str(e).replace(str(shot), os.fspath(png_name))) from e
 
 
 def require_chromium(option: str = "--screenshot") -> None:
