@@ -266,3 +266,20 @@ def test_a_failed_screenshot_writes_nothing_and_names_the_users_png(tmp_path: Pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{out / 'v.png'}: Chromium failed (exit 1): GPU process crashed" in err[0], err
     assert list(out.iterdir()) == []
+
+
+def test_cli_view_reach_draws_reachs_default_region(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``view ROBOT --reach``: the default grid of ``reach``, solved on the robot as drawn, with
+    the fixation of --target; the same counts as ``reach``'s JSON."""
+    page = tmp_path / "v.html"
+    assert main(["view", "iis_head", "--reach", "--target", "-0.3", "-0.4", "0.66", "--no-sweep", "--html", str(page)]) == 0
+    out = capsys.readouterr().out
+    assert main(["reach", "iis_head", "-o", str(tmp_path / "r.png"), "--json", str(tmp_path / "r.json")]) == 0
+    capsys.readouterr()
+    import json
+
+    counts = json.loads((tmp_path / "r.json").read_text())["counts"]
+    assert f"reachable region: {sum(counts.values())} targets (shell grid): {counts['fixated']} fixated" in out
+    assert "target [-0.3  -0.4   0.66] m: fixated" in out
+    text = page.read_text()
+    assert f"fixated: {counts['fixated']}" in text and "held at the middle of their limits: table_x, table_y" in text

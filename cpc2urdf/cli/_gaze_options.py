@@ -1,9 +1,11 @@
 """The gaze solver's options, the same on every command that solves gaze (``gaze``, ``reach``):
-which joints may move, when a target counts as fixated, and how near the policy brings a camera."""
+which joints may move, when a target counts as fixated, and how near the policy brings a camera;
+and what a drawn region says about them (``reach``, ``view --reach``)."""
 
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 
@@ -30,3 +32,13 @@ def solver_options(args: argparse.Namespace) -> dict[str, Any]:
     options."""
     return {"joints": args.joints, "tolerance": args.tolerance, "focal_px": args.focal_px,
             "min_distance": args.min_distance}
+
+
+def region_notes(solver: Any) -> list[str]:
+    """What a reachable region of ``solver`` (a :class:`~cpc2urdf.validation.gaze.GazeSolver`)
+    assumed, in one line for its PNG and legend: the joints that moved, those held at the middle
+    of their limits, and the tolerance of "fixated"."""
+    moved = set(solver.free_joints("cyclopean").tolist())
+    held = [solver.joint_names[i] for i in solver.path_joints.tolist() if i not in moved]
+    return [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
+            + f"; fixated: every axis within {math.degrees(solver.tolerance):.3g} deg"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpc2urdf.cli._gaze_options import add_solver_options, solver_options
+from cpc2urdf.cli._gaze_options import add_solver_options, region_notes, solver_options
 
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
 # cpc2urdf.validation.gaze.reach.
@@ -80,7 +80,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    import math
     from pathlib import Path
 
     from cpc2urdf.api import gaze_solver
@@ -119,10 +118,7 @@ def run(args: argparse.Namespace) -> int:
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
     # render every output before writing any: a failure leaves nothing behind
-    moved = set(solver.free_joints("cyclopean").tolist())
-    held = [solver.joint_names[i] for i in solver.path_joints.tolist() if i not in moved]
-    notes = [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
-             + f"; fixated: every axis within {math.degrees(solver.tolerance):.3g} deg"]
+    notes = region_notes(solver)
     png = region_figure_png(region, title=Path(args.robot).name, notes=notes)
     files: dict[str, str | bytes] = {args.output: png}
     if args.json:

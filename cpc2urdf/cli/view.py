@@ -108,6 +108,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "--policy", default="cyclopean", help="gaze redundancy policy (default: %(default)s)"
     )
     p.add_argument("--no-sweep", action="store_true", help="leave out the joint sweep animation")
+    p.add_argument(
+        "--reach",
+        action="store_true",
+        help="also draw where the cameras (--camera/--cameras) can fixate: every target of cpc2urdf "
+        "reach's default grid (a shell 0.2-3 m from the cameras, +-90 deg azimuth, +-60 deg "
+        "elevation; 14,800 targets) as a point coloured by category (fixated, disparity, joint "
+        "limits, behind, too close, no solution); for another grid or the solver's options, "
+        "cpc2urdf reach --html",
+    )
     p.set_defaults(run=run)
 
 
@@ -143,10 +152,19 @@ def run(args: argparse.Namespace) -> int:
         from cpc2urdf.measurements import load_measurements
 
         options["measurements"] = load_measurements(args.measurements)
+    notes: list[str] = []
+    if args.reach:  # solved on the robot as drawn, as --target is: one world, the view's names
+        from cpc2urdf.cli._gaze_options import region_notes
+        from cpc2urdf.validation.gaze import GazeSolver
+        from cpc2urdf.validation.gaze.reach import make_grid, reachable_region
+
+        solver = GazeSolver(robot.pinocchio, tuple(args.cameras))
+        options["region"] = reachable_region(solver, make_grid(solver))
+        notes = region_notes(solver)
 
     if args.html:
         # the page and its picture are rendered before either is written: a failure leaves neither
-        page, summary = static_view_html(robot, sweep=not args.no_sweep, **options)
+        page, summary = static_view_html(robot, sweep=not args.no_sweep, region_notes=notes, **options)
         files: dict[str, str | bytes] = {args.html: page}
         if args.screenshot:
             files[args.screenshot] = screenshot_page(page, args.screenshot)
