@@ -109,14 +109,14 @@ def referenced_files(path: str) -> list[str]:
     """Files a JSON input names and a command reads through it: a model's ``urdf.path`` (the URDF
     it was identified from, written back into) and a ``robot`` that is a file (a measurement
     file's robot; relative to the JSON's folder). Empty for other files."""
-    if not path.lower().endswith(".json") or os.path.getsize(path) > MAX_REFERENCING_FILE:
-        return []
     import json
 
     try:
+        if not path.lower().endswith(".json") or os.path.getsize(path) > MAX_REFERENCING_FILE:
+            return []
         with open(path, encoding="utf-8") as f:
             doc = json.load(f)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # unreadable, not JSON, nested too deep
         return []  # the command itself names what is wrong with it
     if not isinstance(doc, dict):
         return []
