@@ -91,7 +91,8 @@ def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float
 
 # Options that name a file a command writes (``--json`` only where it takes a path, not a flag).
 OUTPUT_OPTIONS = {"output": "-o", "json": "--json", "html": "--html", "screenshot": "--screenshot"}
-MAX_REFERENCING_FILE = 64 * 2**20  # [bytes]: JSON inputs larger than this are not searched for files they name
+MAX_REFERENCING_FILE = 16 * 2**20  # [bytes]: inputs larger than this are not searched for files they name
+_HOOKS = ("run", "command", "may_replace", "written", "read")  # parser defaults that are not arguments
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -108,15 +109,20 @@ def _same_file(a: str, b: str) -> bool:
 def referenced_files(path: str) -> list[str]:
     """Files a JSON input names and a command reads through it: a model's ``urdf.path`` (the URDF
     it was identified from, written back into) and a ``robot`` that is a file (a measurement
-    file's robot; relative to the JSON's folder). Empty for other files."""
+    file's robot; relative to the JSON's folder). Any file whose text starts with ``{`` is read
+    as JSON, whatever its name (the loaders do the same); empty for other files, and for files
+    over :data:`MAX_REFERENCING_FILE`."""
     import json
 
     try:
-        if not path.lower().endswith(".json") or os.path.getsize(path) > MAX_REFERENCING_FILE:
+        if os.path.getsize(path) > MAX_REFERENCING_FILE:
             return []
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except (OSError, ValueError, RecursionError):  # unreadable, not JSON, nested too deep
+        with open(path, "rb") as f:
+            if not f.read(256).lstrip().startswith(b"{"):  # a URDF, an image, a CSV: not read whole
+                return []
+            f.seek(0)
+            doc = json.loads(f.read().decode("utf-8"))
+    except (OSError, ValueError, RecursionError):  # unreadable, not text, not JSON, nested too deep
         return []  # the command itself names what is wrong with it
     if not isinstance(doc, dict):
         return []
@@ -134,19 +140,37 @@ def referenced_files(path: str) -> list[str]:
     return found
 
 
+def _named_files(value: object) -> list[str]:
+    """The existing files an argument's value names: a path, or the FILE of ``NAME=FILE``
+    (``measure --board FRAME=FILE``, ``--camera NAME=FILE``); each element of a list."""
+    found = []
+    for v in value if isinstance(value, (list, tuple)) else [value]:
+        if not isinstance(v, str) or not v:
+            continue
+        for candidate in (v, v.split("=", 1)[1] if "=" in v else ""):
+            if candidate and os.path.isfile(candidate):
+                found.append(candidate)
+                break
+    return found
+
+
 def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
     """:class:`ConfigurationError` when a file a command would write is one it reads, or two of
-    its outputs are one file.
+    its outputs are one file, or an output is an empty path.
 
     Written: the :data:`OUTPUT_OPTIONS` that name a path, and what ``args.written(args)`` adds
     (``{label: path}``: ``plan``'s PLAN.csv/PLAN.png next to ``-o``, ``simulate``'s files in its
-    folder). Read: every other argument naming an existing file, the files a JSON input names
-    (:func:`referenced_files`: ``export model.json -o <the URDF it was identified from>``
-    replaced the user's URDF), and what ``args.read(args)`` adds (``{label: path}``: ``measure``'s
-    default ``IMAGES_DIR/joints.csv``). A command that updates a file in place on purpose lists the
-    arguments it may replace in ``args.may_replace`` (``handeye --model M -o M``).
+    folder). Read: every other argument naming an existing file (a path, or ``NAME=FILE``), the
+    files those name (:func:`referenced_files`: ``export model.json -o <the URDF it was
+    identified from>`` replaced the user's URDF), and what ``args.read(args)`` adds (``{label:
+    path}``: ``measure``'s default ``IMAGES_DIR/joints.csv``). A command that updates a file in
+    place on purpose lists the arguments it may replace in ``args.may_replace`` (``handeye --model
+    M -o M``): only that file itself, not the files it names.
     """
-    outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str) and v}
+    outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str)}
+    for opt, path in outputs.items():
+        if not path.strip():
+            raise ConfigurationError(f"{opt} {path!r}: an empty path; name the file or folder to write")
     written = getattr(args, "written", None)
     if callable(written) and outputs:
         outputs.update({k: v for k, v in written(args).items() if v})
@@ -156,18 +180,17 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
     for k, (opt, path) in enumerate(items):
         for opt2, path2 in items[:k]:
             if _same_file(path, path2):
-                raise ConfigurationError(f"{opt} {path}: the same file as {opt2}; give each output its own path")
+                raise ConfigurationError(f"{opt} {path}: the same file as {opt2} ({path2}); give each output its own path")
     allowed = set(getattr(args, "may_replace", ()))
-    hooks = ("run", "command", "may_replace", "written", "read")
     inputs: list[tuple[str, str]] = []  # (what it is, path)
     for dest, value in vars(args).items():
-        if dest in OUTPUT_OPTIONS or dest in allowed or dest in hooks:
+        if dest in OUTPUT_OPTIONS or dest in _HOOKS:
             continue
-        for v in value if isinstance(value, (list, tuple)) else [value]:
-            if isinstance(v, str) and v and os.path.isfile(v):
-                label = dest.replace("_", "-")
-                inputs.append((f"the same file as the input {label}", v))
-                inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
+        label = dest.replace("_", "-")
+        for v in _named_files(value):
+            if dest not in allowed:
+                inputs.append((f"the same file as the input {label} ({v})", v))
+            inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
     read = getattr(args, "read", None)
     if callable(read):
         inputs.extend((f"the same file as the input {k}", v) for k, v in read(args).items() if v and os.path.isfile(v))

@@ -132,6 +132,7 @@ def test_study_and_bench_options_return_exit_codes(group, capsys):
         (["measure", "{d}", "--rig", "{d}/rig.yaml", "-o", "{d}/joints.csv"], "-o",
          "joints (default IMAGES_DIR/joints.csv)"),  # the readings it reads without being named
         (["bench", "gaze", "--urdf", "{u}", "--camera", "camera_left_optical", "--json", "{u}"], "--json", "urdf"),
+        (["measure", "{d}", "--rig", "{r}", "--board", "plate_left={c}", "-o", "{c}"], "-o", "board"),  # NAME=FILE
     ],
 )
 def test_no_command_writes_over_a_file_it_reads(demo_run, tmp_path, capsys, argv, option, read):
@@ -167,7 +168,21 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     assert len(err) == 1 and f"the file the input model ({model_file}) refers to" in err[0], err
     assert urdf.read_bytes() == before
     assert main(["view", "iis_head", "--html", str(tmp_path / "v.html"), "--screenshot", str(tmp_path / "./v.html")]) == 2
-    assert "--screenshot" in capsys.readouterr().err and not (tmp_path / "v.html").exists()
+    err = capsys.readouterr().err
+    assert "--screenshot" in err and "the same file as --html" in err and not (tmp_path / "v.html").exists()
+    # handeye may update its model in place, not write over the URDF the model names
+    poses = tmp_path / "poses.json"
+    poses.write_text("{}")
+    assert main(["handeye", str(poses), "--model", str(model_file), "-o", str(urdf)]) == 2
+    assert f"the file the input model ({model_file}) refers to" in capsys.readouterr().err
+    # a model file by another name is read as JSON all the same (the loaders do)
+    other = tmp_path / "calibrated.model"
+    shutil.copy(model_file, other)
+    assert main(["export", str(other), "-o", str(urdf)]) == 2
+    assert "refers to" in capsys.readouterr().err
+    assert main(["simulate", "iis_head", "-o", ""]) == 2  # simulate read "" as the current folder
+    assert "-o '': an empty path" in capsys.readouterr().err
+    assert urdf.read_bytes() == before
     out = tmp_path / "calibrated.urdf"
     out.write_text("an old export\n")
     assert main(["export", str(model_file), "-o", str(out)]) == 0  # overwriting an output nothing reads

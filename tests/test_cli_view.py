@@ -11,6 +11,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+import matplotlib.image
 import pytest
 from test_view import (
     SIZE,
@@ -280,3 +281,40 @@ def test_keep_colours(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     out = capsys.readouterr().out
     assert "translucent green" in out and "calibration moved" not in out
     assert "cpc2urdf-legend" not in html.read_text()
+
+
+def test_serves_the_reachable_region(tmp_path: Path) -> None:
+    """``view ROBOT --reach`` without --html: the region's counts and notes printed (a served view
+    has no legend), and the region in the served scene (green points in the browser's picture)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cpc2urdf", "view", "iis_head", "--reach", "--no-sweep"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+    )
+    try:
+        url, lines = None, []
+        deadline = time.monotonic() + 90.0
+        while time.monotonic() < deadline and proc.poll() is None:
+            line = proc.stdout.readline()  # type: ignore[union-attr]
+            lines.append(line)
+            m = re.search(r"serving at (http://\S+)", line)
+            if m:
+                url = m.group(1)
+                break
+        text = "".join(lines)
+        assert url is not None, text
+        assert "reachable region: 14800 targets (shell grid):" in text and "fixated (green)" in text
+        assert "reachable region: moving pan, tilt, vergence_left, vergence_right; held where shown" in text
+        require_chromium()
+        img = matplotlib.image.imread(str(screenshot_html(url, tmp_path / "live.png", size=SIZE, budget_ms=3000)))
+        green = (img[..., 1] > img[..., 0] + 0.2) & (img[..., 1] > img[..., 2] + 0.1)
+        assert green.mean() > 0.02, f"region green on {green.mean():.2%} of the served picture"
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+        assert proc.returncode == 0
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.communicate(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()

@@ -41,6 +41,7 @@ from cpc2urdf.validation.view.region import (
     point_sizes,
 )
 
+CAMERAS = ("camera_left_optical", "camera_right_optical")
 
 def clouds(window: object) -> dict[str, list[dict[str, object]]]:
     """Category -> its drawn clouds in grid order (``reach/<category>/<k>``, k the grid's first
@@ -279,7 +280,35 @@ def test_cli_view_reach_draws_reachs_default_region(tmp_path: Path, capsys: pyte
     import json
 
     counts = json.loads((tmp_path / "r.json").read_text())["counts"]
-    assert f"reachable region: {sum(counts.values())} targets (shell grid): {counts['fixated']} fixated" in out
+    from cpc2urdf.validation.view.region import COLOUR_NAMES
+
+    parts = ", ".join(f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in counts.items() if k)
+    assert f"reachable region: {sum(counts.values())} targets (shell grid): {parts};" in out
     assert "target [-0.3  -0.4   0.66] m: fixated" in out
     text = page.read_text()
-    assert f"fixated: {counts['fixated']}" in text and "held at the middle of their limits: table_x, table_y" in text
+    assert f"fixated: {counts['fixated']}" in text and "held where shown: table_x=0.5, table_y=0.25" in text
+
+
+def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
+    """With --q moving a held joint (the IIS-head's table), the region is laid out about the
+    cameras as drawn and solved with the table there: its origin is the drawn cameras' mid-point,
+    and every fixated target is fixated by the answer's readings with the table where shown."""
+    robot = load_view_robot("iis_head")
+    shown = robot.q_from({"table_x": 0.0, "table_y": 0.0})
+    solver = GazeSolver(robot.pinocchio, CAMERAS)
+    r = reachable_region(solver, make_grid(solver, "shell", 0.4, 2.0, (3, 7, 5), q=shown), q_current=shown)
+    vis = static_visualizer()
+    summary = build_view(vis, robot, q={"table_x": 0.0, "table_y": 0.0}, region=r, sweep=False)
+    T = robot.link_poses(shown)
+    mid = 0.5 * (T[CAMERAS[0]][:3, 3] + T[CAMERAS[1]][:3, 3])
+    np.testing.assert_allclose(r.grid.frame.origin, mid, atol=1e-12)
+    assert summary.region is not None and summary.region.offset < 1e-12
+    table = [robot.joint_names.index(j) for j in ("table_x", "table_y")]
+    assert np.all(r.q[:, table] == 0.0)
+    fixated = r.category == REGION_CATEGORIES.index("fixated")
+    assert fixated.sum() > 20
+    for q, p in zip(r.q[fixated], r.points[fixated], strict=True):
+        Tq = robot.link_poses(q)
+        for cam in CAMERAS:
+            d = Tq[cam][:3, :3].T @ (p - Tq[cam][:3, 3])
+            assert math.atan2(math.hypot(d[0], d[1]), d[2]) < 1e-8

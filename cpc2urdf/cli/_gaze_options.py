@@ -34,11 +34,16 @@ def solver_options(args: argparse.Namespace) -> dict[str, Any]:
             "min_distance": args.min_distance}
 
 
-def region_notes(solver: Any) -> list[str]:
+def region_notes(solver: Any, q_held: Any = None) -> list[str]:
     """What a reachable region of ``solver`` (a :class:`~cpc2urdf.validation.gaze.GazeSolver`)
-    assumed, in one line for its PNG and legend: the joints that moved, those held at the middle
-    of their limits, and the tolerance of "fixated"."""
+    assumed, in one line for its PNG and legend: the joints that moved, those held (at the middle
+    of their limits, or at ``q_held``: readings of shape (n,), the view's shown ones), and the
+    tolerance of "fixated"."""
     moved = set(solver.free_joints("cyclopean").tolist())
-    held = [solver.joint_names[i] for i in solver.path_joints.tolist() if i not in moved]
-    return [f"moving {', '.join(solver.moving)}" + (f"; held at the middle of their limits: {', '.join(held)}" if held else "")
+    held = [i for i in solver.path_joints.tolist() if i not in moved]
+    if q_held is None:
+        where = f"held at the middle of their limits: {', '.join(solver.joint_names[i] for i in held)}"
+    else:
+        where = "held where shown: " + ", ".join(f"{solver.joint_names[i]}={float(q_held[i]):.4g}" for i in held)
+    return [f"moving {', '.join(solver.moving)}" + (f"; {where}" if held else "")
             + f"; fixated: every axis within {math.degrees(solver.tolerance):.3g} deg"]

@@ -73,6 +73,8 @@ def companions(args: argparse.Namespace) -> dict[str, str]:
     from pathlib import Path
 
     plan = Path(args.output)
+    if plan.suffix.lower() in (".csv", ".png") or plan.name in ("", ".", ".."):
+        return {}  # refused by plan itself, with its own message
     return {"-o (its .csv)": str(plan.with_suffix(".csv")), "-o (its .png)": str(plan.with_suffix(".png"))}
 
 

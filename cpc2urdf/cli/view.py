@@ -114,7 +114,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="also draw where the cameras (--camera/--cameras) can fixate: every target of cpc2urdf "
         "reach's default grid (a shell 0.2-3 m from the cameras, +-90 deg azimuth, +-60 deg "
         "elevation; 14,800 targets) as a point coloured by category (fixated, disparity, joint "
-        "limits, behind, too close, no solution); for another grid or the solver's options, "
+        "limits, behind, too close, no solution), the joints that do not move held where shown "
+        "(--q, else the middle of their limits); for another grid or the solver's options, "
         "cpc2urdf reach --html",
     )
     p.set_defaults(run=run)
@@ -158,10 +159,14 @@ def run(args: argparse.Namespace) -> int:
         from cpc2urdf.validation.gaze import GazeSolver
         from cpc2urdf.validation.gaze.reach import make_grid, reachable_region
 
+        # the joints that do not move are held where shown (--q, else the middle of their limits)
+        shown = robot.q_from(options["q"])
         solver = GazeSolver(robot.pinocchio, tuple(args.cameras))
-        options["region"] = reachable_region(solver, make_grid(solver))
-        notes = region_notes(solver)
+        options["region"] = reachable_region(solver, make_grid(solver, q=shown), q_current=shown)
+        notes = region_notes(solver, shown)
 
+    for line in notes:  # what the region assumed (a served view has no legend)
+        print(f"reachable region: {line}")
     if args.html:
         # the page and its picture are rendered before either is written: a failure leaves neither
         page, summary = static_view_html(robot, sweep=not args.no_sweep, region_notes=notes, **options)

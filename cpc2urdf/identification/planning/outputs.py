@@ -213,6 +213,8 @@ def output_paths(plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
         OutputError: A path is a folder or its folder does not exist; the plan path ends in .csv/.png.
     """
     p = Path(plan_path)
+    if p.name in ("", ".", "..") or p.is_dir():
+        raise OutputError(f"{p}: a folder; the plan needs a file name (PLAN.json, with PLAN.csv and PLAN.png next to it)")
     if p.suffix.lower() in (".csv", ".png"):
         raise OutputError(f"{p}: the plan file needs another name than its .csv and .png companions")
     paths = (p, p.with_suffix(".csv"), p.with_suffix(".png"))

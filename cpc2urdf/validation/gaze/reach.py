@@ -24,6 +24,7 @@ the pointing error of the horizontal slice's targets not fixated, to a PNG.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -87,7 +88,7 @@ class BatchSolver(Protocol):
     lower: Array
     upper: Array
 
-    def solve(self, p_world: ArrayLike) -> Any:
+    def solve(self, p_world: ArrayLike, q_current: Any = None) -> Any:
         """Joint readings that fixate ``p_world``: a :class:`GazeSolution`."""
         ...
 
@@ -111,15 +112,16 @@ class BatchAnswer:
     iterations: NDArray[np.int_]
 
 
-def solve_batch(solver: BatchSolver, targets: ArrayLike) -> BatchAnswer:
+def solve_batch(solver: BatchSolver, targets: ArrayLike, q_current: Array | None = None) -> BatchAnswer:
     """Solve every target of ``targets`` (world) [m], shape (N, 3), with the default policy from
-    the home posture: ``solver.solve_many`` where the solver has it, else one ``solve`` each."""
+    ``q_current`` (shape (n,); the joints that do not move stay there; None: the home posture):
+    ``solver.solve_many`` where the solver has it, else one ``solve`` each."""
     P = np.asarray(targets, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3:
         raise ConfigurationError(f"targets must have shape (N, 3) [m], got shape {P.shape}")
     solve_many = getattr(solver, "solve_many", None)
     if solve_many is not None:
-        b = solve_many(P)
+        b = solve_many(P) if q_current is None else solve_many(P, q_current)
         status = np.asarray(b.status)
         if status.dtype.kind in "iu":  # status codes: names from the batch's table
             status = np.asarray(getattr(b, "status_names", STATUSES))[status]
@@ -130,7 +132,7 @@ def solve_batch(solver: BatchSolver, targets: ArrayLike) -> BatchAnswer:
             status.astype(str),
             np.asarray(b.iterations, dtype=int),
         )
-    sols: list[GazeSolution] = [solver.solve(p) for p in P]
+    sols: list[GazeSolution] = [solver.solve(p) if q_current is None else solver.solve(p, q_current=q_current) for p in P]
     n = solver.n
     return BatchAnswer(
         np.array([s.q for s in sols]).reshape(len(sols), n),
@@ -205,6 +207,8 @@ class Grid:
         points: The targets (world) [m], shape (N, 3), N the product of the axes' sizes, in
             ``meshgrid(..., indexing="ij")`` order.
         points_head: The same in the head frame, shape (N, 3).
+        posture: The readings the head frame was taken at [rad]/[m], shape (n,), in the
+            solver's joint order; None: the home posture (the middle of the limits).
     """
 
     kind: str
@@ -212,6 +216,7 @@ class Grid:
     frame: HeadFrame
     points: Array
     points_head: Array
+    posture: Array | None = None
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -264,13 +269,19 @@ def box_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DEFA
 
 
 def make_grid(solver: BatchSolver, kind: str = "shell", near: float = DEFAULT_RANGE[0], far: float = DEFAULT_RANGE[1],
-              samples: Sequence[int] = DEFAULT_SAMPLES) -> Grid:
+              samples: Sequence[int] = DEFAULT_SAMPLES, q: Array | None = None) -> Grid:
     """The ``kind`` grid (:data:`GRID_KINDS`) in front of the solver's head (see
-    :func:`shell_grid`, :func:`box_grid`)."""
+    :func:`shell_grid`, :func:`box_grid`), its head frame taken at readings ``q`` (shape (n,);
+    None: the home posture, :func:`head_frame`)."""
     if kind not in GRID_KINDS:
         raise ConfigurationError(f"grid must be one of {', '.join(GRID_KINDS)}, got {kind!r}")
     check_grid_args(near, far, samples)
-    return (shell_grid if kind == "shell" else box_grid)(head_frame(solver), near, far, samples)
+    if q is None:
+        return (shell_grid if kind == "shell" else box_grid)(head_frame(solver), near, far, samples)
+    posture = np.array(q, dtype=float)
+    grid = (shell_grid if kind == "shell" else box_grid)(head_frame_at(solver.model, solver.cameras, posture), near,
+                                                          far, samples)
+    return dataclasses.replace(grid, posture=posture)
 
 
 @dataclass(frozen=True)
@@ -326,12 +337,14 @@ class Region:
         }
 
 
-def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True) -> Region:
-    """Solve every target of ``grid`` (:func:`solve_batch`) and sort it into a category; a grid
-    of more than :data:`PROGRESS_CHUNK` targets is solved in chunks under a progress bar."""
+def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True,
+                     q_current: Array | None = None) -> Region:
+    """Solve every target of ``grid`` (:func:`solve_batch`, from ``q_current``: the joints that
+    do not move are held there; None: the home posture) and sort it into a category; a grid of
+    more than :data:`PROGRESS_CHUNK` targets is solved in chunks under a progress bar."""
     P = grid.points
     if P.shape[0] <= PROGRESS_CHUNK or not show_progress:
-        ans = solve_batch(solver, P)
+        ans = solve_batch(solver, P, q_current)
     else:
         from cpc2urdf.progress import progress_checked
 
@@ -339,7 +352,7 @@ def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True
         parts = []
         with progress_checked(chunks, f"solving {P.shape[0]} targets ({PROGRESS_CHUNK} a step)") as it:
             for chunk in it:
-                parts.append(solve_batch(solver, chunk))
+                parts.append(solve_batch(solver, chunk, q_current))
         ans = BatchAnswer(*(np.concatenate([getattr(a, f) for a in parts]) for f in
                             ("q", "reachable", "pointing_error", "status", "iterations")))
     lookup = {s: REGION_CATEGORIES.index(category_of_status(s)) for s in set(ans.status.tolist())}

@@ -39,6 +39,8 @@ from cpc2urdf.validation.view.geometry import hex_colour
 from cpc2urdf.validation.view.robot import ViewRobot
 
 REGION_NODE = "reach"  # /meshcat/reach/<category>
+COLOUR_NAMES = {"fixated": "green", "disparity": "orange", "joint_limits": "blue", "behind": "grey",
+                "too_close": "purple", "no_solution": "red"}  # CATEGORY_COLOURS in words, for a terminal
 POINTED = ("fixated", "disparity")  # categories the head points at (disparity: as well as it can): drawn opaque
 OTHER_OPACITY = 0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
 POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing where it lies
@@ -76,7 +78,7 @@ class RegionShown:
 
     def format(self) -> str:
         """One line for a terminal."""
-        parts = ", ".join(f"{k} {c.replace('_', ' ')}" for c, k in self.counts.items() if k)
+        parts = ", ".join(f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in self.counts.items() if k)
         lo, hi = (1e3 * s for s in self.point_sizes)
         size = f"{lo:.3g} mm" if hi - lo <= 1e-9 * hi else f"{lo:.3g}-{hi:.3g} mm"
         line = (f"reachable region: {self.n} targets ({self.grid} grid): {parts}; drawn as points of {size}, "
@@ -106,8 +108,17 @@ def view_cameras(robot: ViewRobot, cameras: Sequence[str]) -> tuple[str, ...]:
 
 def region_in_view(robot: ViewRobot, region: Region) -> tuple[Array, HeadFrame]:
     """The region's targets in the view's world [m], shape (N, 3), and the head frame they were
-    put on (module docstring): the head frame of ``robot``'s cameras at the middle of its limits."""
-    frame = head_frame_at(robot.model, view_cameras(robot, region.cameras), robot.default_q())
+    put on (module docstring): the head frame of ``robot``'s cameras at the posture the grid's
+    was taken at (its joints matched by name; the middle of the limits for the others, and for
+    all when the grid was laid out at home)."""
+    q = robot.default_q()
+    if region.grid.posture is not None:
+        source = None if robot.written_back is None else urdf_source(robot.written_back)
+        for name, value in zip(region.joint_names, region.grid.posture.tolist(), strict=True):
+            shown = source.joints.get(name, name) if source is not None else name
+            if shown in robot.joint_names:
+                q[robot.joint_names.index(shown)] = value
+    frame = head_frame_at(robot.model, view_cameras(robot, region.cameras), q)
     return frame.to_world(region.grid.points_head), frame
 
 
@@ -214,6 +225,7 @@ REGION_LEGEND_CSS = """#cpc2urdf-region { position: absolute; right: 8px; bottom
 
 
 __all__ = [
+    "COLOUR_NAMES",
     "MAX_FRAMING_POINTS",
     "MAX_POINT_FRACTION",
     "OTHER_OPACITY",
