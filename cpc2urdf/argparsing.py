@@ -106,37 +106,48 @@ def _same_file(a: str, b: str) -> bool:
         return False
 
 
-def referenced_files(path: str) -> list[str]:
-    """Files a JSON input names and a command reads through it: a model's ``urdf.path`` (the URDF
-    it was identified from, written back into) and a ``robot`` that is a file (a measurement
-    file's robot; relative to the JSON's folder). Any file whose text starts with ``{`` is read
-    as JSON, whatever its name (the loaders do the same); empty for other files, and for files
-    over :data:`MAX_REFERENCING_FILE`."""
+def _json_object(path: str) -> dict[str, object] | None:
+    """The JSON object in file ``path`` when its text (after a UTF-8 byte-order mark and white
+    space, as the loaders read it) starts with ``{``; None for anything else, a file over
+    :data:`MAX_REFERENCING_FILE`, or one that cannot be read or parsed."""
     import json
 
     try:
         if os.path.getsize(path) > MAX_REFERENCING_FILE:
-            return []
+            return None
         with open(path, "rb") as f:
-            if not f.read(256).lstrip().startswith(b"{"):  # a URDF, an image, a CSV: not read whole
-                return []
-            f.seek(0)
-            doc = json.loads(f.read().decode("utf-8"))
+            text = f.read().removeprefix(b"\xef\xbb\xbf").lstrip()
+        if not text.startswith(b"{"):  # a URDF, an image, a CSV
+            return None
+        doc = json.loads(text.decode("utf-8"))
     except (OSError, ValueError, RecursionError):  # unreadable, not text, not JSON, nested too deep
-        return []  # the command itself names what is wrong with it
-    if not isinstance(doc, dict):
+        return None  # the command itself names what is wrong with it
+    return doc if isinstance(doc, dict) else None
+
+
+def referenced_files(path: str) -> list[str]:
+    """Files a JSON input names and a command reads through it, resolved as the loaders resolve
+    them: a model's ``urdf.path`` (the URDF it was identified from, written back into; as
+    written) and a ``robot`` that is a file (a measurement file's robot: a path, relative to the
+    JSON's folder first; a bare name is the shipped robot unless such a file is here). Any file
+    whose text starts with ``{`` is read as JSON, whatever its name (the loaders do the same);
+    empty for other files."""
+    doc = _json_object(path)
+    if doc is None:
         return []
-    named = [doc.get("robot")]
-    if isinstance(doc.get("urdf"), dict):
-        named.append(doc["urdf"].get("path"))
-    folder = os.path.dirname(path)
     found = []
-    for v in named:
-        if isinstance(v, str) and v:
-            for candidate in (os.path.join(folder, v), v):
-                if os.path.isfile(candidate):
-                    found.append(candidate)
-                    break
+    urdf = doc.get("urdf")
+    if isinstance(urdf, dict) and isinstance(urdf.get("path"), str) and os.path.isfile(urdf["path"]):
+        found.append(urdf["path"])
+    robot = doc.get("robot")
+    if isinstance(robot, str) and robot:
+        from cpc2urdf.robot_ref import looks_like_path
+
+        if looks_like_path(robot) or os.path.exists(robot):  # else the shipped robot of that name
+            beside = os.path.join(os.path.dirname(path), robot)
+            candidate = beside if not os.path.isabs(robot) and os.path.exists(beside) else robot
+            if os.path.isfile(candidate):
+                found.append(candidate)
     return found
 
 
@@ -165,12 +176,13 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
     identified from>`` replaced the user's URDF), and what ``args.read(args)`` adds (``{label:
     path}``: ``measure``'s default ``IMAGES_DIR/joints.csv``). A command that updates a file in
     place on purpose lists the arguments it may replace in ``args.may_replace`` (``handeye --model
-    M -o M``): only that file itself, not the files it names.
+    M -o M``): only that file itself, when it is a JSON file (a model, not a URDF), not the files
+    it names.
     """
     outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str)}
     for opt, path in outputs.items():
-        if not path.strip():
-            raise ConfigurationError(f"{opt} {path!r}: an empty path; name the file or folder to write")
+        if not path:
+            raise ConfigurationError(f"{opt} '': an empty path; name the file or folder to write")
     written = getattr(args, "written", None)
     if callable(written) and outputs:
         outputs.update({k: v for k, v in written(args).items() if v})
@@ -188,7 +200,7 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
             continue
         label = dest.replace("_", "-")
         for v in _named_files(value):
-            if dest not in allowed:
+            if dest not in allowed or _json_object(v) is None:  # in place: a model file, not a URDF
                 inputs.append((f"the same file as the input {label} ({v})", v))
             inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
     read = getattr(args, "read", None)

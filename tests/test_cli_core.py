@@ -182,11 +182,37 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     assert "refers to" in capsys.readouterr().err
     assert main(["simulate", "iis_head", "-o", ""]) == 2  # simulate read "" as the current folder
     assert "-o '': an empty path" in capsys.readouterr().err
+    # a model saved with a byte-order mark (PowerShell 5) is read as the loaders read it
+    bom = tmp_path / "bom.json"
+    bom.write_bytes(b"\xef\xbb\xbf  \n" + model_file.read_bytes())
+    assert main(["export", str(bom), "-o", str(urdf)]) == 2
+    assert "refers to" in capsys.readouterr().err
+    # handeye may replace a model file in place, not a URDF given as its model
+    assert main(["handeye", str(poses), "--model", str(urdf), "-o", str(urdf)]) == 2
+    assert "the same file as the input model" in capsys.readouterr().err
+    # export also writes a calibration report next to a written-back URDF
+    report = tmp_path / "cal.report.json"
+    shutil.copy(model_file, report)
+    assert main(["export", str(report), "-o", str(tmp_path / "cal.urdf")]) == 2
+    assert "-o (its report)" in capsys.readouterr().err
     assert urdf.read_bytes() == before
     out = tmp_path / "calibrated.urdf"
     out.write_text("an old export\n")
     assert main(["export", str(model_file), "-o", str(out)]) == 0  # overwriting an output nothing reads
     assert out.read_text().startswith("<?xml")
+
+
+def test_a_bare_robot_name_is_the_shipped_robot_not_a_file_beside(demo_run, tmp_path, capsys):
+    """A measurement file's robot "iis_head" is the shipped robot even with a file of that name
+    beside it (the loader's rule): an output there is not refused."""
+    d, _, _ = demo_run
+    folder = tmp_path / "s"
+    folder.mkdir()
+    shutil.copy(d / "sim" / "measurements.json", folder / "measurements.json")
+    (folder / "iis_head").write_text("an earlier output\n")
+    assert main(["identify", str(folder / "measurements.json"), "-o", str(folder / "iis_head")]) == 0
+    capsys.readouterr()
+    assert load_model(folder / "iis_head").structure.joint_names[0] == "table_x"
 
 
 def test_handeye_may_update_its_model_in_place(demo_run, tmp_path, capsys):

@@ -312,3 +312,19 @@ def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
         for cam in CAMERAS:
             d = Tq[cam][:3, :3].T @ (p - Tq[cam][:3, 3])
             assert math.atan2(math.hypot(d[0], d[1]), d[2]) < 1e-8
+
+
+def test_cli_view_reach_lays_the_grid_out_as_reach_does(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--q`` holds the joints that do not move (the table) where shown; the moving ones (pan
+    turned by --q, the eyes by --target) do not turn the grid: the region is the one laid out
+    with them at the middle of their limits."""
+    page = tmp_path / "v.html"
+    assert main(["view", "iis_head", "--reach", "--q", "table_x=0.1", "table_y=0.4", "pan=2.0", "--target", "-0.3",
+                 "-0.4", "0.66", "--no-sweep", "--html", str(page)]) == 0
+    out = capsys.readouterr().out
+    robot = load_view_robot("iis_head")
+    posture = robot.q_from({"table_x": 0.1, "table_y": 0.4})
+    solver = GazeSolver(robot.pinocchio, CAMERAS)
+    r = reachable_region(solver, make_grid(solver, q=posture), q_current=posture)
+    assert f"{r.counts()['fixated']} fixated (green)" in out
+    assert "held where shown: table_x=0.1, table_y=0.4" in out and "held where shown: table_x=0.1" in page.read_text()

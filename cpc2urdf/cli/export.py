@@ -26,7 +26,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "--up", nargs=3, type=float, metavar=("X", "Y", "Z"),
         help="the up direction in base coordinates (default: the robot spec's 'up', else base +z)",
     )
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, written=reports)
+
+
+def reports(args: argparse.Namespace) -> dict[str, str]:
+    """The calibration report written next to a written-back URDF (checked against the inputs
+    before the command runs)."""
+    from cpc2urdf.urdf_report import report_paths
+
+    try:
+        json_path, text_path = report_paths(args.output)
+    except ValueError:  # no file name (-o .): export refuses it itself
+        return {}
+    return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
 
 
 def run(args: argparse.Namespace) -> int:

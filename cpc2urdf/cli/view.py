@@ -115,8 +115,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "reach's default grid (a shell 0.2-3 m from the cameras, +-90 deg azimuth, +-60 deg "
         "elevation; 14,800 targets) as a point coloured by category (fixated, disparity, joint "
         "limits, behind, too close, no solution), the joints that do not move held where shown "
-        "(--q, else the middle of their limits); for another grid or the solver's options, "
-        "cpc2urdf reach --html",
+        "(--q, else the middle of their limits), the grid laid out about the cameras with the "
+        "moving joints at the middle of theirs (as reach does; not where --q or --target turn "
+        "them); for another grid or the solver's options, cpc2urdf reach --html",
     )
     p.set_defaults(run=run)
 
@@ -157,13 +158,18 @@ def run(args: argparse.Namespace) -> int:
     if args.reach:  # solved on the robot as drawn, as --target is: one world, the view's names
         from cpc2urdf.cli._gaze_options import region_notes
         from cpc2urdf.validation.gaze import GazeSolver
+        from cpc2urdf.validation.gaze.chain import mid_limits
         from cpc2urdf.validation.gaze.reach import make_grid, reachable_region
 
-        # the joints that do not move are held where shown (--q, else the middle of their limits)
-        shown = robot.q_from(options["q"])
+        # the joints that do not move are held where shown (--q, else the middle of their limits);
+        # the moving ones start, and the grid is laid out, at the middle of theirs, as reach does:
+        # where the cameras look now (--q, --target) does not change where they can look
+        posture = robot.q_from(options["q"])
         solver = GazeSolver(robot.pinocchio, tuple(args.cameras))
-        options["region"] = reachable_region(solver, make_grid(solver, q=shown), q_current=shown)
-        notes = region_notes(solver, shown)
+        moving = solver.free_joints("cyclopean")
+        posture[moving] = mid_limits(solver.lower, solver.upper)[moving]
+        options["region"] = reachable_region(solver, make_grid(solver, q=posture), q_current=posture)
+        notes = region_notes(solver, posture)
 
     for line in notes:  # what the region assumed (a served view has no legend)
         print(f"reachable region: {line}")
