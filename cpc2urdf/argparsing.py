@@ -106,7 +106,7 @@ def _same_file(a: str, b: str) -> bool:
         return False
 
 
-def _json_object(path: str) -> dict[str, object] | None:
+def json_object(path: str) -> dict[str, Any] | None:
     """The JSON object in file ``path`` when its text (after a UTF-8 byte-order mark and white
     space, as the loaders read it) starts with ``{``; None for anything else, a file over
     :data:`MAX_REFERENCING_FILE`, or one that cannot be read or parsed."""
@@ -132,7 +132,7 @@ def referenced_files(path: str) -> list[str]:
     JSON's folder first; a bare name is the shipped robot unless such a file is here). Any file
     whose text starts with ``{`` is read as JSON, whatever its name (the loaders do the same);
     empty for other files."""
-    doc = _json_object(path)
+    doc = json_object(path)
     if doc is None:
         return []
     found = []
@@ -200,7 +200,7 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
             continue
         label = dest.replace("_", "-")
         for v in _named_files(value):
-            if dest not in allowed or _json_object(v) is None:  # in place: a model file, not a URDF
+            if dest not in allowed or json_object(v) is None:  # in place: a model file, not a URDF
                 inputs.append((f"the same file as the input {label} ({v})", v))
             inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
     read = getattr(args, "read", None)
@@ -217,6 +217,7 @@ __all__ = [
     "OUTPUT_OPTIONS",
     "OneLineParser",
     "check_outputs_are_not_inputs",
+    "json_object",
     "referenced_files",
     "exit_code",
     "finite_numbers",

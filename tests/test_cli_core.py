@@ -195,6 +195,14 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     shutil.copy(model_file, report)
     assert main(["export", str(report), "-o", str(tmp_path / "cal.urdf")]) == 2
     assert "-o (its report)" in capsys.readouterr().err
+    # ... only then: a model cpc2urdf exports itself writes no report, so none is refused
+    from cpc2urdf.model_file import save_model
+
+    plain = save_model(load_model("iis_head"), tmp_path / "plain.report.json")
+    assert main(["export", str(plain), "-o", str(tmp_path / "plain.urdf")]) == 0
+    capsys.readouterr()
+    assert main(["export", str(model_file), "-o", str(tmp_path)]) == 2  # a folder: one line (a traceback before)
+    assert "is a folder" in capsys.readouterr().err
     assert urdf.read_bytes() == before
     out = tmp_path / "calibrated.urdf"
     out.write_text("an old export\n")

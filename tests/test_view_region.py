@@ -315,9 +315,9 @@ def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
 
 
 def test_cli_view_reach_lays_the_grid_out_as_reach_does(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``--q`` holds the joints that do not move (the table) where shown; the moving ones (pan
-    turned by --q, the eyes by --target) do not turn the grid: the region is the one laid out
-    with them at the middle of their limits."""
+    """``--q`` holds the joints that do not move (the table) where shown; a moving one turned by
+    --q (pan) does not turn the grid, nor does --target: the region is the one laid out with the
+    moving joints at the middle of their limits (with pan turned the grid lost 166 fixated)."""
     page = tmp_path / "v.html"
     assert main(["view", "iis_head", "--reach", "--q", "table_x=0.1", "table_y=0.4", "pan=2.0", "--target", "-0.3",
                  "-0.4", "0.66", "--no-sweep", "--html", str(page)]) == 0

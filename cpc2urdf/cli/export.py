@@ -30,13 +30,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def reports(args: argparse.Namespace) -> dict[str, str]:
-    """The calibration report written next to a written-back URDF (checked against the inputs
-    before the command runs)."""
+    """The calibration report written next to the URDF when a model is written back into its
+    user's URDF (a model file with a ``urdf`` section; checked against the inputs before the
+    command runs)."""
+    import os
+
+    from cpc2urdf.argparsing import json_object
     from cpc2urdf.urdf_report import report_paths
 
+    doc = json_object(args.model) if os.path.isfile(args.model) else None
+    if doc is None or not isinstance(doc.get("urdf"), dict):
+        return {}
     try:
         json_path, text_path = report_paths(args.output)
-    except ValueError:  # no file name (-o .): export refuses it itself
+    except ValueError:  # no file name (-o .): refused by run, before writing
         return {}
     return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
 
@@ -44,10 +51,12 @@ def reports(args: argparse.Namespace) -> dict[str, str]:
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import export_urdf
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.fileio import check_output_path
     from cpc2urdf.urdf import total_mass
     from cpc2urdf.urdf_export import describe, plan_export
     from cpc2urdf.urdf_robot import urdf_source
 
+    check_output_path(args.output)  # before any work (-o . is a folder: one line, no traceback)
     plan = plan_export(args.model, up=args.up)
     s = plan.model.structure
     if urdf_source(plan.model) is not None:  # a user's URDF: written back into it (docs/urdf.md)
