@@ -48,12 +48,13 @@ def test_compiled_kinematics_match_pinocchio_and_finite_differences(case):
         for c, fid in enumerate(fids):
             assert np.abs(data.oMf[fid].rotation - R[c]).max() < 1e-12
             assert np.abs(data.oMf[fid].translation - o[c]).max() < 1e-12
-        # the residual's Jacobian against central differences
+        # the residual's Jacobian against central differences: its rows are d r in each
+        # camera's tangent basis T (orthonormal, orthogonal to u), and J^T J is the 3-row one's
         p = o[: len(fids)].mean(axis=0) + 1.3 * R[0][:, 2] + rng.normal(0, 0.2, 3)
         r, J = ws[7], ws[8]
         kernels.residual(comp.ch, u, chain.b, p, r, J, True, *ws[:7])
-        J = J.copy()
-        Jfd = np.empty_like(J)
+        r, J = r.copy(), J.copy()
+        Jfd = np.empty((len(r), chain.m))
         for v in range(chain.m):
             h = np.zeros(chain.m)
             h[v] = 1e-6
@@ -61,7 +62,39 @@ def test_compiled_kinematics_match_pinocchio_and_finite_differences(case):
             kernels.residual(comp.ch, u + h, chain.b, p, a, ws[10], False, *ws[:7])
             kernels.residual(comp.ch, u - h, chain.b, p, b, ws[10], False, *ws[:7])
             Jfd[:, v] = (a - b) / 2e-6
-        assert np.abs(J - Jfd).max() < 1e-7 * max(1.0, np.abs(J).max())
+        tol = 1e-7 * max(1.0, np.abs(J).max())
+        assert np.abs(J.T @ J - Jfd.T @ Jfd).max() < tol * max(1.0, np.abs(J).max())
+        for c in range(len(r) // 3):
+            uc = r[3 * c:3 * c + 3] + [0.0, 0.0, 1.0]
+            T = np.reshape(kernels._tangent(*uc), (2, 3)).T
+            assert np.abs(T.T @ T - np.eye(2)).max() < 1e-15 and np.abs(uc @ T).max() < 1e-15
+            assert np.abs(J[2 * c:2 * c + 2] - T.T @ Jfd[3 * c:3 * c + 3]).max() < tol
+            assert np.allclose(kernels._tangent_residual(r, c), T.T @ r[3 * c:3 * c + 3], rtol=0, atol=1e-15)
+
+
+def test_tangent_basis_on_the_whole_sphere():
+    """The Jacobian's rows are taken in a basis ``t1, t2`` of the plane orthogonal to the target's
+    direction ``u`` (:func:`kernels._tangent`): orthonormal and orthogonal to ``u`` on both sides
+    of its switch (``u_z = -1/2``), including straight behind (``u = -e_z``, where the first
+    side's formula is singular) and on the camera centre (``u = 0``: ``e_x, e_y``); continuous
+    on each side (a warm-started decomposition stays warm); and the residual's tangent part
+    ``T^T (u - e_z)`` the same as from the explicit basis."""
+    rng = np.random.default_rng(0)
+    U = rng.normal(size=(2000, 3))
+    U /= np.linalg.norm(U, axis=1)[:, None]
+    U = np.vstack([U, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0, -0.8], [0, 0.8, -0.6]]])
+    for u in U:
+        T = np.reshape(kernels._tangent(*u), (2, 3)).T
+        assert np.abs(T.T @ T - np.eye(2)).max() < 1e-14 and np.abs(u @ T).max() < 1e-14
+        r = u - [0.0, 0.0, 1.0]
+        assert np.allclose(kernels._tangent_residual(r, 0), T.T @ r, rtol=0, atol=1e-15)
+        for side in (1e-7, -1e-7):  # a small turn that stays on the same side of the switch
+            w = u + side * np.cross(u, [0.3, -0.5, 0.8])
+            w /= np.linalg.norm(w)
+            if (w[2] >= -0.5) == (u[2] >= -0.5):
+                T2 = np.reshape(kernels._tangent(*w), (2, 3)).T
+                assert np.abs(T2 - T).max() < 1e-5
+    assert np.array_equal(np.reshape(kernels._tangent(0.0, 0.0, 0.0), (2, 3)), np.eye(3)[:2])
 
 
 def test_reachable_targets_exact_on_independent_fk(case):
@@ -399,7 +432,8 @@ def _svd_step(comp, p, u0, ws, version=None):
         return None
     k = int(np.sum(lam > cut))
     V = Vt[:k].T
-    dx = -V @ (s[:k] * (U[:, :k].T @ ws[7]) / (lam[:k] + kernels.DAMPING * rr))
+    r_t = np.concatenate([kernels._tangent_residual(ws[7], c) for c in range(len(ws[7]) // 3)])  # J's rows' basis
+    dx = -V @ (s[:k] * (U[:, :k].T @ r_t) / (lam[:k] + kernels.DAMPING * rr))
     z = comp.sw * (u0 - comp.home_u)
     null_z = z - V @ (V.T @ z)
     if version is not None:
@@ -616,7 +650,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     buffer = ws[0].base  # numba's MemInfo of the float buffer: its address and, as a buffer, its size
     assert spans[0][0] == buffer.data
     assert spans[-1][0] + spans[-1][1] - buffer.data == memoryview(buffer).nbytes  # used to its end
-    assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (3 * S, m)
+    assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (2 * S, m) and ws[7].shape == (3 * S,)
     assert ws[26].shape == (G + 1,) and ws[33].shape == (n_top, m) and ws[28].dtype == np.int64
     assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[41], np.ones(m))
 

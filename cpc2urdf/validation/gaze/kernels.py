@@ -14,7 +14,12 @@ and turns it by ``a_j``, a prismatic one moves it by ``a_j``.
 Pointing residual per solved camera (as before): ``r = u - e_z`` with ``u`` the unit target
 direction in the camera frame, ``p_cam = R^T (p - o)``; ``|r| = 2 sin(err / 2)``. With the
 camera's world twist ``(v, w)``: ``d p_cam = R^T ((p - o) x w - v)`` and
-``d u = (I - u u^T) d p_cam / |p_cam|``.
+``d u = (I - u u^T) d p_cam / |p_cam|``. ``d u`` lies in the plane orthogonal to ``u``, so the
+Jacobian is kept in a basis ``t1, t2`` of that plane (:func:`_tangent`): two rows per camera,
+``J_t = T^T d p_cam / |p_cam|``, with the residual's own part there, ``r_t = T^T r``. Every product
+the step takes is the same as with the three rows (``J^T J = J_t^T J_t``, ``J^T r = J_t^T r_t``,
+``J J^T`` has ``J_t J_t^T``'s eigenvalues and two zeros), and ``J_x J_x^T`` of the redundant heads
+is ``2S x 2S`` instead of ``3S x 3S`` (fifteenth pass, docs/gaze.md).
 
 Step (task priority, Levenberg-Marquardt; unknowns scaled by the square root of the policy's
 weights so the secondary task is ``|x - x_ref|^2 / 2``): with ``J^T J = V diag(l) V^T`` over the
@@ -31,7 +36,7 @@ version exactly. With a minimum viewing distance (:func:`pack`) the null move ke
 camera nearest the target from coming nearer than it (:func:`_hold_off`). Joints at a bound whose step
 points outward are held (active set); the step is capped and projected on the bounds. With more
 free unknowns than residual rows (a camera on an arm, iCub's torso, neck and eyes, TALOS's torso
-and head) the same step comes from ``J_x J_x^T`` (``M x M``, ``M = 3S``) instead
+and head) the same step comes from ``J_x J_x^T`` (``M x M``, ``M = 2S``) instead
 (:func:`_step_from_rows`).
 
 Near the answer (``|r|^2 <= ACCELERATE_BELOW``) the policy phase of a head that fixates
@@ -269,9 +274,35 @@ def camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _tangent(ux, uy, uz):  # type: ignore[no-untyped-def]
+    """Two unit vectors ``t1, t2`` (6 scalars) that complete the unit direction ``u`` to an
+    orthonormal basis: the rotation taking ``e_z`` to ``u`` (``-e_z`` when ``u_z < -1/2``: the
+    first is singular at ``u = -e_z``) applied to ``e_x`` and ``e_y``, ``R = I + [k] + [k]^2 / (1 +
+    a . u)``, ``k = a x u``. Continuous in ``u`` on either side, so a warm-started decomposition
+    of ``J_x J_x^T`` stays warm from step to step. ``u = 0`` (a target on the camera centre):
+    ``e_x, e_y``. The residual's tangent part ``T^T (u - e_z)`` is ``(u_x, u_y)`` on the first side."""
+    if uz >= -0.5:
+        c = 1.0 / (1.0 + uz)
+        return 1.0 - ux * ux * c, -ux * uy * c, -ux, -ux * uy * c, 1.0 - uy * uy * c, -uy
+    c = 1.0 / (1.0 - uz)
+    return 1.0 - ux * ux * c, -ux * uy * c, ux, -ux * uy * c, 1.0 - uy * uy * c, uy
+
+
+@inline_kernel
+def _tangent_residual(r, s):  # type: ignore[no-untyped-def]
+    """``r_t = T^T r_s`` (2 scalars) of solved camera ``s`` from its residual ``r_s = u - e_z``
+    (``r[3 s:3 s + 3]``): the part of ``r`` that the Jacobian's rows see (its part along ``u``,
+    ``(u . r) u``, no joint motion changes to first order)."""
+    rx, ry, rz = r[3 * s], r[3 * s + 1], r[3 * s + 2]
+    t1x, t1y, t1z, t2x, t2y, t2z = _tangent(rx, ry, rz + 1.0)
+    return t1x * rx + t1y * ry + t1z * rz, t2x * rx + t2y * ry + t2z * rz
+
+
+@inline_kernel
 def _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
-    its Jacobian ``J`` (3 S, m) by ``u`` when ``want_jac``, and each solved camera's view of
+    its Jacobian ``J`` (2 S, m) by ``u`` in each camera's tangent basis (:func:`_tangent`: the
+    rows of ``d r_t``, ``r_t = T^T r``) when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 5 + m): ``p_cam``, ``|p_cam|``, and with the Jacobian (``want_jac``:
     columns 4 on, left as they are by a trial's evaluation) ``|p_cam|`` again and its gradient
     by ``u``. Returns ``|r|^2``."""
@@ -314,14 +345,15 @@ def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
         if not want_jac:
             continue
         camera_jacobian(ch, c, Jp, Ja, CR, Co, Jc)
+        t1x, t1y, t1z, t2x, t2y, t2z = _tangent(ux, uy, uz)
         for v in range(m):
-            J[3 * s, v] = 0.0
-            J[3 * s + 1, v] = 0.0
-            J[3 * s + 2, v] = 0.0
+            J[2 * s, v] = 0.0
+            J[2 * s + 1, v] = 0.0
             Pc[s, 5 + v] = 0.0
         Pc[s, 4] = nrm
         for k in range(K):
-            # d(p - o) x w - v in world, then R^T, then the projector (I - u u^T) / |p_cam|
+            # d(p - o) x w - v in world, then R^T: d p_cam; its tangent part T^T d p_cam / |p_cam|
+            # is d r_t (the projector I - u u^T of d u = T T^T)
             wx, wy, wz = Jc[3, k], Jc[4, k], Jc[5, k]
             ex = dy * wz - dz * wy - Jc[0, k]
             ey = dz * wx - dx * wz - Jc[1, k]
@@ -330,13 +362,13 @@ def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
             gy = CR[c, 0, 1] * ex + CR[c, 1, 1] * ey + CR[c, 2, 1] * ez
             gz = CR[c, 0, 2] * ex + CR[c, 1, 2] * ey + CR[c, 2, 2] * ez
             d = ux * gx + uy * gy + uz * gz  # d |p_cam|
-            hx, hy, hz = (gx - d * ux) * inv, (gy - d * uy) * inv, (gz - d * uz) * inv
+            h1 = (t1x * gx + t1y * gy + t1z * gz) * inv
+            h2 = (t2x * gx + t2y * gy + t2z * gz) * inv
             for v in range(m):
                 a = A[k, v]
                 if a != 0.0:
-                    J[3 * s, v] += hx * a
-                    J[3 * s + 1, v] += hy * a
-                    J[3 * s + 2, v] += hz * a
+                    J[2 * s, v] += h1 * a
+                    J[2 * s + 1, v] += h2 * a
                     Pc[s, 5 + v] += d * a
     return rr
 
@@ -514,17 +546,15 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
     same step as the column form's, from an M x M eigen-problem instead of f x f. Returns the
     null move's squared length.
 
-    The pointing step along ``v_e`` is ``-v_e (v_e . g) / (l_e + mu)`` (``g = J_x^T r``), with
-    ``v_e . g`` taken as ``sqrt(l_e) (w_e . r_t)``: ``r_t`` is ``r`` without each camera's radial
-    part ``(u . r) u``, which ``J`` cannot see (``u^T J_c = 0``, ``u = r_c + e_z``: the
-    eigenvalues of ``J_x J_x^T`` that are zero by construction). Both choices keep the Jacobi
-    sweeps' error out of a weak direction's step: they stop with off-diagonal terms ~1e-12 of
-    ``l_max``, so a weak ``w_e`` holds ~1e-12 of the strong eigenvectors and ~1e-12 ``l_max /
-    l_e`` of the zero ones. From ``J_x^T w_e`` the first would move ``v_e . g`` by ~1e-12
-    ``l_max |r| / sqrt(l_e)``; with ``r`` the second by that fraction of the radial part.
-    iCub's pointing Jacobian loses rank at its answers (a 4th eigenvalue 1e-11..1e-8 of
-    ``l_max``, just above the cut): the first made 2 of 2,000 targets end at a limit, and the
-    second moved their unit direction there by up to 0.3 (largest component).
+    The pointing step along ``v_e`` is ``-v_e (v_e . g) / (l_e + mu)`` (``g = J_x^T r_t``), with
+    ``v_e . g`` taken as ``sqrt(l_e) (w_e . r_t)``, ``r_t`` the residual in the rows' tangent
+    bases (:func:`_tangent_residual`). That keeps the Jacobi sweeps' error out of a weak
+    direction's step: they stop with off-diagonal terms ~1e-12 of ``l_max``, so a weak ``w_e``
+    holds ~1e-12 of the strong eigenvectors, and from ``J_x^T w_e`` ``v_e . g`` would move by
+    ~1e-12 ``l_max |r| / sqrt(l_e)``. iCub's pointing Jacobian loses rank at its answers (a 4th
+    eigenvalue 1e-11..1e-8 of ``l_max``, just above the cut): taken so, 2 of 2,000 targets ended
+    at a limit. (With three rows a camera, ``r`` itself moved a weak step by that fraction of
+    its radial part ``(u . r) u``, along the zero eigenvalues: up to 0.3 of their unit direction.)
     """
     cut = _null_cut(lam, M, null_rel)
     for a in range(f):  # the policy's offset z = sw (u - u_ref) and the version row c_x = c / sw
@@ -545,13 +575,9 @@ def _step_from_rows(J, r, W, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nul
         # the pointing step along v_e (Gauss-Newton, damped) and the version it moves by; z and
         # c_x lose their v_e component (Gram-Schmidt, one range direction at a time)
         s = 0.0
-        for c in range(M // 3):  # w_e . r_t
-            ux, uy, uz = r[3 * c], r[3 * c + 1], r[3 * c + 2] + 1.0
-            if ux * ux + uy * uy + uz * uz < 0.5:  # a target on the camera centre: J's rows are zero
-                continue
-            d = ux * r[3 * c] + uy * r[3 * c + 1] + uz * r[3 * c + 2]
-            s += (W[3 * c, e] * (r[3 * c] - d * ux) + W[3 * c + 1, e] * (r[3 * c + 1] - d * uy)
-                  + W[3 * c + 2, e] * (r[3 * c + 2] - d * uz))
+        for c in range(M // 2):  # w_e . r_t
+            rt1, rt2 = _tangent_residual(r, c)
+            s += W[2 * c, e] * rt1 + W[2 * c + 1, e] * rt2
         s = -root * s / (lam[e] + mu)
         vr += a_e * s
         for a in range(f):
@@ -726,7 +752,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     vc = ch[12]
     vw_w, vw_ref, d_min = ch[13][0], ch[13][1], ch[13][2]
     m = u.shape[0]
-    M = r.shape[0]
+    M = J.shape[0]  # two rows a solved camera (its tangent basis)
     # the policy phase's Anderson acceleration (heads that fixate exactly, policy = distance
     # from u_ref: the version task's and a disparity head's near-null moves are left as they are);
     # acc rows: the history's unknowns hx and plain steps hf (newest first), their differences
@@ -797,12 +823,15 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, DAMPING * rr,
                                         gain, accelerate, Hb[0], null_z, null_c, dx, dn)
             elif f > 0:
-                if not have_g:
+                if not have_g:  # g = J_t^T r_t / sw
                     for v in range(m):
-                        s = 0.0
-                        for i in range(M):
-                            s += J[i, v] * r[i]
-                        g[v] = s / sw[v]
+                        g[v] = 0.0
+                    for c in range(M // 2):
+                        rt1, rt2 = _tangent_residual(r, c)
+                        for v in range(m):
+                            g[v] += J[2 * c, v] * rt1 + J[2 * c + 1, v] * rt2
+                    for v in range(m):
+                        g[v] /= sw[v]
                     have_g = True
                 cut = _null_cut(lam, f, null_rel)
                 mu = DAMPING * rr
@@ -1072,8 +1101,8 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
     :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
     solve makes its workspace on every call, and 44 allocations cost ~1.3 us of it."""
-    M = 3 * S
-    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + M + M * m + M + M * m + m + 4 * m * m
+    M = 2 * S  # the Jacobian's rows (the residual has 3 S)
+    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
                  + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + n_top + 3 + K + m + m + n_top * m
                  + m + S + m + S + m + m + S + m + m + m)
     ints = np.empty(m + n_top, dtype=np.int64)
@@ -1084,9 +1113,9 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     Co, o = _carve(f, o, 3 * C)
     Jc, o = _carve(f, o, 6 * K)
     Pc, o = _carve(f, o, (5 + m) * S)
-    r, o = _carve(f, o, M)
+    r, o = _carve(f, o, 3 * S)
     J, o = _carve(f, o, M * m)
-    r2, o = _carve(f, o, M)
+    r2, o = _carve(f, o, 3 * S)
     J2, o = _carve(f, o, M * m)
     g, o = _carve(f, o, m)
     H, o = _carve(f, o, m * m)
@@ -1569,9 +1598,11 @@ def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-unty
     g2 = 0.0
     j2 = 0.0
     for v in range(m):
-        gv = 0.0
+        gv = 0.0  # J^T r = J_t^T r_t
+        for c in range(M // 2):
+            rt1, rt2 = _tangent_residual(r, c)
+            gv += J[2 * c, v] * rt1 + J[2 * c + 1, v] * rt2
         for i in range(M):
-            gv += J[i, v] * r[i]
             j2 += J[i, v] * J[i, v]
         if (u[v] <= lower[v] + AT_BOUND and gv > 0.0) or (u[v] >= upper[v] - AT_BOUND and gv < 0.0):
             continue  # descent (-g) pushes u[v] out through its bound
