@@ -292,10 +292,12 @@ def _tangent(ux, uy, uz):  # type: ignore[no-untyped-def]
 def _tangent_residual(r, s):  # type: ignore[no-untyped-def]
     """``r_t = T^T r_s`` (2 scalars) of solved camera ``s`` from its residual ``r_s = u - e_z``
     (``r[3 s:3 s + 3]``): the part of ``r`` that the Jacobian's rows see (its part along ``u``,
-    ``(u . r) u``, no joint motion changes to first order)."""
-    rx, ry, rz = r[3 * s], r[3 * s + 1], r[3 * s + 2]
-    t1x, t1y, t1z, t2x, t2y, t2z = _tangent(rx, ry, rz + 1.0)
-    return t1x * rx + t1y * ry + t1z * rz, t2x * rx + t2y * ry + t2z * rz
+    ``(u . r) u``, no joint motion changes to first order). ``T^T (u - e_z) = -T^T e_z``, which in
+    the bases of :func:`_tangent` is ``(u_x, u_y)``, and ``(-u_x, -u_y)`` on the side ``u_z < -1/2``:
+    no basis to build."""
+    if r[3 * s + 2] + 1.0 >= -0.5:
+        return r[3 * s], r[3 * s + 1]
+    return -r[3 * s], -r[3 * s + 1]
 
 
 @inline_kernel
