@@ -50,26 +50,36 @@ def test_compiled_kinematics_match_pinocchio_and_finite_differences(case):
             assert np.abs(data.oMf[fid].translation - o[c]).max() < 1e-12
         # the residual's Jacobian against central differences: its rows are d r in each
         # camera's tangent basis T (orthonormal, orthogonal to u), and J^T J is the 3-row one's
-        p = o[: len(fids)].mean(axis=0) + 1.3 * R[0][:, 2] + rng.normal(0, 0.2, 3)
-        r, J = ws[7], ws[8]
-        kernels.residual(comp.ch, u, chain.b, p, r, J, True, *ws[:7])
-        r, J = r.copy(), J.copy()
-        Jfd = np.empty((len(r), chain.m))
-        for v in range(chain.m):
-            h = np.zeros(chain.m)
-            h[v] = 1e-6
-            a, b = np.empty_like(r), np.empty_like(r)
-            kernels.residual(comp.ch, u + h, chain.b, p, a, ws[10], False, *ws[:7])
-            kernels.residual(comp.ch, u - h, chain.b, p, b, ws[10], False, *ws[:7])
-            Jfd[:, v] = (a - b) / 2e-6
-        tol = 1e-7 * max(1.0, np.abs(J).max())
-        assert np.abs(J.T @ J - Jfd.T @ Jfd).max() < tol * max(1.0, np.abs(J).max())
-        for c in range(len(r) // 3):
-            uc = r[3 * c:3 * c + 3] + [0.0, 0.0, 1.0]
-            T = np.reshape(kernels._tangent(*uc), (2, 3)).T
-            assert np.abs(T.T @ T - np.eye(2)).max() < 1e-15 and np.abs(uc @ T).max() < 1e-15
-            assert np.abs(J[2 * c:2 * c + 2] - T.T @ Jfd[3 * c:3 * c + 3]).max() < tol
-            assert np.allclose(kernels._tangent_residual(r, c), T.T @ r[3 * c:3 * c + 3], rtol=0, atol=1e-15)
+        # (one target ahead of the cameras, one behind the first: both sides of _tangent's switch)
+        ahead = o[: len(fids)].mean(axis=0) + 1.3 * R[0][:, 2] + rng.normal(0, 0.2, 3)
+        behind = o[0] - 1.3 * R[0][:, 2] + rng.normal(0, 0.2, 3)
+        assert _jacobian_against_differences(comp, chain, u, ahead, ws)[2] > -1.5
+        assert _jacobian_against_differences(comp, chain, u, behind, ws)[2] < -1.5  # u_z < -1/2
+
+
+def _jacobian_against_differences(comp, chain, u, p, ws):
+    """The residual's Jacobian (two rows a camera, in its tangent basis) at ``u`` for target
+    ``p`` against central differences of the three-component residual. Returns the residual."""
+    r, J = ws[7], ws[8]
+    kernels.residual(comp.ch, u, chain.b, p, r, J, True, *ws[:7])
+    r, J = r.copy(), J.copy()
+    Jfd = np.empty((len(r), chain.m))
+    for v in range(chain.m):
+        h = np.zeros(chain.m)
+        h[v] = 1e-6
+        a, b = np.empty_like(r), np.empty_like(r)
+        kernels.residual(comp.ch, u + h, chain.b, p, a, ws[10], False, *ws[:7])
+        kernels.residual(comp.ch, u - h, chain.b, p, b, ws[10], False, *ws[:7])
+        Jfd[:, v] = (a - b) / 2e-6
+    tol = 1e-7 * max(1.0, np.abs(J).max())
+    assert np.abs(J.T @ J - Jfd.T @ Jfd).max() < tol * max(1.0, np.abs(J).max())
+    for c in range(len(r) // 3):
+        uc = r[3 * c:3 * c + 3] + [0.0, 0.0, 1.0]
+        T = np.reshape(kernels._tangent(*uc), (2, 3)).T
+        assert np.abs(T.T @ T - np.eye(2)).max() < 1e-15 and np.abs(uc @ T).max() < 1e-15
+        assert np.abs(J[2 * c:2 * c + 2] - T.T @ Jfd[3 * c:3 * c + 3]).max() < tol
+        assert np.allclose(kernels._tangent_residual(r, c), T.T @ r[3 * c:3 * c + 3], rtol=0, atol=1e-15)
+    return r
 
 
 def test_tangent_basis_on_the_whole_sphere():
@@ -83,15 +93,19 @@ def test_tangent_basis_on_the_whole_sphere():
     U = rng.normal(size=(2000, 3))
     U /= np.linalg.norm(U, axis=1)[:, None]
     U = np.vstack([U, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0, -0.8], [0, 0.8, -0.6]]])
+    # u_z = -1/2 - 2^-53: u_z + 1 - 1 rounds to -1/2, so the side must be read from u_z - 1 (the
+    # residual's double) in both places (a TIAGo target there had its gradient's sign flipped)
+    uz = np.nextafter(-0.5, -1.0)
+    U = np.vstack([U, [[math.sqrt(1.0 - uz * uz), 0.0, uz]]])
     for u in U:
         T = np.reshape(kernels._tangent(*u), (2, 3)).T
         assert np.abs(T.T @ T - np.eye(2)).max() < 1e-14 and np.abs(u @ T).max() < 1e-14
         r = u - [0.0, 0.0, 1.0]
-        assert np.allclose(kernels._tangent_residual(r, 0), T.T @ r, rtol=0, atol=1e-15)
+        assert np.allclose(kernels._tangent_residual(r, 0), T.T @ r, rtol=0, atol=1e-15), u
         for side in (1e-7, -1e-7):  # a small turn that stays on the same side of the switch
             w = u + side * np.cross(u, [0.3, -0.5, 0.8])
             w /= np.linalg.norm(w)
-            if (w[2] >= -0.5) == (u[2] >= -0.5):
+            if (w[2] - 1.0 >= -1.5) == (u[2] - 1.0 >= -1.5):  # the side as _tangent reads it
                 T2 = np.reshape(kernels._tangent(*w), (2, 3)).T
                 assert np.abs(T2 - T).max() < 1e-5
     assert np.array_equal(np.reshape(kernels._tangent(0.0, 0.0, 0.0), (2, 3)), np.eye(3)[:2])
@@ -477,8 +491,8 @@ def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
 def test_one_iteration_takes_the_task_priority_step_of_an_svd(case):
     """One policy-phase iteration (``kernels._iterate``, ``max_it=1``) from seeded postures well
     inside the bounds moves along the task-priority step of an SVD (:func:`_svd_step`). Covers
-    both of the kernel's forms: the eigen-decomposition of ``J^T J`` (TIAGo: 3 unknowns, 3 rows)
-    and of ``J J^T`` (TALOS 4 > 3, iCub 9 > 6, a camera on an arm 7 > 3). A weak direction's
+    the kernel's ``J J^T`` form (the Jacobian has two rows a camera: TIAGo 3 > 2, TALOS 4 > 2, iCub
+    9 > 4, a camera on an arm 7 > 2; the ``J^T J`` form: :func:`test_one_iteration_in_the_column_form`). A weak direction's
     step is as ill-conditioned as ``s_max^2 / s^2``, and the Jacobi sweeps stop with off-diagonal
     terms ~1e-12 of the largest eigenvalue: the direction must agree to 1e-10 times that ratio
     (seen: 1e-12 or less, both forms)."""
@@ -491,6 +505,32 @@ def test_one_iteration_takes_the_task_priority_step_of_an_svd(case):
     for p in P:
         u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
         step = _svd_step(comp, p, u0, ws)
+        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
+        if off is not None:
+            compared += 1
+            worst = max(worst, off * step[1])
+    assert compared >= 30, f"{case.name}: only {compared} postures compared"
+    assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+
+
+@pytest.mark.parametrize("case", ["iis_nominal", "iis_calibrated", "stereo_pan_tilt"], indirect=True)
+def test_one_iteration_in_the_column_form(case):
+    """:func:`test_one_iteration_takes_the_task_priority_step_of_an_svd` for the heads whose free
+    unknowns are no more than the Jacobian's rows (the eigen-decomposition of ``J^T J``, its
+    gradient ``J^T r`` from the tangent residual): the IIS-heads' cyclopean solve (4 unknowns, 4
+    rows; the nominal with its zero-version task, the calibrated with its near-null cut) and
+    the stereo pan-tilt (2, 2)."""
+    comp = case.solver._fast
+    chain = comp.chain
+    assert chain.m <= 2 * len(chain.solve_cameras)  # the column form
+    version = None if comp.version_row is None else (comp.version_row, VERSION_WEIGHT)
+    ws = kernels.workspace(chain)
+    rng = np.random.default_rng(13)
+    P, _ = case.reachable_targets(60, seed=4)
+    compared, worst = 0, 0.0
+    for p in P:
+        u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
+        step = _svd_step(comp, p, u0, ws, version)
         off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
         if off is not None:
             compared += 1
@@ -608,7 +648,7 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
 def test_the_zero_version_task_takes_the_svds_step_in_the_rows_form(case):
     """The zero-version task (the nominal IIS-head's cyclopean policy) in the ``J J^T`` form
     (``kernels._step_from_rows``): no head shape reaches it (an IIS-head solves 4 unknowns
-    against 6 rows), so iCub's chain (9 unknowns, 6 rows) gets a version row on its ``version``
+    against 4 rows), so iCub's chain (9 unknowns, 4 rows) gets a version row on its ``version``
     unknown, at the solver's weight. Its first step from seeded postures must point where the
     SVD's does (:func:`_svd_step` with the version task), to 1e-10 times ``s_max^2 / s^2`` as in
     :func:`test_one_iteration_takes_the_task_priority_step_of_an_svd`, and differ from the step

@@ -18,7 +18,7 @@ camera's world twist ``(v, w)``: ``d p_cam = R^T ((p - o) x w - v)`` and
 Jacobian is kept in a basis ``t1, t2`` of that plane (:func:`_tangent`): two rows per camera,
 ``J_t = T^T d p_cam / |p_cam|``, with the residual's own part there, ``r_t = T^T r``. Every product
 the step takes is the same as with the three rows (``J^T J = J_t^T J_t``, ``J^T r = J_t^T r_t``,
-``J J^T`` has ``J_t J_t^T``'s eigenvalues and two zeros), and ``J_x J_x^T`` of the redundant heads
+``J J^T`` has ``J_t J_t^T``'s eigenvalues and one zero a camera), and ``J_x J_x^T`` of the redundant heads
 is ``2S x 2S`` instead of ``3S x 3S`` (fifteenth pass, docs/gaze.md).
 
 Step (task priority, Levenberg-Marquardt; unknowns scaled by the square root of the policy's
@@ -280,8 +280,11 @@ def _tangent(ux, uy, uz):  # type: ignore[no-untyped-def]
     first is singular at ``u = -e_z``) applied to ``e_x`` and ``e_y``, ``R = I + [k] + [k]^2 / (1 +
     a . u)``, ``k = a x u``. Continuous in ``u`` on either side, so a warm-started decomposition
     of ``J_x J_x^T`` stays warm from step to step. ``u = 0`` (a target on the camera centre):
-    ``e_x, e_y``. The residual's tangent part ``T^T (u - e_z)`` is ``(u_x, u_y)`` on the first side."""
-    if uz >= -0.5:
+    ``e_x, e_y``. The residual's tangent part ``T^T (u - e_z)`` is ``(u_x, u_y)`` on the first side.
+    The side is read from ``u_z - 1`` as the residual holds it, so that :func:`_tangent_residual`
+    (which has only the residual) takes the same side at every double (``u_z = -1/2 - 2^-53``:
+    ``u_z + 1 - 1`` rounds across)."""
+    if uz - 1.0 >= -1.5:
         c = 1.0 / (1.0 + uz)
         return 1.0 - ux * ux * c, -ux * uy * c, -ux, -ux * uy * c, 1.0 - uy * uy * c, -uy
     c = 1.0 / (1.0 - uz)
@@ -295,7 +298,7 @@ def _tangent_residual(r, s):  # type: ignore[no-untyped-def]
     ``(u . r) u``, no joint motion changes to first order). ``T^T (u - e_z) = -T^T e_z``, which in
     the bases of :func:`_tangent` is ``(u_x, u_y)``, and ``(-u_x, -u_y)`` on the side ``u_z < -1/2``:
     no basis to build."""
-    if r[3 * s + 2] + 1.0 >= -0.5:
+    if r[3 * s + 2] >= -1.5:  # the side :func:`_tangent` takes (from the same double)
         return r[3 * s], r[3 * s + 1]
     return -r[3 * s], -r[3 * s + 1]
 
@@ -303,8 +306,8 @@ def _tangent_residual(r, s):  # type: ignore[no-untyped-def]
 @inline_kernel
 def _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
-    its Jacobian ``J`` (2 S, m) by ``u`` in each camera's tangent basis (:func:`_tangent`: the
-    rows of ``d r_t``, ``r_t = T^T r``) when ``want_jac``, and each solved camera's view of
+    its Jacobian ``J`` (2 S, m) by ``u`` in each camera's tangent basis (:func:`_tangent`: ``T^T
+    d r`` with ``T`` taken at this ``u``, the only part of ``d r`` there is) when ``want_jac``, and each solved camera's view of
     the target ``Pc`` (S, 5 + m): ``p_cam``, ``|p_cam|``, and with the Jacobian (``want_jac``:
     columns 4 on, left as they are by a trial's evaluation) ``|p_cam|`` again and its gradient
     by ``u``. Returns ``|r|^2``."""
@@ -355,7 +358,7 @@ def residual_at_fk(ch, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: 
         Pc[s, 4] = nrm
         for k in range(K):
             # d(p - o) x w - v in world, then R^T: d p_cam; its tangent part T^T d p_cam / |p_cam|
-            # is d r_t (the projector I - u u^T of d u = T T^T)
+            # is T^T d r (d r = (I - u u^T) d p_cam / |p_cam| and I - u u^T = T T^T)
             wx, wy, wz = Jc[3, k], Jc[4, k], Jc[5, k]
             ex = dy * wz - dz * wy - Jc[0, k]
             ey = dz * wx - dx * wz - Jc[1, k]
