@@ -156,6 +156,20 @@ def test_output_folder_missing(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert "does not exist" in capsys.readouterr().err
 
 
+def _served_url(proc: subprocess.Popen[str], timeout: float) -> tuple[str | None, list[str]]:
+    """The URL a served ``cpc2urdf view`` prints ("serving at URL"), read from its output within
+    ``timeout`` [s] (None if it exited or did not print it), and the lines read until then."""
+    deadline = time.monotonic() + timeout
+    lines: list[str] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        line = proc.stdout.readline()  # type: ignore[union-attr]
+        lines.append(line)
+        m = re.search(r"serving at (http://\S+)", line)
+        if m:
+            return m.group(1), lines
+    return None, lines
+
+
 def test_serves_until_interrupted(tmp_path: Path) -> None:
     """Without --html: prints the URL, the page is served, Ctrl-C stops it (exit 0, server gone)."""
     proc = subprocess.Popen(
@@ -166,16 +180,7 @@ def test_serves_until_interrupted(tmp_path: Path) -> None:
         cwd=tmp_path,
     )
     try:
-        url = None
-        deadline = time.monotonic() + 60.0
-        lines = []
-        while time.monotonic() < deadline and proc.poll() is None:
-            line = proc.stdout.readline()  # type: ignore[union-attr]
-            lines.append(line)
-            m = re.search(r"serving at (http://\S+)", line)
-            if m:
-                url = m.group(1)
-                break
+        url, lines = _served_url(proc, 60.0)
         assert url is not None, "".join(lines) + (
             proc.stderr.read() if proc.poll() is not None else ""
         )  # type: ignore[union-attr]
@@ -291,15 +296,7 @@ def test_serves_the_reachable_region(tmp_path: Path) -> None:
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
     )
     try:
-        url, lines = None, []
-        deadline = time.monotonic() + 90.0
-        while time.monotonic() < deadline and proc.poll() is None:
-            line = proc.stdout.readline()  # type: ignore[union-attr]
-            lines.append(line)
-            m = re.search(r"serving at (http://\S+)", line)
-            if m:
-                url = m.group(1)
-                break
+        url, lines = _served_url(proc, 90.0)
         text = "".join(lines)
         assert url is not None, text
         assert "reachable region: 14800 targets (shell grid):" in text and "fixated (green)" in text

@@ -487,6 +487,27 @@ def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
     return float(np.abs(move / np.linalg.norm(move) - reference / np.linalg.norm(reference)).max())
 
 
+def _first_steps_against_the_svd(case, seed, version=None):
+    """One policy-phase iteration of the kernel from each of 60 seeded postures well inside the
+    bounds (one per reachable target of seed 4) against the SVD's step (:func:`_svd_step`, with
+    ``version`` as it takes it): the postures compared (the step neither clipped nor refused)
+    and the worst direction's miss times ``s_max^2 / s^2``."""
+    comp = case.solver._fast
+    chain = comp.chain
+    ws = kernels.workspace(chain)
+    rng = np.random.default_rng(seed)
+    P, _ = case.reachable_targets(60, seed=4)
+    compared, worst = 0, 0.0
+    for p in P:
+        u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
+        step = _svd_step(comp, p, u0, ws, version)
+        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
+        if off is not None:
+            compared += 1
+            worst = max(worst, off * step[1])
+    return compared, worst
+
+
 @pytest.mark.parametrize("case", POLICY_HEADS, indirect=True)
 def test_one_iteration_takes_the_task_priority_step_of_an_svd(case):
     """One policy-phase iteration (``kernels._iterate``, ``max_it=1``) from seeded postures well
@@ -496,19 +517,7 @@ def test_one_iteration_takes_the_task_priority_step_of_an_svd(case):
     step is as ill-conditioned as ``s_max^2 / s^2``, and the Jacobi sweeps stop with off-diagonal
     terms ~1e-12 of the largest eigenvalue: the direction must agree to 1e-10 times that ratio
     (seen: 1e-12 or less, both forms)."""
-    comp = case.solver._fast
-    chain = comp.chain
-    ws = kernels.workspace(chain)
-    rng = np.random.default_rng(11)
-    P, _ = case.reachable_targets(60, seed=4)
-    compared, worst = 0, 0.0
-    for p in P:
-        u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
-        step = _svd_step(comp, p, u0, ws)
-        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
-        if off is not None:
-            compared += 1
-            worst = max(worst, off * step[1])
+    compared, worst = _first_steps_against_the_svd(case, 11)
     assert compared >= 30, f"{case.name}: only {compared} postures compared"
     assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
 
@@ -521,20 +530,9 @@ def test_one_iteration_in_the_column_form(case):
     rows; the nominal with its zero-version task, the calibrated with its near-null cut) and
     the stereo pan-tilt (2, 2)."""
     comp = case.solver._fast
-    chain = comp.chain
-    assert chain.m <= 2 * len(chain.solve_cameras)  # the column form
+    assert comp.chain.m <= 2 * len(comp.chain.solve_cameras)  # the column form
     version = None if comp.version_row is None else (comp.version_row, VERSION_WEIGHT)
-    ws = kernels.workspace(chain)
-    rng = np.random.default_rng(13)
-    P, _ = case.reachable_targets(60, seed=4)
-    compared, worst = 0, 0.0
-    for p in P:
-        u0 = chain.lower + rng.uniform(0.3, 0.7, chain.m) * (chain.upper - chain.lower)
-        step = _svd_step(comp, p, u0, ws, version)
-        off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
-        if off is not None:
-            compared += 1
-            worst = max(worst, off * step[1])
+    compared, worst = _first_steps_against_the_svd(case, 13, version)
     assert compared >= 30, f"{case.name}: only {compared} postures compared"
     assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
 

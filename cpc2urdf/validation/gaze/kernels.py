@@ -304,6 +304,17 @@ def _tangent_residual(r, s):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
+def _gradient_entry(J, r, v):  # type: ignore[no-untyped-def]
+    """``(J^T r)_v``, unknown ``v``'s entry of the pointing error's gradient ``J^T r = J_t^T r_t``
+    (the Jacobian's two rows a camera against its tangent residual, :func:`_tangent_residual`)."""
+    gv = 0.0
+    for c in range(J.shape[0] // 2):
+        rt1, rt2 = _tangent_residual(r, c)
+        gv += J[2 * c, v] * rt1 + J[2 * c + 1, v] * rt2
+    return gv
+
+
+@inline_kernel
 def _residual_hot(ch, u, b, p, r, J, want_jac, JR, Jp, Ja, CR, Co, Jc, Pc):  # type: ignore[no-untyped-def]
     """Pointing residual ``r`` (3 S,) of the solved cameras at ``u`` for target ``p`` (world),
     its Jacobian ``J`` (2 S, m) by ``u`` in each camera's tangent basis (:func:`_tangent`: ``T^T
@@ -828,15 +839,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, null_rel, DAMPING * rr,
                                         gain, accelerate, Hb[0], null_z, null_c, dx, dn)
             elif f > 0:
-                if not have_g:  # g = J_t^T r_t / sw
+                if not have_g:  # g = J_x^T r
                     for v in range(m):
-                        g[v] = 0.0
-                    for c in range(M // 2):
-                        rt1, rt2 = _tangent_residual(r, c)
-                        for v in range(m):
-                            g[v] += J[2 * c, v] * rt1 + J[2 * c + 1, v] * rt2
-                    for v in range(m):
-                        g[v] /= sw[v]
+                        g[v] = _gradient_entry(J, r, v) / sw[v]
                     have_g = True
                 cut = _null_cut(lam, f, null_rel)
                 mu = DAMPING * rr
@@ -1603,10 +1608,7 @@ def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-unty
     g2 = 0.0
     j2 = 0.0
     for v in range(m):
-        gv = 0.0  # J^T r = J_t^T r_t
-        for c in range(M // 2):
-            rt1, rt2 = _tangent_residual(r, c)
-            gv += J[2 * c, v] * rt1 + J[2 * c + 1, v] * rt2
+        gv = _gradient_entry(J, r, v)
         for i in range(M):
             j2 += J[i, v] * J[i, v]
         if (u[v] <= lower[v] + AT_BOUND and gv > 0.0) or (u[v] >= upper[v] - AT_BOUND and gv < 0.0):

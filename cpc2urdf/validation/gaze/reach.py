@@ -276,11 +276,9 @@ def make_grid(solver: BatchSolver, kind: str = "shell", near: float = DEFAULT_RA
     if kind not in GRID_KINDS:
         raise ConfigurationError(f"grid must be one of {', '.join(GRID_KINDS)}, got {kind!r}")
     check_grid_args(near, far, samples)
-    if q is None:
-        return (shell_grid if kind == "shell" else box_grid)(head_frame(solver), near, far, samples)
-    posture = np.array(q, dtype=float)
-    grid = (shell_grid if kind == "shell" else box_grid)(head_frame_at(solver.model, solver.cameras, posture), near,
-                                                          far, samples)
+    posture = None if q is None else np.array(q, dtype=float)
+    frame = head_frame(solver) if posture is None else head_frame_at(solver.model, solver.cameras, posture)
+    grid = (shell_grid if kind == "shell" else box_grid)(frame, near, far, samples)
     return dataclasses.replace(grid, posture=posture)
 
 
