@@ -1,8 +1,8 @@
 """Many targets at once through the compiled loop: :class:`CompiledGaze` and :class:`GazeBatch`.
 
 :class:`CompiledGaze` holds a head's :class:`~cpc2urdf.validation.gaze.chain.HeadChain`, its
-table of starts (seeded samples of the unknowns, each with its cyclopean centre and axis; eyes
-and prismatic joints at home) and whether it can fixate exactly (:meth:`CompiledGaze.disparity_report`).
+table of starts (the policy's own answers for targets along the axes of seeded samples of the
+unknowns, each with its cyclopean centre and axis) and whether it can fixate exactly (:meth:`CompiledGaze.disparity_report`).
 :meth:`CompiledGaze.solve_point` runs :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` on
 one target (one compiled call: the head and the answer as flat arrays) with an optional warm
 start (what :meth:`GazeSolver.solve` and tracking use); :meth:`CompiledGaze.solve_many` runs
@@ -45,6 +45,7 @@ from cpc2urdf.validation.gaze.result import STATUSES
 BATCH_STATUSES = STATUSES  # indexed by the kernels' status codes (kernels.S_FIXATED, ...)
 TABLE_SIZE = 256  # starts in the table
 TABLE_SEED = 0
+TABLE_TARGET_DISTANCE = 1.0  # [m]: each table entry is the policy's answer for a target this far along its axis
 N_STARTS = 3  # starts tried per target at most (a further one only if undecided)
 BATCH_MAX_ITERATIONS = 60
 # most iterations one solve_point reports: its starts, each a policy phase and a polish, twice
@@ -120,6 +121,9 @@ class CompiledGaze:
         version_row: The zero-version task's row over the unknowns (None: no such task).
         min_distance: [m] nearest the policy brings a solved camera to the target (0: no
             limit); None: :data:`MIN_VIEWING_DISTANCE`.
+        policy_table: True: the table of starts holds the policy's own answers (see
+            :meth:`_policy_table`; ``table_targets`` their targets); False: the seeded samples
+            alone (for comparison).
 
     Raises:
         ConfigurationError: ``min_distance`` negative or not finite.
@@ -131,6 +135,7 @@ class CompiledGaze:
         tolerance: float | None = None,
         version_row: Array | None = None,
         min_distance: float | None = None,
+        policy_table: bool = True,
     ) -> None:
         self.chain = chain
         self.min_distance = MIN_VIEWING_DISTANCE if min_distance is None else float(min_distance)
@@ -159,17 +164,26 @@ class CompiledGaze:
             self.disparity_head = self._weak_direction() > 0.0
             if self.disparity_head:
                 self.null_rel = NEAR_NULL
-        # the head as two flat arrays: one solve is one call of kernels.solve_flat
+        self.n = len(robot.joint_names)
+        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
+        self._out_size = kernels.out_size(self.n, self.S)
+        self._pack()
+        self.table_targets = np.full((TABLE_SIZE, 3), np.nan)  # the policy table's targets (NaN: a seeded entry)
+        if policy_table:
+            self._policy_table()
+
+    def _pack(self) -> None:
+        """The head as two flat arrays (``F``, ``I``): one solve is one call of
+        :func:`~cpc2urdf.validation.gaze.kernels.solve_flat`."""
+        chain = self.chain
+        robot = chain.robot
         self.F, self.I = kernels.pack_flat(
             self.ch, chain.lower, chain.upper, self.sw, self._table_T,
             (chain.robot_A, chain.robot_b, robot.lower, robot.upper, np.linalg.pinv(chain.robot_A)),
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
             self.tolerance, self.baseline, self.disparity_head, self._centre(),
         )
-        self.n = len(robot.joint_names)
-        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
-        self._out_size = kernels.out_size(self.n, self.S)
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
         ws = self._ws
@@ -183,23 +197,50 @@ class CompiledGaze:
         return float(np.linalg.norm(o[0] - o[1]))
 
     def _table(self) -> None:
+        """The seeded table of starts: the joints shared by the cameras (weight under 10: not
+        the eyes, not prismatic) uniform in their bounds, the others at home."""
         ch = self.chain
         rng = np.random.default_rng(TABLE_SEED)
         U = np.tile(self.home_u, (TABLE_SIZE, 1))
         spread = [v for v in range(ch.m) if not ch.eye[v] and ch.weight[v] < 10.0]
         for v in spread:
             U[:, v] = rng.uniform(ch.lower[v], ch.upper[v], TABLE_SIZE)
-        O = np.empty((TABLE_SIZE, 3))
-        Z = np.empty((TABLE_SIZE, 3))
-        for g in range(TABLE_SIZE):
+        self._set_table(U)
+
+    def _set_table(self, U: Array) -> None:
+        """Table entries ``U`` (G, m) with each one's cyclopean centre and axis (world)."""
+        ch = self.chain
+        cams = ch.solve_cameras
+        O = np.empty((len(U), 3))
+        Z = np.empty((len(U), 3))
+        for g in range(len(U)):
             R, o = self._fk(U[g])
-            cams = ch.solve_cameras
             O[g] = o[cams].mean(axis=0)
             z = R[cams][:, :, 2].sum(axis=0)
             Z[g] = z / max(float(np.linalg.norm(z)), 1e-300)
         self.table_u, self.table_o, self.table_z = U, O, Z
         # the kernels' layout: one column per entry
         self._table_T = (np.ascontiguousarray(U.T), np.ascontiguousarray(O.T), np.ascontiguousarray(Z.T))
+
+    def _policy_table(self) -> None:
+        """Each seeded entry replaced by the policy's own answer (from the middle of the limits)
+        for a target :data:`TABLE_TARGET_DISTANCE` along the entry's cyclopean axis, where the
+        head points at it (fixated, or a disparity head's near-null posture); the others stay.
+
+        A seeded entry faces its direction with the other joints anywhere in their limits, so
+        on a redundant head the policy phase walked far along the null space from it (iCub:
+        12.6 iterations a reachable target); the policy's answer for a nearby direction is close
+        to the answer wanted (10.1), and the policy's local minimum reached from it is more often
+        the lower one (fifteenth pass, docs/gaze.md)."""
+        P = self.table_o + TABLE_TARGET_DISTANCE * self.table_z
+        batch = self.solve_many(P)
+        pointed = (batch.status == kernels.S_FIXATED) | (batch.status == kernels.S_DISPARITY)
+        U = self.table_u.copy()
+        for g in np.flatnonzero(pointed):
+            U[g] = self.chain.u_from_q(batch.q[g])
+        self.table_targets[pointed] = P[pointed]
+        self._set_table(U)
+        self._pack()
 
     def _weak_direction(self) -> float:
         """The weak eigenvalue ratio of the pointing task at home with both eyes on the closest
