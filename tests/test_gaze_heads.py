@@ -415,10 +415,7 @@ def test_the_table_holds_the_policys_answers(case):
     assert err.max() < GAZE_POINTING_TOL
     res, sign, _, _ = _policy_kkt(case, Q, T, 10 * kernels.POLICY_STEP_TOL)
     tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
-    # the policy phase can stop short where bounds hold several unknowns (iCub: 1 of 256
-    # entries, three unknowns at a bound, policy gradient 8e-4; solved again from this table, 2e-7)
-    off = int(np.sum((res >= tol) | (sign >= tol)))
-    assert off <= 0.01 * len(T), f"{case.name}: {off} entries off the policy's minimum (worst {res.max():.3g})"
+    assert res.max() < tol and sign.max() < tol, f"{case.name}: an entry off the policy's minimum ({res.max():.3g})"
     seeded = CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
     assert np.isnan(seeded.table_targets).all()
     P, _ = case.reachable_targets(N_TARGETS, seed=5)
@@ -435,6 +432,28 @@ def test_the_table_holds_the_policys_answers(case):
     if case.name in ("icub", "panda_camera"):
         assert ours.iterations.mean() < 0.9 * before.iterations.mean(), case.name
     assert cost(ours) <= cost(before) * (1.0 + 1e-6), f"{case.name}: {cost(ours):.6g} > {cost(before):.6g}"
+
+
+@pytest.mark.parametrize("case", ["icub"], indirect=True)
+def test_a_policy_walk_held_by_three_bounds_reaches_the_minimum(case):
+    """A policy step that takes a free unknown through its bound is cut at that bound when its
+    clipped trial is refused, not halved: halving landed the unknown short of its bound, free
+    again, and the walk crept on by the halvings' fraction and stopped far from the minimum
+    (this target from the seeded table: torso roll, neck roll and eye tilt at bounds, policy
+    gradient 8.2e-4 after 17 iterations, five times the check's tolerance; now 2.2e-6)."""
+    from cpc2urdf.validation.gaze.batch import CompiledGaze
+
+    comp = case.solver._fast
+    seeded = CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
+    p = np.array([[-0.15585062, -0.05782934, -0.89161996]])
+    batch = seeded.solve_many(p)
+    assert batch.reachable.all()
+    res, sign, _, _ = _policy_kkt(case, batch.q, p, 10 * kernels.POLICY_STEP_TOL)
+    held = np.sum(np.minimum(comp.chain.u_from_q(batch.q[0]) - comp.chain.lower,
+                             comp.chain.upper - comp.chain.u_from_q(batch.q[0])) < 1e-6)
+    assert held == 3  # the case the test is about
+    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
+    assert res[0] < tol and sign[0] < tol, f"policy gradient {res[0]:.3g} off the minimum (tolerance {tol:.1g})"
 
 
 def _distance_gradient(comp, p, u):
