@@ -436,24 +436,59 @@ def test_the_table_holds_the_policys_answers(case):
 
 @pytest.mark.parametrize("case", ["icub"], indirect=True)
 def test_a_policy_walk_held_by_three_bounds_reaches_the_minimum(case):
-    """A policy step that takes a free unknown through its bound is cut at that bound when its
-    clipped trial is refused, not halved: halving landed the unknown short of its bound, free
-    again, and the walk crept on by the halvings' fraction and stopped far from the minimum
-    (this target from the seeded table: torso roll, neck roll and eye tilt at bounds, policy
-    gradient 8.2e-4 after 17 iterations, five times the check's tolerance; now 2.2e-6)."""
-    from cpc2urdf.validation.gaze.batch import CompiledGaze
-
+    """A policy step near a fixating posture that takes a free unknown through its bound is cut
+    at that bound where halving would first fall short of it: halving on left the unknown short
+    of its bound, free again, and the walk crept on by the halvings' fraction and stopped far
+    from the minimum. The start: where that walk stopped (from the seeded table, the target
+    below: torso roll 3e-5 short of its bound, neck roll and eye tilt at theirs); from there the
+    previous kernel ended at policy gradient 8.1e-4, four times the check's tolerance (now 5e-7)."""
     comp = case.solver._fast
-    seeded = CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
-    p = np.array([[-0.15585062, -0.05782934, -0.89161996]])
-    batch = seeded.solve_many(p)
-    assert batch.reachable.all()
-    res, sign, _, _ = _policy_kkt(case, batch.q, p, 10 * kernels.POLICY_STEP_TOL)
-    held = np.sum(np.minimum(comp.chain.u_from_q(batch.q[0]) - comp.chain.lower,
-                             comp.chain.upper - comp.chain.u_from_q(batch.q[0])) < 1e-6)
-    assert held == 3  # the case the test is about
+    chain = comp.chain
+    p = np.array([-0.15585062, -0.05782934, -0.89161996])
+    u0 = np.array([0.46364674, 0.52356878, 0.30536354, -0.15838363, -0.34906585, -0.38192409, -0.6, -0.09531952,
+                   0.06069253])
+    assert chain.upper[1] - u0[1] == pytest.approx(3e-5, abs=1e-8)  # torso roll just short of its bound
+    out = comp.solve_point(p, None, q_start=chain.q_from_u(u0))
+    q = out[2 : 2 + comp.n]
+    assert out[0] == kernels.S_FIXATED
+    u = chain.u_from_q(q)
+    assert np.sum(np.minimum(u - chain.lower, chain.upper - u) < 1e-6) == 3  # the case the test is about
+    res, sign, _, _ = _policy_kkt(case, q[None], p[None], 10 * kernels.POLICY_STEP_TOL)
     tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
     assert res[0] < tol and sign[0] < tol, f"policy gradient {res[0]:.3g} off the minimum (tolerance {tol:.1g})"
+
+
+def test_the_table_is_the_policys_own_answers_on_every_shape(case):
+    """On every head shape the table the kernel is handed holds the policy's answers: nearly
+    every entry pointed at its target (a calibrated head: 249 of 256, its near-null posture),
+    the packed table equal to ``table_u`` and each entry a fixed point (its target solved from
+    it stays there, within the policy phase's stopping step)."""
+    from cpc2urdf.validation.gaze.batch import TABLE_SIZE
+
+    comp = case.solver._fast
+    pointed = np.flatnonzero(np.isfinite(comp.table_targets[:, 0]))
+    assert len(pointed) > 0.95 * TABLE_SIZE, f"{case.name}: {len(pointed)} of {TABLE_SIZE} entries pointed"
+    assert np.array_equal(kernels._unpack(comp.F, comp.I)[5], comp.table_u.T)
+    for g in pointed[:: max(1, len(pointed) // 40)]:
+        q = comp.chain.q_from_u(comp.table_u[g])
+        out = comp.solve_point(comp.table_targets[g], None, q_start=q)
+        assert out[0] in (kernels.S_FIXATED, kernels.S_DISPARITY), f"{case.name}: entry {g} status {out[0]}"
+        moved = np.abs(out[2 : 2 + comp.n] - q).max()
+        assert moved < 10 * kernels.POLICY_STEP_TOL, f"{case.name}: entry {g} moved {moved:.3g}"
+
+
+@pytest.mark.parametrize("case", ["tiago"], indirect=True)
+def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
+    """Building a solver solves its table on the building thread: built on both of the batch
+    pool's workers at once, each waited on the pool it occupied (the review's run: stuck)."""
+    from cpc2urdf.validation.gaze.batch import CompiledGaze, _pool
+
+    comp = case.solver._fast
+    pool = _pool(2)
+    builds = [pool.submit(CompiledGaze, comp.chain, comp.tolerance, comp.version_row, comp.min_distance)
+              for _ in range(2)]
+    tables = [build.result(timeout=120).table_u for build in builds]
+    assert np.array_equal(tables[0], comp.table_u) and np.array_equal(tables[1], comp.table_u)
 
 
 def _distance_gradient(comp, p, u):

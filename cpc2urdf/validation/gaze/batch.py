@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -58,19 +59,30 @@ MIN_VIEWING_DISTANCE = 0.1  # [m]: default nearest approach of a camera to its t
 THREADED_BATCH = 64  # targets per thread from which solve_many splits the work over the cores
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _after_fork_in_child() -> None:
+    """A forked child (multiprocessing's default on Linux) inherits the pools without their
+    threads (work queued there would never run) and the lock as it was (held, if another
+    thread was making a pool): it starts with no pools (made on first use) and a free lock."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+
+
 if hasattr(os, "register_at_fork"):
-    # a forked child (multiprocessing's default on Linux) inherits the pools without their
-    # threads: work queued there would never run. It makes its own on first use.
-    os.register_at_fork(after_in_child=_POOLS.clear)
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
     """The process's pool of ``threads`` worker threads for :meth:`CompiledGaze.solve_many`,
     made on first use and kept (starting two threads costs ~0.1-0.3 ms, a tenth of a
-    2,000-target batch's time on a loaded machine)."""
-    pool = _POOLS.get(threads)
-    if pool is None:
-        pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="cpc2urdf-gaze")
+    2,000-target batch's time on a loaded machine); one pool however many threads ask first."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(threads)
+        if pool is None:
+            pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="cpc2urdf-gaze")
     return pool
 
 
@@ -231,13 +243,18 @@ class CompiledGaze:
         on a redundant head the policy phase walked far along the null space from it (iCub:
         12.6 iterations a reachable target); the policy's answer for a nearby direction is close
         to the answer wanted (10.1), and the policy's local minimum reached from it is more often
-        the lower one (fifteenth pass, docs/gaze.md)."""
-        P = self.table_o + TABLE_TARGET_DISTANCE * self.table_z
-        batch = self.solve_many(P)
-        pointed = (batch.status == kernels.S_FIXATED) | (batch.status == kernels.S_DISPARITY)
+        the lower one (sixteenth pass, docs/gaze.md). Built for the middle of the limits (no
+        ``q_current``): from other readings, or with held joints elsewhere, it helps less."""
+        P = np.ascontiguousarray(self.table_o + TABLE_TARGET_DISTANCE * self.table_z)
+        # on this thread (a few ms): a solver built inside a pool worker would otherwise wait
+        # on the pool it occupies
+        OUT = np.empty((len(P), self._out_size))
+        kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
+        status = OUT[:, 0]
+        pointed = (status == kernels.S_FIXATED) | (status == kernels.S_DISPARITY)
         U = self.table_u.copy()
         for g in np.flatnonzero(pointed):
-            U[g] = self.chain.u_from_q(batch.q[g])
+            U[g] = self.chain.u_from_q(OUT[g, 2 : 2 + self.n])
         self.table_targets[pointed] = P[pointed]
         self._set_table(U)
         self._pack()
