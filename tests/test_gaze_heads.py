@@ -516,7 +516,8 @@ def _svd_step(comp, p, u0, ws, version=None):
     Jacobian ``J_x = J / sw = U diag(s) V^T``: on the singular directions with ``s^2`` above the
     cut the damped Gauss-Newton step ``-v s (u . r) / (s^2 + mu)`` (``= -v (v . g) / (s^2 + mu)``,
     ``g = J_x^T r``, in the form whose error does not grow with ``s_max / s``), on the others
-    the policy's offset ``z`` from home, removed. With ``version = (c, w)`` (a zero-version row
+    the policy's offset ``z`` from home, removed (the cut: ``null_rel`` of the largest, on two eyes
+    that fixate exactly near a fixating posture ``kernels.BINOCULAR_NULL``). With ``version = (c, w)`` (a zero-version row
     over the unknowns and its weight, as ``kernels.pack`` takes them) the null-space move is the
     Newton step of ``|z|^2 / 2 + w (c . (u - home))^2 / 2`` that leaves the version zero after
     the whole step, by Sherman-Morrison without the ``w^2`` terms (``kernels._iterate``):
@@ -534,7 +535,10 @@ def _svd_step(comp, p, u0, ws, version=None):
     rr = kernels.residual(comp.ch, u0.copy(), chain.b, p, ws[7], ws[8], True, *ws[:7])
     U, s, Vt = np.linalg.svd(ws[8] / comp.sw)
     lam = s**2
-    cut = comp.null_rel * lam[0]
+    null_rel = comp.null_rel
+    if len(chain.solve_cameras) == 2 and null_rel < kernels.BINOCULAR_NULL and rr <= kernels.NEAR_FIXATION:
+        null_rel = kernels.BINOCULAR_NULL  # two eyes that fixate exactly, near a fixating posture
+    cut = null_rel * lam[0]
     if np.any((lam > 0.1 * cut) & (lam < 10 * cut)):
         return None
     k = int(np.sum(lam > cut))
@@ -640,7 +644,10 @@ def test_the_step_stays_accurate_where_the_pointing_jacobian_loses_rank(case):
     4e-5 at s^2 = 2e-11 s_max^2). On that scale the step of ``kernels._step_from_rows`` was off
     by 2e-5 with ``v_e . g`` from ``J_x^T w_e`` (direction off by 1.6: 2 of 2,000 iCub targets
     ended at a limit, unfixated) and by 1.8e-6 with the radial part of the residual left in; the
-    decomposition of ``J^T J`` (the form for f <= M) is off by 1.6e-7 there."""
+    decomposition of ``J^T J`` (the form for f <= M) is off by 1.6e-7 there. (Within
+    ``kernels.NEAR_FIXATION`` of fixating, the cut is ``kernels.BINOCULAR_NULL`` and that direction
+    the policy's; the reference takes the same cut, and the postures farther off keep weak
+    directions above the 1e-12 cut.)"""
     comp = case.solver._fast
     chain = comp.chain
     ws = kernels.workspace(chain)
