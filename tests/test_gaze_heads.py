@@ -469,6 +469,9 @@ def test_the_table_is_the_policys_own_answers_on_every_shape(case):
     pointed = np.flatnonzero(np.isfinite(comp.table_targets[:, 0]))
     assert len(pointed) > 0.95 * TABLE_SIZE, f"{case.name}: {len(pointed)} of {TABLE_SIZE} entries pointed"
     assert np.array_equal(kernels._unpack(comp.F, comp.I)[5], comp.table_u.T)
+    # the null cut near fixation (kernels.BINOCULAR_NULL) where the 4th direction is structural
+    assert comp.structural_null == (case.name in ("iis_nominal", "icub")), case.name
+    assert kernels._unpack(comp.F, comp.I)[0][13][3] == (kernels.BINOCULAR_NULL if comp.structural_null else 0.0)
     for g in pointed[:: max(1, len(pointed) // 40)]:
         q = comp.chain.q_from_u(comp.table_u[g])
         out = comp.solve_point(comp.table_targets[g], None, q_start=q)
@@ -489,6 +492,41 @@ def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
               for _ in range(2)]
     tables = [build.result(timeout=120).table_u for build in builds]
     assert np.array_equal(tables[0], comp.table_u) and np.array_equal(tables[1], comp.table_u)
+
+
+def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(tmp_path):
+    """Near a fixating posture the null cut is ``kernels.BINOCULAR_NULL`` only on two eyes whose
+    4th pointing direction vanishes at every fixating posture (their axes sweep one plane: iCub,
+    the nominal IIS-head). Two eyes each on its own roll and tilt can fixate exactly too, but
+    their roll is a real pointing direction, small only near straight ahead: cut there at 1e-9,
+    5 of 400 targets 50-500 m ahead were left unfixated (3.8e-3 rad; review), and 1,369 of 2,400
+    out to 60 km."""
+    from gaze_heads import OPTICAL_RPY
+
+    def joint(name, parent, child, xyz, axis, lo, hi):
+        return (f'<joint name="{name}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
+                f'<parent link="{parent}"/><child link="{child}"/>'
+                f'<limit lower="{lo}" upper="{hi}" effort="1" velocity="2"/></joint>\n')
+
+    text = ('<?xml version="1.0"?>\n<robot name="roll_tilt_eyes"><link name="world"/><link name="head"/>\n'
+            '<joint name="fix" type="fixed"><origin xyz="0 0 1.3"/><parent link="world"/><child link="head"/></joint>\n')
+    for eye, y in (("l", 0.06), ("r", -0.06)):
+        text += f'<link name="{eye}_roll_link"/><link name="{eye}_tilt_link"/><link name="{eye}_optical"/>'
+        text += joint(f"{eye}_roll", "head", f"{eye}_roll_link", f"0.05 {y} 0.0", "1 0 0", -3.1, 3.1)
+        text += joint(f"{eye}_tilt", f"{eye}_roll_link", f"{eye}_tilt_link", "0 0 0", "0 1 0", -0.5, 0.5)
+        text += (f'<joint name="{eye}_opt" type="fixed"><origin xyz="0 0 0" rpy="{OPTICAL_RPY}"/>'
+                 f'<parent link="{eye}_tilt_link"/><child link="{eye}_optical"/></joint>\n')
+    urdf = tmp_path / "roll_tilt_eyes.urdf"
+    urdf.write_text(text + "</robot>\n")
+    solver = GazeSolver(urdf, ("l_optical", "r_optical"))
+    comp = solver._fast
+    assert comp.chain.kind == "binocular" and not comp.disparity_head
+    assert not comp.structural_null and comp.ch[13][3] == 0.0
+    rng = np.random.default_rng(1)
+    d = np.exp(rng.uniform(np.log(50.0), np.log(500.0), 400))
+    P = np.c_[0.05 + d, rng.uniform(-0.3, 0.3, 400), 1.3 + rng.uniform(-0.3, 0.3, 400)]
+    batch = solver.solve_many(P)
+    assert batch.reachable.all(), f"{np.sum(~batch.reachable)} of 400 not fixated (worst {batch.pointing_error.max():.3g} rad)"
 
 
 def _distance_gradient(comp, p, u):
@@ -516,8 +554,8 @@ def _svd_step(comp, p, u0, ws, version=None):
     Jacobian ``J_x = J / sw = U diag(s) V^T``: on the singular directions with ``s^2`` above the
     cut the damped Gauss-Newton step ``-v s (u . r) / (s^2 + mu)`` (``= -v (v . g) / (s^2 + mu)``,
     ``g = J_x^T r``, in the form whose error does not grow with ``s_max / s``), on the others
-    the policy's offset ``z`` from home, removed (the cut: ``null_rel`` of the largest, on two eyes
-    that fixate exactly near a fixating posture ``kernels.BINOCULAR_NULL``). With ``version = (c, w)`` (a zero-version row
+    the policy's offset ``z`` from home, removed (the cut: ``null_rel`` of the largest; near a
+    fixating posture of two eyes with a structural null direction ``kernels.BINOCULAR_NULL``). With ``version = (c, w)`` (a zero-version row
     over the unknowns and its weight, as ``kernels.pack`` takes them) the null-space move is the
     Newton step of ``|z|^2 / 2 + w (c . (u - home))^2 / 2`` that leaves the version zero after
     the whole step, by Sherman-Morrison without the ``w^2`` terms (``kernels._iterate``):
@@ -536,8 +574,8 @@ def _svd_step(comp, p, u0, ws, version=None):
     U, s, Vt = np.linalg.svd(ws[8] / comp.sw)
     lam = s**2
     null_rel = comp.null_rel
-    if len(chain.solve_cameras) == 2 and null_rel < kernels.BINOCULAR_NULL and rr <= kernels.NEAR_FIXATION:
-        null_rel = kernels.BINOCULAR_NULL  # two eyes that fixate exactly, near a fixating posture
+    if rr <= kernels.NEAR_FIXATION:  # two eyes with a structural null direction: kernels.BINOCULAR_NULL
+        null_rel = max(comp.ch[13][3], null_rel)
     cut = null_rel * lam[0]
     if np.any((lam > 0.1 * cut) & (lam < 10 * cut)):
         return None

@@ -184,6 +184,10 @@ class CompiledGaze:
         self.table_targets = np.full((TABLE_SIZE, 3), np.nan)  # the policy table's targets (NaN: a seeded entry)
         if policy_table:
             self._policy_table()
+        self.structural_null = self._structural_null()
+        if self.structural_null:  # the kernels' null cut near a fixating posture (kernels.BINOCULAR_NULL)
+            self.ch[13][3] = kernels.BINOCULAR_NULL
+            self._pack()
 
     def _pack(self) -> None:
         """The head as two flat arrays (``F``, ``I``): one solve is one call of
@@ -258,6 +262,38 @@ class CompiledGaze:
         self.table_targets[pointed] = P[pointed]
         self._set_table(U)
         self._pack()
+
+    def _structural_null(self, sample: int = 64) -> bool:
+        """Whether two eyes lose their 4th pointing direction at every fixating posture (their
+        axes sweep one plane: iCub, the nominal IIS-head): at up to ``sample`` table entries that
+        fixate their targets, the 4th eigenvalue of ``J_x J_x^T`` (``J_x = J / sw``) at most
+        :data:`~cpc2urdf.validation.gaze.kernels.STRUCTURAL_NULL` of the 1st (rounding: 1e-16 on
+        those heads; with the seeded table alone, at answers to targets along its first entries'
+        axes). Not on two eyes each on its own roll and tilt (the roll is a real pointing
+        direction, small only near straight ahead), nor with fewer than four unknowns."""
+        chain = self.chain
+        if chain.kind != KIND_BINOCULAR or self.disparity_head or chain.m < 2 * self.S:
+            return False
+        pointed = np.isfinite(self.table_targets[:, 0])
+        if pointed.any():
+            U, P = self.table_u[pointed], self.table_targets[pointed]
+        else:  # the seeded table alone: solve targets along its first entries' axes
+            P = np.ascontiguousarray((self.table_o + TABLE_TARGET_DISTANCE * self.table_z)[:sample])
+            OUT = np.empty((len(P), self._out_size))
+            kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
+            fixated = OUT[:, 0] == kernels.S_FIXATED
+            U = np.array([chain.u_from_q(q) for q in OUT[fixated, 2 : 2 + self.n]])
+            P = P[fixated]
+        if len(P) == 0:
+            return False
+        ws = self._ws
+        for g in range(0, len(P), max(1, len(P) // sample)):
+            kernels.residual(self.ch, U[g].copy(), chain.b, P[g], ws[7], ws[8], True, *ws[:7])
+            Jx = ws[8] / self.sw
+            lam = np.linalg.eigvalsh(Jx @ Jx.T)  # ascending
+            if lam[0] > kernels.STRUCTURAL_NULL * lam[-1]:
+                return False
+        return True
 
     def _weak_direction(self) -> float:
         """The weak eigenvalue ratio of the pointing task at home with both eyes on the closest

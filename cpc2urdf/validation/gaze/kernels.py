@@ -97,11 +97,11 @@ START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) di
 START_DISTANCE_REDUNDANT = 0.3
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
-# A binocular head that can fixate exactly (null_rel below BINOCULAR_NULL: iCub, the nominal
-# IIS-head) cuts its null space at BINOCULAR_NULL near a fixating posture (|r|^2 <= NEAR_FIXATION,
-# pointing error ~1e-2 rad). Its eyes' axes sweep one plane, so at a fixating posture the pointing
-# Jacobian's 4th eigenvalue is 0 (rounding: 1e-16 of the 1st), and near one it grows with the
-# square of the distance (iCub, 200 answers moved by 1e-4 / 1e-3 / 1e-2 rad: 7e-12 / 5e-10 / 7e-8
+# A binocular head whose eyes' axes sweep one plane (iCub, the nominal IIS-head: CompiledGaze
+# finds the pointing Jacobian's 4th eigenvalue at rounding level, STRUCTURAL_NULL, at every fixating
+# table entry and sets pack's near_rel) cuts its null space at BINOCULAR_NULL near a fixating
+# posture (|r|^2 <= NEAR_FIXATION, pointing error ~1e-2 rad). At a fixating posture that 4th
+# eigenvalue is 0 (rounding: 1e-16 of the 1st), and near one it grows with the square of the distance (iCub, 200 answers moved by 1e-4 / 1e-3 / 1e-2 rad: 7e-12 / 5e-10 / 7e-8
 # of the 1st, median). Cut at null_rel (1e-12) that direction stayed pointing's until the last
 # steps, and the policy walk got it only then: a long step along it that the next steps took back
 # (iCub 10.1 iterations a reachable target, 8.8 so). Farther from fixation (an unreachable
@@ -110,8 +110,12 @@ ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whos
 # answers worse by up to 0.65 deg). 1e-8 and 1e-7 gave iCub 8.6 and 8.5 iterations; 1e-9 stays
 # three orders below a calibrated head's weak direction (2.8e-7 of the 1st), which is no exact
 # null direction. (The policy phase's acceleration goes by null_rel: unchanged.)
+# Not on two eyes that fixate exactly without such a direction (each eye on its own roll and tilt:
+# its roll is a real pointing direction whose eigenvalue is small near straight ahead; cut at 1e-9,
+# 1,369 of 2,400 exactly reachable targets 50 m-60 km off were left unfixated, review).
 BINOCULAR_NULL = 1e-9
 NEAR_FIXATION = 1e-4
+STRUCTURAL_NULL = 1e-12  # [-]: a 4th eigenvalue at most this of the 1st at every fixating table entry is structural
 
 # every kernel: cached across runs; IEEE division (no zero-division checks in the loops: every
 # division is guarded where it matters); the GIL released (a batch is split over threads, one
@@ -145,13 +149,15 @@ def pack(
 ) -> tuple:  # type: ignore[type-arg]
     """The chain's arrays as the tuple the kernels take, then the policy's secondary tasks: the
     zero-version task's row ``c`` over the unknowns (shape (m,); zeros: none), and ``(weight,
-    c . home, min_distance)``: the version's weight and reference, and the minimum viewing
+    c . home, min_distance, near_rel)``: the version's weight and reference, the minimum viewing
     distance [m] the policy phase keeps each solved camera from the target (0: none; see
-    :func:`_iterate`)."""
+    :func:`_iterate`), and the null cut near a fixating posture (0: ``null_rel`` there too; set
+    to :data:`BINOCULAR_NULL` by ``CompiledGaze`` on two eyes with a structural null direction)."""
     m = chain.m
     c = np.zeros(m) if version_row is None else np.ascontiguousarray(version_row, dtype=float)
     home = 0.5 * (chain.lower + chain.upper)
-    vw = np.array([float(version_weight) if version_row is not None else 0.0, float(c @ home), float(min_distance)])
+    vw = np.array([float(version_weight) if version_row is not None else 0.0, float(c @ home), float(min_distance),
+                   0.0])
     return (
         chain.parent,
         chain.jtype,
@@ -789,7 +795,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     # acc rows: the history's unknowns hx and plain steps hf (newest first), their differences
     # to the current ones dXh, dFh, then the plain step d_plain
     accelerate = gain > 0.0 and vw_w == 0.0 and null_rel <= ACCELERATE_NULL_REL and m <= 62
-    near_rel = BINOCULAR_NULL if ch[11].shape[0] == 2 and null_rel < BINOCULAR_NULL else null_rel
+    near_rel = max(ch[13][3], null_rel)  # the null cut near a fixating posture (BINOCULAR_NULL)
     hx, hf = acc[0:HISTORY], acc[HISTORY:2 * HISTORY]
     dXh, dFh, d_plain = acc[2 * HISTORY:3 * HISTORY], acc[3 * HISTORY:4 * HISTORY], acc[4 * HISTORY]
     dn = acc[4 * HISTORY + 1]  # the null (policy) move of the step dx
@@ -860,7 +866,8 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                     for v in range(m):
                         g[v] = _gradient_entry(J, r, v) / sw[v]
                     have_g = True
-                cut = _null_cut(lam, f, nr)
+                # the structural null direction is among J^T J's eigenvalues only with f >= M
+                cut = _null_cut(lam, f, nr if f >= M else null_rel)
                 mu = DAMPING * rr
                 # the pointing step along the strong directions (Gauss-Newton, damped), and
                 # the version it moves by, vr = c_x . dx_range (the null move makes up for it)
@@ -910,7 +917,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                                 dn[idx[a]] += V[a, e] * s
             held_off = False
             if d_min > 0.0 and gain > 0.0 and f > 0:
-                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, nr, Pc, d_min, vc, vw_w, accelerate,
+                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, nr if f >= M else null_rel, Pc, d_min, vc, vw_w, accelerate,
                                      null_z, null_c, Hb[0], trial, Hb[1 % m], dx, dn)  # m >= 2 with a version row
             changed = False
             for v in range(m):
@@ -1537,8 +1544,8 @@ def _unpack(F, I):  # type: ignore[no-untyped-def]
     f += 3 * C
     c = F[f:f + m]
     f += m
-    vw = F[f:f + 3]
-    f += 3
+    vw = F[f:f + 4]
+    f += 4
     lower = F[f:f + m]
     f += m
     upper = F[f:f + m]
@@ -1626,7 +1633,7 @@ def _without_version(ch):  # type: ignore[no-untyped-def]
     """The chain tuple ``ch`` without its zero-version task (weight 0; the minimum viewing
     distance kept)."""
     return (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
-            np.array([0.0, 0.0, ch[13][2]]))
+            np.array([0.0, 0.0, ch[13][2], ch[13][3]]))
 
 
 @inline_kernel
