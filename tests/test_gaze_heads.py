@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from gaze_heads import HEAD_SHAPES, head_case, pointing_errors, yourdfpy_axes
+from gaze_heads import HEAD_SHAPES, OPTICAL_RPY, head_case, pointing_errors, yourdfpy_axes
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.robot_ref import load_model
@@ -19,7 +19,14 @@ from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.urdf import write_urdf
 from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels, solver_for
-from cpc2urdf.validation.gaze.batch import BATCH_MAX_ITERATIONS, THREADED_BATCH, VERSION_WEIGHT
+from cpc2urdf.validation.gaze.batch import (
+    BATCH_MAX_ITERATIONS,
+    TABLE_SIZE,
+    THREADED_BATCH,
+    VERSION_WEIGHT,
+    CompiledGaze,
+    _pool,
+)
 from cpc2urdf.validation.gaze.solver import pointing_tolerance
 from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
@@ -319,6 +326,21 @@ def test_tolerance_from_the_cameras_focal_length():
     assert sol.reachable and sol.status == "fixated" and np.array_equal(sol.q, b0.q[1])
 
 
+# the policy phase stops on a step under POLICY_STEP_TOL (unknowns): a gradient of about that
+# size times the weight (scaled unknowns), and an unknown that close to its bound
+KKT_MARGIN = 10 * kernels.POLICY_STEP_TOL
+
+
+def _kkt_tolerance(comp):
+    """The policy gradient :func:`_policy_kkt` allows on ``comp``'s head (scaled unknowns)."""
+    return KKT_MARGIN * float(comp.sw.max())
+
+
+def _seeded_twin(comp):
+    """``comp``'s head with the seeded table of starts alone (``policy_table=False``)."""
+    return CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
+
+
 def _policy_kkt(case, Q, P, margin, d_margin=1e-4):
     """First-order optimality of each answer (rows of ``Q``, robot readings) for the policy
     ``|sw (u - home)|^2 / 2`` subject to fixating ``P``, the bounds and the minimum viewing
@@ -377,10 +399,8 @@ def test_answers_are_the_policys_constrained_minimum(case):
     counted, not checked."""
     comp = case.solver._fast
     assert comp.version_row is None and not comp.disparity_head  # the policy is the distance from home
-    # the policy phase stops on a step under POLICY_STEP_TOL (unknowns): a gradient of about
-    # that size times the weight (scaled unknowns), and an unknown that close to its bound
-    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
-    margin = 10 * kernels.POLICY_STEP_TOL
+    tol = _kkt_tolerance(comp)
+    margin = KKT_MARGIN
     nulls = 0
     for seed in (7, 8, 9):
         P, _ = case.reachable_targets(N_TARGETS // 2, seed=seed)
@@ -404,8 +424,6 @@ def test_the_table_holds_the_policys_answers(case):
     points at fixates it and is the policy's constrained minimum there (KKT, as the answers
     above), and started from that table the policy phase walks less and ends on a posture at
     least as near home, on average, as from the seeded samples (``policy_table=False``)."""
-    from cpc2urdf.validation.gaze.batch import TABLE_SIZE, CompiledGaze
-
     comp = case.solver._fast
     pointed = np.isfinite(comp.table_targets[:, 0])
     assert pointed.sum() > 0.9 * TABLE_SIZE, f"{case.name}: {pointed.sum()} of {TABLE_SIZE} entries pointed"
@@ -413,10 +431,10 @@ def test_the_table_holds_the_policys_answers(case):
     T = comp.table_targets[pointed]
     err = np.array([comp.pointing_errors(q, p).max() for q, p in zip(Q, T, strict=True)])
     assert err.max() < GAZE_POINTING_TOL
-    res, sign, _, _ = _policy_kkt(case, Q, T, 10 * kernels.POLICY_STEP_TOL)
-    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
+    res, sign, _, _ = _policy_kkt(case, Q, T, KKT_MARGIN)
+    tol = _kkt_tolerance(comp)
     assert res.max() < tol and sign.max() < tol, f"{case.name}: an entry off the policy's minimum ({res.max():.3g})"
-    seeded = CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
+    seeded = _seeded_twin(comp)
     assert np.isnan(seeded.table_targets).all()
     P, _ = case.reachable_targets(N_TARGETS, seed=5)
     ours, before = comp.solve_many(P), seeded.solve_many(P)
@@ -453,8 +471,8 @@ def test_a_policy_walk_held_by_three_bounds_reaches_the_minimum(case):
     assert out[0] == kernels.S_FIXATED
     u = chain.u_from_q(q)
     assert np.sum(np.minimum(u - chain.lower, chain.upper - u) < 1e-6) == 3  # the case the test is about
-    res, sign, _, _ = _policy_kkt(case, q[None], p[None], 10 * kernels.POLICY_STEP_TOL)
-    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
+    res, sign, _, _ = _policy_kkt(case, q[None], p[None], KKT_MARGIN)
+    tol = _kkt_tolerance(comp)
     assert res[0] < tol and sign[0] < tol, f"policy gradient {res[0]:.3g} off the minimum (tolerance {tol:.1g})"
 
 
@@ -463,8 +481,6 @@ def test_the_table_is_the_policys_own_answers_on_every_shape(case):
     every entry pointed at its target (a calibrated head: 249 of 256, its near-null posture),
     the packed table equal to ``table_u`` and each entry a fixed point (its target solved from
     it stays there, within the policy phase's stopping step)."""
-    from cpc2urdf.validation.gaze.batch import TABLE_SIZE
-
     comp = case.solver._fast
     pointed = np.flatnonzero(np.isfinite(comp.table_targets[:, 0]))
     assert len(pointed) > 0.95 * TABLE_SIZE, f"{case.name}: {len(pointed)} of {TABLE_SIZE} entries pointed"
@@ -477,15 +493,13 @@ def test_the_table_is_the_policys_own_answers_on_every_shape(case):
         out = comp.solve_point(comp.table_targets[g], None, q_start=q)
         assert out[0] in (kernels.S_FIXATED, kernels.S_DISPARITY), f"{case.name}: entry {g} status {out[0]}"
         moved = np.abs(out[2 : 2 + comp.n] - q).max()
-        assert moved < 10 * kernels.POLICY_STEP_TOL, f"{case.name}: entry {g} moved {moved:.3g}"
+        assert moved < KKT_MARGIN, f"{case.name}: entry {g} moved {moved:.3g}"
 
 
 @pytest.mark.parametrize("case", ["tiago"], indirect=True)
 def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
     """Building a solver solves its table on the building thread: built on both of the batch
     pool's workers at once, each waited on the pool it occupied (the review's run: stuck)."""
-    from cpc2urdf.validation.gaze.batch import CompiledGaze, _pool
-
     comp = case.solver._fast
     pool = _pool(2)
     builds = [pool.submit(CompiledGaze, comp.chain, comp.tolerance, comp.version_row, comp.min_distance)
@@ -501,8 +515,6 @@ def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(t
     their roll is a real pointing direction, small only near straight ahead: cut there at 1e-9,
     5 of 400 targets 50-500 m ahead were left unfixated (3.8e-3 rad; review), and 1,369 of 2,400
     out to 60 km."""
-    from gaze_heads import OPTICAL_RPY
-
     def joint(name, parent, child, xyz, axis, lo, hi):
         return (f'<joint name="{name}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
                 f'<parent link="{parent}"/><child link="{child}"/>'
@@ -771,9 +783,9 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
     dist = np.linalg.norm(P[:, None] - O, axis=2).min(axis=1)
     assert dist.min() > comp.min_distance * (1 - 1e-5), f"target {int(np.argmin(dist))}: {dist.min():.6g} m"
     converged = batch.iterations < BATCH_MAX_ITERATIONS
-    tol = 10 * kernels.POLICY_STEP_TOL * float(comp.sw.max())
+    tol = _kkt_tolerance(comp)
     # held answers end within a few 1e-6 m of min_distance (the polish moves them): a 1e-4 m margin
-    res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], 10 * kernels.POLICY_STEP_TOL, 1e-4)
+    res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], KKT_MARGIN, 1e-4)
     assert close.sum() >= 5, f"only {close.sum()} answers at the minimum viewing distance"
     worst = int(np.argmax(res))
     assert res[worst] < tol, f"answer {worst} (held: {close[worst]}) is not stationary: {res[worst]:.3g}"

@@ -180,6 +180,8 @@ class CompiledGaze:
         self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
         self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
         self._out_size = kernels.out_size(self.n, self.S)
+        self._robot_pinv = np.linalg.pinv(chain.robot_A)
+        self._home_centre = self._centre()
         self._pack()
         self.table_targets = np.full((TABLE_SIZE, 3), np.nan)  # the policy table's targets (NaN: a seeded entry)
         if policy_table:
@@ -196,9 +198,9 @@ class CompiledGaze:
         robot = chain.robot
         self.F, self.I = kernels.pack_flat(
             self.ch, chain.lower, chain.upper, self.sw, self._table_T,
-            (chain.robot_A, chain.robot_b, robot.lower, robot.upper, np.linalg.pinv(chain.robot_A)),
+            (chain.robot_A, chain.robot_b, robot.lower, robot.upper, self._robot_pinv),
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
-            self.tolerance, self.baseline, self.disparity_head, self._centre(),
+            self.tolerance, self.baseline, self.disparity_head, self._home_centre,
         )
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
@@ -249,19 +251,24 @@ class CompiledGaze:
         to the answer wanted (10.1), and the policy's local minimum reached from it is more often
         the lower one (sixteenth pass, docs/gaze.md). Built for the middle of the limits (no
         ``q_current``): from other readings, or with held joints elsewhere, it helps less."""
-        P = np.ascontiguousarray(self.table_o + TABLE_TARGET_DISTANCE * self.table_z)
-        # on this thread (a few ms): a solver built inside a pool worker would otherwise wait
-        # on the pool it occupies
-        OUT = np.empty((len(P), self._out_size))
-        kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
-        status = OUT[:, 0]
+        P, status, answers = self._solve_along_table(TABLE_SIZE)
         pointed = (status == kernels.S_FIXATED) | (status == kernels.S_DISPARITY)
         U = self.table_u.copy()
-        for g in np.flatnonzero(pointed):
-            U[g] = self.chain.u_from_q(OUT[g, 2 : 2 + self.n])
+        U[pointed] = answers[pointed]
         self.table_targets[pointed] = P[pointed]
         self._set_table(U)
         self._pack()
+
+    def _solve_along_table(self, count: int) -> tuple[Array, Array, Array]:
+        """Targets :data:`TABLE_TARGET_DISTANCE` along the first ``count`` table entries' axes
+        (world, (count, 3)), solved from the middle of the limits: their status codes and
+        answers' unknowns (count, m). On this thread (a few ms): a solver built inside a pool
+        worker would otherwise wait on the pool it occupies."""
+        P = np.ascontiguousarray((self.table_o + TABLE_TARGET_DISTANCE * self.table_z)[:count])
+        OUT = np.empty((len(P), self._out_size))
+        kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
+        U = np.array([self.chain.u_from_q(q) for q in OUT[:, 2 : 2 + self.n]])
+        return P, OUT[:, 0], U
 
     def _structural_null(self, sample: int = 64) -> bool:
         """Whether two eyes lose their 4th pointing direction at every fixating posture (their
@@ -278,12 +285,9 @@ class CompiledGaze:
         if pointed.any():
             U, P = self.table_u[pointed], self.table_targets[pointed]
         else:  # the seeded table alone: solve targets along its first entries' axes
-            P = np.ascontiguousarray((self.table_o + TABLE_TARGET_DISTANCE * self.table_z)[:sample])
-            OUT = np.empty((len(P), self._out_size))
-            kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
-            fixated = OUT[:, 0] == kernels.S_FIXATED
-            U = np.array([chain.u_from_q(q) for q in OUT[fixated, 2 : 2 + self.n]])
-            P = P[fixated]
+            P, status, U = self._solve_along_table(sample)
+            fixated = status == kernels.S_FIXATED
+            U, P = U[fixated], P[fixated]
         if len(P) == 0:
             return False
         ws = self._ws

@@ -832,6 +832,9 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
             # more free unknowns than residual rows (a camera on an arm, iCub, TALOS's torso and head):
             # the decomposition is of J_x J_x^T (M x M), whose nonzero eigenvalues are J^T J's
             rows = f > M
+            # the null cut: near fixation the structural null direction is among the eigenvalues
+            # only with at least as many free unknowns as rows
+            cut_rel = nr if f >= M else null_rel
             if f > 0 and f == m and exact_v:
                 exact_v = False  # V, lam already hold this decomposition at this u
             elif rows:
@@ -859,15 +862,14 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 if f == m:
                     have_v = True
             if rows:
-                vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, nr, DAMPING * rr,
+                vmove = _step_from_rows(J, r, V, lam, M, f, idx, sw, u, u_ref, vc, vw_w, vw_ref, cut_rel, DAMPING * rr,
                                         gain, accelerate, Hb[0], null_z, null_c, dx, dn)
             elif f > 0:
                 if not have_g:  # g = J_x^T r
                     for v in range(m):
                         g[v] = _gradient_entry(J, r, v) / sw[v]
                     have_g = True
-                # the structural null direction is among J^T J's eigenvalues only with f >= M
-                cut = _null_cut(lam, f, nr if f >= M else null_rel)
+                cut = _null_cut(lam, f, cut_rel)
                 mu = DAMPING * rr
                 # the pointing step along the strong directions (Gauss-Newton, damped), and
                 # the version it moves by, vr = c_x . dx_range (the null move makes up for it)
@@ -917,7 +919,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                                 dn[idx[a]] += V[a, e] * s
             held_off = False
             if d_min > 0.0 and gain > 0.0 and f > 0:
-                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, nr if f >= M else null_rel, Pc, d_min, vc, vw_w, accelerate,
+                held_off = _hold_off(J, V, lam, rows, M, f, idx, sw, cut_rel, Pc, d_min, vc, vw_w, accelerate,
                                      null_z, null_c, Hb[0], trial, Hb[1 % m], dx, dn)  # m >= 2 with a version row
             changed = False
             for v in range(m):
