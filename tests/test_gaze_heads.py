@@ -508,13 +508,9 @@ def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
     assert np.array_equal(tables[0], comp.table_u) and np.array_equal(tables[1], comp.table_u)
 
 
-def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(tmp_path):
-    """Near a fixating posture the null cut is ``kernels.BINOCULAR_NULL`` only on two eyes whose
-    4th pointing direction vanishes at every fixating posture (their axes sweep one plane: iCub,
-    the nominal IIS-head). Two eyes each on its own roll and tilt can fixate exactly too, but
-    their roll is a real pointing direction, small only near straight ahead: cut there at 1e-9,
-    5 of 400 targets 50-500 m ahead were left unfixated (3.8e-3 rad; review), and 1,369 of 2,400
-    out to 60 km."""
+def _roll_tilt_eyes(tmp_path):
+    """A solver for two eyes each on its own roll (about the head's forward axis, x) and tilt,
+    no neck, 0.12 m apart: at home both look along their roll axes (a gimbal singularity)."""
     def joint(name, parent, child, xyz, axis, lo, hi):
         return (f'<joint name="{name}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
                 f'<parent link="{parent}"/><child link="{child}"/>'
@@ -530,15 +526,49 @@ def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(t
                  f'<parent link="{eye}_tilt_link"/><child link="{eye}_optical"/></joint>\n')
     urdf = tmp_path / "roll_tilt_eyes.urdf"
     urdf.write_text(text + "</robot>\n")
-    solver = GazeSolver(urdf, ("l_optical", "r_optical"))
+    return GazeSolver(urdf, ("l_optical", "r_optical"))
+
+
+def _ahead(n, near, far, seed):
+    """``n`` seeded targets (world) 0.05 + ``near``-``far`` m ahead of the roll-tilt eyes, within
+    0.3 m of their height and midline."""
+    rng = np.random.default_rng(seed)
+    d = np.exp(rng.uniform(np.log(near), np.log(far), n))
+    return np.c_[0.05 + d, rng.uniform(-0.3, 0.3, n), 1.3 + rng.uniform(-0.3, 0.3, n)]
+
+
+def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(tmp_path):
+    """Near a fixating posture the null cut is ``kernels.BINOCULAR_NULL`` only on two eyes whose
+    4th pointing direction vanishes at every fixating posture (their axes sweep one plane: iCub,
+    the nominal IIS-head). Two eyes each on its own roll and tilt can fixate exactly too, but
+    their roll is a real pointing direction, small only near straight ahead: cut there at 1e-9,
+    5 of 400 targets 50-500 m ahead were left unfixated (3.8e-3 rad; review), and 1,369 of 2,400
+    out to 60 km."""
+    solver = _roll_tilt_eyes(tmp_path)
     comp = solver._fast
     assert comp.chain.kind == "binocular" and not comp.disparity_head
     assert not comp.structural_null and comp.ch[13][3] == 0.0
-    rng = np.random.default_rng(1)
-    d = np.exp(rng.uniform(np.log(50.0), np.log(500.0), 400))
-    P = np.c_[0.05 + d, rng.uniform(-0.3, 0.3, 400), 1.3 + rng.uniform(-0.3, 0.3, 400)]
-    batch = solver.solve_many(P)
+    batch = solver.solve_many(_ahead(400, 50.0, 500.0, 1))
     assert batch.reachable.all(), f"{np.sum(~batch.reachable)} of 400 not fixated (worst {batch.pointing_error.max():.3g} rad)"
+
+
+def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
+    """A head with no joint shared by its cameras spreads its eyes over the seeded table (the
+    shared joints are spread otherwise, the eyes kept at home). With every entry at home, the
+    roll-tilt eyes started every solve at their gimbal singularity, where no step turns the
+    roll a target off to the side needs: 4 of these 400 exactly reachable targets 0.5-5 km
+    ahead were `no_solution` (up to 6e-4 rad; 1 of another 400 at 50-500 m), and no table target
+    was fixated, so the policy table kept the seeded one."""
+    solver = _roll_tilt_eyes(tmp_path)
+    comp = solver._fast
+    assert comp.chain.eye.all() and np.ptp(comp.table_u, axis=0).min() > 0.5  # only eyes, every one spread
+    assert np.isfinite(comp.table_targets[:, 0]).mean() > 0.9  # the policy's answers
+    for near, far in ((50.0, 500.0), (500.0, 5000.0)):
+        batch = solver.solve_many(_ahead(400, near, far, 2))
+        assert batch.reachable.all(), (
+            f"{near:g}-{far:g} m: {np.sum(~batch.reachable)} of 400 not fixated "
+            f"(worst {batch.pointing_error.max():.3g} rad)")
+        assert np.all(batch.pointing_error <= comp.tolerance)
 
 
 def _distance_gradient(comp, p, u):
