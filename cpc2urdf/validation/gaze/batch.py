@@ -228,7 +228,9 @@ class CompiledGaze:
         0 out to 5 km. At 5-60 km 5-13 of 400 remain (pointing error up to 4e-6 rad): every
         target within 1.1e-6 rad of an eye's roll axis, none farther off. There the roll moves
         the target's image by less than 1e-6 of what the tilt does, under the null cut
-        (``null_rel``, 1e-12 of the largest eigenvalue), and the policy takes it (docs/gaze.md)."""
+        (``null_rel``, 1e-12 of the largest eigenvalue), and the policy takes it. The cost, on
+        two pan-tilt eyes without a neck: 35 of 2,109 unreachable targets' best answers worse
+        (median 2.6 deg), none better; iterations 15.1 -> 10.4 (docs/gaze.md, seventeenth pass)."""
         ch = self.chain
         rng = np.random.default_rng(TABLE_SEED)
         U = np.tile(self.home_u, (TABLE_SIZE, 1))
