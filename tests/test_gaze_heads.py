@@ -553,12 +553,12 @@ def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(t
 
 
 def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
-    """A head with no joint shared by its cameras spreads its eyes over the seeded table (the
+    """A head with no joint shared by its cameras spreads its (revolute) eyes over the seeded table (the
     shared joints are spread otherwise, the eyes kept at home). With every entry at home, the
     roll-tilt eyes started every solve at their gimbal singularity, where no step turns the
     roll a target off to the side needs: 4 of these 400 exactly reachable targets 0.5-5 km
-    ahead were `no_solution` (up to 6e-4 rad; 1 of another 400 at 50-500 m), and no table target
-    was fixated, so the policy table kept the seeded one."""
+    ahead were `no_solution` (up to 6e-4 rad), and no table target was fixated, so the policy
+    table kept the seeded one."""
     solver = _roll_tilt_eyes(tmp_path)
     comp = solver._fast
     assert comp.chain.eye.all() and np.ptp(comp.table_u, axis=0).min() > 0.5  # only eyes, every one spread
@@ -568,7 +568,6 @@ def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
         assert batch.reachable.all(), (
             f"{near:g}-{far:g} m: {np.sum(~batch.reachable)} of 400 not fixated "
             f"(worst {batch.pointing_error.max():.3g} rad)")
-        assert np.all(batch.pointing_error <= comp.tolerance)
 
 
 def _distance_gradient(comp, p, u):
