@@ -180,7 +180,6 @@ class CompiledGaze:
         self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
         self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
         self._out_size = kernels.out_size(self.n, self.S)
-        self._robot_pinv = np.linalg.pinv(chain.robot_A)
         self._home_centre = self._centre()
         self._pack()
         self.table_targets = np.full((TABLE_SIZE, 3), np.nan)  # the policy table's targets (NaN: a seeded entry)
@@ -189,7 +188,8 @@ class CompiledGaze:
         self.structural_null = self._structural_null()
         if self.structural_null:  # the kernels' null cut near a fixating posture (kernels.BINOCULAR_NULL)
             self.ch[13][3] = kernels.BINOCULAR_NULL
-            self._pack()
+        if policy_table or self.structural_null:
+            self._pack()  # the kernels' copy of the head: the new table and null cut
 
     def _pack(self) -> None:
         """The head as two flat arrays (``F``, ``I``): one solve is one call of
@@ -198,7 +198,7 @@ class CompiledGaze:
         robot = chain.robot
         self.F, self.I = kernels.pack_flat(
             self.ch, chain.lower, chain.upper, self.sw, self._table_T,
-            (chain.robot_A, chain.robot_b, robot.lower, robot.upper, self._robot_pinv),
+            (chain.robot_A, chain.robot_b, robot.lower, robot.upper, chain.robot_pinv),
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
             self.tolerance, self.baseline, self.disparity_head, self._home_centre,
         )
@@ -223,20 +223,17 @@ class CompiledGaze:
         each on a roll (about the head's forward axis) and a tilt, at home, look along the roll
         axis, where the roll does not move the optical axis (a gimbal singularity). A target
         straight ahead but off to one side needs the roll turned, which no step from there
-        finds: 4 / 45 of 400 exactly reachable targets 0.5-5 / 5-60 km ahead were `no_solution`, and
-        the policy table kept the seeded one (its targets, straight ahead, failed alike). Now
-        0 / 13 now (pointing error up to 3.6e-6 rad; tests' ``_ahead`` seed 2). The 13 are every
-        target within 1.1e-6 rad of an eye's roll axis, none farther off. There the roll moves
-        the target's image by less than 1e-6 of what the tilt does, under the null cut
-        (``null_rel``, 1e-12 of the largest eigenvalue), and the policy takes it. The cost, on
+        finds: 4 / 45 of 400 exactly reachable targets 0.5-5 / 5-60 km ahead were `no_solution`
+        (tests' ``_ahead``, seed 2), and the policy table kept the seeded one (its targets,
+        straight ahead, failed alike); now 0 / 13, the 13 every target within 1.1e-6 rad of an
+        eye's roll axis (under the null cut: docs/gaze.md, Known limits). The cost, on
         two pan-tilt eyes without a neck: 35 of 2,109 unreachable targets' best answers worse
         (median 2.6 deg), none better; iterations 15.1 -> 10.4 (docs/gaze.md, seventeenth pass)."""
         ch = self.chain
         rng = np.random.default_rng(TABLE_SEED)
         U = np.tile(self.home_u, (TABLE_SIZE, 1))
-        spread = [v for v in range(ch.m) if not ch.eye[v] and ch.weight[v] < 10.0]
-        if not spread:
-            spread = [v for v in range(ch.m) if ch.weight[v] < 10.0 and ch.lower[v] < ch.upper[v]]
+        revolute = [v for v in range(ch.m) if ch.weight[v] < 10.0]
+        spread = [v for v in revolute if not ch.eye[v]] or [v for v in revolute if ch.lower[v] < ch.upper[v]]
         for v in spread:
             U[:, v] = rng.uniform(ch.lower[v], ch.upper[v], TABLE_SIZE)
         self._set_table(U)
@@ -272,8 +269,7 @@ class CompiledGaze:
         U = self.table_u.copy()
         U[pointed] = answers[pointed]
         self.table_targets[pointed] = P[pointed]
-        self._set_table(U)
-        self._pack()
+        self._set_table(U)  # the kernels get it at the constructor's one repack
 
     def _solve_along_table(self, count: int) -> tuple[Array, Array, Array]:
         """Targets :data:`TABLE_TARGET_DISTANCE` along the first ``count`` table entries' axes

@@ -142,13 +142,17 @@ class HeadChain:
         """The robot's readings (shape (..., n)) of unknowns ``u`` (shape (..., m))."""
         return np.asarray(u, dtype=float) @ self.robot_A.T + self.robot_b
 
+    @property
+    def robot_pinv(self) -> Array:
+        """The pseudo-inverse of ``robot_A``, shape (m, n): computed once, on first use."""
+        if self._pinv is None:
+            self._pinv = np.asarray(np.linalg.pinv(self.robot_A), dtype=float)
+        return self._pinv
+
     def u_from_q(self, q: Array) -> Array:
         """Unknowns ``u`` (shape (m,)) whose readings are closest to ``q`` (shape (n,)) in least
         squares, clipped to the bounds (exact for readings that satisfy the coupling)."""
-        pinv = self._pinv
-        if pinv is None:
-            pinv = self._pinv = np.asarray(np.linalg.pinv(self.robot_A), dtype=float)
-        return np.clip(pinv @ (q - self.robot_b), self.lower, self.upper)
+        return np.clip(self.robot_pinv @ (q - self.robot_b), self.lower, self.upper)
 
 
 def _mimics(urdf: str) -> dict[str, tuple[str, float, float]]:
