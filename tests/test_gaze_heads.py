@@ -570,6 +570,53 @@ def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
             f"(worst {batch.pointing_error.max():.3g} rad)")
 
 
+def test_the_last_start_leaves_the_first_ones_cluster():
+    """The table's last start for a target is the best-scored entry that differs from every
+    start before it by DISTINCT_START in some scaled unknown (the best-facing entries are often
+    one cluster, all in one basin); with no such entry, the best one not yet chosen. The others
+    go by score alone."""
+    table_u = np.array([[0.0, 0.05, 0.1, 1.0, 0.2, 0.0],
+                        [0.0, 0.0, 0.1, 0.0, 0.2, 0.0]])  # (m, G): one column per entry
+
+    far_ref = np.array([2.0, 2.0])  # u_ref: away from every entry
+
+    def picks(scores, n_table, table_u=table_u, u_ref=far_ref):
+        ws = kernels._workspace(3, 1, 1, 2, table_u.shape[1], n_table + 1)
+        ws[26][:] = scores  # best_starts' scores: the table's entries, then u_ref
+        ws[27][0] = int(np.argmax(scores))  # best_starts' own pick
+        out = np.empty(2)
+        for j in range(1, n_table):
+            kernels.further_start(np.int64(j), np.int64(n_table), u_ref, np.ones(2), table_u, ws, out)
+            assert np.array_equal(out, u_ref if ws[27][j] == table_u.shape[1] else table_u[:, ws[27][j]])
+        return list(ws[27][:n_table])
+
+    scores = np.array([0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.0])
+    assert picks(scores, 3) == [0, 1, 3]  # 2 is within 0.25 of 0 (and of 1): 3 is the first that is not
+    assert picks(scores, 2) == [0, 3]
+    assert picks(scores, 4) == [0, 1, 2, 3]  # only the last start is held apart
+    far = scores.copy()
+    far[3] = -1.0  # entry 3 (the one far off) trails u_ref (scored 0), which is far off too
+    assert picks(far, 3) == [0, 1, 6]  # u_ref (index G) is a start like any other
+    clustered = table_u.copy()
+    clustered[0, 3] = 0.1
+    assert picks(scores, 3, clustered, np.array([0.05, 0.05])) == [0, 1, 2]  # none stands apart: by score
+
+
+def test_targets_missed_from_one_cluster_of_starts_are_fixated(tmp_path):
+    """iCub with its torso: three targets below and to the side, each fixatable, from 240 of the
+    256 table entries, but not from the three that face it best (one cluster of postures,
+    torso and neck turned the same way, the eye tilt at its limit). With the table's first three
+    starts they were answered `joint_limits`, 0.026-0.040 rad off; the last start now comes
+    from outside that cluster."""
+    case = head_case("icub", tmp_path)
+    P = np.array([[0.96, 2.39, -1.12], [1.64, 0.91, -2.19], [1.78, 0.96, -2.37]])
+    batch = case.solver.solve_many(P)
+    assert batch.reachable.all(), f"{batch.pointing_error.max(axis=1)} rad"
+    assert np.all(batch.q >= case.solver.lower) and np.all(batch.q <= case.solver.upper)
+    O, Z = yourdfpy_axes(case, batch.q)
+    assert pointing_errors(O, Z, P).max() < GAZE_POINTING_TOL
+
+
 def _distance_gradient(comp, p, u):
     """The distance from target ``p`` of the solved camera nearest it at unknowns ``u``, and its
     gradient by ``u``: Richardson-extrapolated central differences of the FK (h = 1e-4, error
@@ -860,7 +907,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     buffer used to its end; the arrays that start with a value have it."""
     K, C, S, m, G, n_top = sizes
     ws = kernels._workspace(*sizes)
-    assert len(ws) == 44
+    assert len(ws) == 43
     spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
     for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
         assert start + size == following  # adjacent: no overlap, no gap
@@ -868,8 +915,8 @@ def test_workspace_views_tile_their_buffers(sizes):
     assert spans[0][0] == buffer.data
     assert spans[-1][0] + spans[-1][1] - buffer.data == memoryview(buffer).nbytes  # used to its end
     assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (2 * S, m) and ws[7].shape == (3 * S,)
-    assert ws[26].shape == (G + 1,) and ws[33].shape == (n_top, m) and ws[28].dtype == np.int64
-    assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[41], np.ones(m))
+    assert ws[26].shape == (G + 1,) and ws[32].shape == (n_top, m) and ws[27].dtype == np.int64
+    assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[40], np.ones(m))
 
 
 def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):

@@ -95,6 +95,12 @@ START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) di
 # cost (2,000 targets) 1.40 / 1.32 / 1.20 / 1.20. TALOS 6.11 / 5.84 / 5.91 / 6.56 (answers within
 # 2e-5). Without the minimum viewing distance (_hold_off) it walked more answers onto their target.
 START_DISTANCE_REDUNDANT = 0.3
+# [rad] (scaled unknowns): a target's last start differs from each start before it by this much
+# in some unknown, when a table entry does (further_start). The best-facing entries are often
+# one cluster (the policy's answers for nearby directions), all in one basin: iCub with its
+# torso, 7,500 random targets in a 6 m cube (five seeds), 336 not fixated, 11 of them fixated
+# from one of 40 random starts; now 323 and 1 (docs/gaze.md, eighteenth pass)
+DISTINCT_START = 0.25
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
 # A binocular head whose eyes' axes sweep one plane (iCub, the nominal IIS-head: CompiledGaze
@@ -129,7 +135,7 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 # _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
 # so they are compiled without numba's reference counting (its CPU target option _nrt=False):
 # every array they see is owned by the entry point's frame for the whole call. With it, numba
-# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 44) on
+# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 43) on
 # entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
 # in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
 # batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
@@ -775,7 +781,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
     re-evaluated; -1.0: evaluated at ``u``. (No argument has a default, and callers pass the
     cap as a runtime int: see :func:`solve_one`.)"""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J, r2, J2, g, H, V, lam, idx, free, dx, trial, Hb, Vp, eig, s_prev, u_near, acc = ws[:25]
-    null_z, null_c = ws[42], ws[43]
+    null_z, null_c = ws[41], ws[42]
     moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
     sigma_prev = 1.0
     # eig[0] > 0: Vp holds the eigenvectors of a recent step with every unknown free (a warm
@@ -1152,10 +1158,10 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
     :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
-    solve makes its workspace on every call, and 44 allocations cost ~1.3 us of it."""
+    solve makes its workspace on every call, and 43 allocations cost ~1.3 us of it."""
     M = 2 * S  # the Jacobian's rows (the residual has 3 S)
     f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
-                 + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + n_top + 3 + K + m + m + n_top * m
+                 + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
                  + m + S + m + S + m + m + S + m + m + m)
     ints = np.empty(m + n_top, dtype=np.int64)
     JR, o = _carve(f, 0, 9 * K)
@@ -1183,7 +1189,6 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     acc, o = _carve(f, o, (4 * HISTORY + 2) * m)
     u, o = _carve(f, o, m)
     score, o = _carve(f, o, G + 1)
-    top_s, o = _carve(f, o, n_top)
     ps, o = _carve(f, o, 3)
     b, o = _carve(f, o, K)
     u_ref, o = _carve(f, o, m)
@@ -1231,8 +1236,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         acc.reshape((4 * HISTORY + 2, m)),  # see _iterate
         u,  # see solve_one
         score,  # see best_starts
-        top_s,  # see best_starts
-        ints[m:m + n_top],  # top_g: see best_starts
+        ints[m:m + n_top],  # top_g: the starts chosen (see best_starts, further_start)
         ps,  # see _solve_into
         b,  # see _solve_into
         u_ref,  # see _solve_into
@@ -1265,14 +1269,16 @@ def pointing_error(x, y, z):  # type: ignore[no-untyped-def]
 
 
 @kernel_without_refcounts
-def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it, disparity_head,
-              baseline, u_out, err_out, ws, rr_to_beat):  # type: ignore[no-untyped-def]
+def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, table_from, table_u, null_rel, tol, max_it,
+              disparity_head, baseline, u_out, err_out, ws, rr_to_beat):  # type: ignore[no-untyped-def]
     """One target: the policy phase, then pointing alone, from the best start of ``starts``
     (rows, best first); a further start only if the answer is neither fixated nor decided by
-    geometry (behind, too close). Given a finite ``rr_to_beat`` (|r|^2 of the answer already in
-    ``u_out``), every start is probed and kept only if it does better. Returns ``(iterations,
-    status)``; ``u_out`` the readings, ``err_out`` (S,) the solved cameras' pointing errors
-    [rad] on ``p``."""
+    geometry (behind, too close). Rows from ``table_from`` on are the table's starts: the first
+    is given (:func:`best_starts`), the others picked when reached (:func:`further_start`), so a
+    target fixated from its first start pays for no other. Given a finite ``rr_to_beat`` (|r|^2
+    of the answer already in ``u_out``), every start is probed and kept only if it does better.
+    Returns ``(iterations, status)``; ``u_out`` the readings, ``err_out`` (S,) the solved
+    cameras' pointing errors [rad] on ``p``."""
     JR, Jp, Ja, CR, Co, Jc, Pc, r, J = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6], ws[7], ws[8]
     m = u_ref.shape[0]
     S = err_out.shape[0]
@@ -1285,7 +1291,10 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
     # callee for each. Four copies, before, took half the cold compile (183 -> 87 s without)
     # (tests/test_gaze.py::test_every_kernel_is_compiled_for_one_signature)
     probe_it, polish_it = np.int64(PROBE_ITERATIONS), np.int64(POLISH_ITERATIONS)
-    for k in range(starts.shape[0]):
+    n_rows = starts.shape[0]
+    for k in range(n_rows):
+        if k > table_from:
+            further_start(k - table_from, n_rows - table_from, u_ref, sw, table_u, ws, starts[k])
         for v in range(m):
             u[v] = starts[k, v]
         if k == 0 and best_rr == np.inf:
@@ -1377,14 +1386,14 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol,
 
 
 @kernel_without_refcounts
-def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws):  # type: ignore[no-untyped-def]
-    """The ``n_best`` starts (rows of ``out``) that best face target ``p``: ``u_ref`` and the
-    table entries (unknowns ``table_u`` (m, G), cyclopean centre ``table_o`` and axis
-    ``table_z`` (3, G), world; one column per entry) ranked by the cosine of the angle between
-    their axis and the target direction, less a small cost of their distance (scaled) from
-    ``u_ref`` (:data:`START_DISTANCE`; :data:`START_DISTANCE_REDUNDANT` on a one-camera head with
-    spare joints). The scores are computed column-wise first (loops the compiler vectorises), then
-    the best ``n_best`` picked."""
+def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # type: ignore[no-untyped-def]
+    """The start that best faces target ``p`` (into ``out`` (m,)) among ``u_ref`` and the table
+    entries (unknowns ``table_u`` (m, G), cyclopean centre ``table_o`` and axis ``table_z`` (3,
+    G), world; one column per entry), by the cosine of the angle between their axis and the
+    target direction, less a small cost of their distance (scaled) from ``u_ref``
+    (:data:`START_DISTANCE`; :data:`START_DISTANCE_REDUNDANT` on a one-camera head with spare
+    joints). The scores stay in the workspace for :func:`further_start`. They are computed
+    column-wise (loops the compiler vectorises), then the best picked."""
     JR, Jp, Ja, CR, Co = ws[0], ws[1], ws[2], ws[3], ws[4]
     m, G = table_u.shape
     solve_cams = ch[11]
@@ -1418,24 +1427,71 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, n_best, out, ws)
     dx, dy, dz = px - ox, py - oy, pz - oz
     nd2 = dx * dx + dy * dy + dz * dz
     score[G] = (dx * zx + dy * zy + dz * zz) / nzr / math.sqrt(nd2) if nd2 > 0.0 else 0.0
-    top_s, top_g = ws[27], ws[28]  # the n_best best scores so far, best first
-    for k in range(n_best):
-        top_s[k] = -np.inf
-        top_g[k] = G
+    top_g = ws[27]
+    best = -np.inf
+    top_g[0] = G
     for g in range(G + 1):
-        sc = score[g]
-        if sc > top_s[n_best - 1]:
-            k = n_best - 1
-            while k > 0 and top_s[k - 1] < sc:
-                top_s[k] = top_s[k - 1]
-                top_g[k] = top_g[k - 1]
-                k -= 1
-            top_s[k] = sc
-            top_g[k] = g
-    for k in range(n_best):
-        g = top_g[k]
-        for v in range(m):
-            out[k, v] = u_ref[v] if g == G else table_u[v, g]
+        if score[g] > best:
+            best = score[g]
+            top_g[0] = g
+    _entry(top_g[0], u_ref, table_u, out)
+
+
+@inline_kernel
+def _entry(g, u_ref, table_u, out):  # type: ignore[no-untyped-def]
+    """Start ``g`` of :func:`best_starts`' scores into ``out``: a table column, or ``u_ref`` (g = G)."""
+    G = table_u.shape[1]
+    for v in range(out.shape[0]):
+        out[v] = u_ref[v] if g == G else table_u[v, g]
+
+
+@kernel_without_refcounts
+def further_start(j, n_table, u_ref, sw, table_u, ws, out):  # type: ignore[no-untyped-def]
+    """The table's ``j``-th start (j >= 1) of ``n_table`` for the target :func:`best_starts`
+    scored last (into ``out`` (m,)): the best-scored not chosen before. The last one also
+    differs from each one before it by :data:`DISTINCT_START` in some scaled unknown, when any
+    entry does: the best-facing entries are often one cluster, all in one basin."""
+    score, top_g = ws[26], ws[27]
+    G = table_u.shape[1]
+    g = -1
+    if j == n_table - 1:
+        g = _best_other(score, top_g, j, True, u_ref, sw, table_u)
+    if g < 0:
+        g = _best_other(score, top_g, j, False, u_ref, sw, table_u)
+    top_g[j] = G if g < 0 else g  # (a table of one entry: u_ref again)
+    _entry(top_g[j], u_ref, table_u, out)
+
+
+@inline_kernel
+def _best_other(score, top_g, j, distinct, u_ref, sw, table_u):  # type: ignore[no-untyped-def]
+    """The best-scored start (column of ``score``, G + 1) not among ``top_g[:j]``, and, when
+    ``distinct``, at least :data:`DISTINCT_START` from each of them in some scaled unknown;
+    -1 if none."""
+    m, G = table_u.shape
+    best = -np.inf
+    pick = -1
+    for g in range(G + 1):
+        if not score[g] > best:  # (and never a NaN score)
+            continue
+        ok = True
+        for i in range(j):
+            h = top_g[i]
+            if h == g:
+                ok = False
+                break
+            if distinct:
+                far = 0.0
+                for v in range(m):
+                    a = u_ref[v] if g == G else table_u[v, g]
+                    c = u_ref[v] if h == G else table_u[v, h]
+                    far = max(far, abs(a - c) * sw[v])
+                if far < DISTINCT_START:
+                    ok = False
+                    break
+        if ok:
+            best = score[g]
+            pick = g
+    return pick
 
 
 @kernel_without_refcounts
@@ -1451,12 +1507,12 @@ def solve_single(ch, p_solve, p, b, u_ref, u_start, warm, lower, upper, sw, tabl
     if warm:
         for v in range(m):
             starts[0, v] = min(max(u_start[v], lower[v]), upper[v])
-        best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, n_rows - 1, starts[1:], ws)
-        return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, null_rel, tol, max_it,
-                         disparity_head, baseline, u_out, err_out, ws, rr_to_beat)
-    best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, n_rows - 1, starts, ws)
-    return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts[: n_rows - 1], null_rel, tol, max_it,
-                     disparity_head, baseline, u_out, err_out, ws, rr_to_beat)
+        best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, starts[1], ws)
+        return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, np.int64(1), table_u, null_rel, tol,
+                         max_it, disparity_head, baseline, u_out, err_out, ws, rr_to_beat)
+    best_starts(ch, p_solve, b, u_ref, sw, table_u, table_o, table_z, starts[0], ws)
+    return solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts[: n_rows - 1], np.int64(0), table_u,
+                     null_rel, tol, max_it, disparity_head, baseline, u_out, err_out, ws, rr_to_beat)
 
 
 
@@ -1686,7 +1742,7 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
     eig[0] = 0.0
     eig[1] = 0.0
     eig[2] = 0.0
-    ps, b, u_ref, u_start, starts, u_out, e_out = ws[29], ws[30], ws[31], ws[32], ws[33], ws[34], ws[35]
+    ps, b, u_ref, u_start, starts, u_out, e_out = ws[28], ws[29], ws[30], ws[31], ws[32], ws[33], ws[34]
     _aim_point(p, scalars[4:7], ps)
     has_qc = (mode & 1) != 0
     warm = (mode & 2) != 0
@@ -1713,13 +1769,13 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
         # back: at a first answer where pointing alone has no descent direction inside the
         # bounds (an unreachable target's), neither this nor the rescue below lowered the error
         # by more than 1e-8 relative (23 of 200 bench targets; the rest not at all)
-        u1, e1, best_start = ws[36], ws[37], ws[38]
+        u1, e1, best_start = ws[35], ws[36], ws[37]
         _copy(u_out, u1)
         _copy(e_out, e1)
         _copy(starts[1 if warm else 0], best_start)
         _copy(u1, starts[0])
-        it2, st2 = solve_one(plain, ps, p, b, u_ref, lower, upper, sw, starts[:1], null_rel, tol, max_it,
-                             disparity_head, baseline, u_out, e_out, ws, np.inf)
+        it2, st2 = solve_one(plain, ps, p, b, u_ref, lower, upper, sw, starts[:1], np.int64(0), table_u, null_rel,
+                             tol, max_it, disparity_head, baseline, u_out, e_out, ws, np.inf)
         if st2 == S_LIMITS:
             # the weighted home pulls the eyes to their middle so hard that pointing can end in a
             # corner of the bounds (pan at 0, tilt at its limit) where fixation needs an eye at
@@ -1727,12 +1783,12 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
             # (nominal IIS-head, 40,000 reachable targets: 2 such, both fixated so; 300
             # unreachable: 19.9 -> 25.3 iterations; probed for 8 iterations it fixated neither:
             # the way out of that corner first raises |r|^2)
-            u2, e2 = ws[39], ws[40]
+            u2, e2 = ws[38], ws[39]
             _copy(u_out, u2)
             _copy(e_out, e2)
             _copy(best_start, starts[0])
-            it3, st3 = solve_one(plain, ps, p, b, u_ref, lower, upper, ws[41], starts[:1], null_rel, tol,
-                                 max_it, disparity_head, baseline, u_out, e_out, ws, np.inf)
+            it3, st3 = solve_one(plain, ps, p, b, u_ref, lower, upper, ws[40], starts[:1], np.int64(0), table_u, null_rel,
+                                 tol, max_it, disparity_head, baseline, u_out, e_out, ws, np.inf)
             it2 += it3
             if st3 == S_FIXATED or _largest(e_out) < _largest(e2):
                 st2 = st3
@@ -1855,6 +1911,7 @@ __all__ = [
     "best_starts",
     "camera_jacobian",
     "fk",
+    "further_start",
     "out_size",
     "pack_flat",
     "solve_flat",
