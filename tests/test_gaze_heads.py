@@ -149,7 +149,8 @@ def test_reachable_targets_exact_on_independent_fk(case):
 def test_threaded_batch_answers_each_target_as_one_solve(case):
     """solve_many over two threads (rows dealt round-robin) answers every target exactly as
     one thread does and as solve_point does, wherever the hard (unreachable) targets sit: a run
-    of them first, then reachable ones, as a workspace map's rows come."""
+    of them first, then reachable ones, as a workspace map's rows come; from the middle of the
+    limits and from other readings."""
     comp = case.solver._fast
     P, _ = case.reachable_targets(150, seed=7)
     R, o = comp._fk(comp.home_u)
@@ -171,6 +172,17 @@ def test_threaded_batch_answers_each_target_as_one_solve(case):
     for i in range(0, len(T), 37):
         out = comp.solve_point(T[i], None)
         assert out[0] == two.status[i] and np.array_equal(out[2 : 2 + comp.n], two.q[i])
+    # from other readings too: a batch scores its starts against one reference posture, computed
+    # once (best_starts), a single solve against its own
+    lo, hi = case.solver.lower, case.solver.upper
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    f = np.random.default_rng(8).uniform(0.2, 0.8, lo.shape)
+    qc = np.where(finite, np.where(finite, lo, 0.0) + f * np.where(finite, hi - lo, 0.0), 0.0)
+    moved = comp.solve_many(T, qc)
+    assert not np.array_equal(moved.q, two.q)
+    for i in range(0, len(T), 37):
+        out = comp.solve_point(T[i], qc)
+        assert out[0] == moved.status[i] and np.array_equal(out[2 : 2 + comp.n], moved.q[i])
 
 
 def test_unreachable_targets_answered_in_limits(case):
@@ -907,7 +919,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     buffer used to its end; the arrays that start with a value have it."""
     K, C, S, m, G, n_top = sizes
     ws = kernels._workspace(*sizes)
-    assert len(ws) == 43
+    assert len(ws) == 46
     spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
     for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
         assert start + size == following  # adjacent: no overlap, no gap
@@ -917,6 +929,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (2 * S, m) and ws[7].shape == (3 * S,)
     assert ws[26].shape == (G + 1,) and ws[32].shape == (n_top, m) and ws[27].dtype == np.int64
     assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[40], np.ones(m))
+    assert np.isnan(ws[43]).all() and ws[43].shape == (m + K,) and ws[45].shape == (G,)  # no u_ref cached yet
 
 
 def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):

@@ -135,7 +135,7 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 # _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
 # so they are compiled without numba's reference counting (its CPU target option _nrt=False):
 # every array they see is owned by the entry point's frame for the whole call. With it, numba
-# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 43) on
+# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 46) on
 # entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
 # in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
 # batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
@@ -1158,11 +1158,11 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
     :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
-    solve makes its workspace on every call, and 43 allocations cost ~1.3 us of it."""
+    solve makes its workspace on every call, and 46 allocations cost ~1.3 us of it."""
     M = 2 * S  # the Jacobian's rows (the residual has 3 S)
     f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
                  + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
-                 + m + S + m + S + m + m + S + m + m + m)
+                 + m + S + m + S + m + m + S + m + m + m + m + K + 6 + G)
     ints = np.empty(m + n_top, dtype=np.int64)
     JR, o = _carve(f, 0, 9 * K)
     Jp, o = _carve(f, o, 3 * K)
@@ -1204,6 +1204,10 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     ones, o = _carve(f, o, m)
     null_z, o = _carve(f, o, m)
     null_c, o = _carve(f, o, m)
+    ref_key, o = _carve(f, o, m + K)
+    ref_axis, o = _carve(f, o, 6)
+    ref_cost, o = _carve(f, o, G)
+    ref_key[:] = np.nan  # no target's u_ref and b yet
     for i in range(3):
         eig[i] = 0.0
     for i in range(m):
@@ -1252,6 +1256,9 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         ones,  # equal weights: see _solve_into
         null_z,  # see _step_from_rows
         null_c,  # see _step_from_rows
+        ref_key,  # see best_starts
+        ref_axis,  # see best_starts
+        ref_cost,  # see best_starts
     )
 
 
@@ -1398,16 +1405,41 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # typ
     m, G = table_u.shape
     solve_cams = ch[11]
     S = solve_cams.shape[0]
-    fk(ch, u_ref, b, JR, Jp, Ja, CR, Co)
-    ox, oy, oz, zx, zy, zz = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    for s in range(S):
-        c = solve_cams[s]
-        ox += Co[c, 0] / S
-        oy += Co[c, 1] / S
-        oz += Co[c, 2] / S
-        zx += CR[c, 0, 2]
-        zy += CR[c, 1, 2]
-        zz += CR[c, 2, 2]
+    key, axis, cost = ws[43], ws[44], ws[45]
+    K = b.shape[0]
+    same = True  # the same u_ref and b as the last target's (a batch's every target, from one q_current)?
+    for v in range(m):
+        if key[v] != u_ref[v]:  # (a NaN key, as made: never)
+            same = False
+    for k in range(K):
+        if key[m + k] != b[k]:
+            same = False
+    if not same:  # u_ref's cyclopean centre and axis, and each entry's cost of its distance from u_ref
+        for v in range(m):
+            key[v] = u_ref[v]
+        for k in range(K):
+            key[m + k] = b[k]
+        fk(ch, u_ref, b, JR, Jp, Ja, CR, Co)
+        for i in range(6):
+            axis[i] = 0.0
+        for s in range(S):
+            c = solve_cams[s]
+            axis[0] += Co[c, 0] / S
+            axis[1] += Co[c, 1] / S
+            axis[2] += Co[c, 2] / S
+            axis[3] += CR[c, 0, 2]
+            axis[4] += CR[c, 1, 2]
+            axis[5] += CR[c, 2, 2]
+        w0 = START_DISTANCE_REDUNDANT if S == 1 and m > 3 else START_DISTANCE
+        for g in range(G):
+            cost[g] = 0.0
+        for v in range(m):
+            w = w0 * sw[v] * sw[v]
+            r = u_ref[v]
+            for g in range(G):
+                d = table_u[v, g] - r
+                cost[g] += w * d * d
+    ox, oy, oz, zx, zy, zz = axis[0], axis[1], axis[2], axis[3], axis[4], axis[5]
     # the table's axes are unit vectors and targets are within FAR_TARGET (1e15 m): |p - o|^2
     # cannot overflow, so no scaling in the loop (the start at u_ref is g = G, scored last)
     px, py, pz = p[0], p[1], p[2]
@@ -1415,14 +1447,7 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # typ
     for g in range(G):
         dx, dy, dz = px - table_o[0, g], py - table_o[1, g], pz - table_o[2, g]
         nd2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
-        score[g] = (dx * table_z[0, g] + dy * table_z[1, g] + dz * table_z[2, g]) / math.sqrt(nd2)
-    w0 = START_DISTANCE_REDUNDANT if S == 1 and m > 3 else START_DISTANCE
-    for v in range(m):
-        w = w0 * sw[v] * sw[v]
-        r = u_ref[v]
-        for g in range(G):
-            d = table_u[v, g] - r
-            score[g] -= w * d * d
+        score[g] = (dx * table_z[0, g] + dy * table_z[1, g] + dz * table_z[2, g]) / math.sqrt(nd2) - cost[g]
     nzr = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
     dx, dy, dz = px - ox, py - oy, pz - oz
     nd2 = dx * dx + dy * dy + dz * dz
