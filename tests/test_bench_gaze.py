@@ -15,8 +15,11 @@ from cpc2urdf.studies.bench_gaze import (
     REAL_HEADS,
     SolvedAxes,
     _real_urdf,
+    audit_targets,
     bench_head,
     generic_reachable_targets,
+    generic_unreachable_targets,
+    missed_targets,
     tracking_targets,
 )
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
@@ -25,7 +28,7 @@ from cpc2urdf.validation.crosscheck import yourdfpy_pose
 KEYS = (
     "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",
     "unreachable_ratio", "reference_median_us", "reference_success", "ratio", "batch_targets_per_s", "aims",
-    "p99_cpu_us", "p99_cpu_kin",
+    "p99_cpu_us", "p99_cpu_kin", "audit_targets", "audit_unfixated", "audit_missed",
 )
 
 
@@ -37,7 +40,7 @@ def tiago():
 def test_bench_runs_tiny(tmp_path, capsys):
     out = tmp_path / "bench.json"
     argv = ["bench", "gaze", "--targets", "4", "--unreachable", "2", "--reference", "2", "--track-seconds", "0.02",
-            "--heads", "nominal", "tiago", "--json", str(out)]
+            "--heads", "nominal", "tiago", "--audit", "40", "--json", str(out)]
     assert main(argv) == 0
     res = json.loads(out.read_text())
     assert list(res) == ["nominal", "tiago"]
@@ -47,6 +50,7 @@ def test_bench_runs_tiny(tmp_path, capsys):
         assert r["kin_us"] > 0 and r["median_kin"] > 0 and r["ratio"] > 0 and r["batch_targets_per_s"] > 0
         assert r["success"] + r["disparity"] == 1.0 and r["reference_success"] == 1.0
         assert r["unreachable_fixated"] == 0
+        assert r["audit_targets"] == 40 and 0 < r["audit_unfixated"] < 40 and r["audit_missed"] == 0
     for name in ("nominal", "tiago"):  # every head shape tracks (TIAGo: one camera)
         assert res[name]["track_steps"] == 20 and res[name]["track_saccade_steps"] >= 0
     table = capsys.readouterr().out
@@ -62,8 +66,24 @@ def test_bench_urdf_head(tmp_path, capsys):
     assert list(json.loads(out.read_text())) == ["nominal", "talos_reduced"]
 
 
+def test_the_audit_finds_fixatable_targets_called_unreachable(tiago):
+    """missed_targets solves each target marked unfixated again from random postures: told that
+    reachable targets were not fixated, it fixates them (so a solver that misses targets is
+    caught); targets behind the head, which the pan cannot turn to, it never fixates."""
+    solver = tiago.solver
+    axes = SolvedAxes(solver)
+    P, _ = generic_reachable_targets(axes, 12, seed=3)
+    assert missed_targets(solver, P, np.zeros(12, dtype=bool)).tolist() == list(range(12))
+    assert missed_targets(solver, P, np.ones(12, dtype=bool)).size == 0  # only the unfixated are audited
+    behind = generic_unreachable_targets(solver, 12, seed=3)
+    assert missed_targets(solver, behind, np.zeros(12, dtype=bool)).size == 0
+    A = audit_targets(axes, 200, seed=1)
+    O, _ = axes.axes(axes.home[None])
+    assert np.abs(A - O[0].mean(axis=0)).max() <= 3.0 and np.ptp(A, axis=0).min() > 5.0
+
+
 @pytest.mark.parametrize("argv", [["--urdf", "x.urdf"], ["--camera", "c"], ["--targets", "0"],
-                                  ["--track-seconds", "0"], ["--heads", "nope"]])
+                                  ["--track-seconds", "0"], ["--heads", "nope"], ["--audit", "-1"]])
 def test_bench_bad_input(tmp_path, capsys, argv):
     out = tmp_path / "b.json"
     assert main(["bench", "gaze", *argv, "--json", str(out)]) == 2

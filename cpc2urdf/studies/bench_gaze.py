@@ -16,6 +16,10 @@ example-robot-data; ``--urdf FILE --camera ...`` adds any other), it reports:
 - the 1 kHz tracking loop (:class:`~cpc2urdf.validation.gaze.tracking.GazeTracker`, smooth
   pursuit and minimum-jerk saccades) on every head: the p99 of one step
   against its 1 ms deadline, by the wall clock and by this thread's CPU time.
+- the audit of "unreachable": random targets in a 6 m cube about the head (most out of reach);
+  each one answered as not fixated is solved again from 20 random postures, and ``missed``
+  counts those that one of them fixates (a fixatable target the solver called unreachable; a
+  lower bound).
 
 Targets are built *independently of the solver*. On the IIS-heads from the CPC model's own
 forward kinematics (:meth:`cpc2urdf.model.CPCModel.fk`), so a target is reachable by
@@ -40,7 +44,7 @@ leaves no fixable point in front of the cameras at all (the two eyes' planes cro
 
     cpc2urdf bench gaze [--targets 2000] [--unreachable 200] [--reference 300] [--track-seconds 4]
                         [--heads nominal calibrated tiago talos] [--urdf FILE --camera FRAME ...]
-                        [--seed 0] [--json out.json]
+                        [--audit 1500] [--seed 0] [--json out.json]
 """
 
 from __future__ import annotations
@@ -78,6 +82,8 @@ TRACK_HOLD = 1.0  # [s]: then jumps to the next one (a saccade)
 TRACK_POOL = 200  # reachable targets the tracked target's centres are chosen from
 PERTURB_ANGLE = math.radians(0.1)  # [rad]: std of the random rotation of each CPC transform
 PERTURB_LENGTH = 0.5e-3  # [m]: std of the random translation of each CPC transform
+AUDIT_HALF_WIDTH = 3.0  # [m]: the audit's random targets are uniform in a cube this far about the head's centre
+AUDIT_STARTS = 20  # random postures each audited target is solved again from
 
 
 def _rotvec_matrix(v: Array) -> Array:
@@ -497,6 +503,33 @@ def _generic_reference_solver(axes: SolvedAxes) -> Callable[[Array, Array], tupl
     return solve
 
 
+def audit_targets(axes: SolvedAxes, n: int, seed: int = 0) -> Array:
+    """``n`` targets (world) [m], shape (n, 3), uniform in a cube :data:`AUDIT_HALF_WIDTH` about
+    the solved cameras' mean centre at home: near and far, in front, beside and behind; most out
+    of reach."""
+    O, _ = axes.axes(axes.home[None])
+    rng = np.random.default_rng(seed)
+    return O[0].mean(axis=0) + rng.uniform(-AUDIT_HALF_WIDTH, AUDIT_HALF_WIDTH, (n, 3))
+
+
+def missed_targets(solver: GazeSolver, P: Array, reachable: NDArray[np.bool_], starts: int = AUDIT_STARTS,
+                   seed: int = 0) -> NDArray[np.intp]:
+    """The targets of ``P`` (N, 3) answered as not fixated (``reachable`` False) that ``solve``
+    fixates from one of ``starts`` random postures (its unknowns uniform in their bounds, as a
+    warm start ``q_start``): indices into ``P``. Each is a fixatable target the solver called
+    unreachable. A lower bound: a target fixated from none of them may still be fixatable."""
+    rng = np.random.default_rng(seed)
+    chain = solver.chain
+    lo, hi = np.maximum(chain.lower, -math.pi), np.minimum(chain.upper, math.pi)
+    missed = []
+    for i in np.flatnonzero(~np.asarray(reachable)):
+        for q in chain.q_from_u(rng.uniform(lo, hi, (starts, chain.m))):
+            if solver.solve(P[i], q_start=q).reachable:
+                missed.append(i)
+                break
+    return np.array(missed, dtype=np.intp)
+
+
 KIN_BLOCK = 100  # solves timed between two blocks of as many kinematics calls
 
 
@@ -746,6 +779,7 @@ def run_head(
     unreachable: int = 200,
     reference: int = 300,
     track_seconds: float = 4.0,
+    audit: int = 1500,
 ) -> dict[str, Any]:
     """Every number of ``cpc2urdf bench gaze`` for one head (see :func:`run_benchmark`)."""
     from cpc2urdf.validation.gaze.reach import solve_batch
@@ -786,6 +820,11 @@ def run_head(
         "track_cpu_max_us": float(np.max(tcpu) * 1e6),
         "track_cpu_over_deadline": int(np.sum(tcpu > TRACK_DEADLINE)),
     }
+    # how often a fixatable target is called unreachable (not on a head that fixates nothing exactly)
+    audited = audit if audit and not getattr(solver, "disparity_head", False) else 0
+    A = audit_targets(axes, audited, seed)
+    a_reachable = solve_batch(solver, A).reachable
+    missed = missed_targets(solver, A, a_reachable, seed=seed)
     kin_us = float(np.median(kin_times) * 1e6)
     median_us = float(np.median(times) * 1e6)
     p99_us = float(np.percentile(times, 99) * 1e6)
@@ -817,6 +856,9 @@ def run_head(
         "batch_targets": int(P.shape[0] + U.shape[0]),
         "batch_targets_per_s": rate,
         "batch_path": path,
+        "audit_targets": audited,
+        "audit_unfixated": int(np.sum(~a_reachable)),
+        "audit_missed": int(missed.size),
         **track,
     }
     r["aims"] = {
@@ -841,6 +883,7 @@ def run_benchmark(
     track_seconds: float = 4.0,
     urdf: str | None = None,
     cameras: tuple[str, ...] = (),
+    audit: int = 1500,
 ) -> dict[str, Any]:
     """Every number of ``cpc2urdf bench gaze``, per head, in one run.
 
@@ -855,6 +898,9 @@ def run_benchmark(
         track_seconds: Length of the 1 kHz tracking run [s] (every head).
         urdf: Also this URDF (named by its file stem), with ``cameras``.
         cameras: The camera frames of ``urdf``.
+        audit: Random targets per head (:func:`audit_targets`) whose unfixated answers are
+            solved again from :data:`AUDIT_STARTS` random postures (:func:`missed_targets`); 0:
+            none. Not on a head that cannot fixate exactly.
 
     Returns:
         ``{head: {...}}``: the kinematics unit ``kin_us`` (one FK + two frame Jacobians, measured
@@ -865,8 +911,10 @@ def run_benchmark(
         scipy reference's ``reference_median_us``/``reference_success`` and ``ratio`` (its
         median over ours on the same targets), ``batch_targets_per_s`` and ``batch_path``,
         ``track_p99_us``/``track_max_us``/``track_over_deadline`` (steps over
-        :data:`TRACK_DEADLINE`; wall clock, and ``track_cpu_*`` this thread's CPU time), and
-        ``aims`` (the issue's aims, each True/False).
+        :data:`TRACK_DEADLINE`; wall clock, and ``track_cpu_*`` this thread's CPU time), the
+        audit's ``audit_targets``, ``audit_unfixated`` (answered as not fixated) and
+        ``audit_missed`` (of those, fixated from another start), and ``aims`` (the issue's
+        aims, each True/False).
     """
     import os
 
@@ -878,7 +926,7 @@ def run_benchmark(
         is_urdf = urdf is not None and name == names[-1] and name not in heads
         head = bench_head(name, seed, urdf if is_urdf else None, cameras)
         results[name] = run_head(
-            head, n, seed, unreachable=unreachable, reference=reference, track_seconds=track_seconds
+            head, n, seed, unreachable=unreachable, reference=reference, track_seconds=track_seconds, audit=audit
         )
     return results
 
@@ -892,11 +940,11 @@ def format_table(res: dict[str, Any]) -> str:
     two frame Jacobians (``kin``), the issue's aims under the header."""
     head = (
         f"{'head':13s} {'kind':12s} {'kin us':>7s} {'median':>9s} {'p99':>9s} {'p99 cpu':>9s} {'unreach':>9s} {'success':>8s} "
-        f"{'iters':>5s} {'vs scipy':>9s} {'batch/s':>9s} {'track p99':>10s} {'cpu p99':>8s} {'over 1ms':>8s}"
+        f"{'iters':>5s} {'vs scipy':>9s} {'batch/s':>9s} {'track p99':>10s} {'cpu p99':>8s} {'over 1ms':>8s} {'missed':>10s}"
     )
     aims = (
         f"{'aim':13s} {'':12s} {'':>7s} {'<=10x':>9s} {'<=40x':>9s} {'':>9s} {'<=5x':>9s} {'1.0':>8s} {'':>5s} "
-        f"{'>=100x':>9s} {'>=100000':>9s} {'<=1000us':>10s} {'':>8s} {'0':>8s}"
+        f"{'>=100x':>9s} {'>=100000':>9s} {'<=1000us':>10s} {'':>8s} {'0':>8s} {'0':>10s}"
     )
     lines = [head, aims]
     for name, r in res.items():
@@ -905,10 +953,11 @@ def format_table(res: dict[str, Any]) -> str:
             f"{r['track_p99_us']:8.0f}us {r['track_cpu_p99_us']:6.0f}us {r['track_over_deadline']:8d}"
             if "track_p99_us" in r else f"{'n/a':>10s} {'n/a':>8s} {'n/a':>8s}"
         )
+        missed = f"{r['audit_missed']}/{r['audit_unfixated']}" if r.get("audit_targets") else "n/a"
         lines.append(
             f"{name:13s} {r['kind']:12s} {r['kin_us']:7.2f} {r['median_kin']:8.1f}x {r['p99_kin']:8.1f}x {r['p99_cpu_kin']:8.1f}x "
             f"{_ratio(r['unreachable_ratio'])} {success:8.4f} {r['iterations_median']:5.0f} "
-            f"{r['ratio']:8.1f}x {r['batch_targets_per_s']:9.0f} {track}"
+            f"{r['ratio']:8.1f}x {r['batch_targets_per_s']:9.0f} {track} {missed:>10s}"
         )
     lines.append(
         "kin: one Pinocchio FK + two frame Jacobians [us], in blocks of 100 between the solves; median/p99: one solve per reachable "
@@ -917,6 +966,8 @@ def format_table(res: dict[str, Any]) -> str:
         "batch/s: "
         + ", ".join(f"{n} via {r['batch_path']}" for n, r in res.items())
         + "; track: one 1 kHz step (solve + pursuit/saccade), wall and CPU time"
+        + f"; missed: random targets (a {2 * AUDIT_HALF_WIDTH:g} m cube about the head) answered as not fixated "
+        f"that one of {AUDIT_STARTS} random starts fixates, of all answered so (n/a: a head that cannot fixate exactly)"
     )
     return "\n".join(lines)
 
@@ -933,14 +984,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--heads", nargs="+", choices=HEADS, default=list(HEADS), help="heads (default all)")
     parser.add_argument("--urdf", help="also this head (a URDF file; named by its file stem), with --camera")
     parser.add_argument("--camera", nargs="+", default=[], metavar="FRAME", help="--urdf: its one or two camera frames")
+    parser.add_argument("--audit", type=int, default=1500,
+                        help="random targets per head whose unfixated answers are tried again from "
+                             f"{AUDIT_STARTS} random starts (default 1500; 0: none)")
     parser.add_argument("--seed", type=int, default=0, help="seed of targets and calibration errors")
     parser.add_argument("--json", help="also write the numbers to this JSON file")
     args = parser.parse_args(argv)
     check_outputs_are_not_inputs(args)
     if (args.urdf is None) != (not args.camera):
         raise ConfigurationError("--urdf and --camera go together: a URDF file and its one or two camera frames")
-    if args.targets < 1 or args.reference < 1 or args.unreachable < 0:
-        raise ConfigurationError("--targets and --reference must be at least 1, --unreachable at least 0")
+    if args.targets < 1 or args.reference < 1 or args.unreachable < 0 or args.audit < 0:
+        raise ConfigurationError("--targets and --reference must be at least 1, --unreachable and --audit at least 0")
     if not (math.isfinite(args.track_seconds) and args.track_seconds >= TRACK_DT):
         raise ConfigurationError(f"--track-seconds must be at least {TRACK_DT:g} s, got {args.track_seconds}")
     if args.json:
@@ -956,6 +1010,7 @@ def main(argv: list[str] | None = None) -> int:
         track_seconds=args.track_seconds,
         urdf=args.urdf,
         cameras=tuple(args.camera),
+        audit=args.audit,
     )
     print(format_table(res))
     if args.json:
@@ -966,6 +1021,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 __all__ = [
+    "AUDIT_HALF_WIDTH",
+    "AUDIT_STARTS",
     "CAMERAS",
     "HEADS",
     "REAL_HEADS",
@@ -982,6 +1039,7 @@ __all__ = [
     "PERTURB_LENGTH",
     "axis_distance",
     "axis_meeting",
+    "audit_targets",
     "bench_head",
     "generic_reachable_targets",
     "generic_unreachable_targets",
@@ -991,6 +1049,7 @@ __all__ = [
     "kinematics_call_us",
     "kinematics_timer",
     "main",
+    "missed_targets",
     "reachable_targets",
     "run_benchmark",
     "run_head",
