@@ -67,9 +67,10 @@ def test_bench_urdf_head(tmp_path, capsys):
 
 
 def test_the_audit_finds_fixatable_targets_called_unreachable(tiago):
-    """missed_targets solves each target marked unfixated again from random postures: told that
-    reachable targets were not fixated, it fixates them (so a solver that misses targets is
-    caught); targets behind the head, which the pan cannot turn to, it never fixates."""
+    """missed_targets solves each target marked unfixated again from random postures (each a
+    warm start, the table's starts after it): told that reachable targets were not fixated, it
+    counts every one of them, and only those marked; targets behind the head, which the pan
+    cannot turn to, it never counts. audit_targets fill the 6 m cube about the head."""
     solver = tiago.solver
     axes = SolvedAxes(solver)
     P, _ = generic_reachable_targets(axes, 12, seed=3)

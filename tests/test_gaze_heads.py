@@ -614,13 +614,41 @@ def test_the_last_start_leaves_the_first_ones_cluster():
     assert picks(scores, 3, clustered, np.array([0.05, 0.05])) == [0, 1, 2]  # none stands apart: by score
 
 
-def test_targets_missed_from_one_cluster_of_starts_are_fixated(tmp_path):
+@pytest.mark.parametrize("case", ["iis_nominal"], indirect=True)
+def test_a_workspace_scores_a_new_reference_posture_afresh(case):
+    """best_starts keeps the reference posture's axis and the entries' distance costs in the
+    workspace for the next target (a batch's targets share them): with another ``u_ref``, or
+    other held joints ``b``, on the same workspace it scores and picks as a fresh workspace does."""
+    comp = case.solver._fast
+    chain = comp.chain
+    K, C, S, m = len(chain.parent), len(chain.cam_parent), len(chain.solve_cameras), chain.m
+    U, O, Z = comp._table_T
+    rng = np.random.default_rng(5)
+    p = comp._centre() + np.array([0.3, -0.2, 1.0])
+    held = np.flatnonzero(comp._held)
+    assert held.size  # the table's joints: held at q_current
+    moved = chain.b.copy()
+    moved[held] += 0.2  # the table elsewhere
+    postures = [(comp.home_u, chain.b), (comp.home_u, moved),  # the same u_ref, other held joints
+                (rng.uniform(chain.lower, chain.upper), chain.b), (rng.uniform(chain.lower, chain.upper), chain.b)]
+    used = kernels._workspace(K, C, S, m, U.shape[1], 4)
+    last = None
+    for k, (u_ref, b) in enumerate(postures):
+        kernels.best_starts(comp.ch, p, b, u_ref, comp.sw, U, O, Z, np.empty(m), used)
+        fresh = kernels._workspace(K, C, S, m, U.shape[1], 4)
+        kernels.best_starts(comp.ch, p, b, u_ref, comp.sw, U, O, Z, np.empty(m), fresh)
+        assert np.array_equal(used[26], fresh[26]) and used[27][0] == fresh[27][0], k
+        assert last is None or not np.array_equal(fresh[26], last), k  # each posture scores differently
+        last = fresh[26].copy()
+
+
+@pytest.mark.parametrize("case", ["icub"], indirect=True)
+def test_targets_missed_from_one_cluster_of_starts_are_fixated(case):
     """iCub with its torso: three targets below and to the side, each fixatable, from 240 of the
     256 table entries, but not from the three that face it best (one cluster of postures,
     torso and neck turned the same way, the eye tilt at its limit). With the table's first three
     starts they were answered `joint_limits`, 0.026-0.040 rad off; the last start now comes
     from outside that cluster."""
-    case = head_case("icub", tmp_path)
     P = np.array([[0.96, 2.39, -1.12], [1.64, 0.91, -2.19], [1.78, 0.96, -2.37]])
     batch = case.solver.solve_many(P)
     assert batch.reachable.all(), f"{batch.pointing_error.max(axis=1)} rad"

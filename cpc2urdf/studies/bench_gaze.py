@@ -967,7 +967,8 @@ def format_table(res: dict[str, Any]) -> str:
         + ", ".join(f"{n} via {r['batch_path']}" for n, r in res.items())
         + "; track: one 1 kHz step (solve + pursuit/saccade), wall and CPU time"
         + f"; missed: random targets (a {2 * AUDIT_HALF_WIDTH:g} m cube about the head) answered as not fixated "
-        f"that one of {AUDIT_STARTS} random starts fixates, of all answered so (n/a: a head that cannot fixate exactly)"
+        f"that one of {AUDIT_STARTS} random starts fixates, of all answered so (n/a: not audited: --audit 0, or a head "
+        "that cannot fixate exactly)"
     )
     return "\n".join(lines)
 
@@ -1037,9 +1038,9 @@ __all__ = [
     "MIN_DISTANCE",
     "PERTURB_ANGLE",
     "PERTURB_LENGTH",
+    "audit_targets",
     "axis_distance",
     "axis_meeting",
-    "audit_targets",
     "bench_head",
     "generic_reachable_targets",
     "generic_unreachable_targets",

@@ -95,11 +95,12 @@ START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) di
 # cost (2,000 targets) 1.40 / 1.32 / 1.20 / 1.20. TALOS 6.11 / 5.84 / 5.91 / 6.56 (answers within
 # 2e-5). Without the minimum viewing distance (_hold_off) it walked more answers onto their target.
 START_DISTANCE_REDUNDANT = 0.3
-# [rad] (scaled unknowns): a target's last start differs from each start before it by this much
-# in some unknown, when a table entry does (further_start). The best-facing entries are often
-# one cluster (the policy's answers for nearby directions), all in one basin: iCub with its
-# torso, 7,500 random targets in a 6 m cube (five seeds), 336 not fixated, 11 of them fixated
-# from one of 40 random starts; now 323 and 1 (docs/gaze.md, eighteenth pass)
+# [-] (scaled unknowns): a target's last table start differs from each table start before it by
+# this much in some unknown, when an entry does (further_start). The best-facing entries are
+# often one cluster (the policy's answers for nearby directions), all in one basin: iCub with its
+# torso, 7,500 random targets in a 6 m cube (bench_gaze.audit_targets, seeds 0-4), 321 not
+# fixated, 13 of them fixated from one of 20 random starts; now 309 and 1 (docs/gaze.md,
+# eighteenth pass)
 DISTINCT_START = 0.25
 DISTANCE_REACH = 1e-6  # [-]: |P a|^2 / |a|^2 below which the null space does not move a camera's distance (see _hold_off)
 ACCELERATE_NULL_REL = 1e-9  # [-]: the policy phase is accelerated on heads whose null_rel is at most this (exact null spaces)
@@ -1400,7 +1401,10 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # typ
     target direction, less a small cost of their distance (scaled) from ``u_ref``
     (:data:`START_DISTANCE`; :data:`START_DISTANCE_REDUNDANT` on a one-camera head with spare
     joints). The scores stay in the workspace for :func:`further_start`. They are computed
-    column-wise (loops the compiler vectorises), then the best picked."""
+    column-wise (loops the compiler vectorises), then the best picked. ``u_ref``'s centre and
+    axis and each entry's distance cost stay in the workspace too (``ws[43:46]``), keyed by
+    ``u_ref`` and ``b``: a batch's targets share them. A workspace serves one packed head (its
+    table, ``sw`` and chain), so the key needs nothing else."""
     JR, Jp, Ja, CR, Co = ws[0], ws[1], ws[2], ws[3], ws[4]
     m, G = table_u.shape
     solve_cams = ch[11]
@@ -1474,8 +1478,9 @@ def _entry(g, u_ref, table_u, out):  # type: ignore[no-untyped-def]
 def further_start(j, n_table, u_ref, sw, table_u, ws, out):  # type: ignore[no-untyped-def]
     """The table's ``j``-th start (j >= 1) of ``n_table`` for the target :func:`best_starts`
     scored last (into ``out`` (m,)): the best-scored not chosen before. The last one also
-    differs from each one before it by :data:`DISTINCT_START` in some scaled unknown, when any
-    entry does: the best-facing entries are often one cluster, all in one basin."""
+    differs from each table start before it by :data:`DISTINCT_START` in some scaled unknown,
+    when any entry does (a warm start before them is not counted): the best-facing entries are
+    often one cluster, all in one basin."""
     score, top_g = ws[26], ws[27]
     G = table_u.shape[1]
     g = -1
@@ -1744,8 +1749,9 @@ def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-unty
 def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyped-def]
     """One target, the whole answer in one call. ``head``: :func:`_unpack` of the packed head
     ``(F, I)``; ``plain``: its chain :func:`_without_version`; ``ws``: a :func:`_workspace` for
-    it (reused from target to target: nothing of one solve is read by the next, every buffer
-    of this call is one of its arrays); ``p`` (3,): the target (world) [m], finite;
+    it (reused from target to target: nothing of one solve is read by the next but
+    :func:`best_starts`' cache of the reference posture, keyed by it; every buffer of this call
+    is one of its arrays); ``p`` (3,): the target (world) [m], finite;
     ``qin`` (2 n,): ``q_current`` then ``q_start``;
     ``mode``: bit 1 ``q_current`` given, bit 2 warm start at ``q_start``, bit 4 the fallback
     without the zero-version task when the first answer is at a limit or has no solution.
