@@ -598,7 +598,7 @@ def test_the_last_start_leaves_the_first_ones_cluster():
         ws[27][0] = int(np.argmax(scores))  # best_starts' own pick
         out = np.empty(2)
         for j in range(1, n_table):
-            kernels.further_start(np.int64(j), np.int64(n_table), u_ref, np.ones(2), table_u, ws, out)
+            kernels.further_start(np.int64(j), np.int64(n_table), u_ref, np.ones(2), table_u, ws[26], ws[27], out)
             assert np.array_equal(out, u_ref if ws[27][j] == table_u.shape[1] else table_u[:, ws[27][j]])
         return list(ws[27][:n_table])
 

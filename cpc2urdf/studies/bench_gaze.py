@@ -519,11 +519,10 @@ def missed_targets(solver: GazeSolver, P: Array, reachable: NDArray[np.bool_], s
     warm start ``q_start``): indices into ``P``. Each is a fixatable target the solver called
     unreachable. A lower bound: a target fixated from none of them may still be fixatable."""
     rng = np.random.default_rng(seed)
-    chain = solver.chain
-    lo, hi = np.maximum(chain.lower, -math.pi), np.minimum(chain.upper, math.pi)
+    chain = solver.chain  # (its bounds are finite: a joint without limits on a camera's path is refused)
     missed = []
     for i in np.flatnonzero(~np.asarray(reachable)):
-        for q in chain.q_from_u(rng.uniform(lo, hi, (starts, chain.m))):
+        for q in chain.q_from_u(rng.uniform(chain.lower, chain.upper, (starts, chain.m))):
             if solver.solve(P[i], q_start=q).reachable:
                 missed.append(i)
                 break
@@ -822,9 +821,12 @@ def run_head(
     }
     # how often a fixatable target is called unreachable (not on a head that fixates nothing exactly)
     audited = audit if audit and not getattr(solver, "disparity_head", False) else 0
-    A = audit_targets(axes, audited, seed)
-    a_reachable = solve_batch(solver, A).reachable
-    missed = missed_targets(solver, A, a_reachable, seed=seed)
+    a_unfixated = a_missed = 0
+    if audited:
+        A = audit_targets(axes, audited, seed)
+        a_reachable = solve_batch(solver, A).reachable
+        a_unfixated = int(np.sum(~a_reachable))
+        a_missed = int(missed_targets(solver, A, a_reachable, seed=seed).size)
     kin_us = float(np.median(kin_times) * 1e6)
     median_us = float(np.median(times) * 1e6)
     p99_us = float(np.percentile(times, 99) * 1e6)
@@ -857,8 +859,8 @@ def run_head(
         "batch_targets_per_s": rate,
         "batch_path": path,
         "audit_targets": audited,
-        "audit_unfixated": int(np.sum(~a_reachable)),
-        "audit_missed": int(missed.size),
+        "audit_unfixated": a_unfixated,
+        "audit_missed": a_missed,
         **track,
     }
     r["aims"] = {

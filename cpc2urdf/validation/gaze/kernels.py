@@ -1302,7 +1302,7 @@ def solve_one(ch, p_solve, p, b, u_ref, lower, upper, sw, starts, table_from, ta
     n_rows = starts.shape[0]
     for k in range(n_rows):
         if k > table_from:
-            further_start(k - table_from, n_rows - table_from, u_ref, sw, table_u, ws, starts[k])
+            further_start(k - table_from, n_rows - table_from, u_ref, sw, table_u, ws[26], ws[27], starts[k])
         for v in range(m):
             u[v] = starts[k, v]
         if k == 0 and best_rr == np.inf:
@@ -1475,13 +1475,13 @@ def _entry(g, u_ref, table_u, out):  # type: ignore[no-untyped-def]
 
 
 @kernel_without_refcounts
-def further_start(j, n_table, u_ref, sw, table_u, ws, out):  # type: ignore[no-untyped-def]
+def further_start(j, n_table, u_ref, sw, table_u, score, top_g, out):  # type: ignore[no-untyped-def]
     """The table's ``j``-th start (j >= 1) of ``n_table`` for the target :func:`best_starts`
-    scored last (into ``out`` (m,)): the best-scored not chosen before. The last one also
+    scored last (its ``score`` and picks ``top_g``, the workspace's, into which this one goes;
+    the start into ``out`` (m,)): the best-scored not chosen before. The last one also
     differs from each table start before it by :data:`DISTINCT_START` in some scaled unknown,
     when any entry does (a warm start before them is not counted): the best-facing entries are
     often one cluster, all in one basin."""
-    score, top_g = ws[26], ws[27]
     G = table_u.shape[1]
     g = -1
     if j == n_table - 1:
