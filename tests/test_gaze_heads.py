@@ -118,6 +118,59 @@ def test_tangent_basis_on_the_whole_sphere():
     assert np.array_equal(np.reshape(kernels._tangent(0.0, 0.0, 0.0), (2, 3)), np.eye(3)[:2])
 
 
+
+def _symmetric_cases(f, rng):
+    """Symmetric f x f matrices a step's decomposition meets: random Gram matrices, nearly
+    diagonal ones (a warm start), ones with a repeated and a near-zero eigenvalue (iCub's
+    structural null), and diagonal ones with an off-diagonal entry under the rotation threshold."""
+    for t in range(400):
+        A = rng.normal(size=(f, f))
+        H = A @ A.T
+        if t % 4 == 1:
+            H = np.diag(rng.uniform(0.0, 3.0, f)) + 1e-9 * (A + A.T)
+        elif t % 4 == 2:
+            w, Q = np.linalg.eigh(H)
+            w[0] = 1e-16 * w[-1]
+            w[1:3] = w[min(2, f - 1)]
+            H = (Q * w) @ Q.T
+            H = 0.5 * (H + H.T)
+        elif t % 4 == 3:
+            H = np.diag(rng.uniform(0.0, 3.0, f))
+            if f > 1:
+                H[0, f - 1] = H[f - 1, 0] = 1e-30
+        yield H
+
+
+@pytest.mark.parametrize("f", [1, 2, 3, 4, 5, 6, 9])
+def test_jacobi_eigendecomposition_against_lapack(f):
+    """``kernels.jacobi_eigh`` (round-robin Jacobi; 4 x 4 and 2 x 2 in scalars) against numpy's
+    LAPACK ``eigvalsh``: eigenvalues ascending and equal to 1e-11 of the largest, eigenvectors
+    orthonormal and ``V diag(lam) V^T = H``, on every case of :func:`_symmetric_cases`."""
+    rng = np.random.default_rng(f)
+    for H in _symmetric_cases(f, rng):
+        work, lam, V = H.copy(), np.zeros(f), np.zeros((f, f))
+        kernels.jacobi_eigh(work, f, lam, V)
+        scale = max(np.abs(H).max(), 1e-300)
+        assert np.all(np.diff(lam) >= 0.0)
+        assert np.abs(lam - np.linalg.eigvalsh(H)).max() <= 1e-11 * scale
+        assert np.abs(V.T @ V - np.eye(f)).max() < 1e-12
+        assert np.abs((V * lam) @ V.T - H).max() <= 1e-11 * scale
+
+
+@pytest.mark.parametrize("f", [2, 4])
+def test_scalar_jacobi_is_the_general_one_bit_for_bit(f):
+    """The 4 x 4 and 2 x 2 decompositions written out in scalars (``kernels._jacobi4``,
+    ``_jacobi2``: every binocular and one-camera step) give exactly the general loops' answer
+    (``_jacobi_any``): the same rotations in the same order, so a solve's answers did not move."""
+    rng = np.random.default_rng(10 + f)
+    for H in _symmetric_cases(f, rng):
+        out = []
+        for decompose in (kernels.jacobi_eigh, kernels._jacobi_any):
+            work, lam, V = H.copy(), np.zeros(f), np.zeros((f, f))
+            decompose(work, f, lam, V)
+            out.append((lam, V))
+        assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
 def test_reachable_targets_exact_on_independent_fk(case):
     """Seeded fixatable targets: every one answered exactly inside the limits (a calibrated
     binocular head: the policy's posture with the residual named ``disparity``)."""
