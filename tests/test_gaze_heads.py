@@ -118,11 +118,11 @@ def test_tangent_basis_on_the_whole_sphere():
     assert np.array_equal(np.reshape(kernels._tangent(0.0, 0.0, 0.0), (2, 3)), np.eye(3)[:2])
 
 
-
 def _symmetric_cases(f, rng):
     """Symmetric f x f matrices a step's decomposition meets: random Gram matrices, nearly
-    diagonal ones (a warm start), ones with a repeated and a near-zero eigenvalue (iCub's
-    structural null), and diagonal ones with an off-diagonal entry under the rotation threshold."""
+    diagonal ones (a warm start), ones with a near-zero eigenvalue (iCub's structural null) and,
+    for f >= 3, a repeated one, and diagonal ones with an off-diagonal entry under the stopping
+    threshold (no rotation at all)."""
     for t in range(400):
         A = rng.normal(size=(f, f))
         H = A @ A.T
@@ -161,7 +161,8 @@ def test_jacobi_eigendecomposition_against_lapack(f):
 def test_scalar_jacobi_is_the_general_one_bit_for_bit(f):
     """The 4 x 4 and 2 x 2 decompositions written out in scalars (``kernels._jacobi4``,
     ``_jacobi2``: every binocular and one-camera step) give exactly the general loops' answer
-    (``_jacobi_any``): the same rotations in the same order, so a solve's answers did not move."""
+    (``_jacobi_any``; ``array_equal``, so a zero's sign aside): the same rotations in the same
+    order, so a solve's answers did not move."""
     rng = np.random.default_rng(10 + f)
     for H in _symmetric_cases(f, rng):
         out = []
@@ -170,6 +171,7 @@ def test_scalar_jacobi_is_the_general_one_bit_for_bit(f):
             decompose(work, f, lam, V)
             out.append((lam, V))
         assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
 
 def test_reachable_targets_exact_on_independent_fk(case):
     """Seeded fixatable targets: every one answered exactly inside the limits (a calibrated

@@ -427,9 +427,10 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
     rotation's angle does not wait on the rotation before it and the processor overlaps their
     divisions and square roots (in row order each waited on the last). ``f = 4``, the step's
     ``J_x J_x^T`` on every binocular head, and ``f = 2``, one camera's, run in scalars
-    (:func:`_jacobi4`, :func:`_jacobi2`): the same rotations, bit for bit. Before both, iCub spent about 30 % of a solve here (docs/gaze.md,
-    nineteenth pass). Quadratic convergence holds for any cyclic order that visits every pair
-    once a sweep."""
+    (:func:`_jacobi4`, :func:`_jacobi2`): the same rotations, bit for bit (up to the sign of a
+    zero, which a solve's ``H``, sums from ``0.0``, never holds). Before both, iCub spent about 30 % of a solve here (docs/gaze.md,
+    nineteenth pass). The round-robin order is equivalent to the row order (a relabelling of
+    its pairs) and converges like it, quadratically."""
     if f == 4:
         _jacobi4(H, lam, V)
     elif f == 2:
@@ -584,7 +585,7 @@ def _jacobi4(H, lam, V):  # type: ignore[no-untyped-def]
     V[1, 0], V[1, 1], V[1, 2], V[1, 3] = v10, v11, v12, v13
     V[2, 0], V[2, 1], V[2, 2], V[2, 3] = v20, v21, v22, v23
     V[3, 0], V[3, 1], V[3, 2], V[3, 3] = v30, v31, v32, v33
-    _sort_eigen(lam, V, 4)
+    _sort_eigen(lam, V, np.int64(4))  # not the literal: one compiled _sort_eigen
 
 
 @inline_kernel
@@ -606,7 +607,7 @@ def _jacobi2(H, lam, V):  # type: ignore[no-untyped-def]
     lam[0], lam[1] = h00, h11
     V[0, 0], V[0, 1] = v00, v01
     V[1, 0], V[1, 1] = v10, v11
-    _sort_eigen(lam, V, 2)
+    _sort_eigen(lam, V, np.int64(2))
 
 
 @inline_kernel
