@@ -428,9 +428,9 @@ def jacobi_eigh(H, f, lam, V):  # type: ignore[no-untyped-def]
     divisions and square roots (in row order each waited on the last). ``f = 4``, the step's
     ``J_x J_x^T`` on every binocular head, and ``f = 2``, one camera's, run in scalars
     (:func:`_jacobi4`, :func:`_jacobi2`): the same rotations, bit for bit (up to the sign of a
-    zero, which a solve's ``H``, sums from ``0.0``, never holds). Before both, iCub spent about 30 % of a solve here (docs/gaze.md,
-    nineteenth pass). The round-robin order is equivalent to the row order (a relabelling of
-    its pairs) and converges like it, quadratically."""
+    zero, which a solve's ``H``, sums from ``0.0``, never holds). Before both, iCub spent about
+    30 % of a solve here (docs/gaze.md, nineteenth pass). The round-robin order is equivalent to
+    the row order (a relabelling of its pairs) and converges like it, quadratically."""
     if f == 4:
         _jacobi4(H, lam, V)
     elif f == 2:
@@ -459,7 +459,7 @@ def _jacobi_any(H, f, lam, V):  # type: ignore[no-untyped-def]
         # the circle method: player n - 1 fixed, the others turning; round r pairs (r, n - 1)
         # and ((r + i) mod (n - 1), (r - i) mod (n - 1)), i = 1 .. n/2 - 1
         for r in range(n - 1):
-            if n - 1 < f:
+            if n == f:  # (no dummy player)
                 _rotate_pair(H, V, f, r, n - 1, tiny)
             for i in range(1, n // 2):
                 a = (r + i) % (n - 1)
@@ -590,18 +590,16 @@ def _jacobi4(H, lam, V):  # type: ignore[no-untyped-def]
 
 @inline_kernel
 def _jacobi2(H, lam, V):  # type: ignore[no-untyped-def]
-    """:func:`_jacobi4` for a 2 x 2 ``H`` (one camera's ``J_x J_x^T``): one rotation a sweep."""
-    h00, h01 = H[0, 0], H[0, 1]
-    h11 = H[1, 1]
+    """:func:`_jacobi4` for a 2 x 2 ``H`` (one camera's ``J_x J_x^T``). Its one rotation zeroes the
+    only off-diagonal entry, so the general loops' second sweep always stops at its test: one
+    test, at most one rotation (where the test fails, ``h01^2`` is above the skip threshold)."""
+    h00, h01, h11 = H[0, 0], H[0, 1], H[1, 1]
     v00, v01, v10, v11 = 1.0, 0.0, 0.0, 1.0
-    for _ in range(50):
-        off = h01 * h01
-        diag = h00 * h00 + h11 * h11
-        if off <= 1e-24 * diag or off == 0.0:
-            break
-        tiny = 1e-24 * diag / 4.0
-        cs, sn, tt, keep = _jacobi_angle(h00, h11, h01, tiny)  # pair (0, 1)
-        h00, h11, h01 = h00 - tt * h01, h11 + tt * h01, keep * h01
+    off = h01 * h01
+    diag = h00 * h00 + h11 * h11
+    if not (off <= 1e-24 * diag or off == 0.0):
+        cs, sn, tt, keep = _jacobi_angle(h00, h11, h01, 1e-24 * diag / 4.0)  # pair (0, 1)
+        h00, h11 = h00 - tt * h01, h11 + tt * h01
         v00, v01 = cs * v00 - sn * v01, sn * v00 + cs * v01
         v10, v11 = cs * v10 - sn * v11, sn * v10 + cs * v11
     lam[0], lam[1] = h00, h11
