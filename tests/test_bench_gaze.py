@@ -54,7 +54,9 @@ def test_bench_runs_tiny(tmp_path, capsys):
     for name in ("nominal", "tiago"):  # every head shape tracks (TIAGo: one camera)
         assert res[name]["track_steps"] == 20 and res[name]["track_saccade_steps"] >= 0
     table = capsys.readouterr().out
-    assert "vs scipy" in table and "nominal" in table and "tiago" in table
+    assert "vs scipy" in table and "vs placo" in table and "nominal" in table and "tiago" in table
+    for r in res.values():  # placo's reference ran (where it imports) or says why not
+        assert r["placo"] == "ran" or "vs placo n/a: " + r["placo"] in table
 
 
 def test_bench_urdf_head(tmp_path, capsys):

@@ -12,6 +12,10 @@ example-robot-data; ``--urdf FILE --camera ...`` adds any other), it reports:
 - the reference (:func:`scipy.optimize.least_squares`, trust-region reflective, bounds as
   bounds) on the same residual (per solved axis ``u - e_z``) with Pinocchio frame Jacobians, each
   target right after ours (so both see the same load); the ratio of the medians;
+- where placo imports (it is not one of our dependencies: :mod:`cpc2urdf.studies.placo_reference`),
+  a second reference: placo's axis-align task stepped to 1e-9 rad or its floor, each target right
+  after ours from the same start as scipy's; the ratio of the medians and how close its answers
+  point (by Pinocchio on our model); else the reason it did not run;
 - batch throughput (targets/s of one ``solve_many`` over all the targets, best of 7);
 - the 1 kHz tracking loop (:class:`~cpc2urdf.validation.gaze.tracking.GazeTracker`, smooth
   pursuit and minimum-jerk saccades) on every head: the p99 of one step
@@ -644,6 +648,42 @@ def _reference_run(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool
     return times, ok, ours, "the middle of the limits"
 
 
+def _placo_run(head: BenchHead, P: Array) -> dict[str, Any]:
+    """placo's axis-align reference (:mod:`cpc2urdf.studies.placo_reference`) on every target
+    of ``P``, each right after one ``solve`` of ours, from the scipy reference's start: its
+    median time and ratio to ours, its median steps, and its accuracy (the answers' pointing
+    errors by Pinocchio on the solver's model, not by placo); or ``{"placo": reason}`` when it
+    cannot run."""
+    from cpc2urdf.studies.placo_reference import placo_reference, summary
+
+    solver = head.solver
+    ref = placo_reference(solver, head.urdf) if head.urdf is not None else "no URDF text for this head"
+    if isinstance(ref, str):
+        return {"placo": ref}
+    axes = SolvedAxes(solver)
+    python_start = _has_python_solver(solver)
+    n = P.shape[0]
+    times, ours, steps, errors = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    clock = time.perf_counter
+    for i, p in enumerate(P):
+        t0 = clock()
+        solver.solve(p)
+        t1 = clock()
+        q0 = solver.initial_guess(p) if python_start else axes.home
+        q, k = ref.solve(p, q0)
+        times[i], ours[i], steps[i] = clock() - t1, t1 - t0, k
+        O, Z = axes.axes(q[None, :])
+        d = p - O[0]
+        errors[i] = np.max(np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0])))
+    return {
+        "placo": "ran",
+        "placo_median_us": float(np.median(times) * 1e6),
+        "placo_steps_median": float(np.median(steps)),
+        "placo_ratio": float(np.median(times) / np.median(ours)),
+        **summary(errors),
+    }
+
+
 def _batch_throughput(solver: GazeSolver, P: Array, repeats: int = 7) -> tuple[float, str]:
     """Targets per second of one batch solve of ``P`` (best of ``repeats``), and the path used:
     ``"solve_many"`` or ``"loop"`` (one ``solve`` per target, where the solver has no batch entry)."""
@@ -724,6 +764,7 @@ class BenchHead:
     name: str
     solver: GazeSolver
     model: CPCModel | None = None
+    urdf: str | None = None  # the URDF text the solver was built from (for placo's reference)
 
 
 def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
@@ -742,19 +783,23 @@ def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
 
 def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()) -> BenchHead:
     """The head ``name`` (:data:`HEADS`), or with ``urdf`` any URDF and its ``cameras``."""
+    from pathlib import Path
+
     from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.urdf import urdf_from_model
     from cpc2urdf.validation.gaze import GazeSolver
     from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
     if urdf is not None:
         robot = PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
-        return BenchHead(name, GazeSolver(robot, cameras))
+        return BenchHead(name, GazeSolver(robot, cameras), urdf=Path(urdf).read_text())
     if name in ("nominal", "calibrated"):
         model = load_model("iis_head") if name == "nominal" else calibrated_iis_head(seed)
-        return BenchHead(name, GazeSolver.from_model(model), model)
+        return BenchHead(name, GazeSolver.from_model(model), model, urdf_from_model(model))
     if name in REAL_HEADS:
         path, cams = _real_urdf(name)
-        return BenchHead(name, GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams))
+        solver = GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams)
+        return BenchHead(name, solver, urdf=Path(path).read_text())
     from cpc2urdf.errors import ConfigurationError
 
     raise ConfigurationError(f"unknown head {name!r}; expected one of {', '.join(HEADS)}")
@@ -798,6 +843,7 @@ def run_head(
     utimes, uok, _, _, _ = _solve_times(solver, U)
     m_ref = min(n, reference)
     rtimes, rok, otimes, reference_start = _reference_run(solver, P[:m_ref])
+    placo = _placo_run(head, P[:m_ref])
     rate, path = _batch_throughput(solver, np.concatenate([P, U]))
     # every head shape tracks (one camera and rigid pairs through the chain's FK); centres for the tracked target: a pool of TRACK_POOL reachable targets at least
     Pt, Qt = (P, Q) if n >= TRACK_POOL else (
@@ -855,6 +901,7 @@ def run_head(
         "reference_p99_us": float(np.percentile(rtimes, 99) * 1e6),
         "reference_success": float(rok.mean()),
         "ratio": float(np.median(rtimes) / np.median(otimes)),  # same targets, interleaved
+        **placo,
         "batch_targets": int(P.shape[0] + U.shape[0]),
         "batch_targets_per_s": rate,
         "batch_path": path,
@@ -869,6 +916,7 @@ def run_head(
         "unreachable_le_5_reachable": u_median is not None and r["unreachable_ratio"] <= 5.0,
         "success_100": r["success"] + r["disparity"] == 1.0,
         "ge_100x_scipy": r["ratio"] >= 100.0,
+        **({"ge_100x_placo": r["placo_ratio"] >= 100.0} if "placo_ratio" in r else {}),
         "batch_ge_100k_per_s": rate >= 100_000.0,
         "track_p99_within_deadline": bool(track) and r["track_p99_us"] <= TRACK_DEADLINE * 1e6,
     }
@@ -942,11 +990,11 @@ def format_table(res: dict[str, Any]) -> str:
     two frame Jacobians (``kin``), the issue's aims under the header."""
     head = (
         f"{'head':13s} {'kind':12s} {'kin us':>7s} {'median':>9s} {'p99':>9s} {'p99 cpu':>9s} {'unreach':>9s} {'success':>8s} "
-        f"{'iters':>5s} {'vs scipy':>9s} {'batch/s':>9s} {'track p99':>10s} {'cpu p99':>8s} {'over 1ms':>8s} {'missed':>10s}"
+        f"{'iters':>5s} {'vs scipy':>9s} {'vs placo':>9s} {'batch/s':>9s} {'track p99':>10s} {'cpu p99':>8s} {'over 1ms':>8s} {'missed':>10s}"
     )
     aims = (
         f"{'aim':13s} {'':12s} {'':>7s} {'<=10x':>9s} {'<=40x':>9s} {'':>9s} {'<=5x':>9s} {'1.0':>8s} {'':>5s} "
-        f"{'>=100x':>9s} {'>=100000':>9s} {'<=1000us':>10s} {'':>8s} {'0':>8s} {'0':>10s}"
+        f"{'>=100x':>9s} {'>=100x':>9s} {'>=100000':>9s} {'<=1000us':>10s} {'':>8s} {'0':>8s} {'0':>10s}"
     )
     lines = [head, aims]
     for name, r in res.items():
@@ -959,12 +1007,13 @@ def format_table(res: dict[str, Any]) -> str:
         lines.append(
             f"{name:13s} {r['kind']:12s} {r['kin_us']:7.2f} {r['median_kin']:8.1f}x {r['p99_kin']:8.1f}x {r['p99_cpu_kin']:8.1f}x "
             f"{_ratio(r['unreachable_ratio'])} {success:8.4f} {r['iterations_median']:5.0f} "
-            f"{r['ratio']:8.1f}x {r['batch_targets_per_s']:9.0f} {track} {missed:>10s}"
+            f"{r['ratio']:8.1f}x {_ratio(r.get('placo_ratio'))} {r['batch_targets_per_s']:9.0f} {track} {missed:>10s}"
         )
     lines.append(
         "kin: one Pinocchio FK + two frame Jacobians [us], in blocks of 100 between the solves; median/p99: one solve per reachable "
         "target, over kin (p99 cpu: by this thread's CPU time); unreach: unreachable median over reachable median; success: fixated, or "
         "answered with the head's disparity; vs scipy: least_squares median over ours, same targets; "
+        "vs placo: placo's axis-align steps (to 1e-9 rad, or until the error stops halving) median over ours, same targets; "
         "batch/s: "
         + ", ".join(f"{n} via {r['batch_path']}" for n, r in res.items())
         + "; track: one 1 kHz step (solve + pursuit/saccade), wall and CPU time"
@@ -972,6 +1021,15 @@ def format_table(res: dict[str, Any]) -> str:
         f"that one of {AUDIT_STARTS} random starts fixates, of all answered so (n/a: not audited: --audit 0, or a head "
         "that cannot fixate exactly)"
     )
+    for name, r in res.items():
+        if r.get("placo") == "ran":
+            lines.append(
+                f"placo on {name}: within 1e-9 rad on {r['placo_success']:.1%} of the targets, within 1e-7 on "
+                f"{r['placo_within_1e-7']:.1%}; median error {r['placo_error_median_rad']:.1e} rad, "
+                f"{r['placo_steps_median']:.0f} steps, {r['placo_median_us']:.0f} us"
+            )
+    reasons = sorted({r["placo"] for r in res.values() if r.get("placo", "ran") != "ran"})
+    lines.extend(f"vs placo n/a: {why}" for why in reasons)
     return "\n".join(lines)
 
 

@@ -1,0 +1,163 @@
+"""placo's axis-align task as a second reference for ``cpc2urdf bench gaze`` (issue 15).
+
+placo (Rhoban, ``pip install placo``) is a task-space inverse kinematics on Pinocchio: each
+``KinematicsSolver.solve`` is one quadratic program over a joint step, with the joint limits as
+constraints. Its ``AxisAlignTask`` keeps an axis of a frame along a direction in the world. A
+gaze solve with it, as a user would write one: for every solved camera, the task keeps the
+optical axis (z, REP-103) along the unit direction from the camera's centre to the target; that
+direction is set again before every step (the task holds it fixed over a step, but the centre
+moves with the joints), and steps are taken until every pointing error is within
+:data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL`, or the error stops halving for
+:data:`STALL_STEPS` steps, or after :data:`MAX_STEPS`.
+
+Two things limit it, both measured (docs/gaze.md, twentieth pass):
+
+- **Its error floor.** The task's error is ``acos(a . t)`` (placo's
+  ``src/placo/kinematics/axis_align_task.cpp``). Near zero that resolves only ``sqrt(2 eps)``, about
+  2.1e-8 rad: below it the task sees 0 and stops correcting, so an answer within 1e-9 rad comes by
+  chance.
+- **Where it installs.** placo 0.10.2 requires ``pin==3.8.0`` exactly, and our tests run the
+  newest ``pin`` (4.x), so it is not one of our dependencies: the benchmark uses it when it
+  imports (a virtual environment of its own: docs/gaze.md), and says "not installed" otherwise.
+
+It states only heads whose unknowns are plain joints and whose solved axes are real frames: not a
+coupling or a URDF ``mimic`` (iCub's version/vergence), nor a rigid pair's cyclopean axis.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+
+if TYPE_CHECKING:
+    from cpc2urdf.validation.gaze import GazeSolver
+
+Array = NDArray[np.float64]
+MAX_STEPS = 100  # placo steps per target at most
+STALL_STEPS = 3  # steps without halving the largest pointing error that end a solve (its floor, or a bound)
+REGULARIZATION = 1e-9  # weight of placo's regularization task (|dq|^2): keeps the step unique on a redundant head
+NOT_INSTALLED = "placo is not installed (placo 0.10.2 requires pin==3.8.0: a virtual environment of its own, see docs/gaze.md)"
+
+
+def kinematic_urdf(text: str) -> str:
+    """URDF text ``text`` without its links' ``<visual>`` and ``<collision>`` elements: placo
+    loads every mesh they name and cannot resolve a ``package://`` path outside a ROS workspace;
+    the kinematics are untouched."""
+    root = ET.fromstring(text)
+    for link in root.iter("link"):
+        for tag in ("visual", "collision"):
+            for element in link.findall(tag):
+                link.remove(element)
+    return ET.tostring(root, encoding="unicode")
+
+
+class PlacoGaze:
+    """The gaze solve with placo's axis-align task on one head (see the module's docstring).
+
+    Args:
+        urdf: The head's URDF text (the model the solver was built from).
+        cameras: The frames whose optical axes go through the target (one or two).
+        joint_names: The solver's robot joints, in the order of its readings ``q``.
+        free: Indices into ``q`` of the joints placo may move; the others keep their reading.
+        path: Indices into ``q`` of the joints on the cameras' paths (set from ``q0`` each solve).
+    """
+
+    def __init__(
+        self, urdf: str, cameras: Sequence[str], joint_names: Sequence[str], free: Sequence[int], path: Sequence[int]
+    ) -> None:
+        import placo
+
+        self.robot = placo.RobotWrapper("", placo.Flags.ignore_collisions, kinematic_urdf(urdf))
+        self.cameras = tuple(cameras)
+        self.joint_names = tuple(joint_names)
+        self.path = [(int(i), self.joint_names[i]) for i in path]
+        self.free = [(int(i), self.joint_names[i]) for i in free]
+        self.solver = placo.KinematicsSolver(self.robot)
+        self.solver.mask_fbase(True)
+        free_names = {name for _, name in self.free}
+        for name in self.robot.joint_names():
+            if name not in free_names:
+                self.solver.mask_dof(name)
+        self.solver.enable_joint_limits(True)
+        z = np.array([0.0, 0.0, 1.0])
+        self.tasks = []
+        for c in self.cameras:
+            task = self.solver.add_axisalign_task(c, z, z)
+            task.configure(c, "soft", 1.0)
+            self.tasks.append(task)
+        self.solver.add_regularization_task(REGULARIZATION)
+
+    def solve(self, p: Array, q0: Array) -> tuple[Array, int]:
+        """Readings that point the cameras at ``p`` (world [m]) from readings ``q0``, and the
+        number of placo steps taken."""
+        robot, tasks, cameras, step = self.robot, self.tasks, self.cameras, self.solver.solve
+        px, py, pz = (float(x) for x in p)
+        for i, name in self.path:
+            robot.set_joint(name, float(q0[i]))
+        robot.update_kinematics()
+        best, since, steps = math.inf, 0, 0
+        while True:
+            worst = 0.0
+            for c, task in zip(cameras, tasks, strict=True):
+                # in floats: numpy's cross and norm on 3-vectors cost ~10x placo's own step
+                (_, _, zx, ox), (_, _, zy, oy), (_, _, zz, oz) = robot.get_T_world_frame(c)[:3].tolist()
+                dx, dy, dz = px - ox, py - oy, pz - oz
+                error = math.atan2(math.hypot(zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx), zx * dx + zy * dy + zz * dz)
+                worst = max(worst, error)
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                task.targetAxis_world = np.array((dx / d, dy / d, dz / d))
+            if worst <= GAZE_POINTING_TOL or steps == MAX_STEPS:
+                break
+            if worst < 0.5 * best:
+                best, since = worst, 0
+            else:
+                since += 1
+                if since == STALL_STEPS:
+                    break
+            step(True)
+            robot.update_kinematics()
+            steps += 1
+        q = np.array(q0, dtype=float)
+        for i, name in self.free:
+            q[i] = robot.get_joint(name)
+        return q, steps
+
+
+def placo_reference(solver: GazeSolver, urdf: str) -> PlacoGaze | str:
+    """A :class:`PlacoGaze` for ``solver``'s head (built from URDF text ``urdf``), moving the
+    joints ``solver.free_joints("cyclopean")``; or, when there can be none, the reason in one
+    line: a head its tasks cannot state, or placo not installed."""
+    chain = solver.chain
+    C = len(solver.cameras)
+    if any(int(c) >= C for c in chain.solve_cameras):
+        return "placo's tasks align real frames: this rigid pair is solved on its cyclopean axis (a virtual camera)"
+    free = np.asarray(solver.free_joints("cyclopean"))
+    A = chain.robot_A[free]
+    plain = (np.count_nonzero(A, axis=1) == 1).all() and (np.count_nonzero(A, axis=0) <= 1).all() and np.all(A[A != 0] == 1.0)
+    if not plain:
+        return "placo's tasks move joints one by one: this head couples its joints (a URDF mimic or a stated coupling)"
+    try:
+        import placo  # noqa: F401
+    except ImportError:
+        return NOT_INSTALLED
+    cameras = [solver.cameras[int(c)] for c in chain.solve_cameras]
+    return PlacoGaze(urdf, cameras, solver.joint_names, free.tolist(), np.asarray(solver.path_joints).tolist())
+
+
+def summary(errors: Array) -> dict[str, Any]:
+    """placo's accuracy over its answers' largest pointing errors [rad] (one per target)."""
+    return {
+        "placo_success": float(np.mean(errors <= GAZE_POINTING_TOL)),
+        "placo_within_1e-7": float(np.mean(errors <= 1e-7)),
+        "placo_error_median_rad": float(np.median(errors)),
+    }
+
+
+__all__ = ["MAX_STEPS", "NOT_INSTALLED", "REGULARIZATION", "STALL_STEPS", "PlacoGaze", "kinematic_urdf", "placo_reference", "summary"]

@@ -1,0 +1,92 @@
+"""placo's axis-align task as the gaze benchmark's second reference
+(cpc2urdf/studies/placo_reference.py). placo is not one of our dependencies (placo 0.10.2 pins
+pin==3.8.0): what runs without it is checked here always (the URDF it is given keeps the
+kinematics; the heads it cannot state and a missing placo are named), and its answers, by an FK
+that is not placo's, where it is installed (docs/gaze.md: a virtual environment of its own)."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+from gaze_heads import head_case
+
+from cpc2urdf.studies.bench_gaze import SolvedAxes, bench_head, format_table, reachable_targets
+from cpc2urdf.studies.placo_reference import NOT_INSTALLED, kinematic_urdf, placo_reference
+from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+
+
+def test_kinematic_urdf_drops_geometry_and_keeps_the_kinematics():
+    head = bench_head("tiago")
+    assert head.urdf is not None and "<collision" in head.urdf and "<visual" in head.urdf
+    text = kinematic_urdf(head.urdf)
+    assert "<collision" not in text and "<visual" not in text
+    a = PinocchioRobot.from_urdf(head.urdf, continuous_as_revolute=True)
+    b = PinocchioRobot.from_urdf(text, continuous_as_revolute=True)
+    assert a.joint_names == b.joint_names
+    import pinocchio as pin
+
+    cam = head.solver.cameras[0]
+    da, db = a.model.createData(), b.model.createData()
+    fa, fb = a.frame_id(cam), b.frame_id(cam)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = rng.uniform(np.maximum(a.lower, -3.0), np.minimum(a.upper, 3.0))
+        pin.framesForwardKinematics(a.model, da, q)
+        pin.framesForwardKinematics(b.model, db, q)
+        np.testing.assert_array_equal(da.oMf[fa].homogeneous, db.oMf[fb].homogeneous)
+
+
+@pytest.mark.parametrize(("shape", "why"), [("icub", "couples its joints"), ("stereo_pan_tilt", "cyclopean axis")])
+def test_heads_placo_cannot_state_are_named(shape, why, tmp_path):
+    case = head_case(shape, tmp_path)
+    reason = placo_reference(case.solver, case.urdf.read_text())
+    assert isinstance(reason, str) and why in reason
+
+
+def test_without_placo_the_bench_says_so(monkeypatch):
+    monkeypatch.setitem(sys.modules, "placo", None)  # import placo raises ImportError
+    head = bench_head("nominal")
+    assert head.urdf is not None
+    assert placo_reference(head.solver, head.urdf) == NOT_INSTALLED
+    from cpc2urdf.studies.bench_gaze import _placo_run
+
+    res = _placo_run(head, reachable_targets(head.model, 2, 0)[0])
+    assert res == {"placo": NOT_INSTALLED}
+
+
+def test_the_table_shows_placo_or_why_not():
+    row = {"kind": "look-at", "kin_us": 5.0, "median_kin": 1.6, "p99_kin": 2.0, "p99_cpu_kin": 2.0, "unreachable_ratio": 1.5,
+           "success": 1.0, "disparity": 0.0, "iterations_median": 4.0, "ratio": 60.0, "batch_targets_per_s": 4e5,
+           "batch_path": "solve_many"}
+    ran = {**row, "placo": "ran", "placo_ratio": 9.5, "placo_success": 0.1, "placo_within_1e-7": 0.96,
+           "placo_error_median_rad": 5e-9, "placo_steps_median": 10.0, "placo_median_us": 140.0}
+    table = format_table({"a": ran, "b": {**row, "placo": NOT_INSTALLED}})
+    lines = table.splitlines()
+    assert "vs placo" in lines[0]
+    assert "9.5x" in lines[2] and "n/a" in lines[3]
+    assert "placo on a: within 1e-9 rad on 10.0% of the targets, within 1e-7 on 96.0%" in table
+    assert f"vs placo n/a: {NOT_INSTALLED}" in table
+
+
+def test_placo_points_the_cameras():
+    """Where placo is installed: its answers on the nominal IIS-head, by Pinocchio on our model
+    (not placo's FK), are inside the limits and point both cameras at the target to its floor
+    (its task's error is acos(a . t): ~2e-8 rad resolution)."""
+    pytest.importorskip("placo")
+    head = bench_head("nominal")
+    solver = head.solver
+    ref = placo_reference(solver, head.urdf)
+    assert not isinstance(ref, str)
+    P, _ = reachable_targets(head.model, 20, 3)
+    axes = SolvedAxes(solver)
+    errors = []
+    for p in P:
+        q, steps = ref.solve(p, solver.initial_guess(p))
+        assert 0 < steps <= 100
+        assert np.all(q >= solver.lower - 1e-9) and np.all(q <= solver.upper + 1e-9)
+        O, Z = axes.axes(q[None, :])
+        d = p - O[0]
+        errors.append(np.max(np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))))
+    assert np.median(errors) < 1e-7
