@@ -30,10 +30,11 @@ def tiago_head():
 
 def test_kinematic_urdf_drops_geometry_and_keeps_the_kinematics(tiago_head):
     head = tiago_head
-    assert head.urdf is not None and "<collision" in head.urdf and "<visual" in head.urdf
-    text = kinematic_urdf(head.urdf)
+    urdf = head.solver.robot.urdf
+    assert urdf is not None and "<collision" in urdf and "<visual" in urdf
+    text = kinematic_urdf(urdf)
     assert "<collision" not in text and "<visual" not in text
-    a = PinocchioRobot.from_urdf(head.urdf, continuous_as_revolute=True)
+    a = PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
     b = PinocchioRobot.from_urdf(text, continuous_as_revolute=True)
     assert a.joint_names == b.joint_names
     import pinocchio as pin
@@ -52,7 +53,7 @@ def test_kinematic_urdf_drops_geometry_and_keeps_the_kinematics(tiago_head):
 @pytest.mark.parametrize(("shape", "why"), [("icub", "couples, offsets or bounds"), ("stereo_pan_tilt", "cyclopean axis")])
 def test_heads_placo_cannot_state_are_named(shape, why, tmp_path):
     case = head_case(shape, tmp_path)
-    reason = placo_reference(case.solver, case.urdf.read_text())
+    reason = placo_reference(case.solver)
     assert isinstance(reason, str) and why in reason
 
 
@@ -63,18 +64,18 @@ def test_a_coupling_with_an_offset_is_not_placos(tiago_head):
 
     coupling = Coupling(("head_1_joint",), ("pan",), [[1.0]], [0.2], [-0.3], [0.3])
     solver = GazeSolver(tiago_head.solver.robot, tiago_head.solver.cameras, coupling=coupling)
-    reason = placo_reference(solver, tiago_head.urdf)
+    reason = placo_reference(solver)
     assert isinstance(reason, str) and "offsets or bounds" in reason
 
 
 def test_without_placo_the_bench_says_so(monkeypatch):
     monkeypatch.setitem(sys.modules, "placo", None)  # import placo raises ImportError
     head = bench_head("nominal")
-    assert head.urdf is not None
-    assert placo_reference(head.solver, head.urdf) == NOT_INSTALLED
+    assert head.solver.robot.urdf is not None
+    assert placo_reference(head.solver) == NOT_INSTALLED
     from cpc2urdf.studies.bench_gaze import _placo_run
 
-    res = _placo_run(head, reachable_targets(head.model, 2, 0)[0])
+    res = _placo_run(head.solver, SolvedAxes(head.solver), reachable_targets(head.model, 2, 0)[0])
     assert res == {"placo": NOT_INSTALLED}
 
 
@@ -103,7 +104,7 @@ def test_placo_points_the_cameras():
     pytest.importorskip("placo")
     head = bench_head("nominal")
     solver = head.solver
-    ref = placo_reference(solver, head.urdf)
+    ref = placo_reference(solver)
     assert not isinstance(ref, str)
     P, _ = reachable_targets(head.model, 20, 3)
     axes = SolvedAxes(solver)

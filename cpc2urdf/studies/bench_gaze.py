@@ -66,6 +66,8 @@ from cpc2urdf.argparsing import OneLineParser, check_outputs_are_not_inputs
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.studies.placo_reference import FLOOR as PLACO_FLOOR
+from cpc2urdf.studies.placo_reference import placo_reference
+from cpc2urdf.studies.placo_reference import summary as placo_summary
 
 if TYPE_CHECKING:
     from cpc2urdf.validation.gaze import GazeSolver
@@ -426,6 +428,13 @@ class SolvedAxes:
                 J.append((np.eye(3) - np.outer(u, u)) @ dp / d)
         return np.concatenate(r), (np.vstack(J) if jacobian else None)
 
+    def pointing_errors(self, q: Array, p: Array) -> Array:
+        """Angle [rad] between each solved axis and the direction to target ``p`` at readings
+        ``q``, shape (S,)."""
+        O, Z = self.axes(q[None, :])
+        d = p - O[0]
+        return np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))
+
 
 def generic_reachable_targets(axes: SolvedAxes, n: int, seed: int = 0) -> tuple[Array, Array]:
     """``n`` targets (world) [m], shape (n, 3), that readings sampled inside the bounds of the
@@ -642,27 +651,20 @@ def _reference_run(solver: GazeSolver, P: Array) -> tuple[Array, NDArray[np.bool
         t1 = clock()
         q, _ = gref(p, axes.home)
         times[i], ours[i] = clock() - t1, t1 - t0
-        O, Z = axes.axes(q[None, :])
-        d = p - O[0]
-        e = np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))
-        ok[i] = bool(np.max(e) <= GAZE_POINTING_TOL)
+        ok[i] = bool(np.max(axes.pointing_errors(q, p)) <= GAZE_POINTING_TOL)
     return times, ok, ours, "the middle of the limits"
 
 
-def _placo_run(head: BenchHead, P: Array) -> dict[str, Any]:
+def _placo_run(solver: GazeSolver, axes: SolvedAxes, P: Array) -> dict[str, Any]:
     """placo's axis-align reference (:mod:`cpc2urdf.studies.placo_reference`) on every target
     of ``P``, each right after one ``solve`` of ours, from the scipy reference's start: its
     median time and ratio to ours, the same for the time in placo's own calls alone (its QP
     steps and kinematics, without the Python that drives them), its median steps, and its
     accuracy (the answers' pointing errors by Pinocchio on the solver's model, not by placo);
     or ``{"placo": reason}`` when it cannot run."""
-    from cpc2urdf.studies.placo_reference import placo_reference, summary
-
-    solver = head.solver
-    ref = placo_reference(solver, head.urdf) if head.urdf is not None else "no URDF text for this head"
+    ref = placo_reference(solver)
     if isinstance(ref, str):
         return {"placo": ref}
-    axes = SolvedAxes(solver)
     python_start = _has_python_solver(solver)
     n = P.shape[0]
     times, core, ours, steps, errors = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -674,9 +676,7 @@ def _placo_run(head: BenchHead, P: Array) -> dict[str, Any]:
         q0 = solver.initial_guess(p) if python_start else axes.home
         q, k = ref.solve(p, q0)
         times[i], core[i], ours[i], steps[i] = clock() - t1, ref.core_seconds, t1 - t0, k
-        O, Z = axes.axes(q[None, :])
-        d = p - O[0]
-        errors[i] = np.max(np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0])))
+        errors[i] = np.max(axes.pointing_errors(q, p))
     return {
         "placo": "ran",
         "placo_median_us": float(np.median(times) * 1e6),
@@ -684,7 +684,7 @@ def _placo_run(head: BenchHead, P: Array) -> dict[str, Any]:
         "placo_ratio": float(np.median(times) / np.median(ours)),
         "placo_core_median_us": float(np.median(core) * 1e6),  # in placo's own calls: QP steps, kinematics
         "placo_core_ratio": float(np.median(core) / np.median(ours)),
-        **summary(errors),
+        **placo_summary(errors),
     }
 
 
@@ -768,7 +768,6 @@ class BenchHead:
     name: str
     solver: GazeSolver
     model: CPCModel | None = None
-    urdf: str | None = None  # the URDF text the solver was built from (for placo's reference)
 
 
 def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
@@ -787,23 +786,19 @@ def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
 
 def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()) -> BenchHead:
     """The head ``name`` (:data:`HEADS`), or with ``urdf`` any URDF and its ``cameras``."""
-    from pathlib import Path
-
     from cpc2urdf.robot_ref import load_model
-    from cpc2urdf.urdf import urdf_from_model
     from cpc2urdf.validation.gaze import GazeSolver
     from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
     if urdf is not None:
         robot = PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
-        return BenchHead(name, GazeSolver(robot, cameras), urdf=Path(urdf).read_text())
+        return BenchHead(name, GazeSolver(robot, cameras))
     if name in ("nominal", "calibrated"):
         model = load_model("iis_head") if name == "nominal" else calibrated_iis_head(seed)
-        return BenchHead(name, GazeSolver.from_model(model), model, urdf_from_model(model))
+        return BenchHead(name, GazeSolver.from_model(model), model)
     if name in REAL_HEADS:
         path, cams = _real_urdf(name)
-        solver = GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams)
-        return BenchHead(name, solver, urdf=Path(path).read_text())
+        return BenchHead(name, GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams))
     from cpc2urdf.errors import ConfigurationError
 
     raise ConfigurationError(f"unknown head {name!r}; expected one of {', '.join(HEADS)}")
@@ -847,7 +842,7 @@ def run_head(
     utimes, uok, _, _, _ = _solve_times(solver, U)
     m_ref = min(n, reference)
     rtimes, rok, otimes, reference_start = _reference_run(solver, P[:m_ref])
-    placo = _placo_run(head, P[:m_ref])
+    placo = _placo_run(solver, axes, P[:m_ref])
     rate, path = _batch_throughput(solver, np.concatenate([P, U]))
     # every head shape tracks (one camera and rigid pairs through the chain's FK); centres for the tracked target: a pool of TRACK_POOL reachable targets at least
     Pt, Qt = (P, Q) if n >= TRACK_POOL else (

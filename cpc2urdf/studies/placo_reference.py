@@ -140,8 +140,8 @@ class PlacoGaze:
         return q, steps
 
 
-def placo_reference(solver: GazeSolver, urdf: str) -> PlacoGaze | str:
-    """A :class:`PlacoGaze` for ``solver``'s head (built from URDF text ``urdf``), moving the
+def placo_reference(solver: GazeSolver) -> PlacoGaze | str:
+    """A :class:`PlacoGaze` for ``solver``'s head (from the URDF text its robot was read from), moving the
     joints ``solver.free_joints("cyclopean")``; or, when there can be none, the reason in one
     line: a head its tasks cannot state, or placo not installed."""
     chain = solver.chain
@@ -162,7 +162,7 @@ def placo_reference(solver: GazeSolver, urdf: str) -> PlacoGaze | str:
     except ImportError:
         return NOT_INSTALLED
     cameras = [solver.cameras[int(c)] for c in chain.solve_cameras]
-    return PlacoGaze(urdf, cameras, solver.joint_names, free.tolist(), np.asarray(solver.path_joints).tolist())
+    return PlacoGaze(solver.robot.urdf, cameras, solver.joint_names, free.tolist(), np.asarray(solver.path_joints).tolist())
 
 
 def summary(errors: Array) -> dict[str, Any]:
