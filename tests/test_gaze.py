@@ -546,7 +546,7 @@ def test_fallback_only_where_the_version_task_holds_pointing_back(nominal, solve
 
     comp = solver._fast
     chain = comp.chain
-    plain = kernels._without_version(comp.ch)
+    plain = kernels._without_version(comp.ch, np.empty(4))
     ws = kernels.workspace(chain)
     qin = np.zeros(2 * comp.n)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import warnings
 
 import numpy as np
@@ -239,6 +240,74 @@ def test_threaded_batch_answers_each_target_as_one_solve(case):
         out = comp.solve_point(T[i], qc)
         assert out[0] == moved.status[i] and np.array_equal(out[2 : 2 + comp.n], moved.q[i])
 
+
+
+def _solve_in_new_thread(comp, p, qc):
+    """``comp.solve_point(p, qc)`` from a thread of its own: a workspace never used before."""
+    box = []
+    worker = threading.Thread(target=lambda: box.append(comp.solve_point(p, qc)))
+    worker.start()
+    worker.join()
+    return box[0]
+
+
+@pytest.mark.parametrize("case", ["iis_nominal", "iis_calibrated", "tiago", "icub"], indirect=True)
+def test_single_solves_share_a_workspace_but_nothing_of_one_answer(case):
+    """One thread's single solves reuse one workspace (CompiledGaze._scratch) and the reference
+    posture's scores it caches: each answer is the one a fresh workspace gives (a solve in a
+    new thread), bit for bit, whatever was solved before and from whichever readings; and a
+    solve allocates nothing in numba's runtime (before: 9 allocations a solve)."""
+    from numba.core.runtime import _nrt_python, rtsys
+
+    comp = case.solver._fast
+    P, _ = case.reachable_targets(12, seed=11)
+    lo, hi = case.solver.lower, case.solver.upper
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    rng = np.random.default_rng(12)
+    readings = [None] + [np.where(finite, np.where(finite, lo, 0.0) + rng.uniform(0.2, 0.8, lo.shape)
+                                  * np.where(finite, hi - lo, 0.0), 0.0) for _ in range(2)]
+    for k, p in enumerate(P):
+        qc = readings[k % 3]
+        out = comp.solve_point(p, qc)
+        fresh = _solve_in_new_thread(comp, p, qc)
+        assert np.array_equal(out, fresh, equal_nan=True), k
+    was = _nrt_python.memsys_stats_enabled()
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats()
+        for p in P:
+            comp.solve_point(p, None)
+            comp.solve_point(p, readings[1])
+        after = rtsys.get_allocation_stats()
+    finally:
+        if not was:
+            _nrt_python.memsys_disable_stats()
+    assert after.alloc == before.alloc and after.mi_alloc == before.mi_alloc
+
+
+@pytest.mark.parametrize("case", ["iis_nominal", "tiago"], indirect=True)
+def test_threads_solving_on_one_solver_do_not_share_a_workspace(case):
+    """solve_flat runs without the GIL: two threads solving on one solver at once each get
+    their own workspace, so each answer is the one a lone solve gives. (With one workspace
+    shared by both threads, 13-50 % of these answers differed, in three runs.)"""
+    comp = case.solver._fast
+    P, _ = case.reachable_targets(200, seed=13)
+    alone = [comp.solve_point(p, None) for p in P]
+    answers: dict[int, list] = {0: [], 1: []}
+    start = threading.Barrier(2)
+
+    def work(k):
+        start.wait()
+        for _ in range(5):
+            answers[k] += [comp.solve_point(p, None) for p in P]
+
+    workers = [threading.Thread(target=work, args=(k,)) for k in (0, 1)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    for k in (0, 1):
+        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(alone * 5, answers[k], strict=True)), k
 
 def test_unreachable_targets_answered_in_limits(case):
     """Targets behind and far off: every one answered with in-limit readings, never fixated
@@ -1002,7 +1071,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     buffer used to its end; the arrays that start with a value have it."""
     K, C, S, m, G, n_top = sizes
     ws = kernels._workspace(*sizes)
-    assert len(ws) == 46
+    assert len(ws) == 47
     spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
     for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
         assert start + size == following  # adjacent: no overlap, no gap
@@ -1013,6 +1082,7 @@ def test_workspace_views_tile_their_buffers(sizes):
     assert ws[26].shape == (G + 1,) and ws[32].shape == (n_top, m) and ws[27].dtype == np.int64
     assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[40], np.ones(m))
     assert np.isnan(ws[43]).all() and ws[43].shape == (m + K,) and ws[45].shape == (G,)  # no u_ref cached yet
+    assert ws[46].shape == (4,)  # the chain's task scalars without the zero-version task
 
 
 def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):

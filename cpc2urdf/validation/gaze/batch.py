@@ -202,6 +202,9 @@ class CompiledGaze:
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
             self.tolerance, self.baseline, self.disparity_head, self._home_centre,
         )
+        # per thread, its solve_flat workspace (see _scratch), made again with the head: the
+        # reference posture's cached scores are of the table packed here
+        self._local = threading.local()
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
         ws = self._ws
@@ -392,8 +395,9 @@ class CompiledGaze:
         shape (3,), C-contiguous and writeable: what the kernel is compiled for; no one may
         write it during the call, which runs without the GIL): a control loop's call, nothing
         checked or copied in Python."""
+        f, ints = self._scratch()
         out = np.empty(self._out_size)
-        kernels.solve_flat(self.F, self.I, p, self._qin, 4, out)
+        kernels.solve_flat(self.F, self.I, p, self._qin, 4, out, f, ints)
         return out
 
     def solve_point(self, p: Array, q_current: Array | None, q_start: Array | None = None) -> Array:
@@ -415,9 +419,21 @@ class CompiledGaze:
         if q_start is not None:
             qin[self.n :] = q_start
             mode |= 2
+        f, ints = self._scratch()
         out = np.empty(self._out_size)
-        kernels.solve_flat(self.F, self.I, p, qin, mode, out)
+        kernels.solve_flat(self.F, self.I, p, qin, mode, out, f, ints)
         return out
+
+    def _scratch(self) -> tuple[Array, Array]:
+        """This thread's workspace buffers for :func:`~cpc2urdf.validation.gaze.kernels.solve_flat`
+        (made on its first solve): a single solve allocates no workspace and scores the
+        reference posture only when it changes. One pair a thread, since the kernel runs
+        without the GIL: two threads solving on one solver never share a buffer."""
+        try:
+            return self._local.scratch  # type: ignore[no-any-return]
+        except AttributeError:
+            self._local.scratch = kernels.scratch(self.I)
+            return self._local.scratch  # type: ignore[no-any-return]
 
     def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
         """Every target (rows of ``targets``, world [m]) from ``q_current`` (robot readings,

@@ -136,7 +136,7 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 # _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
 # so they are compiled without numba's reference counting (its CPU target option _nrt=False):
 # every array they see is owned by the entry point's frame for the whole call. With it, numba
-# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 46) on
+# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 47) on
 # entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
 # in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
 # batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
@@ -966,7 +966,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
         nr = near_rel if rr <= NEAR_FIXATION else null_rel  # this iteration's null cut (relative)
         have_g = False  # g = J_x^T r (J_x = J / sw) at this u: the column form's, made once when first needed
         for v in range(m):
-            free[v] = True
+            free[v] = 1
         for _ in range(m + 1):  # active set: hold unknowns at a bound that the step pushes out
             # the count of free unknowns; np.int64, not 0: numba's inference first sees the literal 0
             # and compiled seven of the calls below for it too (jacobi_eigh, _eigh_warm, the step's
@@ -1079,7 +1079,7 @@ def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, r
                 if free[v]:
                     du = dx[v] / sw[v]
                     if (u[v] <= lower[v] + AT_BOUND and du < 0.0) or (u[v] >= upper[v] - AT_BOUND and du > 0.0):
-                        free[v] = False
+                        free[v] = 0
                         changed = True
             if not changed:
                 break
@@ -1301,16 +1301,61 @@ def _carve(buf, o, n):  # type: ignore[no-untyped-def]
 
 
 @kernel
+def workspace_size(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
+    """Lengths of the float and the int buffer that a workspace (:func:`_workspace`) for the
+    chain's K joints, C cameras, S solved axes, m unknowns, G table entries and n_top starts per
+    target is carved from."""
+    M = 2 * S  # the Jacobian's rows (the residual has 3 S)
+    nf = (9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
+          + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
+          + m + S + m + S + m + m + S + m + m + m + m + K + 6 + G + 4)
+    return nf, m + n_top + m
+
+
+@kernel
 def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
-    :func:`fk` and :func:`residual` only). Views of three buffers (float, int, bool): a single
-    solve makes its workspace on every call, and 46 allocations cost ~1.3 us of it."""
-    M = 2 * S  # the Jacobian's rows (the residual has 3 S)
-    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
-                 + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
-                 + m + S + m + S + m + m + S + m + m + m + m + K + 6 + G)
-    ints = np.empty(m + n_top, dtype=np.int64)
+    :func:`fk` and :func:`residual` only), carved from two new buffers (float, int) by
+    :func:`_carve_workspace`, the arrays that start with a value given it."""
+    nf, ni = workspace_size(K, C, S, m, G, n_top)
+    ws = _carve_workspace(np.empty(nf), np.empty(ni, dtype=np.int64), K, C, S, m, G, n_top)
+    _start_workspace(ws)
+    return ws
+
+
+@kernel
+def scratch(I):  # type: ignore[no-untyped-def]
+    """The two buffers (float, int) of a workspace for the packed head whose ints are ``I``
+    (:func:`pack_flat`), started (:func:`_start_workspace`): what :func:`solve_flat` carves its
+    workspace from. ``CompiledGaze`` keeps one pair per thread, so that a single solve neither
+    allocates nor scores the reference posture again (:func:`best_starts`' cache)."""
+    K, C, S, m, G, n_top = I[0], I[1], I[2], I[3], I[4], I[6] + 1
+    nf, ni = workspace_size(K, C, S, m, G, n_top)
+    f = np.empty(nf)
+    ints = np.empty(ni, dtype=np.int64)
+    _start_workspace(_carve_workspace(f, ints, K, C, S, m, G, n_top))
+    return f, ints
+
+
+@inline_kernel
+def _start_workspace(ws):  # type: ignore[no-untyped-def]
+    """The values a new workspace starts with: no reference posture cached (``best_starts``),
+    no warm eigenvectors (``_iterate``), equal weights."""
+    ws[43][:] = np.nan  # ref_key: no target's u_ref and b yet
+    eig, ones = ws[21], ws[40]
+    for i in range(3):
+        eig[i] = 0.0
+    for i in range(ones.shape[0]):
+        ones[i] = 1.0
+
+
+@inline_kernel
+def _carve_workspace(f, ints, K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
+    """The workspace's 47 arrays as views of the float buffer ``f`` and the int buffer ``ints``
+    (lengths: :func:`workspace_size`); nothing written or allocated. ~0.5 us a call on the
+    nominal IIS-head (its reshapes call numba's runtime)."""
+    M = 2 * S
     JR, o = _carve(f, 0, 9 * K)
     Jp, o = _carve(f, o, 3 * K)
     Ja, o = _carve(f, o, 3 * K)
@@ -1354,11 +1399,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     ref_key, o = _carve(f, o, m + K)
     ref_axis, o = _carve(f, o, 6)
     ref_cost, o = _carve(f, o, G)
-    ref_key[:] = np.nan  # no target's u_ref and b yet
-    for i in range(3):
-        eig[i] = 0.0
-    for i in range(m):
-        ones[i] = 1.0
+    vw_plain, o = _carve(f, o, 4)
     return (
         JR.reshape((K, 3, 3)),
         Jp.reshape((K, 3)),
@@ -1376,7 +1417,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         V.reshape((m, m)),
         lam,
         ints[0:m],  # idx
-        np.empty(m, dtype=np.bool_),  # free
+        ints[m + n_top:m + n_top + m],  # free (1: free, 0: held at a bound)
         dx,
         trial,
         Hb.reshape((m, m)),
@@ -1406,6 +1447,7 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
         ref_key,  # see best_starts
         ref_axis,  # see best_starts
         ref_cost,  # see best_starts
+        vw_plain,  # the chain without its zero-version task: see _without_version
     )
 
 
@@ -1863,11 +1905,14 @@ def _largest(a):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _without_version(ch):  # type: ignore[no-untyped-def]
+def _without_version(ch, vw):  # type: ignore[no-untyped-def]
     """The chain tuple ``ch`` without its zero-version task (weight 0; the minimum viewing
-    distance kept)."""
-    return (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12],
-            np.array([0.0, 0.0, ch[13][2], ch[13][3]]))
+    distance kept), its task scalars written into ``vw`` (4,): nothing allocated."""
+    vw[0] = 0.0
+    vw[1] = 0.0
+    vw[2] = ch[13][2]
+    vw[3] = ch[13][3]
+    return (ch[0], ch[1], ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], ch[8], ch[9], ch[10], ch[11], ch[12], vw)
 
 
 @inline_kernel
@@ -2032,20 +2077,15 @@ def _solve_into(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-untyp
 
 
 
-@inline_kernel
-def _solve_state(F, I):  # type: ignore[no-untyped-def]
-    """What :func:`_solve_into` takes besides the target, made by the entry points (which own
-    every array of it for the call): the head's views (:func:`_unpack`), its chain without the
-    zero-version task and the workspace."""
+@kernel_without_refcounts
+def solve_flat(F, I, p, qin, mode, out, f, ints):  # type: ignore[no-untyped-def]
+    """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``. The workspace
+    is carved from the buffers ``f`` and ``ints`` (:func:`scratch`), which keep, from call to
+    call, the reference posture's scores (:func:`best_starts`); no other call may use them
+    at the same time (this one runs without the GIL)."""
     head = _unpack(F, I)
-    return head, _without_version(head[0]), _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
-
-
-@kernel
-def solve_flat(F, I, p, qin, mode, out):  # type: ignore[no-untyped-def]
-    """One target (see :func:`_solve_into`): the entry of ``GazeSolver.solve``."""
-    head, plain, ws = _solve_state(F, I)
-    _solve_into(head, plain, I, ws, p, qin, mode, out)
+    ws = _carve_workspace(f, ints, I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+    _solve_into(head, _without_version(head[0], ws[46]), I, ws, p, qin, mode, out)
 
 
 @kernel
@@ -2056,9 +2096,12 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     Serial, without the GIL: ``solve_many`` runs one call per core on its share of the rows
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
-    head, plain, ws = _solve_state(F, I)  # once per batch (~1.5 us a target otherwise)
+    head = _unpack(F, I)  # once per batch
+    ws = _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+    plain = _without_version(head[0], ws[46])
     for i in range(T.shape[0]):
         _solve_into(head, plain, I, ws, T[i], qin, mode, OUT[i])
+
 
 def workspace(chain: HeadChain) -> tuple[Array, ...]:
     """Scratch arrays of one solve on ``chain``."""
@@ -2095,9 +2138,11 @@ __all__ = [
     "solve_flat_many",
     "pack",
     "pointing_error",
+    "scratch",
     "residual",
     "residual_at_fk",
     "solve_one",
     "solve_single",
     "workspace",
+    "workspace_size",
 ]
