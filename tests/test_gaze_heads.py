@@ -229,7 +229,8 @@ def test_threaded_batch_answers_each_target_as_one_solve(case):
         out = comp.solve_point(T[i], None)
         assert out[0] == two.status[i] and np.array_equal(out[2 : 2 + comp.n], two.q[i])
     # from other readings too: a batch scores its starts against one reference posture, computed
-    # once (best_starts), a single solve against its own
+    # once (best_starts), as one thread's single solves do while the readings stay the same; so
+    # against a solve in a thread of its own (a fresh workspace: the scores made for it alone)
     lo, hi = case.solver.lower, case.solver.upper
     finite = np.isfinite(lo) & np.isfinite(hi)
     f = np.random.default_rng(8).uniform(0.2, 0.8, lo.shape)
@@ -237,7 +238,7 @@ def test_threaded_batch_answers_each_target_as_one_solve(case):
     moved = comp.solve_many(T, qc)
     assert not np.array_equal(moved.q, two.q)
     for i in range(0, len(T), 37):
-        out = comp.solve_point(T[i], qc)
+        out = _solve_in_new_thread(comp, T[i], qc)
         assert out[0] == moved.status[i] and np.array_equal(out[2 : 2 + comp.n], moved.q[i])
 
 
@@ -251,31 +252,47 @@ def _solve_in_new_thread(comp, p, qc):
     return box[0]
 
 
+def _reference_key(comp):
+    """The reference posture (``u_ref`` and the held joints) whose scores this thread's
+    workspace holds (best_starts' cache key): a copy."""
+    f, ints = comp._scratch()
+    I = comp.I
+    return kernels._carve_workspace(f, ints, I[0], I[1], I[2], I[3], I[4], I[6] + 1)[43].copy()
+
+
 @pytest.mark.parametrize("case", ["iis_nominal", "iis_calibrated", "tiago", "icub"], indirect=True)
 def test_single_solves_share_a_workspace_but_nothing_of_one_answer(case):
-    """One thread's single solves reuse one workspace (CompiledGaze._scratch) and the reference
-    posture's scores it caches: each answer is the one a fresh workspace gives (a solve in a
-    new thread), bit for bit, whatever was solved before and from whichever readings; and a
-    solve allocates nothing in numba's runtime (before: 9 allocations a solve)."""
+    """One thread's single solves reuse one workspace (CompiledGaze._scratch) and, while the
+    readings stay the same, the reference posture's scores it caches (best_starts): each answer
+    is the one a fresh workspace gives (a solve in a new thread), bit for bit, whether its
+    scores were cached or made afresh, whatever was solved before; and a solve allocates
+    nothing in numba's runtime (before: 9 allocations a solve)."""
     from numba.core.runtime import _nrt_python, rtsys
 
     comp = case.solver._fast
     P, _ = case.reachable_targets(12, seed=11)
+    R, o = comp._fk(comp.home_u)
+    behind = 2.0 * o[comp.chain.solve_cameras].mean(axis=0) - P[:3]  # mirrored through the head
+    T = np.vstack([P, behind])
     lo, hi = case.solver.lower, case.solver.upper
     finite = np.isfinite(lo) & np.isfinite(hi)
     rng = np.random.default_rng(12)
     readings = [None] + [np.where(finite, np.where(finite, lo, 0.0) + rng.uniform(0.2, 0.8, lo.shape)
                                   * np.where(finite, hi - lo, 0.0), 0.0) for _ in range(2)]
-    for k, p in enumerate(P):
-        qc = readings[k % 3]
-        out = comp.solve_point(p, qc)
-        fresh = _solve_in_new_thread(comp, p, qc)
-        assert np.array_equal(out, fresh, equal_nan=True), k
+    reused = np.zeros((len(T), 2), dtype=bool)
+    for k, p in enumerate(T):
+        qc = readings[k % 3]  # other readings than the last target's: scored afresh
+        for j, q in enumerate((p, T[(k + 5) % len(T)])):  # then another target from the same readings
+            key = _reference_key(comp)
+            out = comp.solve_point(q, qc)
+            reused[k, j] = np.array_equal(key, _reference_key(comp))  # the key kept: the scores were reused
+            assert np.array_equal(out, _solve_in_new_thread(comp, q, qc), equal_nan=True), (k, j)
+    assert reused[:, 1].all() and not reused[1:, 0].any()  # (the first solve's depends on the test before)
     was = _nrt_python.memsys_stats_enabled()
     _nrt_python.memsys_enable_stats()
     try:
         before = rtsys.get_allocation_stats()
-        for p in P:
+        for p in T:
             comp.solve_point(p, None)
             comp.solve_point(p, readings[1])
         after = rtsys.get_allocation_stats()
@@ -283,6 +300,22 @@ def test_single_solves_share_a_workspace_but_nothing_of_one_answer(case):
         if not was:
             _nrt_python.memsys_disable_stats()
     assert after.alloc == before.alloc and after.mi_alloc == before.mi_alloc
+
+
+@pytest.mark.parametrize("case", ["tiago"], indirect=True)
+def test_a_solver_pickles_and_copies_without_its_workspaces(case):
+    """A compiled solver pickles and deep-copies (a process pool, a cache) without the threads'
+    workspaces (a threading.local cannot be pickled), and the copy answers as the original does."""
+    import copy
+    import pickle
+
+    solver = case.solver
+    P, _ = case.reachable_targets(3, seed=2)
+    want = [solver.solve(p) for p in P]
+    for other in (pickle.loads(pickle.dumps(solver)), copy.deepcopy(solver)):
+        for p, w in zip(P, want, strict=True):
+            got = other.solve(p)
+            assert got.status == w.status and np.array_equal(got.q, w.q)
 
 
 @pytest.mark.parametrize("case", ["iis_nominal", "tiago"], indirect=True)

@@ -424,6 +424,17 @@ class CompiledGaze:
         kernels.solve_flat(self.F, self.I, p, qin, mode, out, f, ints)
         return out
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled and copied without the threads' workspaces (a ``threading.local`` cannot be
+        pickled, and a copy's threads make their own)."""
+        state = self.__dict__.copy()
+        del state["_local"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._local = threading.local()
+
     def _scratch(self) -> tuple[Array, Array]:
         """This thread's workspace buffers for :func:`~cpc2urdf.validation.gaze.kernels.solve_flat`
         (made on its first solve): a single solve allocates no workspace and scores the

@@ -135,9 +135,10 @@ inline_kernel = njit(cache=True, error_model="numpy", nogil=True, forceinline=Tr
 # the solve's kernels below the entry points (_solve_into, solve_single, solve_one, best_starts,
 # _iterate) allocate nothing (every buffer is one of the workspace's arrays) and return no array,
 # so they are compiled without numba's reference counting (its CPU target option _nrt=False):
-# every array they see is owned by the entry point's frame for the whole call. With it, numba
-# increfs every array argument (a tuple's every member: the chain's 14, the workspace's 47) on
-# entry and decrefs it on return, each an atomic operation; its pruning pass removes such pairs
+# every array they see is owned by the entry point's frame, or by solve_flat's Python caller
+# (CompiledGaze._scratch), for the whole call. With it, numba increfs every array argument (a
+# tuple's every member: the chain's 14, the workspace's 47) on entry and decrefs it on return,
+# each an atomic operation; its pruning pass removes such pairs
 # in simple functions (fk) but not in these. Nominal IIS-head, 100 reachable targets in one
 # batch: 439 increfs and 590 decrefs a target before, 2 and 2 now (counted at breakpoints on
 # NRT_incref/NRT_decref); the batch kernel's time a target 14.3 -> 10.8 us (TALOS 14.8 -> 11.2,
