@@ -256,8 +256,7 @@ def _reference_key(comp):
     """The reference posture (``u_ref`` and the held joints) whose scores this thread's
     workspace holds (best_starts' cache key): a copy."""
     f, ints = comp._scratch()
-    I = comp.I
-    return kernels._carve_workspace(f, ints, I[0], I[1], I[2], I[3], I[4], I[6] + 1)[43].copy()
+    return kernels._carve_workspace(f, ints, kernels._sizes(comp.I))[43].copy()
 
 
 @pytest.mark.parametrize("case", ["iis_nominal", "iis_calibrated", "tiago", "icub"], indirect=True)

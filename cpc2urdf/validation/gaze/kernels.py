@@ -1301,61 +1301,57 @@ def _carve(buf, o, n):  # type: ignore[no-untyped-def]
     return buf[o:o + n], o + n
 
 
+@inline_kernel
+def _sizes(I):  # type: ignore[no-untyped-def]
+    """``(K, C, S, m, G, n_top)`` of a workspace for the packed head whose ints are ``I``
+    (:func:`pack_flat`): its joints, cameras, solved axes, unknowns, table entries and starts
+    per target."""
+    return I[0], I[1], I[2], I[3], I[4], I[6] + 1
+
+
 @kernel
-def workspace_size(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
-    """Lengths of the float and the int buffer that a workspace (:func:`_workspace`) for the
-    chain's K joints, C cameras, S solved axes, m unknowns, G table entries and n_top starts per
-    target is carved from."""
+def _new_buffers(sizes):  # type: ignore[no-untyped-def]
+    """The two buffers (float, int) a workspace of ``sizes`` (:func:`_sizes`) is carved from
+    (:func:`_carve_workspace`), with the values a workspace starts with: no reference posture
+    cached (``best_starts``), no warm eigenvectors (``_iterate``), equal weights."""
+    K, C, S, m, G, n_top = sizes
     M = 2 * S  # the Jacobian's rows (the residual has 3 S)
-    nf = (9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m + 4 * m * m
-          + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
-          + m + S + m + S + m + m + S + m + m + m + m + K + 6 + G + 4)
-    return nf, m + n_top + m
+    f = np.empty(9 * K + 3 * K + 3 * K + 9 * C + 3 * C + 6 * K + (5 + m) * S + 3 * S + M * m + 3 * S + M * m + m
+                 + 4 * m * m + m + m + m + 3 + m + m + (4 * HISTORY + 2) * m + m + G + 1 + 3 + K + m + m + n_top * m
+                 + m + S + m + S + m + m + S + m + m + m + m + K + 6 + G + 4)
+    ints = np.empty(m + n_top + m, dtype=np.int64)
+    ws = _carve_workspace(f, ints, sizes)
+    ws[43][:] = np.nan  # ref_key: no target's u_ref and b yet
+    ws[21][:] = 0.0  # eig
+    ws[40][:] = 1.0  # ones
+    return f, ints
 
 
 @kernel
 def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """Scratch arrays of one solve (reused from target to target): the chain's K joints, C
     cameras, S solved axes, m unknowns, G table entries and n_top starts per target (0, 0: for
-    :func:`fk` and :func:`residual` only), carved from two new buffers (float, int) by
-    :func:`_carve_workspace`, the arrays that start with a value given it."""
-    nf, ni = workspace_size(K, C, S, m, G, n_top)
-    ws = _carve_workspace(np.empty(nf), np.empty(ni, dtype=np.int64), K, C, S, m, G, n_top)
-    _start_workspace(ws)
-    return ws
+    :func:`fk` and :func:`residual` only), carved from two new buffers (:func:`_new_buffers`)."""
+    sizes = (K, C, S, m, G, n_top)
+    f, ints = _new_buffers(sizes)
+    return _carve_workspace(f, ints, sizes)
 
 
 @kernel
 def scratch(I):  # type: ignore[no-untyped-def]
     """The two buffers (float, int) of a workspace for the packed head whose ints are ``I``
-    (:func:`pack_flat`), started (:func:`_start_workspace`): what :func:`solve_flat` carves its
-    workspace from. ``CompiledGaze`` keeps one pair per thread, so that a single solve neither
-    allocates nor scores the reference posture again (:func:`best_starts`' cache)."""
-    K, C, S, m, G, n_top = I[0], I[1], I[2], I[3], I[4], I[6] + 1
-    nf, ni = workspace_size(K, C, S, m, G, n_top)
-    f = np.empty(nf)
-    ints = np.empty(ni, dtype=np.int64)
-    _start_workspace(_carve_workspace(f, ints, K, C, S, m, G, n_top))
-    return f, ints
+    (:func:`pack_flat`): what :func:`solve_flat` carves its workspace from. ``CompiledGaze``
+    keeps one pair per thread, so that a single solve neither allocates nor scores the
+    reference posture again (:func:`best_starts`' cache)."""
+    return _new_buffers(_sizes(I))
 
 
 @inline_kernel
-def _start_workspace(ws):  # type: ignore[no-untyped-def]
-    """The values a new workspace starts with: no reference posture cached (``best_starts``),
-    no warm eigenvectors (``_iterate``), equal weights."""
-    ws[43][:] = np.nan  # ref_key: no target's u_ref and b yet
-    eig, ones = ws[21], ws[40]
-    for i in range(3):
-        eig[i] = 0.0
-    for i in range(ones.shape[0]):
-        ones[i] = 1.0
-
-
-@inline_kernel
-def _carve_workspace(f, ints, K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
+def _carve_workspace(f, ints, sizes):  # type: ignore[no-untyped-def]
     """The workspace's 47 arrays as views of the float buffer ``f`` and the int buffer ``ints``
-    (lengths: :func:`workspace_size`); nothing written or allocated. ~0.5 us a call on the
-    nominal IIS-head (its reshapes call numba's runtime)."""
+    (:func:`_new_buffers`) for ``sizes`` (:func:`_sizes`); nothing written or allocated. ~0.5 us
+    a call on the nominal IIS-head (its reshapes call numba's runtime)."""
+    K, C, S, m, G, n_top = sizes
     M = 2 * S
     JR, o = _carve(f, 0, 9 * K)
     Jp, o = _carve(f, o, 3 * K)
@@ -2085,7 +2081,7 @@ def solve_flat(F, I, p, qin, mode, out, f, ints):  # type: ignore[no-untyped-def
     call, the reference posture's scores (:func:`best_starts`); no other call may use them
     at the same time (this one runs without the GIL)."""
     head = _unpack(F, I)
-    ws = _carve_workspace(f, ints, I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+    ws = _carve_workspace(f, ints, _sizes(I))
     _solve_into(head, _without_version(head[0], ws[46]), I, ws, p, qin, mode, out)
 
 
@@ -2098,7 +2094,9 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
     head = _unpack(F, I)  # once per batch
-    ws = _workspace(I[0], I[1], I[2], I[3], I[4], I[6] + 1)
+    sizes = _sizes(I)
+    f, ints = _new_buffers(sizes)
+    ws = _carve_workspace(f, ints, sizes)
     plain = _without_version(head[0], ws[46])
     for i in range(T.shape[0]):
         _solve_into(head, plain, I, ws, T[i], qin, mode, OUT[i])
@@ -2145,5 +2143,4 @@ __all__ = [
     "solve_one",
     "solve_single",
     "workspace",
-    "workspace_size",
 ]
