@@ -28,7 +28,8 @@ from cpc2urdf.validation.crosscheck import yourdfpy_pose
 KEYS = (
     "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",
     "unreachable_ratio", "reference_median_us", "reference_success", "ratio", "batch_targets_per_s", "aims",
-    "p99_cpu_us", "p99_cpu_kin", "audit_targets", "audit_unfixated", "audit_missed",
+    "p99_cpu_us", "p99_cpu_kin", "audit_targets", "audit_unfixated", "audit_missed", "after_reference_median_us",
+    "ratio_blocks", "blocks_median_us", "blocks_reference_median_us", "kin_after_reference_us",
 )
 
 
@@ -48,6 +49,8 @@ def test_bench_runs_tiny(tmp_path, capsys):
         for key in KEYS:
             assert key in r
         assert r["kin_us"] > 0 and r["median_kin"] > 0 and r["ratio"] > 0 and r["batch_targets_per_s"] > 0
+        assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
+        assert r["after_reference_median_us"] > 0 and r["kin_after_reference_us"] > 0
         assert r["success"] + r["disparity"] == 1.0 and r["reference_success"] == 1.0
         assert r["unreachable_fixated"] == 0
         assert r["audit_targets"] == 40 and 0 < r["audit_unfixated"] < 40 and r["audit_missed"] == 0
@@ -55,6 +58,8 @@ def test_bench_runs_tiny(tmp_path, capsys):
         assert res[name]["track_steps"] == 20 and res[name]["track_saccade_steps"] >= 0
     table = capsys.readouterr().out
     assert "vs scipy" in table and "vs placo" in table and "nominal" in table and "tiago" in table
+    for name in ("nominal", "tiago"):
+        assert f"vs scipy on {name}: " in table and "in alternating blocks of" in table
     for r in res.values():  # placo's reference ran (where it imports) or says why not
         assert r["placo"] == "ran" or "vs placo n/a: " + r["placo"] in table
 
@@ -145,3 +150,35 @@ def test_tracking_targets_stay_inside():
 
 def test_real_heads_known():
     assert set(REAL_HEADS) == {"tiago", "talos"}
+
+
+def test_block_run_alternates_blocks_of_ours_and_the_reference():
+    """``_block_run``: each block of targets solved by us back to back, then by the reference,
+    with one kinematics call right after each reference solve; every target once by each."""
+    from cpc2urdf.studies.bench_gaze import REFERENCE_BLOCK, _block_run
+
+    calls = []
+
+    class Ours:
+        def solve(self, p):
+            calls.append(("ours", int(p[0])))
+
+    def reference(p):
+        calls.append(("scipy", int(p[0])))
+
+    def kin(i):
+        calls.append(("kin", i))
+        return 1e-6
+
+    n = 2 * REFERENCE_BLOCK + 3
+    P = np.arange(n, dtype=float)[:, None] * np.ones(3)
+    r = _block_run(Ours(), P, reference, kin)
+    expected = []
+    for a in range(0, n, REFERENCE_BLOCK):
+        block = range(a, min(a + REFERENCE_BLOCK, n))
+        expected += [("ours", i) for i in block]
+        for i in block:
+            expected += [("scipy", i), ("kin", i)]
+    assert calls == expected
+    assert r["kin_after_reference_us"] == pytest.approx(1.0)
+    assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
