@@ -49,6 +49,7 @@ def test_bench_runs_tiny(tmp_path, capsys):
         for key in KEYS:
             assert key in r
         assert r["kin_us"] > 0 and r["median_kin"] > 0 and r["ratio"] > 0 and r["batch_targets_per_s"] > 0
+        assert r["ratio"] == pytest.approx(r["reference_median_us"] / r["after_reference_median_us"])
         assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
         assert r["after_reference_median_us"] > 0 and r["kin_after_reference_us"] > 0
         assert r["success"] + r["disparity"] == 1.0 and r["reference_success"] == 1.0
@@ -182,3 +183,76 @@ def test_block_run_alternates_blocks_of_ours_and_the_reference():
     assert calls == expected
     assert r["kin_after_reference_us"] == pytest.approx(1.0)
     assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
+
+
+class _FakeClock:
+    """``time.perf_counter`` that moves only when a stub says so: a timed region's length is
+    the sum of what the calls inside it add."""
+
+    def __init__(self):
+        self.t = 0.0
+        self.perf_counter = lambda: self.t
+
+    def spend(self, seconds):
+        self.t += seconds
+
+
+def test_block_run_times_each_solver_alone(monkeypatch):
+    """Our block's time is our solves' alone, scipy's its solves' alone (not the kinematics
+    call after each), the unit is the kinematics call's own return value."""
+    from types import SimpleNamespace
+
+    from cpc2urdf.studies import bench_gaze
+
+    clock = _FakeClock()
+    monkeypatch.setattr(bench_gaze, "time", SimpleNamespace(perf_counter=clock.perf_counter))
+    ours = SimpleNamespace(solve=lambda p: clock.spend(2e-6 * (1.0 + p[0])))  # 2-4 us, median 3 us
+    P = np.linspace(0.0, 1.0, 31)[:, None] * np.ones(3)
+
+    def reference(p):
+        clock.spend(600e-6)
+
+    def kin(i):
+        clock.spend(1.0)  # a kinematics call counted in the reference's time would show
+        return 5e-6
+
+    r = bench_gaze._block_run(ours, P, reference, kin)
+    assert r["blocks_median_us"] == pytest.approx(3.0)
+    assert r["blocks_reference_median_us"] == pytest.approx(600.0)
+    assert r["ratio_blocks"] == pytest.approx(200.0)
+    assert r["kin_after_reference_us"] == pytest.approx(5.0)
+
+
+def test_reference_run_times_the_start_with_scipy_and_not_the_check(monkeypatch):
+    """A target at a time, on a head with the Python solver: scipy's time includes its start
+    (``initial_guess``) and not the success check after it; ours is our solve alone."""
+    from types import SimpleNamespace
+
+    from cpc2urdf.studies import bench_gaze
+
+    clock = _FakeClock()
+    monkeypatch.setattr(bench_gaze, "time", SimpleNamespace(perf_counter=clock.perf_counter))
+    monkeypatch.setattr(bench_gaze, "_has_python_solver", lambda solver: True)
+
+    def scipy_solver(solver):
+        def solve(p, q0):
+            clock.spend(700e-6)
+            return q0, 1
+        return solve
+
+    monkeypatch.setattr(bench_gaze, "_reference_solver", scipy_solver)
+
+    def guess(p):
+        clock.spend(40e-6)
+        return np.zeros(4)
+
+    def evaluate(q, p, jacobian):
+        clock.spend(1.0)  # a check counted in scipy's time, or in our next solve's, would show
+        return SimpleNamespace(p_cam=[(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)])
+
+    solver = SimpleNamespace(solve=lambda p: clock.spend(5e-6), initial_guess=guess, evaluate=evaluate)
+    P = np.ones((7, 3))
+    times, ok, ours, start, blocks = bench_gaze._reference_run(solver, P, lambda i: 4e-6)
+    assert np.allclose(times, 740e-6) and np.allclose(ours, 5e-6) and ok.all()
+    assert start == "the solver's own start (initial_guess)"
+    assert blocks["ratio_blocks"] == pytest.approx(148.0) and blocks["kin_after_reference_us"] == pytest.approx(4.0)
