@@ -1074,6 +1074,8 @@ def format_table(res: dict[str, Any]) -> str:
         "that cannot fixate exactly)"
     )
     for name, r in res.items():
+        if "ratio_blocks" not in r:  # a row made without the block run
+            continue
         lines.append(
             f"vs scipy on {name}: {r['ratio']:.1f}x a target at a time (scipy {r['reference_median_us']:.0f} us, ours "
             f"{r['after_reference_median_us']:.1f} us right after each scipy solve, where one FK + two Jacobians takes "
