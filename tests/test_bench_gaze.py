@@ -248,7 +248,8 @@ def test_reference_run_times_the_start_with_scipy_and_not_the_check(monkeypatch)
 
     def evaluate(q, p, jacobian):
         clock.spend(1.0)  # a check counted in scipy's time, or in our next solve's, would show
-        return SimpleNamespace(p_cam=[(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)])
+        on_axis = [(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)]  # both cameras' target on their axis, 1 m ahead
+        return SimpleNamespace(p_cam=on_axis, u=[(*d, 1.0) for d in on_axis])
 
     solver = SimpleNamespace(solve=lambda p: clock.spend(5e-6), initial_guess=guess, evaluate=evaluate)
     P = np.ones((7, 3))

@@ -116,7 +116,5 @@ def test_placo_points_the_cameras():
         assert 0 < steps <= MAX_STEPS and 0.0 < ref.core_seconds
         assert np.all(q >= solver.lower - 1e-9) and np.all(q <= solver.upper + 1e-9)
         np.testing.assert_array_equal(q[held], q0[held])
-        O, Z = axes.axes(q[None, :])
-        d = p - O[0]
-        errors.append(np.max(np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))))
+        errors.append(np.max(axes.pointing_errors(q, p)))
     assert np.median(errors) <= FLOOR

@@ -615,54 +615,73 @@ def _solve_times(
     return times, ok, iters, cpu, kin_times
 
 
-def _reference_run(
-    solver: GazeSolver, P: Array, kin: Callable[[int], float]
-) -> tuple[Array, NDArray[np.bool_], Array, str, dict[str, float]]:
-    """scipy ``least_squares`` on every target of ``P``, each right after one ``solve`` of ours
-    (so that both see the same load on a shared machine): the reference's time [s] and success,
-    our time [s] on the same targets, where the reference starts, and :func:`_block_run`'s
-    numbers on the same targets.
-
-    On a head with the two-eye Python solver the reference starts from the solver's own start
-    (``initial_guess``) on the fixation residual with its free joints (:func:`_reference_solver`);
-    on others from the middle of the limits over the solver's unknowns
-    (:func:`_generic_reference_solver`)."""
-    from cpc2urdf.tolerances import GAZE_POINTING_TOL
-
+def _after_ours(
+    solver: GazeSolver, P: Array, reference: Callable[[Array], Any], check: Callable[[Array, Any], Any]
+) -> tuple[Array, Array, list[Any]]:
+    """Every target of ``P`` solved by us, then at once by ``reference`` (``p -> answer``), whose
+    answer ``check(p, answer)`` judges untimed before the next target (so both see the same
+    load on a shared machine): our times [s], the reference's [s], and the checks."""
     n = P.shape[0]
-    times = np.empty(n)
-    ours = np.empty(n)
-    ok = np.zeros(n, dtype=bool)
+    times, ours = np.empty(n), np.empty(n)
+    checks = []
     clock = time.perf_counter
-    if _has_python_solver(solver):
-        ref = _reference_solver(solver)
-        start = "the solver's own start (initial_guess)"
-
-        def reference(p: Array) -> Array:
-            return ref(p, solver.initial_guess(p))[0]
-
-        def fixated(q: Array, p: Array) -> bool:
-            st = solver.evaluate(q, p, jacobian=False)
-            return max(math.atan2(math.hypot(x, y), z) for x, y, z in st.p_cam) <= GAZE_POINTING_TOL
-    else:
-        axes = SolvedAxes(solver)
-        gref = _generic_reference_solver(axes)
-        start = "the middle of the limits"
-
-        def reference(p: Array) -> Array:
-            return gref(p, axes.home)[0]
-
-        def fixated(q: Array, p: Array) -> bool:
-            return bool(np.max(axes.pointing_errors(q, p)) <= GAZE_POINTING_TOL)
-
     for i, p in enumerate(P):
         t0 = clock()
         solver.solve(p)
         t1 = clock()
-        q = reference(p)
+        answer = reference(p)
         times[i], ours[i] = clock() - t1, t1 - t0
-        ok[i] = fixated(q, p)
-    return times, ok, ours, start, _block_run(solver, P, reference, kin)
+        checks.append(check(p, answer))
+    return ours, times, checks
+
+
+def _reference_start(solver: GazeSolver, axes: SolvedAxes | None) -> Callable[[Array], Array]:
+    """Where the references start for target ``p``: on a head with the two-eye Python solver its
+    own start (``initial_guess``, timed with the reference), else the middle of the limits
+    (``axes``, needed then)."""
+    if _has_python_solver(solver):
+        return solver.initial_guess
+    assert axes is not None
+    home = axes.home
+    return lambda p: home
+
+
+def _reference_run(
+    solver: GazeSolver, P: Array, kin: Callable[[int], float], axes: SolvedAxes | None = None
+) -> tuple[Array, NDArray[np.bool_], Array, str, dict[str, float]]:
+    """scipy ``least_squares`` on every target of ``P``, each right after one ``solve`` of ours
+    (:func:`_after_ours`): the reference's time [s] and success, our time [s] on the same
+    targets, where the reference starts, and :func:`_block_run`'s numbers on the same targets.
+
+    On a head with the two-eye Python solver the reference starts from the solver's own start
+    (``initial_guess``) on the fixation residual with its free joints (:func:`_reference_solver`);
+    on others from the middle of the limits over the solver's unknowns
+    (:func:`_generic_reference_solver`; ``axes``: the solver's :class:`SolvedAxes`, made here
+    when None)."""
+    from cpc2urdf.tolerances import GAZE_POINTING_TOL
+    from cpc2urdf.validation.gaze.fixation import pointing_errors
+
+    if _has_python_solver(solver):
+        ref = _reference_solver(solver)
+        start = _reference_start(solver, None)
+        where = "the solver's own start (initial_guess)"
+
+        def fixated(p: Array, q: Array) -> bool:
+            return max(pointing_errors(solver.evaluate(q, p, jacobian=False))) <= GAZE_POINTING_TOL
+    else:
+        solved = axes if axes is not None else SolvedAxes(solver)
+        ref = _generic_reference_solver(solved)
+        start = _reference_start(solver, solved)
+        where = "the middle of the limits"
+
+        def fixated(p: Array, q: Array) -> bool:
+            return bool(np.max(solved.pointing_errors(q, p)) <= GAZE_POINTING_TOL)
+
+    def reference(p: Array) -> Array:
+        return ref(p, start(p))[0]
+
+    ours, times, checks = _after_ours(solver, P, reference, fixated)
+    return times, np.array(checks, dtype=bool), ours, where, _block_run(solver, P, reference, kin)
 
 
 def _block_run(
@@ -703,26 +722,26 @@ def _block_run(
 
 def _placo_run(solver: GazeSolver, axes: SolvedAxes, P: Array) -> dict[str, Any]:
     """placo's axis-align reference (:mod:`cpc2urdf.studies.placo_reference`) on every target
-    of ``P``, each right after one ``solve`` of ours, from the scipy reference's start: its
-    median time and ratio to ours, the same for the time in placo's own calls alone (its QP
-    steps and kinematics, without the Python that drives them), its median steps, and its
-    accuracy (the answers' pointing errors by Pinocchio on the solver's model, not by placo);
-    or ``{"placo": reason}`` when it cannot run."""
+    of ``P``, each right after one ``solve`` of ours (:func:`_after_ours`), from the scipy
+    reference's start: its median time and ratio to ours, the same for the time in placo's own
+    calls alone (its QP steps and kinematics, without the Python that drives them), its median
+    steps, and its accuracy (the answers' pointing errors by Pinocchio on the solver's model,
+    not by placo); or ``{"placo": reason}`` when it cannot run."""
     ref = placo_reference(solver)
     if isinstance(ref, str):
         return {"placo": ref}
-    python_start = _has_python_solver(solver)
-    n = P.shape[0]
-    times, core, ours, steps, errors = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    clock = time.perf_counter
-    for i, p in enumerate(P):
-        t0 = clock()
-        solver.solve(p)
-        t1 = clock()
-        q0 = solver.initial_guess(p) if python_start else axes.home
-        q, k = ref.solve(p, q0)
-        times[i], core[i], ours[i], steps[i] = clock() - t1, ref.core_seconds, t1 - t0, k
-        errors[i] = np.max(axes.pointing_errors(q, p))
+    start = _reference_start(solver, axes)
+
+    def reference(p: Array) -> tuple[Array, int, float]:
+        q, k = ref.solve(p, start(p))
+        return q, k, ref.core_seconds
+
+    def check(p: Array, answer: tuple[Array, int, float]) -> tuple[float, int, float]:
+        q, k, core = answer
+        return float(np.max(axes.pointing_errors(q, p))), k, core
+
+    ours, times, checks = _after_ours(solver, P, reference, check)
+    errors, steps, core = (np.array(x, dtype=float) for x in zip(*checks, strict=True))
     return {
         "placo": "ran",
         "placo_median_us": float(np.median(times) * 1e6),
@@ -888,7 +907,7 @@ def run_head(
     statuses = solve_batch(solver, P).status
     utimes, uok, _, _, _ = _solve_times(solver, U)
     m_ref = min(n, reference)
-    rtimes, rok, otimes, reference_start, blocks = _reference_run(solver, P[:m_ref], kin)
+    rtimes, rok, otimes, reference_start, blocks = _reference_run(solver, P[:m_ref], kin, axes)
     placo = _placo_run(solver, axes, P[:m_ref])
     rate, path = _batch_throughput(solver, np.concatenate([P, U]))
     # every head shape tracks (one camera and rigid pairs through the chain's FK); centres for the tracked target: a pool of TRACK_POOL reachable targets at least
