@@ -2094,7 +2094,8 @@ def solve_flat_many(F, I, T, qin, mode, OUT):  # type: ignore[no-untyped-def]
     from Python threads. (numba's ``prange`` kernel took ~105 s of a 120 s cold compile, paid
     by every fresh clone; threads cost nothing to compile.)"""
     head = _unpack(F, I)  # once per batch
-    ws = _workspace(*_sizes(I))
+    K, C, S, m, G, n_top = _sizes(I)
+    ws = _workspace(K, C, S, m, G, n_top)
     plain = _without_version(head[0], ws[46])
     for i in range(T.shape[0]):
         _solve_into(head, plain, I, ws, T[i], qin, mode, OUT[i])
