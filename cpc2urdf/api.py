@@ -62,6 +62,7 @@ from cpc2urdf.validation.gaze import (
 from cpc2urdf.validation.gaze.chain import Coupling
 from cpc2urdf.validation.gaze.reach import Region, make_grid
 from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
+from cpc2urdf.validation.pinocchio_robot import gravity_loads
 from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
 from cpc2urdf.validation.view.region import view_cameras
 
@@ -158,7 +159,8 @@ def identify(
         ms = measurements
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
-    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent)
+    loads = gravity_loads(ms) if method == "map" else None
+    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads)
     return attach_urdf_source(model, ms.spec)
 
 

@@ -17,6 +17,7 @@ STUDIES: dict[str, tuple[str, str]] = {
     "images": ("cpc2urdf.studies.images", "image pipeline: centre, pose and identification errors from rendered images"),
     "boards": ("cpc2urdf.studies.boards", "standard boards: poses vs pixel noise, calibrateCamera/stereoCalibrate, both stages"),
     "free-configs": ("cpc2urdf.studies.free_configs", "refined held-out error: random configurations vs the one-joint protocol"),
+    "real-data": ("cpc2urdf.studies.real_data", "calibration held out on three real robots (TIAGo, TALOS, UR10) vs their URDFs and FIGAROH"),
 }
 
 

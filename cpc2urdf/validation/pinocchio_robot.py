@@ -26,19 +26,23 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import InputFileError, SpecError, UnknownNameError
 from cpc2urdf.fileio import read_text_file
+from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.native_output import captured_output
 from cpc2urdf.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf import urdf_from_model
 from cpc2urdf.urdf_input import validate_urdf
+from cpc2urdf.urdf_robot import UrdfRobot
 
 PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")  # Pinocchio joint model short names
 REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
@@ -301,6 +305,41 @@ class PinocchioRobot:
         if frame_type is None:
             return int(self.model.getFrameId(name))
         return int(self.model.getFrameId(name, frame_type))
+
+
+    def gravity_torques(self, joints: Sequence[str], Q: ArrayLike) -> Array:
+        """What each joint carries at rest under gravity (``-z`` of the URDF's root, 9.81 m/s^2),
+        from the URDF's inertials: torques [N m] of revolute joints, forces [N] of prismatic ones.
+
+        Args:
+            joints: URDF joint names, one per column of ``Q``.
+            Q: Readings of those joints, shape (N, len(joints)); every other joint at 0.
+
+        Returns:
+            Shape (N, len(joints)).
+        """
+        cols = [self.joint_index(j) for j in joints]
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        data = self.model.createData()
+        q = pin.neutral(self.model)
+        out = np.empty(Q.shape)
+        for i, row in enumerate(Q):
+            q[cols] = row
+            out[i] = pin.computeGeneralizedGravity(self.model, data, q)[cols]
+        return out
+
+
+def gravity_loads(ms: MeasurementSet, q: ArrayLike | None = None) -> Array | None:
+    """Each joint's gravity load (:meth:`PinocchioRobot.gravity_torques`) at readings ``q``
+    (N, n) of a URDF robot's measurement set (default: its records), in its joint order; None
+    when the set's robot is not a URDF or its URDF carries no mass on the measured paths."""
+    robot = ms.spec
+    if not isinstance(robot, UrdfRobot) or robot.tree is None or robot.names is None:
+        return None
+    pr = PinocchioRobot.from_urdf(robot.tree.source, continuous_as_revolute=True)
+    names = [robot.names.urdf_joint(j) for j in ms.structure.joint_names]
+    loads = pr.gravity_torques(names, ms.q if q is None else q)
+    return loads if np.abs(loads).max() > 0 else None
 
 
 def revolute_from_continuous(urdf: str) -> tuple[str, tuple[str, ...]]:

@@ -143,8 +143,17 @@ def refined_robust(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
     return identify_refined(ms, nominal, robust=True)
 
 
+def map_about_nominal(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
+    """Maximum a posteriori about the nominal model, level chosen by cross-validation
+    (:func:`map_identify.identify_map`; joint compliance needs the loads :func:`identify` passes)."""
+    from cpc2urdf.identification.kinematics.map_identify import identify_map
+
+    return identify_map(ms, nominal)
+
+
 METHODS: dict[str, Method] = {
     "closed-form": closed_form,
+    "map": map_about_nominal,
     "refined": refined,
     "refined-robust": refined_robust,
 }
@@ -192,6 +201,7 @@ def identify(
     nominal: CPCModel | None = None,
     *,
     accept_inconsistent: bool = False,
+    loads: np.ndarray | None = None,
 ) -> CPCModel:
     """Check the data suffice, run ``METHODS[method]``, test the fit against the data's noise
     (:mod:`consistency`) and attach the ``residuals`` section.
@@ -205,6 +215,8 @@ def identify(
             model of the robot ``ms`` was read with.
         accept_inconsistent: Keep the model of inconsistent data, with the gate's diagnosis in
             its ``notes`` and its provenance (``details["consistency"]``), instead of refusing.
+        loads: For ``map``: each joint's gravity load at each record, shape (N, n) [N m] / [N]
+            (adds the joint-compliance level).
 
     Raises:
         Cpc2UrdfError: Unknown method name.
@@ -226,6 +238,12 @@ def identify(
         raise Cpc2UrdfError(f"unknown identification method {method!r}; known: {', '.join(METHODS)}")
     if nominal is None and ms.spec is not None and ms.spec.nominal is not None:
         nominal = ms.spec.nominal_model()
+    if method == "map":
+        from cpc2urdf.identification.kinematics.map_identify import identify_map
+
+        model = identify_map(ms, nominal, loads=loads)
+        return model if ms.has_points else model.with_params(
+            metadata=model.metadata.replace(residuals=residuals(model, ms)))
     if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)
         from cpc2urdf.identification.kinematics.point_identify import identify_points
 
