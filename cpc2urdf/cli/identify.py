@@ -26,6 +26,9 @@ if TYPE_CHECKING:
     from cpc2urdf.measurements import MeasurementSet
 
 
+NOT_BETTER_EXIT = 3  # --method map: no calibration predicts better than the URDF as it is (model still written)
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
     from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
@@ -43,16 +46,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("measurements", help="measurement file: cpc2urdf/measurements@1 (poses) or @2 (markers), "
                    "or a tracker CSV export (.csv: config,marker,x,y,z[,joints...])")
     p.add_argument("-o", "--output", required=True, help="model file to write (atomically)")
-    p.add_argument("--method", choices=sorted(METHODS), default=DEFAULT_METHOD,
-                   help="identification method (default refined: closed form + maximum-likelihood "
-                   "refinement with covariance; closed-form: Shih et al. sec. 4.2 only)")
+    p.add_argument("--method", choices=sorted(METHODS), default=None,
+                   help=f"identification method (default {DEFAULT_METHOD}: closed form + maximum-likelihood "
+                   "refinement with covariance; closed-form: Shih et al. sec. 4.2 only; map: maximum a posteriori "
+                   "about the URDF, the model chosen by cross-validation, the default for a FIGAROH CSV; exit "
+                   "code 3 when no calibration predicts better than the URDF as it is)")
     p.add_argument("--robot", help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
                    "(required for a .csv)")
     p.add_argument("--accept-inconsistent", action="store_true",
                    help="keep the model even when the data are inconsistent with it (a fit far from the file's "
                    "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
                    "notes and provenance")
-    csv = p.add_argument_group("tracker CSV export (measurements ending in .csv)")
+    csv = p.add_argument_group("tracker CSV export or FIGAROH CSV (measurements ending in .csv)")
+    csv.add_argument("--link", help="FIGAROH CSV (a row per posture: x1,y1,z1[,phix1,phiy1,phiz1] ... and the "
+                     "URDF's joints): the URDF link the measured points ride on")
     csv.add_argument("--marker", action="append", default=[], metavar="NAME=LINK",
                      help="the link (a spec frame or URDF link) marker NAME is fixed to (repeat for each marker)")
     csv.add_argument("--joints-csv", metavar="FILE", help="joint readings config,<joint>,... when the points file "
@@ -84,7 +91,7 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
     from cpc2urdf.api import load_measurements, load_robot
     from cpc2urdf.errors import ConfigurationError
 
-    csv_only = {"--marker": args.marker, "--joints-csv": args.joints_csv,
+    csv_only = {"--marker": args.marker, "--joints-csv": args.joints_csv, "--link": args.link,
                 "--units-length": args.units_length, "--units-angle": args.units_angle}
     if not str(args.measurements).lower().endswith(".csv"):
         given = [k for k, v in csv_only.items() if v]
@@ -94,6 +101,17 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
         return load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
     from cpc2urdf.marker_csv import load_marker_csv
 
+    if args.link:
+        from cpc2urdf.figaroh_csv import load_figaroh_csv
+        from cpc2urdf.urdf_robot import UrdfRobot
+
+        robot = load_robot(args.robot) if args.robot else None
+        if not isinstance(robot, UrdfRobot):
+            raise ConfigurationError(f"{args.measurements}: a FIGAROH CSV needs --robot ROBOT.urdf (the URDF it was "
+                                     "recorded against)")
+        if args.marker:
+            raise ConfigurationError("--marker applies to a tracker export; a FIGAROH CSV names its points x1, y1, z1 ...")
+        return load_figaroh_csv(args.measurements, robot, args.link, robot_ref=args.robot)
     if not args.robot:
         raise ConfigurationError(f"{args.measurements}: a tracker CSV export needs --robot (the robot the markers are on)")
     if not args.marker:
@@ -109,10 +127,12 @@ def run(args: argparse.Namespace) -> int:
 
     from cpc2urdf.api import identify, save_model
     from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD
     from cpc2urdf.model_metadata import Provenance
 
     check_output_path(args.output)  # a bad -o is refused before the identification, not after it
     ms = _read(args)
+    args.method = args.method or ("map" if args.link else DEFAULT_METHOD)
     start = time.perf_counter()
     model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent)
     elapsed = time.perf_counter() - start
@@ -135,4 +155,10 @@ def run(args: argparse.Namespace) -> int:
     if consistency.get("accepted"):
         print(f"warning: the data are INCONSISTENT with the model; kept because of --accept-inconsistent: "
               f"{consistency['diagnosis']['cause']} (stored in the model's notes)")
+    if "cross_validation_rms_m" in prov.details:
+        scores = prov.details["cross_validation_rms_m"]
+        print("  left-out RMS by level: " + ", ".join(f"{lv} {v * 1e3:.2f} mm" for lv, v in scores.items())
+              + f"; chosen: {prov.details['chosen_level']}")
+        if not prov.details["beats_urdf"]:
+            return NOT_BETTER_EXIT
     return 0

@@ -1,0 +1,112 @@
+"""FIGAROH's calibration CSV (one row per posture) -> a :class:`~cpc2urdf.measurements.MeasurementSet`.
+
+FIGAROH (and its example data) writes one row per static posture: measured points
+``x1,y1,z1, …, xK,yK,zK`` [m] in the measuring frame, or 6-D poses ``x1,y1,z1,phix1,phiy1,phiz1``
+(orientation as URDF roll-pitch-yaw, ``R = Rz(phiz) Ry(phiy) Rx(phix)``), then one column per
+joint named as in the URDF [rad] / [m]. A time column ``t`` is ignored; any other column is
+refused, naming it.
+
+Points become markers ``m1 … mK`` on the measured link with unknown positions; a marker whose
+column repeats another's in every row (a tracker that filled a lost marker with its neighbour) is
+dropped and named in the set's ``notes``. A 6-D pose is the measured pose of the link's frame up
+to a fixed unknown transform (a tool or camera on it): identification fits that transform.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from cpc2urdf.errors import InputFileError
+from cpc2urdf.identification.kinematics.prior_fit import UNKNOWN_MOUNTS
+from cpc2urdf.measurements import Marker, MeasurementSet
+from cpc2urdf.transforms import homogeneous, matrix_from_rpy
+from cpc2urdf.urdf_robot import UrdfRobot
+
+IGNORED_COLUMNS = ("t",)
+_POINT = re.compile(r"^(x|y|z|phix|phiy|phiz)(\d+)$")
+
+
+def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, *,
+                     robot_ref: str | None = None) -> MeasurementSet:
+    """Read a FIGAROH calibration CSV of ``robot`` (a URDF robot) whose points ride on ``link``.
+
+    Raises:
+        InputFileError: Unreadable file, no rows, a column that is neither a point coordinate, a
+            joint of the URDF nor ``t``, an incomplete point (``x2`` without ``z2``), a cell that
+            is not a number (file, row, column).
+    """
+    p = Path(path)
+    try:
+        rows = list(csv.reader(p.read_text(encoding="utf-8-sig").splitlines()))
+    except OSError as e:
+        raise InputFileError(p, f"cannot read ({e.strerror})") from e
+    if len(rows) < 2:
+        raise InputFileError(p, "expected a header row and at least one row of numbers")
+    header = [c.strip() for c in rows[0]]
+    assert robot.tree is not None and robot.names is not None
+    sub = robot.restricted([link])
+    assert sub.names is not None
+    cpc_of = sub.names.joints
+    points: dict[int, dict[str, int]] = {}
+    joints: dict[str, int] = {}
+    for i, c in enumerate(header):
+        m = _POINT.match(c)
+        if m:
+            points.setdefault(int(m.group(2)), {})[m.group(1)] = i
+        elif c in robot.tree.joints:
+            if cpc_of.get(c) in sub.structure.joint_names:
+                joints[cpc_of[c]] = i
+        elif c not in IGNORED_COLUMNS:
+            raise InputFileError(p, f"column {c!r} is neither a point coordinate (x1, y1, z1[, phix1, phiy1, "
+                                 f"phiz1] ...) nor a joint of {robot.tree.source}")
+    missing = [j for j in sub.structure.joint_names if j not in joints]
+    if missing:
+        raise InputFileError(p, f"no column for joint {sub.names.urdf_joint(missing[0])!r} on the path to {link!r}")
+    data = np.full((len(rows) - 1, len(header)), np.nan)
+    for r, row in enumerate(rows[1:]):
+        for i, v in enumerate(row[:len(header)]):
+            try:
+                data[r, i] = float(v)
+            except ValueError:
+                raise InputFileError(p, f"row {r + 2}, column {header[i]!r}: {v!r} is not a number") from None
+    q = data[:, [joints[j] for j in sub.structure.joint_names]]
+    frame = sub.names.links[link]
+    poses: dict[str, np.ndarray] = {}
+    markers: dict[str, Marker] = {}
+    marker_points: dict[str, np.ndarray] = {}
+    notes: list[str] = []
+    for k in sorted(points):
+        cols = points[k]
+        if set(cols) >= {"phix", "phiy", "phiz", "x", "y", "z"}:
+            T = np.stack([homogeneous(matrix_from_rpy(data[r, [cols["phix"], cols["phiy"], cols["phiz"]]]),
+                                      data[r, [cols["x"], cols["y"], cols["z"]]]) for r in range(len(data))])
+            if poses:
+                raise InputFileError(p, f"more than one 6-D pose per row (point {k}): one measured frame is read")
+            poses[frame] = T
+        elif set(cols) == {"x", "y", "z"}:
+            Y = data[:, [cols["x"], cols["y"], cols["z"]]]
+            twin = next((n for n, other in marker_points.items() if np.array_equal(other, Y)), None)
+            if twin is not None:
+                notes.append(f"marker {k} repeats {twin} in every row: dropped")
+                continue
+            name = f"m{k}"
+            markers[name] = Marker(name, frame)
+            marker_points[name] = Y
+        else:
+            raise InputFileError(p, f"point {k}: columns {sorted(cols)}; expected x{k}, y{k}, z{k} "
+                                 f"(and phix{k}, phiy{k}, phiz{k} for a 6-D pose)")
+    metadata: dict[str, object] = {UNKNOWN_MOUNTS: [frame]} if poses else {}
+    if notes:
+        metadata["notes"] = notes
+    ms = MeasurementSet.from_arrays(sub.structure, q, poses, robot=robot_ref, source=str(p), markers=markers,
+                                    marker_points=marker_points, metadata=metadata)
+    ms.spec = sub
+    return ms
+
+
+__all__ = ["load_figaroh_csv"]
