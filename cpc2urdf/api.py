@@ -136,6 +136,7 @@ def identify(
     *,
     robot: RobotRef | None = None,
     accept_inconsistent: bool = False,
+    level: str | None = None,
 ) -> CPCModel:
     """Identify a robot's CPC model from stage-1 measurements (``cpc2urdf identify``).
 
@@ -148,6 +149,8 @@ def identify(
         robot: With a file path: use this robot instead of the file's ``"robot"``.
         accept_inconsistent: Keep a model whose data fail the consistency gate (the diagnosis is
             stored in its notes and provenance) instead of raising.
+        level: With ``method="map"``: fit this level alone (``frames``, ``offsets``, ``geometry``,
+            ``compliance``) instead of choosing one by cross-validation.
 
     Returns:
         The identified model; ``model.metadata`` (typed sections) holds ``provenance``, ``residuals``,
@@ -159,8 +162,8 @@ def identify(
         ms = measurements
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
-    loads = gravity_loads(ms) if method == "map" else None
-    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads)
+    loads = gravity_loads(ms) if method == "map" and level in (None, "compliance") else None
+    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads, level=level)
     return attach_urdf_source(model, ms.spec)
 
 

@@ -22,8 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.identification.kinematics.prior_fit import UNKNOWN_MOUNTS
-from cpc2urdf.measurements import Marker, MeasurementSet
+from cpc2urdf.measurements import UNKNOWN_MOUNTS, Marker, MeasurementSet
 from cpc2urdf.transforms import homogeneous, matrix_from_rpy
 from cpc2urdf.urdf_robot import UrdfRobot
 

@@ -77,6 +77,11 @@ _RECORD_KEYS_2 = _RECORD_KEYS | {"markers"}
 _MARKER_KEYS = {"link", "position"}
 
 
+# ``MeasurementSet.metadata`` key: measured frames whose mount on their link nobody measured (a tool
+# or camera on the link): identification fits it freely instead of keeping it near the URDF's.
+UNKNOWN_MOUNTS = "unknown_mounts"
+
+
 @dataclass(frozen=True)
 class Marker:
     """A marker (a tracker's reflector, a mocap ball, a probed point) fixed to a frame of the robot.
@@ -652,6 +657,7 @@ __all__ = [
     "MEASUREMENTS_FORMAT",
     "MEASUREMENTS_FORMATS",
     "MEASUREMENTS_FORMAT_2",
+    "UNKNOWN_MOUNTS",
     "Marker",
     "MeasurementSet",
     "load_measurements",

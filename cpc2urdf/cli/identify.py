@@ -53,6 +53,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    "code 3 when no calibration predicts better than the URDF as it is)")
     p.add_argument("--robot", help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
                    "(required for a .csv)")
+    p.add_argument("--level", choices=("frames", "offsets", "geometry", "compliance"),
+                   help="--method map: fit this level alone instead of choosing one by cross-validation")
+    p.add_argument("--noise", metavar="MM[,DEG]", help="the measurements' noise, one standard deviation per "
+                   "coordinate: position in mm (and orientation in deg for frame poses); default: the file's "
+                   "noise section, else estimated from the data (map) or 0.5 mm / 0.5 deg with the a-posteriori "
+                   "scale (refined)")
     p.add_argument("--accept-inconsistent", action="store_true",
                    help="keep the model even when the data are inconsistent with it (a fit far from the file's "
                    "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
@@ -69,6 +75,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     csv.add_argument("--units-angle", choices=sorted(ANGLE_UNITS), help="angle unit of the CSV if its "
                      "'# units:' header does not say (default rad)")
     p.set_defaults(run=run)
+
+
+def _noise(text: str) -> dict[str, float | str]:
+    """``--noise MM[,DEG]`` as a measurement set's ``noise`` section (SI)."""
+    import math
+
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.kinematics.problem import DEFAULT_SIGMA_R
+
+    parts = text.split(",")
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(parts) > 2 or not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise ConfigurationError(f"--noise {text!r}: expected MM or MM,DEG (positive numbers: position noise "
+                                 "in mm, orientation noise in deg)")
+    sigma_r = math.radians(values[1]) if len(values) == 2 else DEFAULT_SIGMA_R
+    return {"model": "stated", "sigma_t_m": values[0] * 1e-3, "sigma_r_rad": sigma_r}
 
 
 def _markers(items: list[str]) -> dict[str, str]:
@@ -131,10 +156,17 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.model_metadata import Provenance
 
     check_output_path(args.output)  # a bad -o is refused before the identification, not after it
+    noise = _noise(args.noise) if args.noise else None
     ms = _read(args)
+    if noise is not None:
+        ms.metadata["noise"] = noise
     args.method = args.method or ("map" if args.link else DEFAULT_METHOD)
     start = time.perf_counter()
-    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent)
+    if args.level and args.method != "map":
+        from cpc2urdf.errors import ConfigurationError
+
+        raise ConfigurationError(f"--level applies to --method map, not {args.method}")
+    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level)
     elapsed = time.perf_counter() - start
     prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
     meta = model.metadata.replace(provenance=prov)

@@ -202,6 +202,7 @@ def identify(
     *,
     accept_inconsistent: bool = False,
     loads: np.ndarray | None = None,
+    level: str | None = None,
 ) -> CPCModel:
     """Check the data suffice, run ``METHODS[method]``, test the fit against the data's noise
     (:mod:`consistency`) and attach the ``residuals`` section.
@@ -217,6 +218,7 @@ def identify(
             its ``notes`` and its provenance (``details["consistency"]``), instead of refusing.
         loads: For ``map``: each joint's gravity load at each record, shape (N, n) [N m] / [N]
             (adds the joint-compliance level).
+        level: For ``map``: fit this level alone (default: chosen by cross-validation).
 
     Raises:
         Cpc2UrdfError: Unknown method name.
@@ -240,8 +242,11 @@ def identify(
         nominal = ms.spec.nominal_model()
     if method == "map":
         from cpc2urdf.identification.kinematics.map_identify import identify_map
+        from cpc2urdf.identification.kinematics.prior_fit import Noise as StatedNoise
 
-        model = identify_map(ms, nominal, loads=loads)
+        st, sr, known = noise_from_metadata(ms.metadata)
+        model = identify_map(ms, nominal, loads=loads, noise=StatedNoise(st, sr) if known else None,
+                             accept_inconsistent=accept_inconsistent, level=level)
         return model if ms.has_points else model.with_params(
             metadata=model.metadata.replace(residuals=residuals(model, ms)))
     if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)

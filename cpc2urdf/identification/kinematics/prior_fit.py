@@ -31,15 +31,13 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.measurements import UNKNOWN_MOUNTS, MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams
 from cpc2urdf.registration import transforms_from_point_pairs
 from cpc2urdf.transforms import Array, homogeneous, inverse, skew
 
 LEVELS = ("frames", "offsets", "geometry", "compliance")
 CV_FOLDS = 5  # [-]: folds of :func:`cross_validate`
-# MeasurementSet.metadata key: the measured frames whose mount on their link is unknown (no prior).
-UNKNOWN_MOUNTS = "unknown_mounts"
 # A richer level must predict left-out records this much better (a fraction of the RMS) to be chosen.
 SELECTION_MARGIN = 0.05  # [-]
 NOISE_ITERATIONS = 20  # [-]: at most this many refits while the noise estimate settles (1 %)
@@ -93,6 +91,10 @@ class MapFit:
         names: One label per free parameter.
         rms_m: RMS distance of the measured points (or frame origins) to the fit [m].
         dof: Effective number of parameters the data determined (trace of the hat matrix).
+        loo_sq_m2: Per record, the squared distances of its points to the fit made without it,
+            summed [m^2], shape (N,).
+        loo_points: Per record, how many points (markers, frame origins) it measured, shape (N,).
+        residual_noise: The noise the residuals show (equal to ``noise`` when it was estimated).
         data_share: Joint -> fraction of its perturbation's information that comes from the data
             (1: the data alone, 0: the prior alone), mean over its free components.
     """
@@ -107,9 +109,17 @@ class MapFit:
     names: tuple[str, ...]
     rms_m: float
     dof: float
-    loo_rms_m: float
+    loo_sq_m2: Array
+    loo_points: Array
+    residual_noise: Noise
     data_share: dict[str, float] = field(default_factory=dict)
     compliance: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def loo_rms_m(self) -> float:
+        """RMS distance of the measured points to fits made without their record [m]: the error
+        this fit predicts for new postures (leave-one-record-out cross-validation)."""
+        return math.sqrt(float(self.loo_sq_m2.sum()) / max(float(self.loo_points.sum()), 1.0))
 
     def deflected(self, q: Array, loads: Array | None) -> Array:
         """Readings ``q`` (N, n) deflected by ``loads`` (N, n) through the fitted compliances."""
@@ -198,6 +208,7 @@ class _Problem:
                  tol: Tolerances, noise: Noise, loads: Array | None = None) -> None:
         self.nominal, self.ms, self.level, self.tol, self.noise = nominal, ms, level, tol, noise
         self.loads = loads
+        self._cache: tuple[bytes, tuple[CPCModel, Array, Array, Array]] | None = None
         s = nominal.structure
         self.joints = tuple(joints)
         self.pose_frames = [f for f in ms.frames if ms.has_pose(f).any()]
@@ -231,7 +242,8 @@ class _Problem:
         self.compliance: dict[str, int] = {}
         if level == "compliance":
             if loads is None:
-                raise ValueError("the compliance level needs the joints' loads")
+                raise DegenerateDataError(f"{ms.source}: the compliance level needs the joints' gravity loads "
+                                          "(the URDF has no inertials on the measured paths)")
             for j in self.joints:
                 self.compliance[j] = len(names)
                 names.append(f"{j}.compliance")
@@ -303,12 +315,20 @@ class _Problem:
         Rw = Rotation.from_rotvec(xi[3:]).as_matrix()
         self._local(J, first, A, Rw, _right_jacobian(xi[3:]), y, comps, rot)
 
+    def _kinematics(self, x: Array) -> tuple[CPCModel, Array, Array, Array]:
+        """The model at ``x``, the deflected readings and every axis and link frame (the last one
+        kept: the optimiser asks for the residuals and then the Jacobian at the same point)."""
+        key = x.tobytes()
+        if self._cache is None or self._cache[0] != key:
+            model = self.model(x)
+            q = self.q(x)
+            self._cache = (key, (model, q, *model.link_poses(q)))
+        return self._cache[1]
+
     def evaluate(self, x: Array, jacobian: bool = True) -> tuple[Array, Array | None]:
         """Weighted residuals (measurements, then prior) and their Jacobian."""
-        model = self.model(x)
+        model, q, axis, link = self._kinematics(x)
         ms, n = self.ms, len(x)
-        q = self.q(x)
-        axis, link = model.link_poses(q)
         W = model.T_world_base()
         res: list[Array] = []
         jac: list[Array] = []
@@ -488,38 +508,23 @@ def fit_map(nominal: CPCModel, ms: MeasurementSet, level: str = "geometry", join
     return _result(problem, x)
 
 
-def _hat_traces(problem: _Problem, J: Array) -> tuple[Array, Array]:
-    """Posterior covariance and the hat matrix's diagonal over the measurement rows."""
-    info = J.T @ J
-    cov = np.linalg.pinv(info)
-    n_meas = sum(problem.rows_of_kind())
-    Jm = J[:n_meas]
-    h = np.einsum("ij,jk,ik->i", Jm, cov, Jm)
-    return cov, h
+def _hat_traces(problem: _Problem, J: Array) -> tuple[Array, float, float]:
+    """Posterior covariance, and the hat matrix's trace over the position and the rotation rows
+    (the parameters each kind of measurement used up)."""
+    cov = np.linalg.pinv(J.T @ J)
+    _, point = problem.row_records()
+    Jm = J[:len(point)]
+    Jp, Jr = Jm[point], Jm[~point]
+    return cov, float(np.sum(cov * (Jp.T @ Jp))), float(np.sum(cov * (Jr.T @ Jr)))
 
 
 def _estimate_noise(problem: _Problem, x: Array) -> Noise:
     r, J = problem.evaluate(x)
     assert J is not None
-    _, h = _hat_traces(problem, J)
-    n_pos, n_rot = problem.rows_of_kind()
-    rp, rr = r[:n_pos] * problem.noise.position_m, r[n_pos:n_pos + n_rot] * problem.noise.rotation_rad
-    if problem.pose_frames:  # rows interleave per frame: position block, then rotation block
-        pos_rows, rot_rows = [], []
-        k = 3 * sum(int(problem.ms.has_marker(m).sum()) for m in problem.markers)
-        pos_rows += list(range(k))
-        for f in problem.pose_frames:
-            c = 3 * int(problem.ms.has_pose(f).sum())
-            pos_rows += list(range(k, k + c))
-            rot_rows += list(range(k + c, k + 2 * c))
-            k += 2 * c
-        unw = r.copy()
-        unw[pos_rows] *= problem.noise.position_m
-        unw[rot_rows] *= problem.noise.rotation_rad
-        rp, rr = unw[pos_rows], unw[rot_rows]
-        hp, hr = h[pos_rows].sum(), h[rot_rows].sum()
-    else:
-        hp, hr = h.sum(), 0.0
+    _, hp, hr = _hat_traces(problem, J)
+    _, point = problem.row_records()
+    rm = r[:len(point)]
+    rp, rr = rm[point] * problem.noise.position_m, rm[~point] * problem.noise.rotation_rad
     sp = math.sqrt(float(rp @ rp) / max(len(rp) - hp, 1.0))
     sr = math.sqrt(float(rr @ rr) / max(len(rr) - hr, 1.0)) if len(rr) else problem.noise.rotation_rad
     return Noise(max(sp, NOISE_FLOOR), max(sr, NOISE_FLOOR))
@@ -528,7 +533,8 @@ def _estimate_noise(problem: _Problem, x: Array) -> Noise:
 def _result(problem: _Problem, x: Array) -> MapFit:
     r, J = problem.evaluate(x)
     assert J is not None
-    cov, h = _hat_traces(problem, J)
+    cov, hp, hr = _hat_traces(problem, J)
+    loo_sq, loo_count = _leave_one_out(problem, r, J, cov)
     model = problem.model(x)
     info_data = J[:sum(problem.rows_of_kind())]
     share: dict[str, float] = {}
@@ -551,28 +557,43 @@ def _result(problem: _Problem, x: Array) -> MapFit:
         names=problem.names,
         rms_m=float(np.sqrt(np.mean(np.concatenate(list(point_errors(
             model, problem.ms, {m: problem.marker_position(x, m) for m in problem.markers}, problem.q(x)).values())) ** 2))),
-        dof=float(h.sum()),
-        loo_rms_m=_leave_one_out(problem, r, J, cov),
+        dof=hp + hr,
+        loo_sq_m2=loo_sq,
+        loo_points=loo_count,
+        residual_noise=_estimate_noise(problem, x),
         data_share=share,
         compliance={j: float(x[i]) for j, i in problem.compliance.items()},
     )
 
 
-def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> float:
-    """RMS distance of each record's points to the fit made without that record [m]: for the
-    linearised problem exactly ``(I - H_ii)^-1 r_i`` with ``H_ii`` the record's block of the hat
-    matrix (the PRESS residuals of a record)."""
+def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[Array, Array]:
+    """Per record: the squared distances of its points to the fit made without it, summed [m^2],
+    and how many points it has. For the linearised problem exactly ``(I - H_ii)^-1 r_i``, with
+    ``H_ii`` the record's block of the hat matrix (the PRESS residuals of a record)."""
     rec, point = problem.row_records()
     scale = np.where(point, problem.noise.position_m, problem.noise.rotation_rad)
-    sq = 0.0
-    count = 0
-    for i in np.unique(rec):
-        rows = np.flatnonzero(rec == i)
-        Ji = J[rows]
-        e = np.linalg.solve(np.eye(len(rows)) - Ji @ cov @ Ji.T, r[rows]) * scale[rows]
-        sq += float(np.sum(e[point[rows]] ** 2))
-        count += int(point[rows].sum()) // 3
-    return math.sqrt(sq / max(count, 1))
+    n_rec = problem.ms.n_records
+    sq, count = np.zeros(n_rec), np.zeros(n_rec)
+    order = np.argsort(rec, kind="stable")
+    sizes = np.bincount(rec, minlength=n_rec)
+    k = int(sizes.max())
+    full = np.flatnonzero(sizes == k)  # records with every row: one batched solve
+    rows = order.reshape(-1, k) if np.all(sizes[sizes > 0] == k) else None
+    if rows is not None:
+        Jb = J[rows]
+        H = Jb @ cov @ np.transpose(Jb, (0, 2, 1))
+        e = np.linalg.solve(np.eye(k) - H, r[rows][..., None])[..., 0] * scale[rows]
+        pt = point[rows]
+        sq[full] = np.sum(np.where(pt, e, 0.0) ** 2, axis=1)
+        count[full] = pt.sum(axis=1) / 3
+        return sq, count
+    for i in np.flatnonzero(sizes):
+        ri = np.flatnonzero(rec == i)
+        Ji = J[ri]
+        e = np.linalg.solve(np.eye(len(ri)) - Ji @ cov @ Ji.T, r[ri]) * scale[ri]
+        sq[i] = float(np.sum(e[point[ri]] ** 2))
+        count[i] = point[ri].sum() / 3
+    return sq, count
 
 
 def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
@@ -593,6 +614,18 @@ def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
         T = model.fk(q[rows], [f])[f]
         out[f] = np.linalg.norm(T[:, :3, 3] - ms.poses[f][rows][:, :3, 3], axis=1)
     return out
+
+
+def record_errors(fit: MapFit, ms: MeasurementSet, loads: Array | None = None) -> tuple[Array, Array]:
+    """Per record of ``ms``: the squared distances of its points to ``fit``'s predictions, summed
+    [m^2], and how many points it has; shape (N,) each."""
+    q = fit.deflected(ms.q, loads)
+    sq, count = np.zeros(ms.n_records), np.zeros(ms.n_records)
+    for name, e in point_errors(fit.model, ms, fit.markers, q).items():
+        rows = ms.has_marker(name) if name in ms.marker_points else ms.has_pose(name)
+        sq[rows] += e**2
+        count[rows] += 1
+    return sq, count
 
 
 def folds(n: int, k: int = CV_FOLDS, seed: int = 0) -> list[Array]:
@@ -639,17 +672,19 @@ class Selection:
 
 def select_model(nominal: CPCModel, ms: MeasurementSet, joints: Sequence[str] | None = None,
                  tolerances: Tolerances | None = None, loads: Array | None = None,
-                 margin: float = SELECTION_MARGIN) -> Selection:
+                 margin: float = SELECTION_MARGIN, noise: Noise | None = None) -> Selection:
     """Fit every level and keep the one that predicts left-out records best.
 
     Each level is scored by its leave-one-record-out RMS (:attr:`MapFit.loo_rms_m`). The default is
     ``geometry``: its prior already keeps what the data barely see at the URDF's values. A level
     that departs from it (compliance added, or offsets alone) must lower that score by more than
     ``margin`` (a fraction; few records cannot tell small differences apart), and the URDF as it is
-    (``frames``) is kept whenever it scores no worse than the level chosen.
+    (``frames``) is kept whenever it scores no worse than the level chosen. A stated ``noise`` is
+    used as it is; without one the noise is estimated.
     """
     levels = [lv for lv in LEVELS if lv != "compliance" or loads is not None]
-    fits = {lv: fit_map(nominal, ms, lv, joints, tolerances, loads=loads) for lv in levels}
+    fits = {lv: fit_map(nominal, ms, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=loads)
+            for lv in levels}
     best = fits["geometry"]
     for lv in ("compliance", "offsets"):
         if lv in fits and fits[lv].loo_rms_m < (1.0 - margin) * best.loo_rms_m:
@@ -661,7 +696,6 @@ def select_model(nominal: CPCModel, ms: MeasurementSet, joints: Sequence[str] | 
 
 __all__ = [
     "LEVELS",
-    "UNKNOWN_MOUNTS",
     "MapFit",
     "Noise",
     "Tolerances",
@@ -671,6 +705,7 @@ __all__ = [
     "folds",
     "perturbation",
     "point_errors",
+    "record_errors",
     "select_model",
     "Selection",
 ]

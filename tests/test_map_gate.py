@@ -1,0 +1,54 @@
+"""The gate of ``identify --method map`` (:mod:`cpc2urdf.identification.kinematics.map_gate`) on the
+real robots' data: it passes them with the noise it estimates, names unmodelled error when the
+stated noise is 5x too small, and names exactly the records where gross outliers were planted."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpc2urdf.errors import InconsistentDataError
+from cpc2urdf.identification.kinematics.map_identify import identify_map
+from cpc2urdf.identification.kinematics.prior_fit import Noise
+from cpc2urdf.studies.real_data import SETS, load_set
+from cpc2urdf.validation.pinocchio_robot import gravity_loads
+
+NAMES = [s.name for s in SETS]
+PLANTED = (5, 12, 20)  # records given a gross error
+GROSS = 0.05  # [m]: a marker swapped, a wrong frame
+
+
+def _set(name: str):  # type: ignore[no-untyped-def]
+    _, ms = load_set(next(s for s in SETS if s.name == name))
+    return ms, ms.spec.nominal_model(), gravity_loads(ms)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_real_data_pass_and_a_noise_five_times_too_small_is_unmodelled_error(name: str) -> None:
+    ms, nominal, loads = _set(name)
+    model = identify_map(ms, nominal, loads=loads)
+    details = model.metadata.provenance.details
+    assert details["consistency"]["consistent"]
+    shown = details["noise_residuals"]
+    stated = Noise(shown["position_m"] / 5, shown["rotation_rad"] / 5)
+    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s residuals are (4|5)\.\dx"):
+        identify_map(ms, nominal, loads=loads, noise=stated)
+    kept = identify_map(ms, nominal, loads=loads, noise=stated, accept_inconsistent=True)
+    assert any("INCONSISTENT DATA" in n for n in kept.metadata.notes)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_planted_gross_outliers_are_named_exactly(name: str) -> None:
+    ms, nominal, loads = _set(name)
+    for i in PLANTED:
+        d = np.random.default_rng(i).normal(size=3)
+        d *= GROSS / np.linalg.norm(d)
+        for points in ms.marker_points.values():
+            points[i] += d
+        for poses in ms.poses.values():
+            poses[i, :3, 3] += d
+    with pytest.raises(InconsistentDataError) as e:
+        identify_map(ms, nominal, loads=loads)
+    assert str(e.value).endswith("the fit made without them: " + ", ".join(f"record {i}" for i in PLANTED))
+    kept = identify_map(ms, nominal, loads=loads, accept_inconsistent=True)  # fitted without them
+    assert kept.metadata.provenance.details["consistency"]["outlier_records"] == [f"record {i}" for i in PLANTED]
