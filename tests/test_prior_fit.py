@@ -90,14 +90,22 @@ def real_rows() -> dict[str, dict]:
     return {rs.name: run_set(rs) for rs in SETS}
 
 
-@pytest.mark.parametrize("name", ["TIAGo, marker 1", "TIAGo, markers 1-3", "TALOS"])
+@pytest.mark.parametrize("name", [s.name for s in SETS])
 def test_real_data_held_out_beat_the_urdf_and_figaroh(real_rows: dict[str, dict], name: str) -> None:
     """The data's 5-fold split: ``--method map`` at or below the URDF's and FIGAROH's held-out RMS
     (the data README's figures, 2 decimals), its left-out prediction within 0.8-1.25x."""
     r = real_rows[name]
-    assert round(r["map_mm"], 2) <= min(r["nominal_mm"], r["figaroh_mm"], round(r["frames_mm"], 2))
+    assert round(r["map_mm"], 2) <= min(r["nominal_mm"], r["figaroh_mm"])
     assert 0.8 <= r["predicted_mm"] / r["map_mm"] <= 1.25
     assert r["seconds"] < 10.0
+
+
+@pytest.mark.parametrize("name", ["TIAGo, marker 1", "TIAGo, markers 1-3", "TALOS"])
+def test_real_data_never_worse_than_our_own_urdf_fit(real_rows: dict[str, dict], name: str) -> None:
+    """Against the URDF as-is fitted here (measuring frame and markers by the same fit). UR10 is
+    the exception, docs/real-data.md: 4.11 mm against 4.07 mm (the README's URDF figure is 4.13)."""
+    r = real_rows[name]
+    assert r["map_mm"] <= r["frames_mm"]
 
 
 def test_real_data_talos_meets_its_aim(real_rows: dict[str, dict]) -> None:
@@ -111,9 +119,3 @@ def test_real_data_full_range_stays_near_the_urdf(real_rows: dict[str, dict], na
     r = real_rows[name]
     assert r["divergence_mm"]["p95"] <= r["figaroh_p95_mm"]
 
-
-def test_real_data_ur10_stays_near_the_urdf(real_rows: dict[str, dict]) -> None:
-    """UR10 (23 poses) is where the choice of level is a coin toss: held out within 7 % of the
-    URDF's own error (4.34 mm against 4.07 mm; FIGAROH 4.12 mm)."""
-    r = real_rows["UR10"]
-    assert r["map_mm"] <= 1.07 * r["frames_mm"]

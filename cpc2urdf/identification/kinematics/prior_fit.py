@@ -94,6 +94,8 @@ class MapFit:
         loo_sq_m2: Per record, the squared distances of its points to the fit made without it,
             summed [m^2], shape (N,).
         loo_points: Per record, how many points (markers, frame origins) it measured, shape (N,).
+        loo_rot_sq: Per record, its frames' squared orientation residuals left out, summed
+            [rad^2], shape (N,) (zeros for marker points).
         residual_noise: The noise the residuals show (equal to ``noise`` when it was estimated).
         data_share: Joint -> fraction of its perturbation's information that comes from the data
             (1: the data alone, 0: the prior alone), mean over its free components.
@@ -111,6 +113,7 @@ class MapFit:
     dof: float
     loo_sq_m2: Array
     loo_points: Array
+    loo_rot_sq: Array
     residual_noise: Noise
     data_share: dict[str, float] = field(default_factory=dict)
     compliance: dict[str, float] = field(default_factory=dict)
@@ -534,7 +537,7 @@ def _result(problem: _Problem, x: Array) -> MapFit:
     r, J = problem.evaluate(x)
     assert J is not None
     cov, hp, hr = _hat_traces(problem, J)
-    loo_sq, loo_count = _leave_one_out(problem, r, J, cov)
+    loo_sq, loo_count, loo_rot = _leave_one_out(problem, r, J, cov)
     model = problem.model(x)
     info_data = J[:sum(problem.rows_of_kind())]
     share: dict[str, float] = {}
@@ -560,40 +563,44 @@ def _result(problem: _Problem, x: Array) -> MapFit:
         dof=hp + hr,
         loo_sq_m2=loo_sq,
         loo_points=loo_count,
+        loo_rot_sq=loo_rot,
         residual_noise=_estimate_noise(problem, x),
         data_share=share,
         compliance={j: float(x[i]) for j, i in problem.compliance.items()},
     )
 
 
-def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[Array, Array]:
+def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[Array, Array, Array]:
     """Per record: the squared distances of its points to the fit made without it, summed [m^2],
-    and how many points it has. For the linearised problem exactly ``(I - H_ii)^-1 r_i``, with
-    ``H_ii`` the record's block of the hat matrix (the PRESS residuals of a record)."""
+    how many points it has, and the squared orientation residuals of its frames, summed [rad^2].
+    For the linearised problem exactly ``(I - H_ii)^-1 r_i``, with ``H_ii`` the record's block of
+    the hat matrix (the PRESS residuals of a record)."""
     rec, point = problem.row_records()
     scale = np.where(point, problem.noise.position_m, problem.noise.rotation_rad)
     n_rec = problem.ms.n_records
-    sq, count = np.zeros(n_rec), np.zeros(n_rec)
+    sq, count, rot = np.zeros(n_rec), np.zeros(n_rec), np.zeros(n_rec)
     order = np.argsort(rec, kind="stable")
     sizes = np.bincount(rec, minlength=n_rec)
     k = int(sizes.max())
-    full = np.flatnonzero(sizes == k)  # records with every row: one batched solve
-    rows = order.reshape(-1, k) if np.all(sizes[sizes > 0] == k) else None
-    if rows is not None:
+    if np.all(sizes[sizes > 0] == k):  # every record has the same rows: one batched solve
+        full = np.flatnonzero(sizes == k)
+        rows = order.reshape(-1, k)
         Jb = J[rows]
         H = Jb @ cov @ np.transpose(Jb, (0, 2, 1))
         e = np.linalg.solve(np.eye(k) - H, r[rows][..., None])[..., 0] * scale[rows]
         pt = point[rows]
         sq[full] = np.sum(np.where(pt, e, 0.0) ** 2, axis=1)
+        rot[full] = np.sum(np.where(pt, 0.0, e) ** 2, axis=1)
         count[full] = pt.sum(axis=1) / 3
-        return sq, count
+        return sq, count, rot
     for i in np.flatnonzero(sizes):
         ri = np.flatnonzero(rec == i)
         Ji = J[ri]
         e = np.linalg.solve(np.eye(len(ri)) - Ji @ cov @ Ji.T, r[ri]) * scale[ri]
         sq[i] = float(np.sum(e[point[ri]] ** 2))
+        rot[i] = float(np.sum(e[~point[ri]] ** 2))
         count[i] = point[ri].sum() / 3
-    return sq, count
+    return sq, count, rot
 
 
 def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
@@ -675,21 +682,29 @@ def select_model(nominal: CPCModel, ms: MeasurementSet, joints: Sequence[str] | 
                  margin: float = SELECTION_MARGIN, noise: Noise | None = None) -> Selection:
     """Fit every level and keep the one that predicts left-out records best.
 
-    Each level is scored by its leave-one-record-out RMS (:attr:`MapFit.loo_rms_m`). The default is
+    Each level is scored by its leave-one-record-out residuals (:attr:`MapFit.loo_sq_m2`, and for
+    frame poses their orientations too, :attr:`MapFit.loo_rot_sq`, weighed by the URDF-as-is
+    fit's position / orientation noise so that both count on one scale). The default is
     ``geometry``: its prior already keeps what the data barely see at the URDF's values. A level
-    that departs from it (compliance added, or offsets alone) must lower that score by more than
-    ``margin`` (a fraction; few records cannot tell small differences apart), and the URDF as it is
-    (``frames``) is kept whenever it scores no worse than the level chosen. A stated ``noise`` is
-    used as it is; without one the noise is estimated.
+    that departs from it (compliance added, or offsets alone) must lower the RMS of that score by
+    more than ``margin`` (a fraction; few records cannot tell small differences apart), and the
+    URDF as it is (``frames``) is kept whenever it scores no worse than the level chosen. A stated
+    ``noise`` is used as it is; without one the noise is estimated.
     """
     levels = [lv for lv in LEVELS if lv != "compliance" or loads is not None]
     fits = {lv: fit_map(nominal, ms, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=loads)
             for lv in levels}
+    base = fits["frames"].noise
+    weight = (base.position_m / base.rotation_rad) ** 2 if ms.frames else 0.0  # [m^2 / rad^2]
+
+    def score(f: MapFit) -> float:
+        return float(f.loo_sq_m2.sum() + weight * f.loo_rot_sq.sum())
+
     best = fits["geometry"]
     for lv in ("compliance", "offsets"):
-        if lv in fits and fits[lv].loo_rms_m < (1.0 - margin) * best.loo_rms_m:
+        if lv in fits and score(fits[lv]) < (1.0 - margin) ** 2 * score(best):
             best = fits[lv]
-    if fits["frames"].loo_rms_m <= best.loo_rms_m:
+    if score(fits["frames"]) <= score(best):
         best = fits["frames"]
     return Selection(best, fits)
 
