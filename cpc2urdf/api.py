@@ -48,7 +48,7 @@ from cpc2urdf.urdf_export import plan_export
 from cpc2urdf.urdf_origins import writeback_plan
 from cpc2urdf.urdf_report import CalibrationReport
 from cpc2urdf.urdf_report import calibration_report as _calibration_report
-from cpc2urdf.urdf_robot import attach_urdf_source, urdf_source
+from cpc2urdf.urdf_robot import UrdfRobot, attach_urdf_source, urdf_source
 from cpc2urdf.urdf_writeback import write_calibrated_urdf
 from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
 from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
@@ -137,6 +137,7 @@ def identify(
     robot: RobotRef | None = None,
     accept_inconsistent: bool = False,
     level: str | None = None,
+    joints: Sequence[str] | None = None,
 ) -> CPCModel:
     """Identify a robot's CPC model from stage-1 measurements (``cpc2urdf identify``).
 
@@ -151,6 +152,8 @@ def identify(
             stored in its notes and provenance) instead of raising.
         level: With ``method="map"``: fit this level alone (``frames``, ``offsets``, ``geometry``,
             ``compliance``) instead of choosing one by cross-validation.
+        joints: With ``method="map"``: the joints to calibrate (URDF names); every other joint
+            keeps the URDF's values (default: those the data move on the paths to the measured links).
 
     Returns:
         The identified model; ``model.metadata`` (typed sections) holds ``provenance``, ``residuals``,
@@ -163,8 +166,24 @@ def identify(
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
     loads = gravity_loads(ms) if method == "map" and level in (None, "compliance") else None
-    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads, level=level)
+    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads, level=level,
+                      joints=None if joints is None else _cpc_joints(ms, joints))
     return attach_urdf_source(model, ms.spec)
+
+
+def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
+    """The model's names of ``joints`` (a URDF robot's URDF names, or the model's own)."""
+    s = ms.structure
+    robot = ms.spec
+    urdf_names = robot.names.joints if isinstance(robot, UrdfRobot) and robot.names is not None else {}
+    out = []
+    for j in joints:
+        name = urdf_names.get(j, j)
+        if name not in s.joint_names:
+            known = [u for u, c in urdf_names.items() if c in s.joint_names] if urdf_names else list(s.joint_names)
+            raise UnknownNameError("joint", j, known)
+        out.append(name)
+    return out
 
 
 def solve_handeye(

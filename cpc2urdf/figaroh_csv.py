@@ -6,6 +6,10 @@ FIGAROH (and its example data) writes one row per static posture: measured point
 joint named as in the URDF [rad] / [m]. A time column ``t`` is ignored; any other column is
 refused, naming it.
 
+A reading up to :data:`LIMIT_TOLERANCE_M` / :data:`LIMIT_TOLERANCE_RAD` past a URDF limit is
+accepted and said in the set's ``notes``; a revolute reading a whole number of turns outside the
+limits is wrapped into them and said; further out is refused (wrong unit or column).
+
 Points become markers ``m1 … mK`` on the measured link with unknown positions; a marker whose
 column repeats another's in every row (a tracker that filled a lost marker with its neighbour) is
 dropped and named in the set's ``notes``. A 6-D pose is the measured pose of the link's frame up
@@ -15,6 +19,7 @@ to a fixed unknown transform (a tool or camera on it): identification fits that 
 from __future__ import annotations
 
 import csv
+import math
 import os
 import re
 from pathlib import Path
@@ -23,11 +28,43 @@ import numpy as np
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.measurements import UNKNOWN_MOUNTS, Marker, MeasurementSet
+from cpc2urdf.model import Joint
 from cpc2urdf.transforms import homogeneous, matrix_from_rpy
 from cpc2urdf.urdf_robot import UrdfRobot
 
 IGNORED_COLUMNS = ("t",)
+# A reading this far past a URDF limit is taken as it is (a limit set slightly inside the travel),
+# and said; further is refused as a wrong unit or column. A revolute reading 360 deg away from
+# the limits' range is wrapped into it, and said.
+LIMIT_TOLERANCE_M = 1e-3  # [m]
+LIMIT_TOLERANCE_RAD = math.radians(1.0)  # [rad]
 _POINT = re.compile(r"^(x|y|z|phix|phiy|phiz)(\d+)$")
+
+
+def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
+    """Readings ``v`` of ``joint`` with 360-deg wraps undone, and what was said about them."""
+    tol = LIMIT_TOLERANCE_M if joint.type == "prismatic" else LIMIT_TOLERANCE_RAD
+    lo, hi = joint.lower, joint.upper
+    out, notes = v.copy(), []
+    if joint.type == "revolute":
+        turns = np.where((v < lo - tol) | (v > hi + tol), np.round((np.clip(v, lo, hi) - v) / (2 * math.pi)), 0.0)
+        wrapped = v + 2 * math.pi * turns
+        ok = (wrapped >= lo - tol) & (wrapped <= hi + tol) & (turns != 0)
+        out[ok] = wrapped[ok]
+        if ok.any():
+            notes.append(f"{name}: {int(ok.sum())} reading(s) wrapped by a multiple of 360 deg into its limits")
+    bad = np.flatnonzero((out < lo - tol) | (out > hi + tol))
+    if len(bad):
+        i = int(bad[0])
+        raise InputFileError(path, f"row {i + 2}, column {name!r}: {v[i]:.6g} is outside the URDF limits "
+                             f"[{lo:.6g}, {hi:.6g}] by more than {tol:.3g} (wrong units or column?)")
+    past = np.maximum(out - hi, lo - out)
+    if (past > 0).any():
+        unit = "mm" if joint.type == "prismatic" else "deg"
+        size = past.max() * (1e3 if joint.type == "prismatic" else 180 / math.pi)
+        notes.append(f"{name}: {int((past > 0).sum())} reading(s) up to {size:.3g} {unit} past its URDF limits "
+                     f"(accepted: within {LIMIT_TOLERANCE_M * 1e3:g} mm / {math.degrees(LIMIT_TOLERANCE_RAD):g} deg)")
+    return out, notes
 
 
 def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, *,
@@ -74,11 +111,14 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
             except ValueError:
                 raise InputFileError(p, f"row {r + 2}, column {header[i]!r}: {v!r} is not a number") from None
     q = data[:, [joints[j] for j in sub.structure.joint_names]]
+    notes: list[str] = []
+    for k, j in enumerate(sub.structure.joints):
+        q[:, k], said = _within_limits(q[:, k], j, sub.names.urdf_joint(j.name), p)
+        notes += said
     frame = sub.names.links[link]
     poses: dict[str, np.ndarray] = {}
     markers: dict[str, Marker] = {}
     marker_points: dict[str, np.ndarray] = {}
-    notes: list[str] = []
     for k in sorted(points):
         cols = points[k]
         if set(cols) >= {"phix", "phiy", "phiz", "x", "y", "z"}:

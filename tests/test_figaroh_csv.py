@@ -24,7 +24,9 @@ UR10_CSV = DATA / "ur10" / "calibration.csv"
 def test_markers_are_read_and_a_repeated_marker_is_dropped() -> None:
     ms = load_figaroh_csv(TIAGO_CSV, load_urdf_robot(TIAGO), "wrist_ft_tool_link")
     assert sorted(ms.markers) == ["m1", "m2", "m3"]  # marker 4 repeats marker 3 in every row
-    assert ms.metadata["notes"] == ["marker 4 repeats m3 in every row: dropped"]
+    assert ms.metadata["notes"] == [
+        "torso_lift_joint: 1 reading(s) up to 0.184 mm past its URDF limits (accepted: within 1 mm / 1 deg)",
+        "marker 4 repeats m3 in every row: dropped"]
     first = TIAGO_CSV.read_text().splitlines()[1].split(",")
     assert np.allclose(ms.marker_points["m2"][0], [float(v) for v in first[3:6]])
     assert ms.structure.joint_names[0] == "torso_lift" and ms.q[0, 0] == float(first[12])
@@ -52,6 +54,26 @@ def test_bad_files_get_one_line(tmp_path: Path, header: str, row: str, says: str
     p.write_text(f"{header}\n{row}\n")
     with pytest.raises(InputFileError, match=says.replace("[", r"\[").replace("]", r"\]")):
         load_figaroh_csv(p, load_urdf_robot(TIAGO), "wrist_ft_tool_link")
+
+
+def _edited(tmp_path: Path, column: int, row: int, add: float) -> Path:
+    lines = TIAGO_CSV.read_text().splitlines()
+    cells = lines[row].split(",")
+    cells[column] = repr(float(cells[column]) + add)
+    lines[row] = ",".join(cells)
+    path = tmp_path / "edited.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_wrapped_readings_are_unwrapped_and_far_ones_refused(tmp_path: Path) -> None:
+    robot = load_urdf_robot(TIAGO)
+    clean = load_figaroh_csv(TIAGO_CSV, robot, "wrist_ft_tool_link")
+    wrapped = load_figaroh_csv(_edited(tmp_path, 13, 3, 2 * np.pi), robot, "wrist_ft_tool_link")  # arm_1_joint
+    assert np.allclose(wrapped.q, clean.q)
+    assert "arm_1_joint: 1 reading(s) wrapped by a multiple of 360 deg into its limits" in wrapped.metadata["notes"]
+    with pytest.raises(InputFileError, match=r"row 3, column 'torso_lift_joint': .* outside the URDF limits"):
+        load_figaroh_csv(_edited(tmp_path, 12, 2, 0.5), robot, "wrist_ft_tool_link")
 
 
 def test_identify_calibrates_about_the_urdf_and_writes_it_back(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

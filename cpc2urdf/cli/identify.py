@@ -53,6 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    "code 3 when no calibration predicts better than the URDF as it is)")
     p.add_argument("--robot", help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
                    "(required for a .csv)")
+    p.add_argument("--joints", metavar="J1,J2,...", help="--method map: the joints to calibrate (URDF names); "
+                   "every other joint keeps the URDF's values (default: those the data move on the paths to the "
+                   "measured links)")
     p.add_argument("--level", choices=("frames", "offsets", "geometry", "compliance"),
                    help="--method map: fit this level alone instead of choosing one by cross-validation")
     p.add_argument("--noise", metavar="MM[,DEG]", help="the measurements' noise, one standard deviation per "
@@ -162,11 +165,13 @@ def run(args: argparse.Namespace) -> int:
         ms.metadata["noise"] = noise
     args.method = args.method or ("map" if args.link else DEFAULT_METHOD)
     start = time.perf_counter()
-    if args.level and args.method != "map":
-        from cpc2urdf.errors import ConfigurationError
+    for option, value in (("--level", args.level), ("--joints", args.joints)):
+        if value and args.method != "map":
+            from cpc2urdf.errors import ConfigurationError
 
-        raise ConfigurationError(f"--level applies to --method map, not {args.method}")
-    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level)
+            raise ConfigurationError(f"{option} applies to --method map, not {args.method}")
+    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level, joints=joints)
     elapsed = time.perf_counter() - start
     prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
     meta = model.metadata.replace(provenance=prov)

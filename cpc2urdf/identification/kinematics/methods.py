@@ -203,6 +203,7 @@ def identify(
     accept_inconsistent: bool = False,
     loads: np.ndarray | None = None,
     level: str | None = None,
+    joints: list[str] | None = None,
 ) -> CPCModel:
     """Check the data suffice, run ``METHODS[method]``, test the fit against the data's noise
     (:mod:`consistency`) and attach the ``residuals`` section.
@@ -219,6 +220,7 @@ def identify(
         loads: For ``map``: each joint's gravity load at each record, shape (N, n) [N m] / [N]
             (adds the joint-compliance level).
         level: For ``map``: fit this level alone (default: chosen by cross-validation).
+        joints: For ``map``: the joints to calibrate (default: those the data move).
 
     Raises:
         Cpc2UrdfError: Unknown method name.
@@ -246,7 +248,7 @@ def identify(
 
         st, sr, known = noise_from_metadata(ms.metadata)
         model = identify_map(ms, nominal, loads=loads, noise=StatedNoise(st, sr) if known else None,
-                             accept_inconsistent=accept_inconsistent, level=level)
+                             accept_inconsistent=accept_inconsistent, level=level, joints=joints)
         return model if ms.has_points else model.with_params(
             metadata=model.metadata.replace(residuals=residuals(model, ms)))
     if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)
