@@ -52,3 +52,22 @@ def test_planted_gross_outliers_are_named_exactly(name: str) -> None:
     assert str(e.value).endswith("the fit made without them: " + ", ".join(f"record {i}" for i in PLANTED))
     kept = identify_map(ms, nominal, loads=loads, accept_inconsistent=True)  # fitted without them
     assert kept.metadata.provenance.details["consistency"]["outlier_records"] == [f"record {i}" for i in PLANTED]
+
+
+def test_joints_the_data_cannot_vouch_for_are_kept_at_the_urdf() -> None:
+    """With a prior as loose as maximum likelihood (0.1 m, 30 deg), TALOS's barely moved wrist
+    (``arm_left_5`` spans 0.05 rad, ``arm_left_6`` 0.28 rad) would take the predictions far from
+    the URDF's over their whole range: they are named and keep the URDF's values exactly."""
+    import math
+
+    from cpc2urdf.identification.kinematics.prior_fit import Tolerances
+
+    ms, nominal, loads = _set("TALOS")
+    loose = Tolerances(translation_m=0.1, rotation_rad=math.radians(30))
+    model = identify_map(ms, nominal, loads=loads, tolerances=loose, level="geometry")
+    assert any(n.startswith("kept at the URDF's values: arm_left_5, arm_left_6") for n in model.metadata.notes)
+    for j in ("arm_left_5", "arm_left_6"):
+        assert np.array_equal(model.joints[j].matrix(), nominal.joints[j].matrix())
+    default = identify_map(ms, nominal, loads=loads)  # the default prior needs no such rescue
+    assert not any(n.startswith("kept at") for n in default.metadata.notes)
+    assert default.metadata.provenance.details["whole_range"]["whole_range_m"]["p95"] < 0.040

@@ -196,6 +196,14 @@ def run(args: argparse.Namespace) -> int:
         scores = prov.details["cross_validation_rms_m"]
         print("  left-out RMS by level: " + ", ".join(f"{lv} {v * 1e3:.2f} mm" for lv, v in scores.items())
               + f"; chosen: {prov.details['chosen_level']}")
+        whole = prov.details.get("whole_range")
+        if whole:
+            w = whole["whole_range_m"]
+            j, r = max(whole["joints"].items(), key=lambda kv: kv[1]["whole_range_m"])
+            print(f"  over the whole joint range the measured point moves from your URDF's prediction by "
+                  f"{w['median'] * 1e3:.1f} / {w['p95'] * 1e3:.1f} / {w['max'] * 1e3:.1f} mm (median / p95 / max); "
+                  f"most by {j} ({r['whole_range_m'] * 1e3:.1f} mm over its range, {r['within_data_m'] * 1e3:.1f} mm "
+                  "within the data)")
         if not prov.details["beats_urdf"]:
             return NOT_BETTER_EXIT
     return 0

@@ -5,7 +5,7 @@ markers, a point on TALOS's left gripper and a frame on UR10's wrist, each with 
 recorded against. For each set, with the data's own 5-fold split (a seeded permutation,
 ``numpy.array_split``): the held-out RMS distance of the measured points of every level of
 :mod:`~cpc2urdf.identification.kinematics.prior_fit` fitted alone, and of ``identify --method map``
-(the level chosen on the training records only); the error the chosen fits predicted for left-out
+(the level chosen, the gate and the whole-range check run on the training records only); the error the chosen fits predicted for left-out
 records; and, fitted on every record, how far the calibrated model's prediction of the measured
 point moves from the URDF's over the robot's whole joint range (500 seeded readings within the
 URDF's limits), the seconds it took, and which level it chose.
@@ -24,12 +24,12 @@ import numpy as np
 
 from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.figaroh_csv import load_figaroh_csv
+from cpc2urdf.identification.kinematics.map_identify import calibrate
 from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
     MapFit,
     cross_validate,
     fit_map,
-    select_model,
 )
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.urdf_robot import UrdfRobot, load_urdf_robot
@@ -129,23 +129,23 @@ def run_set(rs: RealSet) -> dict[str, Any]:
     predicted: list[float] = []
 
     def default(m: MeasurementSet, L: np.ndarray | None) -> MapFit:
-        sel = select_model(nominal, m, loads=L)
-        chosen.append(sel.chosen)
-        predicted.append(sel.fit.loo_rms_m)
-        return sel.fit
+        fit = calibrate(m, nominal, loads=L).fit
+        chosen.append(fit.level)
+        predicted.append(fit.loo_rms_m)
+        return fit
 
     e = cross_validate(ms, default, loads)
     row["map_mm"] = _rms(e) * 1e3
     row["predicted_mm"] = float(np.sqrt(np.mean(np.square(predicted)))) * 1e3
     row["chosen_per_fold"] = chosen
     t0 = time.perf_counter()
-    sel = select_model(nominal, ms, loads=loads)
+    cal = calibrate(ms, nominal, loads=loads)
     row["seconds"] = time.perf_counter() - t0
-    row["chosen"] = sel.chosen
-    d = divergence(sel.fit, sel.fits["frames"], ms)
+    row["chosen"] = cal.fit.level
+    d = divergence(cal.fit, cal.selection.fits["frames"], ms)
     row["divergence_mm"] = {"median": float(np.median(d)) * 1e3, "p95": float(np.percentile(d, 95)) * 1e3,
                             "max": float(d.max()) * 1e3}
-    row["data_share"] = sel.fit.data_share
+    row["data_share"] = cal.fit.data_share
     return row
 
 

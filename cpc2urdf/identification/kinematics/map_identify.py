@@ -14,25 +14,35 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
-from cpc2urdf.identification.kinematics.map_gate import GateReport, RecordErrors, check
+from cpc2urdf.identification.kinematics.map_gate import GateReport, check
 from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
     MapFit,
     Noise,
     Selection,
     Tolerances,
+    first_point,
     fit_map,
-    record_errors,
     select_model,
 )
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.transforms import Array
+
+RANGE_SAMPLES = 500  # [-]: seeded readings within the limits for the whole-range comparison
+SWEEP_SAMPLES = 101  # [-]: readings of one joint's sweep over its limits
+# A joint whose sweep over its whole range moves the calibrated prediction away from the URDF's,
+# beyond what it does over the data's span, by more than this x the left-out RMS (and at least
+# WILD_DIVERGENCE_M) is kept at the URDF: the data cannot vouch for it there.
+DIVERGENCE_FACTOR = 5.0  # [-]
+WILD_DIVERGENCE_M = 0.02  # [m]
 
 NOT_BETTER = ("no calibration predicts left-out records better than the URDF as it is: its joints are kept, "
               "only the measuring frame{what} fitted")
@@ -60,45 +70,94 @@ def _details(sel: Selection) -> dict[str, object]:
 
 def _gate(sel: Selection, nominal: CPCModel, ms: MeasurementSet, loads: Array | None, tolerances: Tolerances | None,
           noise: Noise | None) -> GateReport:
-    """:func:`map_gate.check` on the chosen fit (noise estimated), refitting its level without the
-    records dropped; ``noise`` is the stated noise it is checked against."""
+    """:func:`map_gate.check` on the chosen fit (noise estimated), refitting its level on the
+    records kept; ``noise`` is the stated noise it is checked against."""
 
-    def refit(drop: np.ndarray) -> tuple[MapFit, RecordErrors]:
-        keep = np.setdiff1d(np.arange(ms.n_records), drop)
-        f = fit_map(nominal, ms.subset(keep), sel.chosen, sel.fit.joints, tolerances,
-                    loads=None if loads is None else loads[keep])
-        sq, count = np.zeros(ms.n_records), np.zeros(ms.n_records)
-        sq[keep], count[keep] = f.loo_sq_m2, f.loo_points
-        sq[drop], count[drop] = record_errors(f, ms.subset(drop), None if loads is None else loads[drop])
-        return f, (sq, count)
+    def refit(kept: np.ndarray) -> MapFit:
+        return fit_map(nominal, ms.subset(kept), sel.chosen, sel.fit.joints, tolerances,
+                       loads=None if loads is None else loads[kept])
 
     return check(sel.fit, refit, noise, ms.labels)
 
 
-def identify_map(ms: MeasurementSet, nominal: CPCModel | None, *, loads: Array | None = None,
-                 joints: Sequence[str] | None = None, tolerances: Tolerances | None = None,
-                 noise: Noise | None = None, accept_inconsistent: bool = False, level: str | None = None) -> CPCModel:
-    """The calibrated model (module docstring), through the gate (:mod:`map_gate`).
+def range_report(fit: MapFit, urdf: MapFit, ms: MeasurementSet, seed: int = 0) -> dict[str, object]:
+    """How far the calibrated geometry's prediction of the first measured point moves from the
+    URDF's (``urdf``: the URDF as it is, placed by the same data) over the whole joint range:
+    ``"whole_range_m"`` (median, p95, max over :data:`RANGE_SAMPLES` seeded readings within the
+    limits), and per calibrated joint, swept over its limits with the others at the data's median,
+    the largest divergence within the data's span and over the whole range (``"joints"``)."""
+    s = ms.structure
+    lo = np.array([j.lower for j in s.joints])
+    hi = np.array([j.upper for j in s.joints])
+    Q = np.random.default_rng(seed).uniform(lo, hi, (RANGE_SAMPLES, s.n_joints))
+    d = np.linalg.norm(first_point(fit, ms, Q) - first_point(urdf, ms, Q), axis=1)
+    joints: dict[str, dict[str, float]] = {}
+    mid = np.median(ms.q, axis=0)
+    for j in fit.joints:
+        k = s.joint_index(j)
+        sweep = np.tile(mid, (SWEEP_SAMPLES, 1))
+        sweep[:, k] = np.linspace(lo[k], hi[k], SWEEP_SAMPLES)
+        dj = np.linalg.norm(first_point(fit, ms, sweep) - first_point(urdf, ms, sweep), axis=1)
+        inside = (sweep[:, k] >= ms.q[:, k].min()) & (sweep[:, k] <= ms.q[:, k].max())
+        joints[j] = {"data_span": float(np.ptp(ms.q[:, k])), "range": float(hi[k] - lo[k]),
+                     "within_data_m": float(dj[inside].max()) if inside.any() else 0.0,
+                     "whole_range_m": float(dj.max())}
+    return {"whole_range_m": {"median": float(np.median(d)), "p95": float(np.percentile(d, 95)),
+                              "max": float(d.max())}, "joints": joints}
+
+
+def _wild(report: dict[str, object], fit: MapFit) -> list[str]:
+    """Joints whose whole range takes the prediction far from the URDF's beyond the data's span."""
+    joints = report["joints"]
+    assert isinstance(joints, dict)
+    limit = max(DIVERGENCE_FACTOR * fit.loo_rms_m, WILD_DIVERGENCE_M)
+    return [j for j, r in joints.items() if r["whole_range_m"] - r["within_data_m"] > limit]
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """A calibration about the URDF, through the gate and the whole-range check.
+
+    Attributes:
+        selection: The chosen fit and the levels' fits.
+        gate: What the gate found.
+        whole_range: :func:`range_report` of the chosen fit, or None.
+        notes: What the user should read.
+    """
+
+    selection: Selection
+    gate: GateReport
+    whole_range: dict[str, object] | None
+    notes: tuple[str, ...]
+
+    @property
+    def fit(self) -> MapFit:
+        return self.selection.fit
+
+
+def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = None,
+              joints: Sequence[str] | None = None, tolerances: Tolerances | None = None,
+              noise: Noise | None = None, accept_inconsistent: bool = False, level: str | None = None) -> Calibration:
+    """Choose and fit the level (module docstring), through the gate (:mod:`map_gate`); joints
+    the data cannot vouch for over their whole range keep the URDF's values.
 
     Args:
         noise: The measurement noise if the user states it (else estimated from the data).
-        accept_inconsistent: Keep the model of data the gate refuses (fitted without the outliers
-            it named), with the cause in its notes.
+        accept_inconsistent: Keep the fit of data the gate refuses (without the outliers it
+            named), with the cause in the notes.
         level: Fit this level of :data:`LEVELS` alone instead of choosing one (no cross-validation).
 
     Raises:
-        DegenerateDataError: No nominal model (a URDF or a spec with geometry) to calibrate about.
         InconsistentDataError: Isolated outliers (named), or residuals beyond chance for the stated
             noise (unmodelled error, named with its size).
     """
-    if nominal is None:
-        raise DegenerateDataError(f"{ms.source}: --method map calibrates about a nominal model; the robot "
-                                  "has no geometry (give its URDF)")
+
     def choose(m: MeasurementSet, L: Array | None, noise: Noise | None = None) -> Selection:
         if level is None:
             return select_model(nominal, m, joints, tolerances, L, noise=noise)
-        fit = fit_map(nominal, m, level, joints, tolerances, noise, estimate_noise=noise is None, loads=L)
-        return Selection(fit, {level: fit})
+        fits = {lv: fit_map(nominal, m, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=L)
+                for lv in dict.fromkeys(("frames", level))}  # the URDF as it is: the whole-range yardstick
+        return Selection(fits[level], fits)
 
     sel = choose(ms, loads)  # the gate judges with the noise the data show
     gate = _gate(sel, nominal, ms, loads, tolerances, noise)
@@ -113,6 +172,15 @@ def identify_map(ms: MeasurementSet, nominal: CPCModel | None, *, loads: Array |
     if not sel.beats_urdf:
         what = " and the markers were" if ms.marker_points else " and the measured frame were"
         notes.append(NOT_BETTER.format(what=what))
+    report = range_report(sel.fit, sel.fits["frames"], ms)
+    wild = _wild(report, sel.fit) if sel.beats_urdf else []
+    if wild:  # the data cannot vouch for these joints over their range: keep them at the URDF
+        vouched = [j for j in sel.fit.joints if j not in wild]
+        fit = fit_map(nominal, ms, sel.chosen, vouched, tolerances, noise, estimate_noise=noise is None, loads=loads)
+        sel = Selection(fit, {**sel.fits, sel.chosen: fit})
+        notes.append(f"kept at the URDF's values: {', '.join(wild)} (over their whole range the calibrated "
+                     "prediction would leave the URDF's far beyond what the data cover)")
+        report = range_report(sel.fit, sel.fits["frames"], ms)
     weak = [j for j, s in sel.fit.data_share.items() if s < 0.5]
     if weak and sel.beats_urdf:
         notes.append(f"the data barely determine {', '.join(weak)}: kept near the URDF by the prior "
@@ -120,11 +188,28 @@ def identify_map(ms: MeasurementSet, nominal: CPCModel | None, *, loads: Array |
     n = sel.fit.residual_noise
     notes.append(f"noise {'the residuals show' if noise else 'estimated from the data'}: {n.position_m * 1e3:.3f} mm"
                  + (f", {math.degrees(n.rotation_rad):.3f} deg" if ms.frames else ""))
-    details = {**_details(sel), "consistency": {"consistent": gate.consistent, "cause": gate.cause,
-                                                "outlier_records": [ms.labels[i] for i in gate.outliers]}}
+    return Calibration(sel, gate, report, tuple(notes))
+
+
+def identify_map(ms: MeasurementSet, nominal: CPCModel | None, **options: Any) -> CPCModel:
+    """The calibrated model of :func:`calibrate` (same options), with its provenance: the levels'
+    left-out errors, the estimated noise, markers, data shares, the gate and the whole range.
+
+    Raises:
+        DegenerateDataError: No nominal model (a URDF or a spec with geometry) to calibrate about.
+        InconsistentDataError: As :func:`calibrate`.
+    """
+    if nominal is None:
+        raise DegenerateDataError(f"{ms.source}: --method map calibrates about a nominal model; the robot "
+                                  "has no geometry (give its URDF)")
+    cal = calibrate(ms, nominal, **options)
+    gate = cal.gate
+    details = {**_details(cal.selection), "whole_range": cal.whole_range,
+               "consistency": {"consistent": gate.consistent, "cause": gate.cause,
+                               "outlier_records": [ms.labels[i] for i in gate.outliers]}}
     prov = Provenance(method="map", measurements=ms.source, robot=ms.robot, details=details)
-    model = sel.fit.model
-    return model.with_params(metadata=model.metadata.replace(provenance=prov, notes=tuple(notes)))
+    model = cal.fit.model
+    return model.with_params(metadata=model.metadata.replace(provenance=prov, notes=cal.notes))
 
 
-__all__ = ["NOT_BETTER", "identify_map"]
+__all__ = ["DIVERGENCE_FACTOR", "NOT_BETTER", "Calibration", "calibrate", "identify_map", "range_report"]

@@ -96,6 +96,10 @@ class MapFit:
         loo_points: Per record, how many points (markers, frame origins) it measured, shape (N,).
         loo_rot_sq: Per record, its frames' squared orientation residuals left out, summed
             [rad^2], shape (N,) (zeros for marker points).
+        loo_stat: Per record, ``r_i^T (I - H_ii)^-1 r_i`` over its position rows, in noise units:
+            chi-square with ``3 loo_points`` degrees of freedom for a good record, shape (N,).
+        loo_stat_rot: The same over its orientation rows (3 a measured frame), shape (N,).
+        loo_frames: Per record, how many frame poses it measured, shape (N,).
         residual_noise: The noise the residuals show (equal to ``noise`` when it was estimated).
         data_share: Joint -> fraction of its perturbation's information that comes from the data
             (1: the data alone, 0: the prior alone), mean over its free components.
@@ -114,6 +118,9 @@ class MapFit:
     loo_sq_m2: Array
     loo_points: Array
     loo_rot_sq: Array
+    loo_stat: Array
+    loo_stat_rot: Array
+    loo_frames: Array
     residual_noise: Noise
     data_share: dict[str, float] = field(default_factory=dict)
     compliance: dict[str, float] = field(default_factory=dict)
@@ -537,7 +544,7 @@ def _result(problem: _Problem, x: Array) -> MapFit:
     r, J = problem.evaluate(x)
     assert J is not None
     cov, hp, hr = _hat_traces(problem, J)
-    loo_sq, loo_count, loo_rot = _leave_one_out(problem, r, J, cov)
+    loo_sq, loo_count, loo_rot, loo_stat, loo_stat_rot, loo_frames = _leave_one_out(problem, r, J, cov)
     model = problem.model(x)
     info_data = J[:sum(problem.rows_of_kind())]
     share: dict[str, float] = {}
@@ -564,21 +571,28 @@ def _result(problem: _Problem, x: Array) -> MapFit:
         loo_sq_m2=loo_sq,
         loo_points=loo_count,
         loo_rot_sq=loo_rot,
+        loo_stat=loo_stat,
+        loo_stat_rot=loo_stat_rot,
+        loo_frames=loo_frames,
         residual_noise=_estimate_noise(problem, x),
         data_share=share,
         compliance={j: float(x[i]) for j, i in problem.compliance.items()},
     )
 
 
-def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[Array, Array, Array]:
+def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[Array, ...]:
     """Per record: the squared distances of its points to the fit made without it, summed [m^2],
-    how many points it has, and the squared orientation residuals of its frames, summed [rad^2].
-    For the linearised problem exactly ``(I - H_ii)^-1 r_i``, with ``H_ii`` the record's block of
-    the hat matrix (the PRESS residuals of a record)."""
+    how many points it has, the squared orientation residuals of its frames, summed [rad^2], and
+    its studentized statistic ``r_i^T (I - H_ii)^-1 r_i`` over its position rows and over its
+    orientation rows (chi-square with as many degrees of freedom as rows, for a good record and
+    the right noise), and how many frame poses it has.
+    For the linearised problem the left-out residual is exactly ``(I - H_ii)^-1 r_i``, with
+    ``H_ii`` the record's block of the hat matrix (the PRESS residuals of a record)."""
     rec, point = problem.row_records()
     scale = np.where(point, problem.noise.position_m, problem.noise.rotation_rad)
     n_rec = problem.ms.n_records
     sq, count, rot = np.zeros(n_rec), np.zeros(n_rec), np.zeros(n_rec)
+    stat, stat_rot, frames = np.zeros(n_rec), np.zeros(n_rec), np.zeros(n_rec)
     order = np.argsort(rec, kind="stable")
     sizes = np.bincount(rec, minlength=n_rec)
     k = int(sizes.max())
@@ -587,20 +601,28 @@ def _leave_one_out(problem: _Problem, r: Array, J: Array, cov: Array) -> tuple[A
         rows = order.reshape(-1, k)
         Jb = J[rows]
         H = Jb @ cov @ np.transpose(Jb, (0, 2, 1))
-        e = np.linalg.solve(np.eye(k) - H, r[rows][..., None])[..., 0] * scale[rows]
+        e_w = np.linalg.solve(np.eye(k) - H, r[rows][..., None])[..., 0]
         pt = point[rows]
+        stat[full] = np.sum(np.where(pt, e_w * r[rows], 0.0), axis=1)
+        stat_rot[full] = np.sum(np.where(pt, 0.0, e_w * r[rows]), axis=1)
+        frames[full] = (~pt).sum(axis=1) / 3
+        e = e_w * scale[rows]
         sq[full] = np.sum(np.where(pt, e, 0.0) ** 2, axis=1)
         rot[full] = np.sum(np.where(pt, 0.0, e) ** 2, axis=1)
         count[full] = pt.sum(axis=1) / 3
-        return sq, count, rot
+        return sq, count, rot, stat, stat_rot, frames
     for i in np.flatnonzero(sizes):
         ri = np.flatnonzero(rec == i)
         Ji = J[ri]
-        e = np.linalg.solve(np.eye(len(ri)) - Ji @ cov @ Ji.T, r[ri]) * scale[ri]
+        e_w = np.linalg.solve(np.eye(len(ri)) - Ji @ cov @ Ji.T, r[ri])
+        stat[i] = float(e_w[point[ri]] @ r[ri][point[ri]])
+        stat_rot[i] = float(e_w[~point[ri]] @ r[ri][~point[ri]])
+        frames[i] = (~point[ri]).sum() / 3
+        e = e_w * scale[ri]
         sq[i] = float(np.sum(e[point[ri]] ** 2))
         rot[i] = float(np.sum(e[~point[ri]] ** 2))
         count[i] = point[ri].sum() / 3
-    return sq, count, rot
+    return sq, count, rot, stat, stat_rot, frames
 
 
 def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
@@ -623,16 +645,15 @@ def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
     return out
 
 
-def record_errors(fit: MapFit, ms: MeasurementSet, loads: Array | None = None) -> tuple[Array, Array]:
-    """Per record of ``ms``: the squared distances of its points to ``fit``'s predictions, summed
-    [m^2], and how many points it has; shape (N,) each."""
-    q = fit.deflected(ms.q, loads)
-    sq, count = np.zeros(ms.n_records), np.zeros(ms.n_records)
-    for name, e in point_errors(fit.model, ms, fit.markers, q).items():
-        rows = ms.has_marker(name) if name in ms.marker_points else ms.has_pose(name)
-        sq[rows] += e**2
-        count[rows] += 1
-    return sq, count
+def first_point(fit: MapFit, ms: MeasurementSet, q: Array) -> Array:
+    """World prediction [m] of the first measured point (marker, else frame origin) of ``ms`` at
+    readings ``q`` (N, n) with the geometry alone (no deflection), shape (N, 3)."""
+    if fit.markers:
+        m = next(iter(fit.markers))
+        frame = ms.markers[m].frame
+        T = fit.model.fk(q, [frame])[frame]
+        return T[:, :3, :3] @ fit.markers[m] + T[:, :3, 3]
+    return fit.model.fk(q, [ms.frames[0]])[ms.frames[0]][:, :3, 3]
 
 
 def folds(n: int, k: int = CV_FOLDS, seed: int = 0) -> list[Array]:
@@ -719,8 +740,8 @@ __all__ = [
     "fit_map",
     "folds",
     "perturbation",
+    "first_point",
     "point_errors",
-    "record_errors",
     "select_model",
     "Selection",
 ]
