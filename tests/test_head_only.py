@@ -75,7 +75,7 @@ def test_head_only_data_calibrate_the_neck_and_keep_the_rest(urdf: Path, tmp_pat
     """Every link not below a neck joint stays where the URDF puts it; the camera's orientation
     relative to the torso is nearer the truth than the stock URDF's (median over the seeds: the
     neck's own offset is as unobservable as the first joint's placement, so single seeds can go
-    either way: 5 of 10 here, 25 of 40 over 40 seeds)."""
+    either way: 26 of 40 over 40 seeds)."""
     stock, calibrated = [], []
     for seed in SEEDS:
         nominal, truth, ms = _experiment(urdf, seed)
