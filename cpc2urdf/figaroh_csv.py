@@ -41,13 +41,16 @@ LIMIT_TOLERANCE_RAD = math.radians(1.0)  # [rad]
 _POINT = re.compile(r"^(x|y|z|phix|phiy|phiz)(\d+)$")
 
 
-def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
-    """Readings ``v`` of ``joint`` with 360-deg wraps undone, and what was said about them."""
+def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path, lines: list[int]) -> tuple[np.ndarray, list[str]]:
+    """Readings ``v`` of ``joint`` (from the file's ``lines``) with 360-deg wraps undone, and what
+    was said about them."""
     tol = LIMIT_TOLERANCE_M if joint.type == "prismatic" else LIMIT_TOLERANCE_RAD
     lo, hi = joint.lower, joint.upper
     out, notes = v.copy(), []
-    if joint.type == "revolute":
-        turns = np.where((v < lo - tol) | (v > hi + tol), np.round((np.clip(v, lo, hi) - v) / (2 * math.pi)), 0.0)
+    if joint.type == "revolute":  # the fewest whole turns that bring a reading within the limits
+        up = np.ceil((lo - tol - v) / (2 * math.pi))  # > 0 for a reading below the range
+        down = np.floor((hi + tol - v) / (2 * math.pi))  # < 0 for a reading above it
+        turns = np.where(up > 0, up, np.where(down < 0, down, 0.0))
         wrapped = v + 2 * math.pi * turns
         ok = (wrapped >= lo - tol) & (wrapped <= hi + tol) & (turns != 0)
         out[ok] = wrapped[ok]
@@ -56,7 +59,7 @@ def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path) -> tuple[
     bad = np.flatnonzero((out < lo - tol) | (out > hi + tol))
     if len(bad):
         i = int(bad[0])
-        raise InputFileError(path, f"row {i + 2}, column {name!r}: {v[i]:.6g} is outside the URDF limits "
+        raise InputFileError(path, f"row {lines[i]}, column {name!r}: {v[i]:.6g} is outside the URDF limits "
                              f"[{lo:.6g}, {hi:.6g}] by more than {tol:.3g} (wrong units or column?)")
     past = np.maximum(out - hi, lo - out)
     if (past > 0).any():
@@ -103,17 +106,24 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
     missing = [j for j in sub.structure.joint_names if j not in joints]
     if missing:
         raise InputFileError(p, f"no column for joint {sub.names.urdf_joint(missing[0])!r} on the path to {link!r}")
-    data = np.full((len(rows) - 1, len(header)), np.nan)
-    for r, row in enumerate(rows[1:]):
-        for i, v in enumerate(row[:len(header)]):
+    body = [(k + 2, row) for k, row in enumerate(rows[1:]) if any(c.strip() for c in row)]  # (line, cells)
+    if not body:
+        raise InputFileError(p, "expected a header row and at least one row of numbers")
+    data = np.full((len(body), len(header)), np.nan)
+    for r, (line, row) in enumerate(body):
+        if len(row) != len(header):
+            raise InputFileError(p, f"row {line}: {len(row)} cells, the header has {len(header)}")
+        for i, v in enumerate(row):
             try:
                 data[r, i] = float(v)
             except ValueError:
-                raise InputFileError(p, f"row {r + 2}, column {header[i]!r}: {v!r} is not a number") from None
+                raise InputFileError(p, f"row {line}, column {header[i]!r}: {v!r} is not a number") from None
+            if not math.isfinite(data[r, i]):
+                raise InputFileError(p, f"row {line}, column {header[i]!r}: {v!r} is not a finite number")
     q = data[:, [joints[j] for j in sub.structure.joint_names]]
     notes: list[str] = []
     for k, j in enumerate(sub.structure.joints):
-        q[:, k], said = _within_limits(q[:, k], j, sub.names.urdf_joint(j.name), p)
+        q[:, k], said = _within_limits(q[:, k], j, sub.names.urdf_joint(j.name), p, [line for line, _ in body])
         notes += said
     frame = sub.names.links[link]
     poses: dict[str, np.ndarray] = {}

@@ -114,3 +114,45 @@ def test_identify_says_when_the_urdf_is_as_good(tmp_path: Path, capsys: pytest.C
     assert main(["identify", str(csv), "--robot", str(TIAGO), "--link", "wrist_ft_tool_link", "-o", str(out)]) == 3
     assert "no calibration predicts left-out records better than the URDF" in capsys.readouterr().out
     assert out.exists()
+
+
+@pytest.mark.parametrize(("lower", "upper", "reading", "expected"), [
+    (-np.pi, np.pi, 3.5, 3.5 - 2 * np.pi),  # less than half a turn past the upper limit
+    (-np.pi, np.pi, 5.0, 5.0 - 2 * np.pi),
+    (0.0, 2 * np.pi, -0.5, 2 * np.pi - 0.5),
+    (-2.0, 2.0, 2.0 + 4 * np.pi, 2.0),  # two turns
+])
+def test_readings_are_unwrapped_by_the_fewest_turns(lower: float, upper: float, reading: float,
+                                                    expected: float) -> None:
+    from cpc2urdf.figaroh_csv import _within_limits
+    from cpc2urdf.model import Joint
+
+    q, notes = _within_limits(np.array([0.0, reading]), Joint("j", "revolute", "base", lower, upper), "j",
+                              Path("x.csv"), [2, 3])
+    assert q[1] == pytest.approx(expected, abs=1e-12) and q[0] == 0.0
+    assert notes == ["j: 1 reading(s) wrapped by a multiple of 360 deg into its limits"]
+
+
+def test_a_short_row_is_named(tmp_path: Path) -> None:
+    lines = TIAGO_CSV.read_text().splitlines()
+    lines[4] = ",".join(lines[4].split(",")[:-1])
+    path = tmp_path / "short.csv"
+    path.write_text("\n".join(lines[:3] + [""] + lines[3:]) + "\n")  # a blank line is passed over
+    with pytest.raises(InputFileError, match=r"row 6: 19 cells, the header has 20"):
+        load_figaroh_csv(path, load_urdf_robot(TIAGO), "wrist_ft_tool_link")
+
+
+@pytest.mark.parametrize(("args", "code", "says"), [
+    (["--joints", ","], 2, "--joints: name at least one joint"),
+    (["--noise", "1"], 2, "the data are frame poses; give their orientation noise too"),
+    (["--level", "frames"], 0, "chosen: frames"),
+])
+def test_identify_options(tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], code: int,
+                          says: str) -> None:
+    out = tmp_path / "u.json"
+    assert main(["identify", str(UR10_CSV), "--robot", str(UR10), "--link", "tool0", "-o", str(out), *args]) == code
+    captured = capsys.readouterr()
+    assert says in captured.out + captured.err
+    assert out.exists() == (code == 0)
+    if code == 2:
+        assert len(captured.err.strip().splitlines()) == 1 and "Traceback" not in captured.err

@@ -31,7 +31,7 @@ def test_real_data_pass_and_a_noise_five_times_too_small_is_unmodelled_error(nam
     assert details["consistency"]["consistent"]
     shown = details["noise_residuals"]
     stated = Noise(shown["position_m"] / 5, shown["rotation_rad"] / 5)
-    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s residuals are (4|5)\.\dx"):
+    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s position residuals are (4|5)\.\dx"):
         identify_map(ms, nominal, loads=loads, noise=stated)
     kept = identify_map(ms, nominal, loads=loads, noise=stated, accept_inconsistent=True)
     assert any("INCONSISTENT DATA" in n for n in kept.metadata.notes)
@@ -71,3 +71,37 @@ def test_joints_the_data_cannot_vouch_for_are_kept_at_the_urdf() -> None:
     default = identify_map(ms, nominal, loads=loads)  # the default prior needs no such rescue
     assert not any(n.startswith("kept at") for n in default.metadata.notes)
     assert default.metadata.provenance.details["whole_range"]["whole_range_m"]["p95"] < 0.040
+
+
+def test_what_the_data_cannot_see_is_named_and_held_by_the_urdf() -> None:
+    """The first joint's placement is absorbed by the measuring frame: its data share is 0 and the
+    notes name it; TALOS's barely moved wrist is named too (data share = 1 - posterior / prior
+    variance)."""
+    from cpc2urdf.identification.kinematics.map_identify import calibrate
+
+    ms, nominal, loads = _set("TALOS")
+    cal = calibrate(ms, nominal, loads=loads)
+    share = cal.fit.data_share
+    assert share["torso_1"] < 1e-6
+    assert max(share["arm_left_5"], share["arm_left_6"], share["arm_left_7"]) < 0.25 < share["arm_left_2"]
+    note = next(n for n in cal.notes if n.startswith("the data barely determine"))
+    assert "torso_1" in note and "arm_left_5" in note and "arm_left_2" not in note
+
+
+def test_accepted_outliers_are_left_out_of_every_fit() -> None:
+    from cpc2urdf.identification.kinematics.map_identify import calibrate
+
+    ms, nominal, loads = _set("TALOS")
+    for i in PLANTED:
+        ms.marker_points["m1"][i] += [GROSS, 0.0, 0.0]
+    cal = calibrate(ms, nominal, loads=loads, accept_inconsistent=True)
+    assert cal.gate.outliers == PLANTED
+    assert len(cal.fit.loo_points) == ms.n_records - len(PLANTED)  # the fit kept saw the others only
+    assert cal.fit.noise.position_m < 1e-3  # not inflated by 50 mm errors
+
+
+def test_a_stated_orientation_noise_too_small_is_named() -> None:
+    ms, nominal, loads = _set("UR10")
+    shown = identify_map(ms, nominal, loads=loads).metadata.provenance.details["noise_residuals"]
+    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s orientation residuals are"):
+        identify_map(ms, nominal, noise=Noise(shown["position_m"], shown["rotation_rad"] / 5))

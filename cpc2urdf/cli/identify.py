@@ -80,8 +80,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.set_defaults(run=run)
 
 
-def _noise(text: str) -> dict[str, float | str]:
-    """``--noise MM[,DEG]`` as a measurement set's ``noise`` section (SI)."""
+def _noise(text: str, poses: bool) -> dict[str, float | str]:
+    """``--noise MM[,DEG]`` as a measurement set's ``noise`` section (SI); ``poses``: the data are
+    frame poses, whose orientation noise must then be given too."""
     import math
 
     from cpc2urdf.errors import ConfigurationError
@@ -95,7 +96,10 @@ def _noise(text: str) -> dict[str, float | str]:
     if len(parts) > 2 or not values or not all(math.isfinite(v) and v > 0 for v in values):
         raise ConfigurationError(f"--noise {text!r}: expected MM or MM,DEG (positive numbers: position noise "
                                  "in mm, orientation noise in deg)")
-    sigma_r = math.radians(values[1]) if len(values) == 2 else DEFAULT_SIGMA_R
+    if poses and len(values) == 1:
+        raise ConfigurationError(f"--noise {text!r}: the data are frame poses; give their orientation noise too "
+                                 "(MM,DEG)")
+    sigma_r = math.radians(values[1]) if len(values) == 2 else DEFAULT_SIGMA_R  # unused by marker points
     return {"model": "stated", "sigma_t_m": values[0] * 1e-3, "sigma_r_rad": sigma_r}
 
 
@@ -159,18 +163,21 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.model_metadata import Provenance
 
     check_output_path(args.output)  # a bad -o is refused before the identification, not after it
-    noise = _noise(args.noise) if args.noise else None
     ms = _read(args)
-    if noise is not None:
-        ms.metadata["noise"] = noise
+    if args.noise is not None:
+        ms.metadata["noise"] = _noise(args.noise, bool(ms.frames))
     args.method = args.method or ("map" if args.link else DEFAULT_METHOD)
     start = time.perf_counter()
     for option, value in (("--level", args.level), ("--joints", args.joints)):
-        if value and args.method != "map":
+        if value is not None and args.method != "map":
             from cpc2urdf.errors import ConfigurationError
 
             raise ConfigurationError(f"{option} applies to --method map, not {args.method}")
-    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints else None
+    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints is not None else None
+    if joints is not None and not joints:
+        from cpc2urdf.errors import ConfigurationError
+
+        raise ConfigurationError("--joints: name at least one joint to calibrate (URDF names, comma-separated)")
     model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level, joints=joints)
     elapsed = time.perf_counter() - start
     prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
@@ -197,13 +204,13 @@ def run(args: argparse.Namespace) -> int:
         print("  left-out RMS by level: " + ", ".join(f"{lv} {v * 1e3:.2f} mm" for lv, v in scores.items())
               + f"; chosen: {prov.details['chosen_level']}")
         whole = prov.details.get("whole_range")
-        if whole:
+        if whole and whole["joints"]:
             w = whole["whole_range_m"]
             j, r = max(whole["joints"].items(), key=lambda kv: kv[1]["whole_range_m"])
             print(f"  over the whole joint range the measured point moves from your URDF's prediction by "
                   f"{w['median'] * 1e3:.1f} / {w['p95'] * 1e3:.1f} / {w['max'] * 1e3:.1f} mm (median / p95 / max); "
                   f"most by {j} ({r['whole_range_m'] * 1e3:.1f} mm over its range, {r['within_data_m'] * 1e3:.1f} mm "
                   "within the data)")
-        if not prov.details["beats_urdf"]:
+        if prov.details["beats_urdf"] is False:
             return NOT_BETTER_EXIT
     return 0

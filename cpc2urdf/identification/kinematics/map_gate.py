@@ -11,11 +11,13 @@ is wrong. So:
    :data:`Z_OUTLIER` robust standard deviations (per row) away is an outlier; the worst one is left
    out, the fit made again and the others judged again, until none is that far, and only while
    they stay isolated (at most :data:`MAX_OUTLIER_SHARE` of the records: more is the model's error,
-   not outliers). The outliers are named and the fit is made without them. Data with no such
+   not outliers). The position and orientation parts of a statistic are taken apart (the cross
+   terms between them make each part chi-square only approximately). The outliers are named and the fit is made without them. Data with no such
    record cost no refit.
-2. **Stated noise.** When the user states the noise, a fit whose residuals are beyond chance for
-   it (chi-square, :data:`NOISE_ALPHA`) is unmodelled error, named with its size (N x the noise),
-   not a list of outliers.
+2. **Stated noise.** When the user states the noise, a fit whose position (or, for frame poses,
+   orientation) residuals are beyond chance for it (chi-square with the degrees of freedom the fit
+   left them, :data:`NOISE_ALPHA`) is unmodelled error, named with its size (N x the noise), not a
+   list of outliers.
 
 Without a stated noise the noise is estimated from the data, and the gate passes whatever has no
 isolated outliers.
@@ -65,6 +67,7 @@ def _z(stat: np.ndarray, rows: np.ndarray) -> np.ndarray:
     if not used.any():
         return np.zeros(len(rows))
     r = np.maximum(rows, 1.0)
+    stat = np.maximum(stat, 0.0)  # a part of a record's statistic can dip below 0 (cross terms)
     scale = float(np.median((stat / chi2.median(r))[used]))
     return np.where(used, np.sqrt(stat / (max(scale, 1e-300) * r)), 0.0)
 
@@ -82,7 +85,7 @@ def check(fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | No
     kept = np.arange(n)
     current = fit
     z = record_z(fit)
-    while z.max(initial=0.0) > Z_OUTLIER and n - len(kept) < MAX_OUTLIER_SHARE * n:
+    while z.max(initial=0.0) > Z_OUTLIER and n - len(kept) + 1 <= MAX_OUTLIER_SHARE * n:
         kept = np.delete(kept, int(np.argmax(z)))
         current = refit(kept)
         z = record_z(current)
@@ -94,19 +97,26 @@ def check(fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | No
         cause = (f"{len(outliers)} isolated outlier record(s), more than {Z_OUTLIER:g} standard deviations from "
                  f"the fit made without them: " + ", ".join(labels[i] for i in outliers))
     elif stated is not None:
-        m = float(current.loo_points.sum()) * 3
-        ratio = current.residual_noise.position_m / stated.position_m
-        dof = max(m - current.dof, 1.0)
-        stat = ratio**2 * dof
-        if stat > chi2.isf(NOISE_ALPHA, dof):
-            cause = (f"unmodelled error: the fit's residuals are {ratio:.1f}x the stated noise "
-                     f"({current.residual_noise.position_m * 1e3:.3f} mm against {stated.position_m * 1e3:.3f} mm), "
-                     "spread over the records, not a few of them (elastic links, backlash, marker bodies, or "
-                     "the stated noise is too small)")
-        elif stat < chi2.ppf(NOISE_ALPHA, dof):
-            cause = (f"the fit's residuals are {1 / ratio:.1f}x below the stated noise "
-                     f"({current.residual_noise.position_m * 1e3:.3f} mm against {stated.position_m * 1e3:.3f} mm): "
-                     "the stated noise is too large")
+        shown = current.residual_noise
+        m_pos = float(current.loo_points.sum()) * 3
+        m_rot = float(current.loo_frames.sum()) * 3
+        checks = [("position", shown.position_m, stated.position_m, m_pos - current.dof_position, 1e3, "mm")]
+        if m_rot:
+            checks.append(("orientation", shown.rotation_rad, stated.rotation_rad, m_rot - (current.dof - current.dof_position),
+                           180 / np.pi, "deg"))
+        for what, got, want, dof, scale, unit in checks:
+            r = got / want
+            ratio = r if ratio is None else ratio
+            stat = r**2 * max(dof, 1.0)
+            if stat > chi2.isf(NOISE_ALPHA, max(dof, 1.0)):
+                cause = (f"unmodelled error: the fit's {what} residuals are {r:.1f}x the stated noise "
+                         f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}), spread over the records, "
+                         "not a few of them (elastic links, backlash, marker bodies, or the stated noise is too small)")
+                break
+            if stat < chi2.ppf(NOISE_ALPHA, max(dof, 1.0)):
+                cause = (f"the fit's {what} residuals are {1 / r:.1f}x below the stated noise "
+                         f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}): the stated noise is too large")
+                break
     return GateReport(current, outliers, ratio, cause)
 
 

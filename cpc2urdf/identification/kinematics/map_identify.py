@@ -44,6 +44,10 @@ SWEEP_SAMPLES = 101  # [-]: readings of one joint's sweep over its limits
 DIVERGENCE_FACTOR = 5.0  # [-]
 WILD_DIVERGENCE_M = 0.02  # [m]
 
+# A joint whose data share (1 - posterior / prior variance) is below this is named as barely
+# determined by the data: the prior, that is the URDF, holds it.
+BARELY = 0.25  # [-]
+
 NOT_BETTER = ("no calibration predicts left-out records better than the URDF as it is: its joints are kept, "
               "only the measuring frame{what} fitted")
 
@@ -54,7 +58,6 @@ def _details(sel: Selection) -> dict[str, object]:
         "reference": "maximum a posteriori about the URDF (prior: manufacturing tolerances), level chosen by "
                      "leave-one-record-out cross-validation",
         "chosen_level": fit.level,
-        "beats_urdf": sel.beats_urdf,
         "cross_validation_rms_m": {lv: sel.fits[lv].loo_rms_m for lv in LEVELS if lv in sel.fits},
         "fit_rms_m": fit.rms_m,
         "noise_residuals": {"position_m": fit.residual_noise.position_m, "rotation_rad": fit.residual_noise.rotation_rad},
@@ -123,12 +126,14 @@ class Calibration:
         gate: What the gate found.
         whole_range: :func:`range_report` of the chosen fit, or None.
         notes: What the user should read.
+        chosen_by_cv: False when the level was given (no cross-validation chose it).
     """
 
     selection: Selection
     gate: GateReport
     whole_range: dict[str, object] | None
     notes: tuple[str, ...]
+    chosen_by_cv: bool = True
 
     @property
     def fit(self) -> MapFit:
@@ -163,32 +168,34 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
     gate = _gate(sel, nominal, ms, loads, tolerances, noise)
     if not gate.consistent and not accept_inconsistent:
         raise InconsistentDataError(f"{ms.source}: {gate.cause}", gate)
+    kept = np.setdiff1d(np.arange(ms.n_records), gate.outliers)
+    used, used_loads = ms.subset(kept), None if loads is None else loads[kept]
     if gate.outliers or noise is not None:
-        keep = np.setdiff1d(np.arange(ms.n_records), gate.outliers)
-        sel = choose(ms.subset(keep), None if loads is None else loads[keep], noise)
+        sel = choose(used, used_loads, noise)
     notes = list(ms.metadata.get("notes", [])) if isinstance(ms.metadata.get("notes"), list) else []
     if not gate.consistent:
         notes.append(f"INCONSISTENT DATA, kept with --accept-inconsistent: {gate.cause}")
-    if not sel.beats_urdf:
-        what = " and the markers were" if ms.marker_points else " and the measured frame were"
-        notes.append(NOT_BETTER.format(what=what))
-    report = range_report(sel.fit, sel.fits["frames"], ms)
+    report = range_report(sel.fit, sel.fits["frames"], used)
     wild = _wild(report, sel.fit) if sel.beats_urdf else []
     if wild:  # the data cannot vouch for these joints over their range: keep them at the URDF
         vouched = [j for j in sel.fit.joints if j not in wild]
-        fit = fit_map(nominal, ms, sel.chosen, vouched, tolerances, noise, estimate_noise=noise is None, loads=loads)
+        fit = sel.fits["frames"] if not vouched else fit_map(
+            nominal, used, sel.chosen, vouched, tolerances, noise, estimate_noise=noise is None, loads=used_loads)
         sel = Selection(fit, {**sel.fits, sel.chosen: fit})
         notes.append(f"kept at the URDF's values: {', '.join(wild)} (over their whole range the calibrated "
                      "prediction would leave the URDF's far beyond what the data cover)")
-        report = range_report(sel.fit, sel.fits["frames"], ms)
-    weak = [j for j, s in sel.fit.data_share.items() if s < 0.5]
+        report = range_report(sel.fit, sel.fits["frames"], used)
+    if level is None and not sel.beats_urdf:
+        what = " and the markers were" if ms.marker_points else " and the measured frame were"
+        notes.append(NOT_BETTER.format(what=what))
+    weak = [j for j, s in sel.fit.data_share.items() if s < BARELY]
     if weak and sel.beats_urdf:
         notes.append(f"the data barely determine {', '.join(weak)}: kept near the URDF by the prior "
                      f"(data share {', '.join(f'{sel.fit.data_share[j]:.2f}' for j in weak)})")
     n = sel.fit.residual_noise
     notes.append(f"noise {'the residuals show' if noise else 'estimated from the data'}: {n.position_m * 1e3:.3f} mm"
                  + (f", {math.degrees(n.rotation_rad):.3f} deg" if ms.frames else ""))
-    return Calibration(sel, gate, report, tuple(notes))
+    return Calibration(sel, gate, report, tuple(notes), level is None)
 
 
 def identify_map(ms: MeasurementSet, nominal: CPCModel | None, **options: Any) -> CPCModel:
@@ -205,6 +212,7 @@ def identify_map(ms: MeasurementSet, nominal: CPCModel | None, **options: Any) -
     cal = calibrate(ms, nominal, **options)
     gate = cal.gate
     details = {**_details(cal.selection), "whole_range": cal.whole_range,
+               "beats_urdf": cal.selection.beats_urdf if cal.chosen_by_cv else None,
                "consistency": {"consistent": gate.consistent, "cause": gate.cause,
                                "outlier_records": [ms.labels[i] for i in gate.outliers]}}
     prov = Provenance(method="map", measurements=ms.source, robot=ms.robot, details=details)

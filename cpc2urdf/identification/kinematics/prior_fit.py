@@ -91,6 +91,7 @@ class MapFit:
         names: One label per free parameter.
         rms_m: RMS distance of the measured points (or frame origins) to the fit [m].
         dof: Effective number of parameters the data determined (trace of the hat matrix).
+        dof_position: The part of ``dof`` the position rows used (the rest: orientations).
         loo_sq_m2: Per record, the squared distances of its points to the fit made without it,
             summed [m^2], shape (N,).
         loo_points: Per record, how many points (markers, frame origins) it measured, shape (N,).
@@ -101,8 +102,9 @@ class MapFit:
         loo_stat_rot: The same over its orientation rows (3 a measured frame), shape (N,).
         loo_frames: Per record, how many frame poses it measured, shape (N,).
         residual_noise: The noise the residuals show (equal to ``noise`` when it was estimated).
-        data_share: Joint -> fraction of its perturbation's information that comes from the data
-            (1: the data alone, 0: the prior alone), mean over its free components.
+        data_share: Joint -> how much the data narrowed its perturbation: ``1 - posterior
+            variance / prior variance``, mean over its free components (1: the data alone fix it,
+            0: the prior alone, as for a joint whose effect the measuring frame absorbs).
     """
 
     model: CPCModel
@@ -115,6 +117,7 @@ class MapFit:
     names: tuple[str, ...]
     rms_m: float
     dof: float
+    dof_position: float
     loo_sq_m2: Array
     loo_points: Array
     loo_rot_sq: Array
@@ -546,16 +549,13 @@ def _result(problem: _Problem, x: Array) -> MapFit:
     cov, hp, hr = _hat_traces(problem, J)
     loo_sq, loo_count, loo_rot, loo_stat, loo_stat_rot, loo_frames = _leave_one_out(problem, r, J, cov)
     model = problem.model(x)
-    info_data = J[:sum(problem.rows_of_kind())]
-    share: dict[str, float] = {}
+    share: dict[str, float] = {}  # 1 - posterior / prior variance, mean over the joint's free components
     for j in problem.joints:
         if j not in problem.slots:
             continue
         first, comps = problem.slots[j]
-        idx = list(range(first, first + len(comps)))
-        d = np.einsum("ij,ij->j", info_data[:, idx], info_data[:, idx])
-        p = 1.0 / problem.prior[idx] ** 2
-        share[j] = float(np.mean(d / (d + p)))
+        idx = np.arange(first, first + len(comps))
+        share[j] = float(np.mean(np.clip(1.0 - np.diag(cov)[idx] / problem.prior[idx] ** 2, 0.0, 1.0)))
     return MapFit(
         model=model,
         level=problem.level,
@@ -568,6 +568,7 @@ def _result(problem: _Problem, x: Array) -> MapFit:
         rms_m=float(np.sqrt(np.mean(np.concatenate(list(point_errors(
             model, problem.ms, {m: problem.marker_position(x, m) for m in problem.markers}, problem.q(x)).values())) ** 2))),
         dof=hp + hr,
+        dof_position=hp,
         loo_sq_m2=loo_sq,
         loo_points=loo_count,
         loo_rot_sq=loo_rot,
