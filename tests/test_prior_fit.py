@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cpc2urdf.identification.kinematics import prior_fit as pf
+from cpc2urdf.identification.kinematics.prior_problem import MapProblem, start_point
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCParams
 from cpc2urdf.studies.real_data import SETS, load_set, run_set
@@ -28,8 +29,8 @@ def _set(name: str) -> tuple[MeasurementSet, np.ndarray | None]:
 def test_jacobian_matches_finite_differences(name: str, level: str) -> None:
     ms, loads = _set(name)
     nominal = ms.spec.nominal_model()
-    problem = pf._Problem(nominal, ms, level, pf.default_joints(ms), pf.Tolerances(), pf.Noise(), loads)
-    x = pf._initial(problem) + np.random.default_rng(0).normal(0, 1e-3, len(problem.names))
+    problem = MapProblem(nominal, ms, level, pf.default_joints(ms), pf.Tolerances(), pf.Noise(), loads)
+    x = start_point(problem) + np.random.default_rng(0).normal(0, 1e-3, len(problem.names))
     _, J = problem.evaluate(x)
     assert J is not None
     fd = np.empty_like(J)
