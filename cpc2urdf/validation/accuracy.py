@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
+from cpc2urdf.identification.kinematics.point_identify import marker_positions
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import rotation_error
@@ -80,6 +81,15 @@ class BranchAccuracy:
         }
 
 
+def _branch(name: str, e: Array, rotation: Array, predicted: float | None) -> BranchAccuracy:
+    """Table 4 of errors ``e`` (K, 3) [m] and rotation errors (K,) [rad]."""
+    a = np.abs(e)
+    d = np.linalg.norm(e, axis=1)
+    return BranchAccuracy(name, len(e), a.mean(axis=0), a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
+                          float(d.mean()), float(np.sqrt(np.mean(d**2))), float(d.max()), float(rotation.mean()),
+                          float(rotation.max()), predicted)
+
+
 def position_errors(model: CPCModel, ms: MeasurementSet, frame: str) -> tuple[Array, Array]:
     """Per record that measured ``frame``: ``e = p_model - p_measured`` [m], shape (K, 3), and the
     rotation error [rad], shape (K,)."""
@@ -116,8 +126,10 @@ def predicted_rms(model: CPCModel, ms: MeasurementSet, frame: str) -> float | No
 
 
 def accuracy(model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool = False) -> dict[str, BranchAccuracy]:
-    """Table 4 for every frame that both the model has and ``ms`` measured, with the error the
-    model's covariance predicts next to it when the model has one (``identify --method refined``).
+    """Table 4 for every frame that both the model has and ``ms`` measured, and for every marker
+    whose position the model identified (point data: its frame at the held-out readings places
+    it), with the error the model's covariance predicts next to a frame's when the model has one
+    (``identify --method refined``).
 
     Args:
         model: The model.
@@ -126,7 +138,7 @@ def accuracy(model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool =
             with the model's own prediction (see :func:`prediction_check`).
 
     Raises:
-        DegenerateDataError: The joints differ, or no measured frame is in the model.
+        DegenerateDataError: The joints differ, or no measured frame or marker is in the model.
         InconsistentDataError: The observed errors are far above or below the model's prediction
             (unless ``accept_inconsistent``), naming the likely cause.
     """
@@ -136,22 +148,25 @@ def accuracy(model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool =
             f"{list(model.structure.joint_names)}"
         )
     frames = [f for f in ms.frames if f in model.structure.frame_names]
-    if not frames:
+    placed = marker_positions(model)
+    markers = [m for m in ms.marker_points if m in placed and bool(ms.has_marker(m).any())]
+    if not frames and not markers:
+        what = ", ".join([*ms.frames, *ms.marker_points]) or "none"
         raise DegenerateDataError(
-            f"{ms.source}: none of its measured frames ({', '.join(ms.frames) or 'none'}) is in the model "
-            f"({', '.join(model.structure.frame_names)})"
+            f"{ms.source}: none of its measured frames or markers ({what}) is in the model "
+            f"({', '.join([*model.structure.frame_names, *placed])})"
         )
     out = {}
     for f in frames:
         e, r = position_errors(model, ms, f)
-        a = np.abs(e)
-        d = np.linalg.norm(e, axis=1)
-        out[f] = BranchAccuracy(
-            f, len(e), a.mean(axis=0), a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
-            float(d.mean()), float(np.sqrt(np.mean(d**2))), float(d.max()), float(r.mean()), float(r.max()),
-            predicted_rms(model, ms, f) if model.metadata.uncertainty is not None else None,
-        )
-    if not accept_inconsistent:
+        out[f] = _branch(f, e, r, predicted_rms(model, ms, f) if model.metadata.uncertainty is not None else None)
+    for m in markers:  # a marker's identified position on its frame, at the held-out readings
+        frame, p = placed[m]
+        ok = ms.has_marker(m)
+        T = model.fk(ms.q[ok], [frame])[frame]
+        e = T[:, :3, :3] @ p + T[:, :3, 3] - ms.marker_points[m][ok]
+        out[m] = _branch(m, e, np.zeros(len(e)), None)
+    if not accept_inconsistent and frames:
         check = prediction_check(model, ms)
         if check is not None and not check.consistent:
             raise check.error()

@@ -52,8 +52,9 @@ NOT_BETTER = ("no calibration predicts left-out records better than the URDF as 
               "only the measuring frame{what} fitted")
 
 
-def _details(sel: Selection) -> dict[str, object]:
+def _details(sel: Selection, ms: MeasurementSet) -> dict[str, object]:
     fit = sel.fit
+    markers = {m: (ms.markers[m].frame, p) for m, p in fit.markers.items()}
     return {
         "reference": "maximum a posteriori about the URDF (prior: manufacturing tolerances), level chosen by "
                      "leave-one-record-out cross-validation",
@@ -67,7 +68,8 @@ def _details(sel: Selection) -> dict[str, object]:
         "offsets_rad_or_m": {j: float(xi[5] if fit.model.structure.joint(j).type == "revolute" else xi[2])
                              for j, xi in fit.perturbations.items()},
         "compliance": fit.compliance,
-        "markers": {m: {"position_m": [float(v) for v in p]} for m, p in fit.markers.items()},
+        "markers": {m: {"frame": frame, "position_m": [float(v) for v in p]}
+                    for m, (frame, p) in markers.items()},
     }
 
 
@@ -211,7 +213,7 @@ def identify_map(ms: MeasurementSet, nominal: CPCModel | None, **options: Any) -
                                   "has no geometry (give its URDF)")
     cal = calibrate(ms, nominal, **options)
     gate = cal.gate
-    details = {**_details(cal.selection), "whole_range": cal.whole_range,
+    details = {**_details(cal.selection, ms), "whole_range": cal.whole_range,
                "beats_urdf": cal.selection.beats_urdf if cal.chosen_by_cv else None,
                "consistency": {"consistent": gate.consistent, "cause": gate.cause,
                                "outlier_records": [ms.labels[i] for i in gate.outliers]}}
