@@ -120,3 +120,19 @@ def test_real_data_full_range_stays_near_the_urdf(real_rows: dict[str, dict], na
     r = real_rows[name]
     assert r["divergence_mm"]["p95"] <= r["figaroh_p95_mm"]
 
+
+
+def test_points_on_a_line_are_fitted_not_refused() -> None:
+    """Only TIAGo's torso lift moves: the marker's points span a line, and the measuring frame's
+    turn about it is free (kept at the start's); the fit is made, at the noise (0.2 mm)."""
+    ms, _ = _set("TIAGo, marker 1")
+    nominal = ms.spec.nominal_model()
+    q = np.tile(ms.q[3], (20, 1))
+    q[:, 0] = np.linspace(0.0, 0.35, 20)
+    truth = pf.fit_map(nominal, ms, "geometry")
+    T = truth.model.fk(q, ["wrist_ft_tool"])["wrist_ft_tool"]
+    y = T[:, :3, :3] @ truth.markers["m1"] + T[:, :3, 3] + np.random.default_rng(0).normal(0, 2e-4, (20, 3))
+    line = MeasurementSet.from_arrays(ms.structure, q, {}, markers=ms.markers, marker_points={"m1": y})
+    fit = pf.fit_map(nominal, line, "geometry")
+    assert fit.joints == ("torso_lift",)
+    assert fit.rms_m < 2e-4 * np.sqrt(3)

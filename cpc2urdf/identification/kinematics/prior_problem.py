@@ -339,6 +339,22 @@ class MapProblem:
         return pos, rot
 
 
+def _register(P: Array, Y: Array, source: str) -> Array:
+    """The rigid transform taking the predicted points ``P`` (K, 3) onto the measured ``Y``. Points
+    that span only a line (a ball seated in two sockets) leave the turn about it free: the start
+    takes the smallest rotation that aligns the lines, and the fit keeps that turn as it keeps any
+    freedom the data cannot see."""
+    try:
+        return transforms_from_point_pairs(P, Y, what=f"{source}: measured points")
+    except DegenerateDataError:
+        cP, cY = P.mean(0), Y.mean(0)
+        dP, dY = np.linalg.svd(P - cP)[2][0], np.linalg.svd(Y - cY)[2][0]
+        if float(((P - cP) @ dP) @ ((Y - cY) @ dY)) < 0:
+            dY = -dY
+        R = Rotation.align_vectors(dY[None], dP[None])[0].as_matrix()
+        return homogeneous(R, cY - R @ cP)
+
+
 def start_point(problem: MapProblem) -> Array:
     """A start: the measuring frame, measured frames and markers placed on the nominal model by
     alternating a rigid registration with their own least-squares placement."""
@@ -362,7 +378,7 @@ def start_point(problem: MapProblem) -> Array:
             T = base[f][rows] @ C[f]
             P.append(T[:, :3, 3])
             Y.append(ms.poses[f][rows][:, :3, 3])
-        W = transforms_from_point_pairs(np.vstack(P), np.vstack(Y), what=f"{ms.source}: measured points")
+        W = _register(np.vstack(P), np.vstack(Y), ms.source)
         Wi = inverse(W)
         for m in problem.unknown:
             rows = ms.has_marker(m)
