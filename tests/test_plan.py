@@ -519,3 +519,24 @@ def test_a_marker_plan_names_the_markers_simulate_places(tmp_path: Path, capsys:
         T = truth.fk(held.q, [v["frame"]])[v["frame"]]
         y = T[:, :3, :3] @ (np.array(v["position_mm"]) / 1e3) + T[:, :3, 3]
         np.testing.assert_allclose(y, held.marker_points[name], atol=1e-12)
+
+
+def test_a_joint_the_plan_holds_stays_held_through_simulate_and_identify(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``plan --range table_x=0:0``: the plan file records its ranges, ``simulate --plan`` keeps the
+    joint still in the held-out set too, and ``identify --method map`` keeps it at the nominal."""
+    import json
+
+    from cpc2urdf.cli import main
+    from cpc2urdf.robot_ref import load_model
+
+    plan, sim, model = tmp_path / "plan.json", tmp_path / "sim", tmp_path / "model.json"
+    assert main(["plan", "iis_head", "--n", "30", "--range", "table_x=0:0", "-o", str(plan)]) == 0
+    assert json.loads(plan.read_text())["setup"]["ranges"]["table_x"] == [0.0, 0.0]
+    assert main(["simulate", "iis_head", "--plan", str(plan), "-o", str(sim)]) == 0
+    for name in ("measurements.json", "heldout.json"):
+        assert {r["joints"]["table_x"] for r in json.loads((sim / name).read_text())["records"]} == {0.0}
+    assert main(["identify", str(sim / "measurements.json"), "--method", "map", "-o", str(model)]) == 0
+    identified = load_model(model)
+    assert "table_x" not in identified.metadata.provenance.details["calibrated_joints"]
+    nominal = load_model("iis_head")
+    assert identified.joints["table_x"].matrix() == pytest.approx(nominal.joints["table_x"].matrix(), abs=0)

@@ -58,8 +58,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
                    "measured links)")
     p.add_argument("--level", choices=("frames", "offsets", "geometry", "compliance"),
                    help="--method map: fit this level alone instead of choosing one by cross-validation")
-    p.add_argument("--noise", metavar="MM[,DEG]", help="the measurements' noise, one standard deviation per "
-                   "coordinate: position in mm (and orientation in deg for frame poses); default: the file's "
+    p.add_argument("--noise", metavar="MM[,DEG]", help="the measurements' noise, one standard deviation: of each "
+                   "position coordinate in mm (and, for frame poses, of the orientation error's angle in deg, as "
+                   "simulate's Fig. 10 noise); default: the file's "
                    "noise section, else estimated from the data (map) or 0.5 mm / 0.5 deg with the a-posteriori "
                    "scale (refined)")
     p.add_argument("--accept-inconsistent", action="store_true",

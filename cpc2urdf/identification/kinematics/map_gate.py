@@ -100,10 +100,10 @@ def check(fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | No
         shown = current.residual_noise
         m_pos = float(current.loo_points.sum()) * 3
         m_rot = float(current.loo_frames.sum()) * 3
-        checks = [("position", shown.position_m, stated.position_m, m_pos - current.dof_position, 1e3, "mm")]
+        checks = [("position", shown.position_m, stated.position_m, m_pos - current.dof_position, 1e3, "mm per coordinate")]
         if m_rot:
             checks.append(("orientation", shown.rotation_rad, stated.rotation_rad, m_rot - (current.dof - current.dof_position),
-                           180 / np.pi, "deg"))
+                           180 / np.pi, "deg per axis"))
         for what, got, want, dof, scale, unit in checks:
             r = got / want
             ratio = r if ratio is None else ratio

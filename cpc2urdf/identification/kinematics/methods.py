@@ -246,8 +246,8 @@ def identify(
         from cpc2urdf.identification.kinematics.map_identify import identify_map
         from cpc2urdf.identification.kinematics.prior_fit import Noise as StatedNoise
 
-        st, sr, known = noise_from_metadata(ms.metadata)
-        model = identify_map(ms, nominal, loads=loads, noise=StatedNoise(st, sr) if known else None,
+        st, sr, known = noise_from_metadata(ms.metadata)  # sr: the rotation error's angle (Fig. 10)
+        model = identify_map(ms, nominal, loads=loads, noise=StatedNoise(st, sr / np.sqrt(3.0)) if known else None,
                              accept_inconsistent=accept_inconsistent, level=level, joints=joints)
         return model if ms.has_points else model.with_params(
             metadata=model.metadata.replace(residuals=residuals(model, ms)))

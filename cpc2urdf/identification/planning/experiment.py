@@ -145,8 +145,8 @@ def simulate_from_plan(
 ) -> Experiment:
     """``cpc2urdf simulate --plan``: measure a plan file's configurations from where the plan put
     the robot, with the plan's rig (and noise, unless given); held-out configurations drawn as
-    :func:`simulate_experiment` draws them (uniform in the calibration ranges, redrawn until the rig
-    sees them, from the seed's held-out stream).
+    :func:`simulate_experiment` draws them (uniform in the plan's calibration ranges, so a joint the
+    plan held still stays still; redrawn until the rig sees them, from the seed's held-out stream).
 
     Args:
         nominal: The robot's nominal model (its joints are the plan's; see :func:`load_plan`).
@@ -162,7 +162,7 @@ def simulate_from_plan(
         require_view: Refuse a plan the rig does not see completely on the true robot.
         robot_ref: Robot reference written into the measurement sets.
     """
-    setup = measuring_setup(nominal, rig=plan.rig, sigma_t=plan.sigma_t if sigma_t is None else sigma_t,
+    setup = measuring_setup(nominal, rig=plan.rig, ranges=plan.ranges, sigma_t=plan.sigma_t if sigma_t is None else sigma_t,
                             sigma_r=plan.sigma_r if sigma_r is None else sigma_r, frames=plan.measured_frames,
                             world_to_base=CPCParams.from_matrix(plan.T_world_base),
                             noise="stereo" if (noise or plan.noise) == "stereo" else "fig10",

@@ -109,6 +109,7 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
             **({"markers": _markers_doc(setup)} if setup.markers else {}),
             "rig": setup.rig.to_json(),
             "T_world_base": T.tolist(),
+            "ranges": {j.name: [float(v) for v in setup.ranges[i] / scale[i]] for i, j in enumerate(s.joints)},
         },
         "task_region": task_region,
         "candidates": candidates,
@@ -157,6 +158,8 @@ class LoadedPlan:
         markers: Markers per measured frame the plan was made for (0: plate poses).
         marker_sigma: Their point noise per coordinate [m].
         marker_seed: The seed that placed them (``simulate --markers K --seed marker_seed``).
+        ranges: The calibration ranges the plan drew from, ``{joint: (lo, hi)}`` [m]/[rad] (a
+            joint held still has ``lo == hi``), or None in a plan file without them.
     """
 
     q: Array
@@ -175,6 +178,7 @@ class LoadedPlan:
     markers: int = 0
     marker_sigma: float = 0.0
     marker_seed: int = 0
+    ranges: dict[str, tuple[float, float]] | None = None
 
 
 def load_plan(path: str | os.PathLike[str], structure: RobotStructure | None = None) -> LoadedPlan:
@@ -291,9 +295,21 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     if not isinstance(robot, str) or not robot:
         raise ValueError("robot must be the robot reference the plan was made for")
     pred = doc.get("prediction")
+    ranges = None
+    if setup.get("ranges") is not None:
+        doc_ranges = setup["ranges"]
+        factor = dict(zip([j["name"] for j in joints], scale, strict=True))
+        if not isinstance(doc_ranges, dict) or set(doc_ranges) != set(names):
+            raise ValueError(f"setup.ranges must be {{joint: [lo, hi]}} for the joints {names}")
+        ranges = {}
+        for n, r in doc_ranges.items():
+            lo, hi = float_list(r, 2, f"setup.ranges.{n}")
+            if lo > hi:
+                raise ValueError(f"setup.ranges.{n}: lower {lo:g} > upper {hi:g}")
+            ranges[n] = (lo * factor[n], hi * factor[n])
     return LoadedPlan(q, labels, tuple(names), robot, tuple(frames), T, rig, sigma_t, sigma_r,
                       bool(doc.get("one_joint", False)), pred if isinstance(pred, dict) else {}, str(model),
-                      pixel_sigma, markers, marker_sigma, marker_seed)
+                      pixel_sigma, markers, marker_sigma, marker_seed, ranges)
 
 
 __all__ = ["PLAN_FORMAT", "LoadedPlan", "load_plan", "plan_to_json"]
