@@ -65,7 +65,7 @@ def test_joints_the_data_cannot_vouch_for_are_kept_at_the_urdf() -> None:
     ms, nominal, loads = _set("TALOS")
     loose = Tolerances(translation_m=0.1, rotation_rad=math.radians(30))
     model = identify_map(ms, nominal, loads=loads, tolerances=loose, level="geometry")
-    assert any(n.startswith("kept at the URDF's values: arm_left_5, arm_left_6") for n in model.metadata.notes)
+    assert any(n.startswith("kept at the URDF's values: arm_left_5_joint, arm_left_6_joint") for n in model.metadata.notes)
     for j in ("arm_left_5", "arm_left_6"):
         assert np.array_equal(model.joints[j].matrix(), nominal.joints[j].matrix())
     default = identify_map(ms, nominal, loads=loads)  # the default prior needs no such rescue
@@ -105,3 +105,14 @@ def test_a_stated_orientation_noise_too_small_is_named() -> None:
     shown = identify_map(ms, nominal, loads=loads).metadata.provenance.details["noise_residuals"]
     with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s orientation residuals are"):
         identify_map(ms, nominal, noise=Noise(shown["position_m"], shown["rotation_rad"] / 5))
+
+
+def test_a_joint_read_from_the_horizontal_is_named() -> None:
+    """UR10's controller made to report the elbow from the horizontal (``elbow + shoulder_lift``):
+    the fit fails by centimetres, and undoing that reading is what explains it."""
+    ms, nominal, _ = _set("UR10")
+    s = ms.structure
+    ms.q[:, s.joint_index("elbow")] += ms.q[:, s.joint_index("shoulder_lift")]
+    with pytest.raises(InconsistentDataError, match=r"joint 'elbow_joint' seems read relative to joint "
+                       r"'shoulder_lift_joint' \(the reading is elbow_joint \+ shoulder_lift_joint.*fall from .* mm to 1\.9\d mm"):
+        identify_map(ms, nominal)

@@ -35,6 +35,7 @@ from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.transforms import Array
+from cpc2urdf.urdf_robot import UrdfRobot
 
 RANGE_SAMPLES = 500  # [-]: seeded readings within the limits for the whole-range comparison
 SWEEP_SAMPLES = 101  # [-]: readings of one joint's sweep over its limits
@@ -47,6 +48,14 @@ WILD_DIVERGENCE_M = 0.02  # [m]
 # A joint whose data share (1 - posterior / prior variance) is below this is named as barely
 # determined by the data: the prior, that is the URDF, holds it.
 BARELY = 0.25  # [-]
+
+# A fit whose residuals scatter by more than this [m] is no working setup's: its likely mistakes are
+# tested (as they are when a stated noise is exceeded).
+FAILED_FIT_M = 0.01
+# Axes this parallel (|cos|) make a pair whose child a controller may report from the horizontal.
+PARALLEL_COS = 0.999
+# Undoing a likely mistake must lower the residual noise this many fold to name it.
+COUPLED_GAIN = 3.0
 
 NOT_BETTER = ("no calibration predicts left-out records better than the URDF as it is: its joints are kept, "
               "only the measuring frame{what} fitted")
@@ -83,6 +92,53 @@ def _gate(sel: Selection, nominal: CPCModel, ms: MeasurementSet, loads: Array | 
                        loads=None if loads is None else loads[kept])
 
     return check(sel.fit, refit, noise, ms.labels)
+
+
+def _shown(ms: MeasurementSet, joint: str) -> str:
+    """How the user names ``joint``: its URDF name for a URDF robot."""
+    robot = ms.spec
+    if isinstance(robot, UrdfRobot) and robot.names is not None:
+        return robot.names.urdf_joint(joint)
+    return joint
+
+
+def _parallel_pairs(nominal: CPCModel, joints: Sequence[str]) -> list[tuple[str, str]]:
+    """Calibrated revolute joints whose parent is a calibrated revolute joint with a parallel axis
+    (a parallelogram's or a planar arm's: a controller may report the child's angle from the
+    horizontal, the sum of the two)."""
+    s = nominal.structure
+    axis, _ = nominal.link_poses(np.zeros(s.n_joints))
+    out = []
+    for j in joints:
+        parent = s.joint(j).parent
+        if parent in joints and s.joint(j).type == s.joint(parent).type == "revolute":
+            a, b = axis[0, s.joint_index(j), :3, 2], axis[0, s.joint_index(parent), :3, 2]
+            if abs(float(a @ b)) > PARALLEL_COS:
+                out.append((parent, j))
+    return out
+
+
+def _coupled_reading(sel: Selection, nominal: CPCModel, ms: MeasurementSet,
+                     tolerances: Tolerances | None) -> str | None:
+    """The failed fit explained by a joint read relative to its parallel parent (``q_j + q_p`` or
+    ``q_j - q_p``), or None: the chosen level refitted with each reading undone must lower the
+    residual noise :data:`COUPLED_GAIN` fold."""
+    s = ms.structure
+    before = sel.fit.residual_noise.position_m
+    for parent, j in _parallel_pairs(nominal, sel.fit.joints):
+        for sign, how in ((1.0, "+"), (-1.0, "-")):
+            q = ms.q.copy()
+            q[:, s.joint_index(j)] -= sign * ms.q[:, s.joint_index(parent)]
+            undone = MeasurementSet(s, q, ms.poses, ms.source, ms.robot, ms.labels, ms.points, ms.fit_rms,
+                                    ms.metadata, ms.spec, ms.markers, ms.marker_points)
+            after = fit_map(nominal, undone, sel.chosen, sel.fit.joints, tolerances).residual_noise.position_m
+            if after * COUPLED_GAIN < before:
+                a, b = _shown(ms, j), _shown(ms, parent)
+                return (f"joint {a!r} seems read relative to joint {b!r} (the reading is {a} {how} {b}, as a "
+                        f"controller reporting the angle from the horizontal gives): with {a} "
+                        f"{'-' if sign > 0 else '+'} {b} the fit's residuals fall from {before * 1e3:.3g} mm to "
+                        f"{after * 1e3:.3g} mm")
+    return None
 
 
 def range_report(fit: MapFit, urdf: MapFit, ms: MeasurementSet, seed: int = 0) -> dict[str, object]:
@@ -168,6 +224,10 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
 
     sel = choose(ms, loads)  # the gate judges with the noise the data show
     gate = _gate(sel, nominal, ms, loads, tolerances, noise)
+    failed = (not gate.consistent and not gate.outliers) or sel.fit.residual_noise.position_m > FAILED_FIT_M
+    coupled = _coupled_reading(sel, nominal, ms, tolerances) if failed else None
+    if coupled is not None:  # a likely mistake explains the data: name it, whatever accept_inconsistent says
+        raise InconsistentDataError(f"{ms.source}: {coupled}", gate)
     if not gate.consistent and not accept_inconsistent:
         raise InconsistentDataError(f"{ms.source}: {gate.cause}", gate)
     kept = np.setdiff1d(np.arange(ms.n_records), gate.outliers)
@@ -184,7 +244,7 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
         fit = sel.fits["frames"] if not vouched else fit_map(
             nominal, used, sel.chosen, vouched, tolerances, noise, estimate_noise=noise is None, loads=used_loads)
         sel = Selection(fit, {**sel.fits, sel.chosen: fit})
-        notes.append(f"kept at the URDF's values: {', '.join(wild)} (over their whole range the calibrated "
+        notes.append(f"kept at the URDF's values: {', '.join(_shown(ms, j) for j in wild)} (over their whole range the calibrated "
                      "prediction would leave the URDF's far beyond what the data cover)")
         report = range_report(sel.fit, sel.fits["frames"], used)
     if level is None and not sel.beats_urdf:
@@ -192,7 +252,7 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
         notes.append(NOT_BETTER.format(what=what))
     weak = [j for j, s in sel.fit.data_share.items() if s < BARELY]
     if weak and sel.beats_urdf:
-        notes.append(f"the data barely determine {', '.join(weak)}: kept near the URDF by the prior "
+        notes.append(f"the data barely determine {', '.join(_shown(ms, j) for j in weak)}: kept near the URDF by the prior "
                      f"(data share {', '.join(f'{sel.fit.data_share[j]:.2f}' for j in weak)})")
     n = sel.fit.residual_noise
     notes.append(f"noise {'the residuals show' if noise else 'estimated from the data'}: {n.position_m * 1e3:.3f} mm"
