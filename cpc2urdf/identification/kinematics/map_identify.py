@@ -1,13 +1,18 @@
-"""``cpc2urdf identify --method map``: calibrate a URDF robot about its own URDF, the model chosen by
-cross-validation (:mod:`prior_fit`).
+"""``cpc2urdf identify --method map``: calibrate a URDF robot about its own URDF (:func:`calibrate`).
 
-The levels (the URDF as it is, joint offsets, offsets and geometry, and joint compliance when the
-joints' gravity loads are given) are each fitted by maximum a posteriori about the URDF; the
-simplest level whose leave-one-record-out error is best is kept (:func:`prior_fit.select_model`).
-The model's provenance holds the cross-validation table, the estimated noise, each marker's
-position, each joint's share of data versus prior, and whether the calibration beats the URDF;
-when it does not, the model is the URDF's own geometry with only the measuring frame fitted, and
-its notes say so.
+1. The levels (the URDF as it is, joint offsets, offsets and geometry, and joint compliance when
+   the joints' gravity loads are given) are fitted by maximum a posteriori about the URDF and one
+   is chosen by leave-one-record-out cross-validation (:func:`prior_fit.select_model`).
+2. The gate (:mod:`map_gate`) names isolated outliers or, against a stated noise, unmodelled
+   error. When the fit fails (beyond a stated noise, or residuals over :data:`FAILED_FIT_M`), a
+   joint read from the horizontal (a parallel pair's child reported as the sum of the two) is
+   tested, and named when undoing it explains the data.
+3. Over the whole joint range, a joint the data cannot vouch for keeps the URDF's values.
+
+The model's provenance holds the levels' left-out errors, the noise the residuals show, each
+marker's position, each joint's data share, the gate's verdict, the whole-range comparison and
+whether the calibration beats the URDF; when it does not, the model is the URDF's own geometry
+with only the measuring frame fitted, and its notes say so.
 """
 
 from __future__ import annotations
