@@ -415,7 +415,7 @@ def solve_daniilidis(A: Array, B: Array) -> Array:
         S[4:, :4] = quat_left_matrix(ad) - quat_right_matrix(bd)
         S[4:, 4:] = quat_left_matrix(a) - quat_right_matrix(b)
         rows.append(S)
-    _, _, Vt = np.linalg.svd(np.concatenate(rows))
+    _, _, Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)
     v1, v2 = Vt[-1], Vt[-2]
     lam = null_space_combination([(v1[:4], v2[:4], v1[4:], v2[4:])])
     v = lam[0] * v1 + lam[1] * v2

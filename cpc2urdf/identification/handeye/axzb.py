@@ -135,7 +135,7 @@ def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
         S[4:, 8:12] = -quat_right_matrix(bd)
         S[4:, 12:16] = -quat_right_matrix(b)
         rows.append(S)
-    _, _, Vt = np.linalg.svd(np.concatenate(rows))
+    _, _, Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)
     v1, v2 = Vt[-1], Vt[-2]  # eq. (13): the two right singular vectors of (near) zero
     lam = null_space_combination(
         [(v1[0:4], v2[0:4], v1[4:8], v2[4:8]), (v1[8:12], v2[8:12], v1[12:16], v2[12:16])]
@@ -174,7 +174,7 @@ def solve_zhuang(A: Array, B: Array) -> tuple[Array, Array]:
         G.append(others[1:] - np.outer(M[1:, 0], others[0]) / a[0])
         r0s.append(others[0])
         a0s.append(a[0])
-    _, _, Vt = np.linalg.svd(np.concatenate(G))
+    _, _, Vt = np.linalg.svd(np.concatenate(G), full_matrices=False)
     u = Vt[-1]
     a0 = np.array(a0s)
     x0 = -float(a0 @ (np.array(r0s) @ u)) / float(a0 @ a0)  # least squares over the poses
