@@ -159,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from cpc2urdf.api import identify, save_model
+    from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.fileio import check_output_path
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD
     from cpc2urdf.model_metadata import Provenance
@@ -171,13 +172,9 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     for option, value in (("--level", args.level), ("--joints", args.joints)):
         if value is not None and args.method != "map":
-            from cpc2urdf.errors import ConfigurationError
-
             raise ConfigurationError(f"{option} applies to --method map, not {args.method}")
     joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints is not None else None
     if joints is not None and not joints:
-        from cpc2urdf.errors import ConfigurationError
-
         raise ConfigurationError("--joints: name at least one joint to calibrate (URDF names, comma-separated)")
     model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level, joints=joints)
     elapsed = time.perf_counter() - start

@@ -29,7 +29,9 @@ from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
     MapFit,
     cross_validate,
+    first_point,
     fit_map,
+    readings_within_limits,
 )
 from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.urdf_robot import UrdfRobot, load_urdf_robot
@@ -90,24 +92,12 @@ def _rms(e: np.ndarray) -> float:
 
 
 def divergence(fit: MapFit, urdf_fit: MapFit, ms: MeasurementSet, seed: int = 0) -> np.ndarray:
-    """Distance [m] between the calibrated and the URDF's prediction of the first measured point,
-    at :data:`RANGE_SAMPLES` seeded readings within the joints' limits."""
-    s = ms.structure
-    lo = np.array([j.lower for j in s.joints])
-    hi = np.array([j.upper for j in s.joints])
-    Q = np.random.default_rng(seed).uniform(lo, hi, size=(RANGE_SAMPLES, s.n_joints))
+    """Distance [m] between the calibrated (deflected by gravity where it has compliances) and the
+    URDF's prediction of the first measured point, at :data:`RANGE_SAMPLES` seeded readings within
+    the joints' limits."""
+    Q = readings_within_limits(ms.structure, RANGE_SAMPLES, seed)
     Qd = fit.deflected(Q, gravity_loads(ms, Q) if fit.compliance else None)
-
-    def point(f: MapFit, q: np.ndarray) -> np.ndarray:
-        if f.markers:
-            m = next(iter(f.markers))
-            frame = ms.markers[m].frame
-            T = f.model.fk(q, [frame])[frame]
-            return T[:, :3, :3] @ f.markers[m] + T[:, :3, 3]
-        frame = ms.frames[0]
-        return f.model.fk(q, [frame])[frame][:, :3, 3]
-
-    return np.linalg.norm(point(fit, Qd) - point(urdf_fit, Q), axis=1)
+    return np.linalg.norm(first_point(fit, ms, Qd) - first_point(urdf_fit, ms, Q), axis=1)
 
 
 def run_set(rs: RealSet) -> dict[str, Any]:

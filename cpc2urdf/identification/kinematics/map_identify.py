@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,7 @@ from cpc2urdf.identification.kinematics.prior_fit import (
     Tolerances,
     first_point,
     fit_map,
+    readings_within_limits,
     select_model,
 )
 from cpc2urdf.measurements import MeasurementSet
@@ -134,9 +135,7 @@ def _coupled_reading(sel: Selection, nominal: CPCModel, ms: MeasurementSet,
         for sign, how in ((1.0, "+"), (-1.0, "-")):
             q = ms.q.copy()
             q[:, s.joint_index(j)] -= sign * ms.q[:, s.joint_index(parent)]
-            undone = MeasurementSet(s, q, ms.poses, ms.source, ms.robot, ms.labels, ms.points, ms.fit_rms,
-                                    ms.metadata, ms.spec, ms.markers, ms.marker_points)
-            after = fit_map(nominal, undone, sel.chosen, sel.fit.joints, tolerances).residual_noise.position_m
+            after = fit_map(nominal, replace(ms, q=q), sel.chosen, sel.fit.joints, tolerances).residual_noise.position_m
             if after * COUPLED_GAIN < before:
                 a, b = _shown(ms, j), _shown(ms, parent)
                 return (f"joint {a!r} seems read relative to joint {b!r} (the reading is {a} {how} {b}, as a "
@@ -155,7 +154,7 @@ def range_report(fit: MapFit, urdf: MapFit, ms: MeasurementSet, seed: int = 0) -
     s = ms.structure
     lo = np.array([j.lower for j in s.joints])
     hi = np.array([j.upper for j in s.joints])
-    Q = np.random.default_rng(seed).uniform(lo, hi, (RANGE_SAMPLES, s.n_joints))
+    Q = readings_within_limits(s, RANGE_SAMPLES, seed)
     d = np.linalg.norm(first_point(fit, ms, Q) - first_point(urdf, ms, Q), axis=1)
     joints: dict[str, dict[str, float]] = {}
     mid = np.median(ms.q, axis=0)
@@ -187,14 +186,14 @@ class Calibration:
     Attributes:
         selection: The chosen fit and the levels' fits.
         gate: What the gate found.
-        whole_range: :func:`range_report` of the chosen fit, or None.
+        whole_range: :func:`range_report` of the chosen fit.
         notes: What the user should read.
         chosen_by_cv: False when the level was given (no cross-validation chose it).
     """
 
     selection: Selection
     gate: GateReport
-    whole_range: dict[str, object] | None
+    whole_range: dict[str, object]
     notes: tuple[str, ...]
     chosen_by_cv: bool = True
 

@@ -35,7 +35,7 @@ from cpc2urdf.identification.kinematics.prior_problem import (
     start_point,
 )
 from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.model import CPCModel
+from cpc2urdf.model import CPCModel, RobotStructure
 from cpc2urdf.transforms import Array
 
 LEVELS = ("frames", "offsets", "geometry", "compliance")
@@ -171,10 +171,9 @@ def _hat_traces(problem: MapProblem, J: Array) -> tuple[Array, float, float]:
     return cov, float(np.sum(cov * (Jp.T @ Jp))), float(np.sum(cov * (Jr.T @ Jr)))
 
 
-def _estimate_noise(problem: MapProblem, x: Array) -> Noise:
-    r, J = problem.evaluate(x)
-    assert J is not None
-    _, hp, hr = _hat_traces(problem, J)
+def _noise_shown(problem: MapProblem, r: Array, hp: float, hr: float) -> Noise:
+    """The noise the weighted residuals ``r`` show, the hat matrix's traces ``hp``, ``hr``
+    counting the parameters the position and rotation rows used up."""
     _, point = problem.row_records()
     rm = r[:len(point)]
     rp, rr = rm[point] * problem.noise.position_m, rm[~point] * problem.noise.rotation_rad
@@ -183,12 +182,21 @@ def _estimate_noise(problem: MapProblem, x: Array) -> Noise:
     return Noise(max(sp, NOISE_FLOOR), max(sr, NOISE_FLOOR))
 
 
+def _estimate_noise(problem: MapProblem, x: Array) -> Noise:
+    r, J = problem.evaluate(x)
+    assert J is not None
+    _, hp, hr = _hat_traces(problem, J)
+    return _noise_shown(problem, r, hp, hr)
+
+
 def _result(problem: MapProblem, x: Array) -> MapFit:
     r, J = problem.evaluate(x)
     assert J is not None
     cov, hp, hr = _hat_traces(problem, J)
     loo_sq, loo_count, loo_rot, loo_stat, loo_stat_rot, loo_frames = _leave_one_out(problem, r, J, cov)
     model = problem.model(x)
+    _, point = problem.row_records()
+    point_rows = r[:len(point)][point] * problem.noise.position_m  # the points' fit residuals [m]
     share: dict[str, float] = {}  # 1 - posterior / prior variance, mean over the joint's free components
     for j in problem.joints:
         if j not in problem.slots:
@@ -205,8 +213,7 @@ def _result(problem: MapProblem, x: Array) -> MapFit:
         noise=problem.noise,
         covariance=cov,
         names=problem.names,
-        rms_m=float(np.sqrt(np.mean(np.concatenate(list(point_errors(
-            model, problem.ms, {m: problem.marker_position(x, m) for m in problem.markers}, problem.q(x)).values())) ** 2))),
+        rms_m=math.sqrt(float(point_rows @ point_rows) / max(len(point_rows) / 3, 1.0)),
         dof=hp + hr,
         dof_position=hp,
         loo_sq_m2=loo_sq,
@@ -215,7 +222,7 @@ def _result(problem: MapProblem, x: Array) -> MapFit:
         loo_stat=loo_stat,
         loo_stat_rot=loo_stat_rot,
         loo_frames=loo_frames,
-        residual_noise=_estimate_noise(problem, x),
+        residual_noise=_noise_shown(problem, r, hp, hr),
         data_share=share,
         compliance={j: float(x[i]) for j, i in problem.compliance.items()},
     )
@@ -284,6 +291,13 @@ def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
         T = model.fk(q[rows], [f])[f]
         out[f] = np.linalg.norm(T[:, :3, 3] - ms.poses[f][rows][:, :3, 3], axis=1)
     return out
+
+
+def readings_within_limits(structure: RobotStructure, n: int, seed: int = 0) -> Array:
+    """``n`` seeded readings uniform within every joint's limits, shape (n, joints)."""
+    lo = np.array([j.lower for j in structure.joints])
+    hi = np.array([j.upper for j in structure.joints])
+    return np.random.default_rng(seed).uniform(lo, hi, (n, structure.n_joints))
 
 
 def first_point(fit: MapFit, ms: MeasurementSet, q: Array) -> Array:
@@ -382,6 +396,7 @@ __all__ = [
     "folds",
     "perturbation",
     "first_point",
+    "readings_within_limits",
     "point_errors",
     "select_model",
     "Selection",

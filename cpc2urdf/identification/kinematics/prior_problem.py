@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.measurements import UNKNOWN_MOUNTS, MeasurementSet
-from cpc2urdf.model import BASE, CPCModel, CPCParams
+from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
 from cpc2urdf.registration import transforms_from_point_pairs
 from cpc2urdf.transforms import Array, homogeneous, inverse, skew
 
@@ -102,9 +102,8 @@ def _components(model: CPCModel, joint: str, level: str) -> list[int]:
     return list(range(6))
 
 
-def _upstream(model: CPCModel, frame: str) -> list[int]:
+def _upstream(s: RobotStructure, frame: str) -> list[int]:
     """Indices of the joints on the path from the base to ``frame``."""
-    s = model.structure
     out, parent = [], s.frame(frame).parent
     while parent != BASE:
         i = s.joint_index(parent)
@@ -116,13 +115,7 @@ def _upstream(model: CPCModel, frame: str) -> list[int]:
 def default_joints(ms: MeasurementSet) -> tuple[str, ...]:
     """The joints the data move, on the paths to the measured frames and markers."""
     frames = set(ms.frames) | {ms.markers[m].frame for m in ms.marker_points if ms.has_marker(m).any()}
-    on_paths: set[int] = set()
-    for f in frames:
-        parent = ms.structure.frame(f).parent
-        while parent != BASE:
-            i = ms.structure.joint_index(parent)
-            on_paths.add(i)
-            parent = ms.structure.joints[i].parent
+    on_paths = {i for f in frames for i in _upstream(ms.structure, f)}
     span = np.ptp(ms.q, axis=0)
     return tuple(ms.structure.joint_names[i] for i in sorted(on_paths) if span[i] > 0)
 
@@ -182,7 +175,7 @@ class MapProblem:
         self.names = tuple(names)
         self.prior = np.array(prior)
         self.has_prior = self.prior > 0
-        self.upstream = {f: _upstream(nominal, f) for f in {*self.pose_frames, *(ms.markers[m].frame for m in self.markers)}}
+        self.upstream = {f: _upstream(s, f) for f in {*self.pose_frames, *(ms.markers[m].frame for m in self.markers)}}
 
     # ---- the model at a parameter vector --------------------------------------------------------
 
@@ -263,21 +256,18 @@ class MapProblem:
             N = len(rows)
             J = np.zeros((N, 3, n))
             self._block_local(J, "world", np.broadcast_to(W, (N, 4, 4)), x, y, rot)
-            for i in self.upstream[frame]:
-                name = model.structure.joint_names[i]
-                self._block_local(J, name, axis[rows, i], x, y, rot)
             if ("frame:" + frame) in self.slots:
                 self._block_local(J, "frame:" + frame, T_rows, x, y, rot)
             for i in self.upstream[frame]:
                 name = model.structure.joint_names[i]
-                if name in self.compliance:
-                    A = axis[rows, i]
-                    z = A[:, :3, 2]
-                    if rot:
-                        d = z if model.structure.joints[i].type == "revolute" else np.zeros_like(z)
-                    else:
-                        d = np.cross(z, y - link[rows, i][:, :3, 3]) if model.structure.joints[i].type == "revolute" else z
+                self._block_local(J, name, axis[rows, i], x, y, rot)
+                if name in self.compliance:  # d(point)/dq of the joint, times its load
                     assert self.loads is not None
+                    z = axis[rows, i][:, :3, 2]
+                    if model.structure.joints[i].type == "revolute":
+                        d = z if rot else np.cross(z, y - link[rows, i][:, :3, 3])
+                    else:
+                        d = np.zeros_like(z) if rot else z
                     J[:, :, self.compliance[name]] += d * self.loads[rows, i][:, None]
             return J
 
@@ -330,13 +320,6 @@ class MapProblem:
             rec += [r, r]
             point += [np.ones(len(r), bool), np.zeros(len(r), bool)]
         return np.concatenate(rec), np.concatenate(point)
-
-    def rows_of_kind(self) -> tuple[int, int]:
-        """How many residual rows are position and rotation measurements."""
-        pos = 3 * sum(int(self.ms.has_marker(m).sum()) for m in self.markers)
-        pos += 3 * sum(int(self.ms.has_pose(f).sum()) for f in self.pose_frames)
-        rot = 3 * sum(int(self.ms.has_pose(f).sum()) for f in self.pose_frames)
-        return pos, rot
 
 
 def _register(P: Array, Y: Array, source: str) -> Array:
