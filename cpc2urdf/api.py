@@ -37,19 +37,19 @@ from cpc2urdf.identification.kinematics.methods import identify as _identify
 from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
 from cpc2urdf.identification.planning.outputs import DEFAULT_CANDIDATES, PlanOutputs, plan_robot
 from cpc2urdf.identification.planning.plan_file import LoadedPlan, load_plan
-from cpc2urdf.marker_csv import load_marker_csv as _load_marker_csv
-from cpc2urdf.measurements import MeasurementSet, load_measurements
+from cpc2urdf.files.marker_csv import load_marker_csv as _load_marker_csv
+from cpc2urdf.files.measurements import MeasurementSet, load_measurements
 from cpc2urdf.model import CPCModel
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import RobotRef, load_model, load_robot
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.urdf import write_urdf
-from cpc2urdf.urdf_export import plan_export
-from cpc2urdf.urdf_origins import writeback_plan
-from cpc2urdf.urdf_report import CalibrationReport
-from cpc2urdf.urdf_report import calibration_report as _calibration_report
-from cpc2urdf.urdf_robot import UrdfRobot, attach_urdf_source, urdf_source
-from cpc2urdf.urdf_writeback import write_calibrated_urdf
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import RobotRef, load_model, load_robot
+from cpc2urdf.files.spec import RobotSpec
+from cpc2urdf.urdf.document import write_urdf
+from cpc2urdf.urdf.export import plan_export
+from cpc2urdf.urdf.origins import writeback_plan
+from cpc2urdf.urdf.report import CalibrationReport
+from cpc2urdf.urdf.report import calibration_report as _calibration_report
+from cpc2urdf.urdf.robot import UrdfRobot, attach_urdf_source, urdf_source
+from cpc2urdf.urdf.writeback import write_calibrated_urdf
 from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
 from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
 from cpc2urdf.validation.gaze import (
@@ -62,7 +62,7 @@ from cpc2urdf.validation.gaze import (
 from cpc2urdf.validation.gaze.chain import Coupling
 from cpc2urdf.validation.gaze.reach import Region, make_grid
 from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
-from cpc2urdf.validation.pinocchio_robot import gravity_loads
+from cpc2urdf.urdf.pinocchio import gravity_loads
 from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
 from cpc2urdf.validation.view.region import view_cameras
 

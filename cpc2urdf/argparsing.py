@@ -141,7 +141,7 @@ def referenced_files(path: str) -> list[str]:
         found.append(urdf["path"])
     robot = doc.get("robot")
     if isinstance(robot, str) and robot:
-        from cpc2urdf.robot_ref import looks_like_path
+        from cpc2urdf.files.robot_ref import looks_like_path
 
         if looks_like_path(robot) or os.path.exists(robot):  # else the shipped robot of that name
             beside = os.path.join(os.path.dirname(path), robot)

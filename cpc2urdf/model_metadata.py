@@ -1,7 +1,7 @@
 """What an identified model carries besides its geometry, as types: where it came from, how well
 it fits its data, how far to trust it, and how its cameras were calibrated.
 
-These are the optional sections of a ``cpc2urdf/model@1`` file (:mod:`cpc2urdf.model_file`)::
+These are the optional sections of a ``cpc2urdf/model@1`` file (:mod:`cpc2urdf.files.model_file`)::
 
     "description": "...",
     "provenance":  {"method": "refined", "measurements": "...", "robot": "...", ...},

@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from cpc2urdf.native_output import captured_output
 from cpc2urdf.transforms import Array, matrix_from_rpy, rotation_error
+from cpc2urdf.urdf.native_output import captured_output
 from cpc2urdf.validation.crosscheck import check_urdfdom_executable, yourdfpy_pose
 
 CONSUMER_TOL = 1e-12  # [m] and [rad]: every consumer's pose of every link vs Pinocchio's

@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head, reachable_targets
-from cpc2urdf.urdf import write_urdf
+from cpc2urdf.urdf.document import write_urdf
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import Coupling, GazeSolver
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 HEAD_SHAPES = ("iis_nominal", "iis_calibrated", "tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera")
 ERD = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"

@@ -41,9 +41,9 @@ Trial = tuple[str, Array, Array, PoseNoise | None]
 
 
 def stage2_trials(seeds: int, kinematic_error: bool) -> Iterator[Trial]:
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye import stage2 as s2
     from cpc2urdf.identification.simulation.truth import perturbed_model
-    from cpc2urdf.robot_ref import load_model
 
     nominal = load_model("iis_head")
     truth = s2.perturb_cameras(nominal, np.random.default_rng(1))

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.handeye.pose_file import handeye_poses_to_json
 from cpc2urdf.transforms import homogeneous, inverse, matrix_from_rpy
-from cpc2urdf.units import Units
 
 Doc = dict[str, Any]
 

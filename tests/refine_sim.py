@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.simulation import design
 from cpc2urdf.identification.simulation.noise import fig10_noise
 from cpc2urdf.identification.simulation.truth import perturbed_model
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 
 

@@ -9,11 +9,11 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet, save_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.measurements import MeasurementSet, save_measurements
 from cpc2urdf.model import CPCParams
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import homogeneous
 from cpc2urdf.validation.accuracy import accuracy, format_table
 
@@ -93,9 +93,9 @@ def test_refined_model_shows_predicted_next_to_observed() -> None:
 @pytest.fixture(scope="module")
 def identified(tmp_path_factory):
     """A refined model of a simulated head, its stage-1 file and its held-out file (SI units)."""
+    from cpc2urdf.files.measurements import measurements_to_json
     from cpc2urdf.identification.kinematics.methods import identify
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
-    from cpc2urdf.measurements import measurements_to_json
 
     d = tmp_path_factory.mktemp("accuracy")
     _, measured, heldout = simulate_experiment("iis_head", seed=0, n_heldout=30)
@@ -113,7 +113,7 @@ def _run(capsys, *args: str) -> tuple[int, str, str]:
 def test_heldout_file_with_a_unit_mistake_is_refused_naming_it(identified, capsys) -> None:
     import stage1_mistakes as sm
 
-    from cpc2urdf.fileio import write_json
+    from cpc2urdf.files.jsonio import write_json
 
     d, _, held = identified
     write_json(d / "held_mm.json", sm.metres_as_mm(held))
@@ -131,7 +131,7 @@ def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(identified, 
     --accept-inconsistent) predicts about 1 mm, the held-out errors are 1000x smaller."""
     import stage1_mistakes as sm
 
-    from cpc2urdf.fileio import write_json
+    from cpc2urdf.files.jsonio import write_json
 
     _, measured, held = identified
     write_json(tmp_path / "m.json", sm.metres_as_mm(measured))
@@ -144,9 +144,9 @@ def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(identified, 
 
 
 def test_clean_heldout_data_are_consistent_with_the_prediction(identified, capsys) -> None:
-    from cpc2urdf.fileio import write_json
-    from cpc2urdf.measurements import measurements_from_json
-    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.files.jsonio import write_json
+    from cpc2urdf.files.measurements import measurements_from_json
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.validation.accuracy import prediction_check
 
     d, _, held = identified

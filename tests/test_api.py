@@ -14,7 +14,7 @@ import pytest
 import cpc2urdf
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

@@ -27,7 +27,7 @@ from bad_inputs import CASES, Case, Corpus, write_content
 
 import cpc2urdf
 from cpc2urdf.cli import COMMANDS, main
-from cpc2urdf.fileio import read_json, write_json
+from cpc2urdf.files.jsonio import read_json, write_json
 
 PLACEHOLDERS = ("meas", "heldout", "model", "urdf", "spec", "poses", "images", "rig", "joints", "camera")
 IMAGE_SIZE = (64, 48)  # [px] width, height: blank images, nothing to detect
@@ -41,10 +41,10 @@ def _quiet_main(argv: list[str]) -> int:
 def _blank_images(d: Path) -> None:
     """A stage-1 and stage-2 image folder of 4 records of blank images, with its rig, joint
     readings and camera files (as in test_cli_measure)."""
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.vision.joints_csv import write_joints_csv
     from cpc2urdf.identification.vision.rig_file import save_camera, save_rig
     from cpc2urdf.identification.vision.stereo import StereoRig
-    from cpc2urdf.robot_ref import load_robot
 
     structure = load_robot("iis_head").structure
     K = np.array([[60.0, 0.0, 32.0], [0.0, 60.0, 24.0], [0.0, 0.0, 1.0]])

@@ -29,6 +29,9 @@ from scipy.spatial.transform import Rotation
 from cpc2urdf.cli import bag as cli_bag
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
+from cpc2urdf.files.measurements import MeasurementSet, load_measurements, save_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.handeye import stage2 as s2
 from cpc2urdf.identification.handeye.head_images import write_handeye_files
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
@@ -38,9 +41,6 @@ from cpc2urdf.identification.vision import bag_images, bags
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
 from cpc2urdf.identification.vision.measure_head import HeadImageMeasurement
 from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
-from cpc2urdf.measurements import MeasurementSet, load_measurements, save_measurements
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_model, load_robot
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # [ns] the recording's start
@@ -220,7 +220,7 @@ def test_urdf_robot_takes_the_joints_on_the_path_from_a_whole_joint_states(tmp_p
     joint the driver has; the file keeps those on the path to the measured link, URDF names."""
     from urdf_cases import TIAGO_HEAD, simulate, tiago_with_plate
 
-    from cpc2urdf.urdf_robot import load_urdf_robot
+    from cpc2urdf.urdf.robot import load_urdf_robot
 
     urdf = tiago_with_plate(tmp_path)
     robot = load_urdf_robot(urdf, ["calib_plate"])

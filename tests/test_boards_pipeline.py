@@ -17,6 +17,8 @@ import pytest
 from scipy.stats import chi2
 
 from cpc2urdf.cli import main
+from cpc2urdf.files.measurements import load_measurements
+from cpc2urdf.files.model_file import save_model
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 from cpc2urdf.identification.handeye.stage2 import (
     DEFAULT_INTRINSICS,
@@ -32,9 +34,7 @@ from cpc2urdf.identification.simulation.simulate import simulate_experiment
 from cpc2urdf.identification.vision.board_file import board_from_json, save_board
 from cpc2urdf.identification.vision.board_poses import _solve, board_pose, detect_board
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv
-from cpc2urdf.measurements import load_measurements
 from cpc2urdf.model import CPCModel
-from cpc2urdf.model_file import save_model
 from cpc2urdf.transforms import inverse, rotation_error
 
 # "As accurate as from exact poses with the same noise": the image result is not worse than this
@@ -210,8 +210,8 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
     # identification (closed form) from the board images is as accurate as from the exact poses of
     # the same records and plates with the same pixel noise (REFERENCE_DRAWS draws; measured: 0.11 mm,
     # above 10 % (plate_left) and 5 % (plate_right) of the draws)
+    from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-    from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.validation.accuracy import accuracy
 
     held = load_measurements(folder / "heldout.json")
@@ -280,9 +280,9 @@ def test_plate_boards_from_prefix_dictionaries_are_told_apart_by_id() -> None:
     import cv2
 
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.vision.boards import Board
     from cpc2urdf.identification.vision.measure_stereo import check_plate_boards, dictionary_family
-    from cpc2urdf.robot_ref import load_model
 
     small = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50).bytesList
     large = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_1000).bytesList

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from cpc2urdf.cli import main
-from cpc2urdf.robot_ref import load_model
-from cpc2urdf.urdf import urdf_from_model
+from cpc2urdf.files.robot_ref import load_model
+from cpc2urdf.urdf.document import urdf_from_model
 
 HEAD = urdf_from_model(load_model("iis_head"))
 # What urdfdom (console_bridge), check_urdf and yourdfpy print themselves.
@@ -219,7 +219,7 @@ def tiago_written_back(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
     URDF written back from that model."""
     from test_view_writeback import identified_tiago
 
-    from cpc2urdf.urdf_writeback import write_calibrated_urdf
+    from cpc2urdf.urdf.writeback import write_calibrated_urdf
 
     folder = tmp_path_factory.mktemp("tiago_check")
     urdf, model, model_file = identified_tiago(folder)
@@ -300,9 +300,9 @@ def test_written_back_small_robot_with_every_awkward_joint(tmp_path: Path, capfd
     from urdf_cases import SMALL, write
 
     from cpc2urdf.identification.simulation.truth import perturbed_model
-    from cpc2urdf.model_file import save_model
-    from cpc2urdf.urdf_robot import load_urdf_robot, urdf_source, with_urdf_source
-    from cpc2urdf.urdf_writeback import write_calibrated_urdf
+    from cpc2urdf.files.model_file import save_model
+    from cpc2urdf.urdf.robot import load_urdf_robot, urdf_source, with_urdf_source
+    from cpc2urdf.urdf.writeback import write_calibrated_urdf
 
     nominal = load_urdf_robot(write(tmp_path, "small.urdf", SMALL), ["marker"]).nominal_model()
     model = with_urdf_source(perturbed_model(nominal, np.random.default_rng(1), 1e-3, 0.01), urdf_source(nominal))
@@ -321,9 +321,9 @@ def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixtur
     (the solver's disparity report); the JSON carries the same under ``gaze_head``."""
     import json
 
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
     from cpc2urdf.studies.bench_gaze import calibrated_iis_head
-    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.urdf.document import write_urdf
     from cpc2urdf.validation.gaze import GazeSolver
 
     path = tmp_path / "head.urdf"

@@ -8,8 +8,8 @@ import sys
 import pytest
 
 from cpc2urdf.cli import main
-from cpc2urdf.model_file import model_to_json
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.model_file import model_to_json
+from cpc2urdf.files.robot_ref import load_model
 
 
 def run(argv, capsys):
@@ -43,7 +43,7 @@ def test_check_reports_a_tampered_urdf_with_exit_1(tmp_path, capsys):
 
 def test_check_names_missing_frames(tmp_path, capsys):
     m = load_model("iis_head").without_frames(["camera"])
-    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.urdf.document import write_urdf
 
     write_urdf(m, tmp_path / "nocam.urdf")
     code, out, _ = run(["check", str(tmp_path / "nocam.urdf"), "--model", "iis_head", "-n", "3"], capsys)
@@ -196,7 +196,7 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     assert main(["export", str(report), "-o", str(tmp_path / "cal.urdf")]) == 2
     assert "-o (its report)" in capsys.readouterr().err
     # ... only then: a model cpc2urdf exports itself writes no report, so none is refused
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
 
     plain = save_model(load_model("iis_head"), tmp_path / "plain.report.json")
     assert main(["export", str(plain), "-o", str(tmp_path / "plain.urdf")]) == 0

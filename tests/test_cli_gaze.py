@@ -11,9 +11,9 @@ from gaze_heads import model_pointing_errors
 
 from cpc2urdf.cli import gaze as cli_gaze
 from cpc2urdf.cli import main
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.urdf import write_urdf
+from cpc2urdf.urdf.document import write_urdf
 from cpc2urdf.validation import gaze
 
 AHEAD = ["-0.6", "-0.6", "0.7"]
@@ -149,7 +149,7 @@ def test_report_of_the_head_alone(capsys):
 def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     """A calibrated IIS-head (eyes mounted a little off): cannot fixate exactly, its vertical
     disparity reported once (median and max over the workspace ahead), then the solution."""
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
     from cpc2urdf.studies.bench_gaze import calibrated_iis_head
     from cpc2urdf.validation.gaze import GazeSolver
 

@@ -12,6 +12,7 @@ from test_handeye import EXACT, make_data
 
 from cpc2urdf.cli import COMMANDS, main
 from cpc2urdf.errors import InputFileError
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.handeye.pose_file import (
     HANDEYE_POSES_FORMAT,
     handeye_poses_to_json,
@@ -20,7 +21,6 @@ from cpc2urdf.identification.handeye.pose_file import (
 )
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS
 from cpc2urdf.transforms import inverse
-from cpc2urdf.units import Units
 
 
 @pytest.fixture()
@@ -145,9 +145,9 @@ def test_file_errors_name_the_field() -> None:
 
 
 def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cpc2urdf.files.model_file import save_model
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye import stage2 as s2
-    from cpc2urdf.model_file import save_model
-    from cpc2urdf.robot_ref import load_model
 
     nominal = load_model("iis_head")
     truth = s2.perturb_cameras(nominal, np.random.default_rng(2))

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from cpc2urdf.cli import main
-from cpc2urdf.fileio import write_json
+from cpc2urdf.files.jsonio import write_json
+from cpc2urdf.files.measurements import MeasurementSet, measurements_to_json
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.measurements import MeasurementSet, measurements_to_json
 from cpc2urdf.model import CPCModel
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 
 
@@ -186,7 +186,7 @@ def test_simulated_marker_data_identify_and_predict_the_heldout_points(marker_si
     """``simulate --markers 3`` writes position-only files (@2; the held-out one with the true points);
     ``identify`` starts from the circle-point closed form, prints no rotation column, and predicts
     the held-out points better than one measurement's noise (the fit averages 31 records)."""
-    from cpc2urdf.measurements import load_measurements
+    from cpc2urdf.files.measurements import load_measurements
 
     doc = json.loads((marker_sim / "measurements.json").read_text())
     held_doc = json.loads((marker_sim / "heldout.json").read_text())
@@ -241,8 +241,8 @@ def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim
     """``identify tracker.csv --robot iis_head --marker NAME=LINK ...``: the same points as the
     measurement file give the same model (the CSV does not state the noise: a-posteriori scale, same
     estimate)."""
+    from cpc2urdf.files.measurements import load_measurements
     from cpc2urdf.identification.kinematics.point_identify import marker_positions
-    from cpc2urdf.measurements import load_measurements
 
     ms = load_measurements(marker_sim / "measurements.json")
     csv_path = _as_csv(ms, tmp_path / "tracker.csv")
@@ -272,7 +272,7 @@ def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim
 def test_tracker_csv_route_refuses_bad_input_in_one_line(marker_sim: Path, tmp_path: Path,
                                                           capsys: pytest.CaptureFixture[str],
                                                           extra: tuple[str, ...], words: str) -> None:
-    from cpc2urdf.measurements import load_measurements
+    from cpc2urdf.files.measurements import load_measurements
 
     csv_path = _as_csv(load_measurements(marker_sim / "measurements.json"), tmp_path / "tracker.csv")
     out = tmp_path / "m.json"

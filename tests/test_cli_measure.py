@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from cpc2urdf.cli import main
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.vision.joints_csv import write_joints_csv
 from cpc2urdf.identification.vision.rig_file import save_camera, save_rig
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.robot_ref import load_robot
 
 SIZE = (64, 48)  # [px] width, height
 K = np.array([[60.0, 0.0, 32.0], [0.0, 60.0, 24.0], [0.0, 0.0, 1.0]])

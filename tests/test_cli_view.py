@@ -23,10 +23,10 @@ from test_view import (
 )
 
 from cpc2urdf.cli import main
-from cpc2urdf.measurements import save_measurements
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_model
-from cpc2urdf.urdf import write_urdf
+from cpc2urdf.files.measurements import save_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model
+from cpc2urdf.urdf.document import write_urdf
 from cpc2urdf.validation.view import build_view, screenshot_html, static_visualizer
 
 

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.kinematics.closed_form import count_parameters, identify_closed_form
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import homogeneous
 

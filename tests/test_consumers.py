@@ -5,7 +5,7 @@ mass, a few simulation steps stay finite); ``world`` is gravity-aligned where a 
 way is up; and ``cpc2urdf check`` passes the same files.
 
 What each consumer prints while loading is captured at the file-descriptor level
-(:func:`cpc2urdf.native_output.captured_output`: urdfdom's and PyBullet's C++ ``b3Warning`` lines,
+(:func:`cpc2urdf.urdf.native_output.captured_output`: urdfdom's and PyBullet's C++ ``b3Warning`` lines,
 MuJoCo's compiler warnings) together with Python warnings and log records, and must be empty.
 
 How each consumer is loaded, and how its poses are read (PyBullet's from its exact
@@ -26,15 +26,15 @@ import pytest
 from consumer_checks import CONSUMER_TOL, CONSUMERS, LOADERS, fk_disagreement, links, load_pinocchio
 
 from cpc2urdf.cli import main
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.identification.simulation.simulate import simulate_experiment
-from cpc2urdf.mass_properties import is_physical
 from cpc2urdf.model import CPCModel
-from cpc2urdf.model_file import save_model
-from cpc2urdf.native_output import captured_output
-from cpc2urdf.robot_ref import load_model, load_robot
-from cpc2urdf.urdf import camera_body_names, write_urdf
+from cpc2urdf.urdf.document import camera_body_names, write_urdf
+from cpc2urdf.urdf.mass_properties import is_physical
+from cpc2urdf.urdf.native_output import captured_output
 from cpc2urdf.validation.crosscheck import cross_check
 
 N_CONFIGURATIONS = 12  # seeded, plus both limit corners

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.noise import stereo_noise
 from cpc2urdf.identification.vision.detect import (
     InconsistentDetectionError,
@@ -32,7 +33,6 @@ from cpc2urdf.identification.vision.plate_poses import (
 from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import plate_design, robot_plate_designs, target_design
-from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.transforms import rotation_error
 
 RIG = StereoRig.verged()  # the paper's rig: 600 mm baseline, verged at 1.5 m, 1280 x 1024, f = 1600 px

@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.dh import cpc_from_dh
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.model import BASE, CPCModel, Frame, Joint, RobotStructure
-from cpc2urdf.robot_ref import load_model
 
 D = math.radians
 # Shih et al. Table 3: (theta, d, alpha, a) with the joint variable in theta (R) or d (P). [mm, deg]

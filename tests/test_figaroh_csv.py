@@ -1,4 +1,4 @@
-"""FIGAROH's calibration CSV (:mod:`cpc2urdf.figaroh_csv`) and ``cpc2urdf identify`` on it."""
+"""FIGAROH's calibration CSV (:mod:`cpc2urdf.files.figaroh_csv`) and ``cpc2urdf identify`` on it."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.figaroh_csv import load_figaroh_csv
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.figaroh_csv import load_figaroh_csv
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.real_data import DATA
 from cpc2urdf.transforms import matrix_from_rpy
-from cpc2urdf.urdf_robot import load_urdf_robot
+from cpc2urdf.urdf.robot import load_urdf_robot
 
 TIAGO = DATA / "tiago" / "tiago_48_schunk.urdf"
 TIAGO_CSV = DATA / "tiago" / "qualysis_base_hand_calibration.csv"
@@ -85,7 +85,7 @@ def test_identify_calibrates_about_the_urdf_and_writes_it_back(tmp_path: Path, c
     assert model.metadata.provenance is not None and model.metadata.provenance.method == "map"
     urdf = tmp_path / "tiago.urdf"
     assert main(["export", str(out), "-o", str(urdf)]) == 0
-    from cpc2urdf.urdf_tree import read_urdf_tree
+    from cpc2urdf.urdf.tree import read_urdf_tree
 
     before, after = read_urdf_tree(TIAGO), read_urdf_tree(urdf)
     changed = {j for j in before.joints if before.joints[j].xyz != after.joints[j].xyz
@@ -124,7 +124,7 @@ def test_identify_says_when_the_urdf_is_as_good(tmp_path: Path, capsys: pytest.C
 ])
 def test_readings_are_unwrapped_by_the_fewest_turns(lower: float, upper: float, reading: float,
                                                     expected: float) -> None:
-    from cpc2urdf.figaroh_csv import _within_limits
+    from cpc2urdf.files.figaroh_csv import _within_limits
     from cpc2urdf.model import Joint
 
     q, notes = _within_limits(np.array([0.0, reading]), Joint("j", "revolute", "base", lower, upper), "j",

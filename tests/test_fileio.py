@@ -1,4 +1,4 @@
-"""``cpc2urdf.fileio``: the one JSON reader (depth, duplicate keys, non-finite numbers, encodings)
+"""``cpc2urdf.files.jsonio``: the one JSON reader (depth, duplicate keys, non-finite numbers, encodings)
 and the checks of input and output paths, each refused as one line naming the file and place."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError, OutputError
-from cpc2urdf.fileio import (
+from cpc2urdf.files.jsonio import (
     JSON_MAX_DEPTH,
     check_output_path,
     read_json,
@@ -20,8 +20,8 @@ from cpc2urdf.fileio import (
     write_all_atomic,
     write_atomic,
 )
-from cpc2urdf.model_file import model_to_json
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.model_file import model_to_json
+from cpc2urdf.files.robot_ref import load_model
 
 
 def _refused(tmp_path: Path, text: str | bytes, name: str = "f.json") -> str:

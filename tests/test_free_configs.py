@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.simulation.design import (
     measured_frames,
@@ -14,8 +16,6 @@ from cpc2urdf.identification.simulation.design import (
     random_configurations,
 )
 from cpc2urdf.identification.simulation.truth import perturbed_model
-from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.robot_ref import load_robot
 from cpc2urdf.studies.free_configs import main
 
 EXACT = 1e-9  # [m]

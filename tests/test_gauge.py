@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
 from cpc2urdf.identification.kinematics.gauge import (
     align_to_nominal,
@@ -14,7 +15,6 @@ from cpc2urdf.identification.kinematics.gauge import (
 )
 from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.identification.simulation.simulate import simulate_experiment
-from cpc2urdf.robot_ref import load_model
 
 EXACT = 1e-12  # [m]
 

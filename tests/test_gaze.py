@@ -21,7 +21,7 @@ from gaze_heads import IIS_CAMERAS as CAMERAS
 from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, SpecError, UnknownNameError
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import (
     calibrated_iis_head,
     reachable_targets,
@@ -29,10 +29,10 @@ from cpc2urdf.studies.bench_gaze import (
     unreachable_targets,
 )
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.urdf import write_urdf
+from cpc2urdf.urdf.document import write_urdf
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import POLICIES, GazeSolver, solver_for
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 N_TARGETS = 10_000
 N_YOURDFPY = 300
@@ -320,7 +320,7 @@ def test_batch_in_a_forked_child(solver):
 _LEAK_CHECK = """
 import numpy as np
 from numba.core.runtime import rtsys
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import reachable_targets, unreachable_targets
 from cpc2urdf.validation.gaze import GazeSolver
 

@@ -15,10 +15,11 @@ import pytest
 from gaze_heads import HEAD_SHAPES, OPTICAL_RPY, head_case, pointing_errors, yourdfpy_axes
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
-from cpc2urdf.urdf import write_urdf
+from cpc2urdf.urdf.document import write_urdf
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.gaze import BATCH_STATUSES, Coupling, GazeSolver, kernels, solver_for
 from cpc2urdf.validation.gaze.batch import (
     BATCH_MAX_ITERATIONS,
@@ -29,7 +30,6 @@ from cpc2urdf.validation.gaze.batch import (
     _pool,
 )
 from cpc2urdf.validation.gaze.solver import pointing_tolerance
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 N_TARGETS = 200
 N_YOURDFPY = 25

@@ -15,7 +15,7 @@ import pytest
 from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head, eyes_coplanar, reachable_targets
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
@@ -465,7 +465,7 @@ def test_a_policy_that_frees_off_path_joints_needs_no_speed_for_them(tmp_path):
     URDF velocity="0" does not stop tracking, and the gripper keeps still."""
     import re
 
-    from cpc2urdf.urdf import write_urdf
+    from cpc2urdf.urdf.document import write_urdf
     from cpc2urdf.validation.gaze import solver_for
 
     text = write_urdf(load_model("iis_head"), tmp_path / "head.urdf").read_text()

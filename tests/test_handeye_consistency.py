@@ -15,6 +15,8 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError, InputFileError
+from cpc2urdf.files.robot_ref import load_model
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.handeye import mistakes as mk
 from cpc2urdf.identification.handeye import stage2 as s2
 from cpc2urdf.identification.handeye.consistency import check_consistency
@@ -31,9 +33,7 @@ from cpc2urdf.identification.handeye.reference_fit import (
     rotvec_from_matrix,
 )
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, Gate, calibrate, calibrate_poses
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.transforms import homogeneous, inverse
-from cpc2urdf.units import Units
 
 NOISE = PoseNoise(0.0001, math.radians(0.02), 0.0003, math.radians(0.05))  # as handeye_mistakes
 

@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from cpc2urdf import api
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.prior_problem import perturbation
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.transforms import rotation_error
-from cpc2urdf.urdf_robot import load_urdf_robot
-from cpc2urdf.urdf_tree import read_urdf_tree
+from cpc2urdf.urdf.robot import load_urdf_robot
+from cpc2urdf.urdf.tree import read_urdf_tree
 
 SHARE = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"  # example-robot-data
 ICUB_SHARE = Path(sys.prefix, "share")  # icub-models

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityWarning,
     analyze_jacobian,
@@ -15,7 +16,6 @@ from cpc2urdf.identification.kinematics.identifiability import (
 )
 from cpc2urdf.identification.kinematics.refine import refine
 from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
-from cpc2urdf.robot_ref import load_model
 
 PLATES = ("plate_left", "plate_right")
 SIGMA_T, SIGMA_R = 0.5e-3, np.radians(0.5)

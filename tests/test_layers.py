@@ -2,9 +2,10 @@
 
 Layers, lowest first (docs/architecture.md):
 
-    core            cpc2urdf/*.py (model, transforms, spec, files, urdf, ...) and cpc2urdf.robots
+    core            cpc2urdf/*.py (model, transforms, errors, ...), cpc2urdf.files, cpc2urdf.urdf
+                    and cpc2urdf.robots
     identification  kinematics, vision  <  handeye  <  simulation  <  planning
-    validation      crosscheck, accuracy, gaze, view (Pinocchio users)
+    validation      crosscheck, accuracy, gaze, view (what uses the calibrated URDF)
     api             cpc2urdf.api and the package's __init__ (re-exports the api)
     studies         cpc2urdf.studies (experiments, benchmarks)
     cli             cpc2urdf.cli, cpc2urdf.__main__
@@ -178,7 +179,7 @@ def test_no_import_cycles() -> None:
         ("cpc2urdf.identification.kinematics.refine", "import cpc2urdf.studies.crb\n",
          "cpc2urdf.identification.kinematics.refine (kinematics) imports cpc2urdf.studies.crb (studies)"),
         # the package's api names from below the api
-        ("cpc2urdf.urdf", "from cpc2urdf import identify\n", "cpc2urdf.urdf (core) imports cpc2urdf (api)"),
+        ("cpc2urdf.urdf.document", "from cpc2urdf import identify\n", "cpc2urdf.urdf.document (core) imports cpc2urdf (api)"),
         # a relative import is resolved too
         ("cpc2urdf.identification.kinematics.protocol", "from ..simulation import design\n",
          "cpc2urdf.identification.kinematics.protocol (kinematics) imports cpc2urdf.identification.simulation"),

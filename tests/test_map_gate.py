@@ -11,7 +11,7 @@ from cpc2urdf.errors import InconsistentDataError
 from cpc2urdf.identification.kinematics.map_identify import identify_map
 from cpc2urdf.identification.kinematics.prior_fit import Noise
 from cpc2urdf.studies.real_data import SETS, load_set
-from cpc2urdf.validation.pinocchio_robot import gravity_loads
+from cpc2urdf.urdf.pinocchio import gravity_loads
 
 NAMES = [s.name for s in SETS]
 PLANTED = (5, 12, 20)  # records given a gross error

@@ -15,6 +15,14 @@ from urdf_cases import TIAGO
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError, InputFileError
+from cpc2urdf.files.measurements import (
+    MEASUREMENTS_FORMAT,
+    MEASUREMENTS_FORMAT_2,
+    measurements_from_json,
+    measurements_to_json,
+    save_measurements,
+)
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.kinematics.circle_point import circle_point_start
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
@@ -24,16 +32,8 @@ from cpc2urdf.identification.kinematics.point_refine import refine_points
 from cpc2urdf.identification.simulation.design import protocol_q, random_configurations
 from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
 from cpc2urdf.identification.simulation.truth import perturbed_model
-from cpc2urdf.measurements import (
-    MEASUREMENTS_FORMAT,
-    MEASUREMENTS_FORMAT_2,
-    measurements_from_json,
-    measurements_to_json,
-    save_measurements,
-)
 from cpc2urdf.model import CPCModel
-from cpc2urdf.robot_ref import load_robot
-from cpc2urdf.urdf_robot import load_urdf_robot
+from cpc2urdf.urdf.robot import load_urdf_robot
 
 EXACT = 1e-9  # [m], [rad]: noise-free recovery
 # identify and the maximum-likelihood fit started from the truth reach the same optimum (measured:

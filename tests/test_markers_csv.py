@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError
+from cpc2urdf.files.marker_csv import load_marker_csv
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
 from cpc2urdf.identification.simulation.truth import perturbed_model
-from cpc2urdf.marker_csv import load_marker_csv
-from cpc2urdf.robot_ref import load_robot
 
 
 @pytest.fixture(scope="module")

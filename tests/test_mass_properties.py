@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import SpecError
-from cpc2urdf.mass_properties import FRAME_MASS, combined, frame_floor, is_physical, solid
+from cpc2urdf.urdf.mass_properties import FRAME_MASS, combined, frame_floor, is_physical, solid
 
 
 def _at(xyz, R=None):

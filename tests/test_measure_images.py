@@ -18,6 +18,8 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
+from cpc2urdf.files.measurements import MeasurementSet, load_measurements
+from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
 from cpc2urdf.identification.simulation.images import (
@@ -29,8 +31,6 @@ from cpc2urdf.identification.simulation.noise import stereo_noise
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
 from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
 from cpc2urdf.identification.vision.targets import robot_plate_designs
-from cpc2urdf.measurements import MeasurementSet, load_measurements
-from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.transforms import inverse, rotation_error
 from cpc2urdf.validation.accuracy import accuracy
 

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError, UnknownNameError
-from cpc2urdf.measurements import (
+from cpc2urdf.files.measurements import (
     MeasurementSet,
     load_measurements,
     measurements_from_json,
     save_measurements,
 )
-from cpc2urdf.robot_ref import load_robot
+from cpc2urdf.files.robot_ref import load_robot
 
 EXAMPLE: dict[str, Any] = {
     "format": "cpc2urdf/measurements@1",
@@ -121,7 +121,7 @@ def test_points_give_the_pose_by_registration(tmp_path: Path) -> None:
 
 
 def test_robot_path_relative_to_the_file(tmp_path: Path) -> None:
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
 
     save_model(load_robot("iis_head").nominal_model(), tmp_path / "truth.json")
     doc = copy.deepcopy(EXAMPLE)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.model import BASE, CPCModel, CPCParams, Frame, Joint, RobotStructure
-from cpc2urdf.robot_ref import load_model
 from random_trees import random_tree
 
 

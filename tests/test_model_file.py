@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.model_file import model_to_json, save_model
+from cpc2urdf.files.model_file import model_to_json, save_model
+from cpc2urdf.files.robot_ref import load_model, load_robot
+from cpc2urdf.files.spec import load_spec
 from cpc2urdf.model_metadata import ModelMetadata, Provenance
-from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.robots import available, spec_path
-from cpc2urdf.spec import load_spec
 from random_trees import random_tree
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.model_file import model_from_json, model_to_json, save_model
+from cpc2urdf.files.model_file import model_from_json, model_to_json, save_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.model_metadata import (
     FrameResiduals,
     HandEyeRecord,
@@ -17,7 +18,6 @@ from cpc2urdf.model_metadata import (
     RecordResiduals,
     Residuals,
 )
-from cpc2urdf.robot_ref import load_model
 
 
 def test_identified_model_file_round_trips_every_section(demo_run, tmp_path):

@@ -1,4 +1,4 @@
-"""``cpc2urdf.native_output.captured_output``: what C, C++ and Python libraries print inside the
+"""``cpc2urdf.urdf.native_output.captured_output``: what C, C++ and Python libraries print inside the
 block is captured at the file-descriptor level and never reaches the terminal."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from cpc2urdf.native_output import captured_output
+from cpc2urdf.urdf.native_output import captured_output
 
 
 def test_fd_level_c_and_python_output_is_captured(capfd: pytest.CaptureFixture[str]) -> None:

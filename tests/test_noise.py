@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.noise import fig10_noise, random_rotations, stereo_noise
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.robot_ref import load_robot
 
 LAYOUT = np.array(load_robot("iis_head").structure.frame("plate_left").layout)
 N = 20000

@@ -7,8 +7,8 @@ import pytest
 from refine_sim import perturbed, random_q
 
 from cpc2urdf.errors import UnknownNameError
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from random_trees import random_tree
 

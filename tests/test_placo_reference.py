@@ -20,7 +20,7 @@ from cpc2urdf.studies.placo_reference import (
     kinematic_urdf,
     placo_reference,
 )
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 
 
 @pytest.fixture(scope="module")

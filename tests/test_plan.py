@@ -12,6 +12,8 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError, InputFileError
+from cpc2urdf.files.measurements import MeasurementSet, load_measurements
+from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.protocol import recognise_protocol
 from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
@@ -28,8 +30,6 @@ from cpc2urdf.identification.planning.plan import (
 from cpc2urdf.identification.planning.plan_file import load_plan
 from cpc2urdf.identification.planning.prediction import predict_plan
 from cpc2urdf.identification.simulation.design import protocol_q
-from cpc2urdf.measurements import MeasurementSet, load_measurements
-from cpc2urdf.robot_ref import load_model, load_robot
 
 
 @pytest.fixture(scope="module")
@@ -294,9 +294,9 @@ def test_plan_files_get_one_mode_and_are_written_all_or_nothing(tmp_path: Path,
 
 
 def test_the_curve_is_in_mm_and_deg_whatever_the_file_units() -> None:
+    from cpc2urdf.files.units import Units
     from cpc2urdf.identification.planning.outputs import plan_robot
     from cpc2urdf.identification.planning.plan_file import plan_to_json
-    from cpc2urdf.units import Units
 
     out = plan_robot(load_robot("iis_head"), robot_ref="iis_head", n=13, n_candidates=40, curve_ns=[13])
     si = plan_to_json(out.result, out.setup, robot="iis_head", task_region={}, candidates={}, units=Units("m", "rad"))
@@ -527,7 +527,7 @@ def test_a_joint_the_plan_holds_stays_held_through_simulate_and_identify(tmp_pat
     import json
 
     from cpc2urdf.cli import main
-    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.files.robot_ref import load_model
 
     plan, sim, model = tmp_path / "plan.json", tmp_path / "sim", tmp_path / "model.json"
     assert main(["plan", "iis_head", "--n", "30", "--range", "table_x=0:0", "-o", str(plan)]) == 0

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics import prior_fit as pf
 from cpc2urdf.identification.kinematics.prior_problem import MapProblem, start_point
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCParams
 from cpc2urdf.studies.real_data import SETS, load_set, run_set
-from cpc2urdf.validation.pinocchio_robot import gravity_loads
+from cpc2urdf.urdf.pinocchio import gravity_loads
 
 FD_STEP = 1e-7  # [-]: central-difference step on the parameters
 FD_TOL = 1e-5  # [-]: Jacobian agreement, relative to its largest entry

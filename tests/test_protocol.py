@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.protocol import find_reference, recognise_protocol
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.measurements import MeasurementSet
 
 
 def _data(seed: int = 0, n: int = 4, M: int = 3) -> tuple[MeasurementSet, np.ndarray]:

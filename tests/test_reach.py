@@ -19,7 +19,7 @@ from gaze_heads import model_pointing_errors
 from cpc2urdf.cli import main
 from cpc2urdf.cli import reach as cli_reach
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.studies.bench_gaze import _reference_solver, calibrated_iis_head, eyes_coplanar
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.gaze import GazeSolver, reach
@@ -291,7 +291,7 @@ def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
     """--focal-px (or --tolerance) and --joints, as gaze takes them: on a calibrated head (its eyes
     cannot fixate exactly: every target 'disparity') a target counts as fixated within 0.1 px of a
     200 px camera; with the neck held (--joints on the eyes only) fewer targets are fixated."""
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
     from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 
     model = save_model(calibrated_iis_head(0), tmp_path / "calibrated.json")

@@ -63,8 +63,8 @@ from cpc2urdf.identification.kinematics.uncertainty import (
 from cpc2urdf.identification.simulation.simulate import Experiment, simulate_experiment
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf_origins import WritebackPlan, writeback_plan
-from cpc2urdf.urdf_robot import UrdfRobot, load_urdf_robot
+from cpc2urdf.urdf.origins import WritebackPlan, writeback_plan
+from cpc2urdf.urdf.robot import UrdfRobot, load_urdf_robot
 
 SHARE = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share"  # example-robot-data
 ICUB_SHARE = Path(sys.prefix, "share")  # icub-models

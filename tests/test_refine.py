@@ -9,11 +9,11 @@ import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.problem import IdentificationProblem
 from cpc2urdf.identification.kinematics.refine import refine
-from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 
 PLATES = ("plate_left", "plate_right")
@@ -199,9 +199,9 @@ def test_bad_input(head):
 
 def test_identify_cli_method_refined(tmp_path):
     from cpc2urdf.cli import main
+    from cpc2urdf.files.measurements import save_measurements
     from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
-    from cpc2urdf.measurements import save_measurements
 
     truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)
     path = save_measurements(measured, tmp_path / "m.json", robot="iis_head")

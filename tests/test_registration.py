@@ -7,12 +7,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.registration import (
     plate_pose_from_points,
     registration_rms,
     transforms_from_point_pairs,
 )
-from cpc2urdf.robot_ref import load_robot
 
 LAYOUT = np.array(load_robot("iis_head").structure.frame("plate_left").layout)
 

@@ -13,6 +13,9 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.files.measurements import load_measurements, save_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.simulation.design import (
     calibration_ranges,
     measured_frames,
@@ -28,10 +31,7 @@ from cpc2urdf.identification.simulation.visibility import OCCLUSION_MARGIN_PX, c
 from cpc2urdf.identification.vision.render import PinholeView, hidden_circles
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import robot_plate_designs
-from cpc2urdf.measurements import load_measurements, save_measurements
 from cpc2urdf.model import CPCModel, CPCParams, Frame, Joint, RobotStructure
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_model, load_robot
 from cpc2urdf.robots import spec_path
 
 PLATE = tuple((x, y, 0.0) for x in (-0.025, 0.0, 0.025) for y in (-0.025, 0.0, 0.025))
@@ -307,9 +307,9 @@ def test_cli_urdf_robot_names_its_measured_links_and_round_trips(tmp_path: Path,
     the simulated truth puts it at the held-out configurations (within the fit's noise)."""
     from urdf_cases import TIAGO_HEAD, pinocchio_poses, tiago_with_plate
 
+    from cpc2urdf.files.robot_ref import load_model as load
     from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
-    from cpc2urdf.robot_ref import load_model as load
-    from cpc2urdf.urdf_robot import urdf_source
+    from cpc2urdf.urdf.robot import urdf_source
 
     urdf = tiago_with_plate(tmp_path)
     out = tmp_path / "sim"

@@ -10,12 +10,12 @@ import pytest
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.model_file import model_to_json, save_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.handeye import stage2 as s2
 from cpc2urdf.identification.vision import targets
-from cpc2urdf.model_file import model_to_json, save_model
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.transforms import inverse
-from cpc2urdf.urdf import urdf_from_model
+from cpc2urdf.urdf.document import urdf_from_model
 
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.sufficiency import (
     check_data_suffice,
     exact_copies,
@@ -14,8 +16,6 @@ from cpc2urdf.identification.kinematics.sufficiency import (
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.noise import fig10_noise
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.robot_ref import load_model
 
 
 def _head(q: np.ndarray, sigma: float = 0.0, seed: int = 0) -> MeasurementSet:

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from refine_sim import measure, perturbed, protocol_q, random_q
 
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.problem import IdentificationProblem
 from cpc2urdf.identification.kinematics.refine import refine
@@ -16,9 +18,7 @@ from cpc2urdf.identification.kinematics.uncertainty import (
     position_covariance,
     predicted_position_std,
 )
-from cpc2urdf.model_file import save_model
 from cpc2urdf.model_metadata import ModelMetadata
-from cpc2urdf.robot_ref import load_model
 
 PLATES = ("plate_left", "plate_right")
 SIGMA_T, SIGMA_R = 0.5e-3, np.radians(0.5)

@@ -10,9 +10,9 @@ import yourdfpy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
-from cpc2urdf.urdf import link_name, urdf_from_model, write_urdf
+from cpc2urdf.urdf.document import link_name, urdf_from_model, write_urdf
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from random_trees import random_tree
 
@@ -157,7 +157,7 @@ def test_camera_body_frames_follow_rep_103():
 
 def test_camera_body_names_avoid_taken_names():
     from cpc2urdf.model import Frame, Joint, RobotStructure
-    from cpc2urdf.urdf import camera_body_names, urdf_link_names
+    from cpc2urdf.urdf.document import camera_body_names, urdf_link_names
 
     s = RobotStructure("r", [Joint("a", "revolute")], [
         Frame("eye_optical", "a", "camera"), Frame("eye", "a", "plate"), Frame("cam", "a", "camera"),
@@ -170,8 +170,8 @@ def test_camera_body_names_avoid_taken_names():
 
 def test_mounts_rig_and_base():
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.model import CPCParams
-    from cpc2urdf.robot_ref import load_robot
     from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 
     spec = load_robot("iis_head")
@@ -190,8 +190,8 @@ def test_mounts_rig_and_base():
 
 
 def test_inertials_from_density_or_stated_masses():
-    from cpc2urdf.physical import PhysicalProperties
-    from cpc2urdf.urdf import total_mass
+    from cpc2urdf.urdf.document import total_mass
+    from cpc2urdf.urdf.physical import PhysicalProperties
 
     model = load_model("iis_head")
     floors = 3e-3  # base (a marker plate) and the two optical frames: nothing solid, 1 g each
@@ -209,8 +209,8 @@ def test_spec_states_density_masses_and_up(tmp_path):
     import json
 
     from cpc2urdf.errors import InputFileError
+    from cpc2urdf.files.spec import load_spec
     from cpc2urdf.robots import spec_path
-    from cpc2urdf.spec import load_spec
 
     doc = json.loads(spec_path("iis_head").read_text())
     spec = load_spec(spec_path("iis_head"))
@@ -255,7 +255,7 @@ def test_export_cli_mount_and_up(tmp_path, capsys):
 
 
 def test_check_accepts_both_mounts_and_older_urdfs_but_not_a_moved_base(tmp_path):
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.transforms import rpy_from_matrix
     from cpc2urdf.validation.crosscheck import cross_check
 
@@ -287,10 +287,10 @@ def test_export_says_where_the_physical_properties_came_from(tmp_path, capsys):
     import json
 
     from cpc2urdf.cli import main
-    from cpc2urdf.model_file import save_model
+    from cpc2urdf.files.model_file import save_model
     from cpc2urdf.model_metadata import Provenance
     from cpc2urdf.robots import spec_path
-    from cpc2urdf.urdf_export import plan_export
+    from cpc2urdf.urdf.export import plan_export
 
     model = load_model("iis_head")
     assert plan_export(model).physical_from == "defaults (none stated)"

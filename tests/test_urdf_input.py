@@ -1,4 +1,4 @@
-"""``cpc2urdf.urdf_input``: the URDF rules checked before any parser sees a file, one problem per
+"""``cpc2urdf.urdf.input``: the URDF rules checked before any parser sees a file, one problem per
 line naming the element and its line; the URDFs we write always pass."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.robot_ref import load_model
-from cpc2urdf.urdf import urdf_from_model
-from cpc2urdf.urdf_input import URDF_MAX_DEPTH, read_urdf, urdf_problems, validate_urdf
+from cpc2urdf.files.robot_ref import load_model
+from cpc2urdf.urdf.document import urdf_from_model
+from cpc2urdf.urdf.input import URDF_MAX_DEPTH, read_urdf, urdf_problems, validate_urdf
 from random_trees import random_tree
 
 HEAD = urdf_from_model(load_model("iis_head"))

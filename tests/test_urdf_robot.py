@@ -14,11 +14,11 @@ from urdf_cases import SMALL, TIAGO_HEAD, pinocchio_poses, simulate, tiago_with_
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.measurements import load_measurements, save_measurements
-from cpc2urdf.model_file import model_from_json, model_to_json
-from cpc2urdf.robot_ref import load_model, load_robot
-from cpc2urdf.urdf_robot import NameMap, UrdfRobot, load_urdf_robot, urdf_source
-from cpc2urdf.urdf_tree import read_urdf_tree
+from cpc2urdf.files.measurements import load_measurements, save_measurements
+from cpc2urdf.files.model_file import model_from_json, model_to_json
+from cpc2urdf.files.robot_ref import load_model, load_robot
+from cpc2urdf.urdf.robot import NameMap, UrdfRobot, load_urdf_robot, urdf_source
+from cpc2urdf.urdf.tree import read_urdf_tree
 
 EXACT = 1e-12  # [m] and [-]: the mapping is exact; only rounding differs
 

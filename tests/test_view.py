@@ -15,11 +15,11 @@ import umsgpack
 from matplotlib.colors import rgb_to_hsv
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, UnknownNameError
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
-from cpc2urdf.urdf import HEAD_RGBA, write_urdf
+from cpc2urdf.urdf.document import HEAD_RGBA, write_urdf
 from cpc2urdf.validation.view import (
     GHOST_RGBA,
     TARGET_RGBA,

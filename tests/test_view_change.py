@@ -11,9 +11,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_view import calibrated_head, decoded
 
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.model import CPCParams
-from cpc2urdf.robot_ref import load_model
-from cpc2urdf.urdf import HEAD_RGBA
+from cpc2urdf.urdf.document import HEAD_RGBA
 from cpc2urdf.validation.view import (
     CHANGE_GHOST_RGBA,
     CHANGE_GREEN,

@@ -17,7 +17,7 @@ from test_view import SIZE, decoded, hue_mask, require_chromium
 
 from cpc2urdf.api import write_view
 from cpc2urdf.cli import main
-from cpc2urdf.robot_ref import load_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.validation.gaze import GazeSolver, solver_for
 from cpc2urdf.validation.gaze.chain import mid_limits
 from cpc2urdf.validation.gaze.reach import (

@@ -18,14 +18,14 @@ from test_view_meshes import SHARE
 from urdf_cases import pinocchio_poses, simulate, tiago_with_plate
 
 from cpc2urdf.cli import main
+from cpc2urdf.files.measurements import load_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.methods import identify
-from cpc2urdf.measurements import load_measurements
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
-from cpc2urdf.urdf_origins import urdf_link_poses, writeback_plan
-from cpc2urdf.urdf_robot import attach_urdf_source, load_urdf_robot
+from cpc2urdf.urdf.origins import urdf_link_poses, writeback_plan
+from cpc2urdf.urdf.robot import attach_urdf_source, load_urdf_robot
 from cpc2urdf.validation.view import (
     build_view,
     change_rgba,

@@ -17,20 +17,20 @@ import yourdfpy
 from urdf_cases import SMALL, TIAGO_HEAD, pinocchio_poses, simulate, tiago_with_plate, write
 
 from cpc2urdf.errors import InputFileError, OutputError, SpecError
+from cpc2urdf.files.measurements import load_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.measurements import load_measurements
 from cpc2urdf.model import CPCModel, CPCParams, Frame
-from cpc2urdf.model_file import save_model
-from cpc2urdf.robot_ref import load_model
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import inverse, rotation_error
-from cpc2urdf.urdf_origins import plan_for_tree, urdf_link_poses, writeback_plan
-from cpc2urdf.urdf_report import report_paths
-from cpc2urdf.urdf_robot import attach_urdf_source, load_urdf_robot
-from cpc2urdf.urdf_tree import read_urdf_tree
-from cpc2urdf.urdf_writeback import write_calibrated_urdf
+from cpc2urdf.urdf.origins import plan_for_tree, urdf_link_poses, writeback_plan
+from cpc2urdf.urdf.report import report_paths
+from cpc2urdf.urdf.robot import attach_urdf_source, load_urdf_robot
+from cpc2urdf.urdf.tree import read_urdf_tree
+from cpc2urdf.urdf.writeback import write_calibrated_urdf
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 
 EXACT = 1e-12  # [m] and [-]: the written origins reproduce the model to rounding

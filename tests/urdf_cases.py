@@ -10,12 +10,12 @@ import numpy as np
 import pinocchio as pin
 from consumer_checks import pinocchio_q
 
+from cpc2urdf.files.measurements import MeasurementSet, save_measurements
 from cpc2urdf.identification.simulation.design import protocol_q
 from cpc2urdf.identification.simulation.noise import fig10_noise
 from cpc2urdf.identification.simulation.truth import perturbed_model
-from cpc2urdf.measurements import MeasurementSet, save_measurements
 from cpc2urdf.model import CPCModel
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
 TIAGO = ROBOTS / "tiago_description/robots/tiago.urdf"

@@ -11,7 +11,7 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the spec module loads numpy: imported inside the function (fast `cpc2urdf --help`)
-    from cpc2urdf.spec import RobotSpec
+    from cpc2urdf.files.spec import RobotSpec
 
 
 def parse_ranges(items: list[str], spec: RobotSpec) -> dict[str, tuple[float, float]]:
@@ -21,7 +21,7 @@ def parse_ranges(items: list[str], spec: RobotSpec) -> dict[str, tuple[float, fl
         ConfigurationError: Not ``JOINT=LO:HI`` with finite ``LO <= HI``, or an unknown joint.
     """
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.urdf_robot import UrdfRobot
+    from cpc2urdf.urdf.robot import UrdfRobot
 
     structure = spec.structure
     out: dict[str, tuple[float, float]] = {}

@@ -84,7 +84,9 @@ def run(args: argparse.Namespace) -> int:
     import math
 
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.files.jsonio import check_output_path
+    from cpc2urdf.files.measurements import save_measurements
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.vision.bags import (
         ImageTopic,
         PoseTopic,
@@ -92,8 +94,6 @@ def run(args: argparse.Namespace) -> int:
         image_folder_from_bag,
         measurements_from_bag,
     )
-    from cpc2urdf.measurements import save_measurements
-    from cpc2urdf.robot_ref import load_robot
 
     if sum(map(bool, (args.pose, args.target, args.image))) != 1:
         raise ConfigurationError("give --pose FRAME=TOPIC (a measurement file), --target CAMERA=TOPIC (hand-eye pose "
@@ -127,10 +127,10 @@ def _run_targets(args: argparse.Namespace, rule: SyncRule) -> int:
     from pathlib import Path
 
     from cpc2urdf.errors import ConfigurationError, OutputError
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye.head_images import write_handeye_files
     from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA
     from cpc2urdf.identification.vision.bags import PoseTopic, target_poses_from_bag
-    from cpc2urdf.robot_ref import load_model
 
     if not args.model:
         raise ConfigurationError("--target needs --model identified.json (it gives T_base_hand)")

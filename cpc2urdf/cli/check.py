@@ -65,7 +65,7 @@ def _gaze_head(ref: str) -> dict[str, Any] | None:
     """The gaze head report of model ``ref`` when it has exactly two camera frames; None otherwise.
     A head the gaze solver cannot take (e.g. a joint without limits) is reported with its reason."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.robot_ref import is_urdf_ref, load_model
+    from cpc2urdf.files.robot_ref import is_urdf_ref, load_model
 
     if is_urdf_ref(ref):
         return None

@@ -98,10 +98,10 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder
+    from cpc2urdf.files.jsonio import make_folder
+    from cpc2urdf.files.model_file import save_model
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye.stage2 import perturb_cameras, run_stage2, write_pose_files
-    from cpc2urdf.model_file import save_model
-    from cpc2urdf.robot_ref import load_model
 
     if args.seed < 0:  # numpy's generators take seeds >= 0; refused before the folder is made
         raise ConfigurationError(f"--seed must be >= 0, got {args.seed}")

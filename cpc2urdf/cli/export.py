@@ -36,7 +36,7 @@ def reports(args: argparse.Namespace) -> dict[str, str]:
     import os
 
     from cpc2urdf.argparsing import json_object
-    from cpc2urdf.urdf_report import report_paths
+    from cpc2urdf.urdf.report import report_paths
 
     doc = json_object(args.model) if os.path.isfile(args.model) else None
     if doc is None or not isinstance(doc.get("urdf"), dict):
@@ -51,10 +51,10 @@ def reports(args: argparse.Namespace) -> dict[str, str]:
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import export_urdf
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path
-    from cpc2urdf.urdf import total_mass
-    from cpc2urdf.urdf_export import describe, plan_export
-    from cpc2urdf.urdf_robot import urdf_source
+    from cpc2urdf.files.jsonio import check_output_path
+    from cpc2urdf.urdf.document import total_mass
+    from cpc2urdf.urdf.export import describe, plan_export
+    from cpc2urdf.urdf.robot import urdf_source
 
     check_output_path(args.output)  # before any work (-o . is a folder: one line, no traceback)
     plan = plan_export(args.model, up=args.up)

@@ -58,7 +58,7 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
     """The model --model names (checked against the poses before solving), or None."""
     from cpc2urdf.api import camera_mount, load_model
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.files.jsonio import check_output_path
 
     if (args.model is None) != (args.output is None):
         raise ConfigurationError("--model and -o/--output go together (the model to extend and where to write it)")

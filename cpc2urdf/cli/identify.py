@@ -2,7 +2,7 @@
 
 Reads stage-1 measurements: frame poses (``cpc2urdf/measurements@1``) or marker points
 (``cpc2urdf/measurements@2``), or a tracker CSV export (``identify tracker.csv --robot R --marker
-m0=LINK ...``, read by :func:`cpc2urdf.marker_csv.load_marker_csv`, docs/measurements.md sec. 1b),
+m0=LINK ...``, read by :func:`cpc2urdf.files.marker_csv.load_marker_csv`, docs/measurements.md sec. 1b),
 at any configurations. It runs an identification method
 (``--method``, default ``refined``: the closed form of Shih et al. sec. 4.2, then maximum-likelihood
 refinement of every record, which reaches the Cramér-Rao bound (docs/refinement.md); the registry is
@@ -23,15 +23,15 @@ import argparse
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from cpc2urdf.measurements import MeasurementSet
+    from cpc2urdf.files.measurements import MeasurementSet
 
 
 NOT_BETTER_EXIT = 3  # --method map: no calibration predicts better than the URDF as it is (model still written)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    from cpc2urdf.files.units import ANGLE_UNITS, LENGTH_UNITS
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
-    from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
 
     p = subparsers.add_parser(
         "identify",
@@ -132,11 +132,11 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
             raise ConfigurationError(f"{given[0]} applies to a tracker CSV export (.csv); "
                                      f"{args.measurements} is a measurement file")
         return load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
-    from cpc2urdf.marker_csv import load_marker_csv
+    from cpc2urdf.files.marker_csv import load_marker_csv
 
     if args.link:
-        from cpc2urdf.figaroh_csv import load_figaroh_csv
-        from cpc2urdf.urdf_robot import UrdfRobot
+        from cpc2urdf.files.figaroh_csv import load_figaroh_csv
+        from cpc2urdf.urdf.robot import UrdfRobot
 
         robot = load_robot(args.robot) if args.robot else None
         if not isinstance(robot, UrdfRobot):
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
 
     from cpc2urdf.api import identify, save_model
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.files.jsonio import check_output_path
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD
     from cpc2urdf.model_metadata import Provenance
 

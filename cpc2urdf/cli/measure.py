@@ -85,12 +85,12 @@ def run(args: argparse.Namespace) -> int:
     if args.stage2:
         return _run_stage2(args)
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path
+    from cpc2urdf.files.jsonio import check_output_path
+    from cpc2urdf.files.measurements import save_measurements
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.identification.vision.rig_file import load_rig
-    from cpc2urdf.measurements import save_measurements
-    from cpc2urdf.robot_ref import load_robot
 
     if not args.rig:
         raise ConfigurationError("stage 1 needs --rig rig.yaml (or pass --stage2 for the head cameras)")
@@ -116,12 +116,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_stage2(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError, OutputError
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye.head_images import write_handeye_files
     from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA
     from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
     from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.identification.vision.rig_file import load_camera
-    from cpc2urdf.robot_ref import load_model
 
     if not args.model:
         raise ConfigurationError("--stage2 needs --model identified.json (it gives T_base_hand)")

@@ -81,13 +81,13 @@ def companions(args: argparse.Namespace) -> dict[str, str]:
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.cli._ranges import parse_ranges
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.planning.outputs import (
         output_paths,
         plan_robot,
         robot_for_plan,
         write_plan_outputs,
     )
-    from cpc2urdf.robot_ref import load_robot
 
     output_paths(args.output)  # a bad -o is refused before the work
     if args.markers < 0:

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
     from cpc2urdf.api import gaze_solver
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import check_output_path, dumps, write_all_atomic
+    from cpc2urdf.files.jsonio import check_output_path, dumps, write_all_atomic
     from cpc2urdf.validation.gaze.reach import (
         check_grid_args,
         make_grid,

@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from cpc2urdf.files.measurements import MeasurementSet
+    from cpc2urdf.files.spec import RobotSpec
     from cpc2urdf.identification.simulation.simulate import Experiment
-    from cpc2urdf.measurements import MeasurementSet
-    from cpc2urdf.spec import RobotSpec
 
 
 FILES = ("measurements.json", "truth.json", "heldout.json")  # what simulate writes into its folder
@@ -99,10 +99,10 @@ def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> Rob
     Raises:
         ConfigurationError: ``--measure`` with a robot that is not a URDF, or a URDF without it.
         InputFileError: A link that is not in the URDF, is its root, or is moved by a joint
-            directly (:func:`cpc2urdf.urdf_robot.urdf_robot` names it).
+            directly (:func:`cpc2urdf.urdf.robot.urdf_robot` names it).
     """
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.urdf_robot import UrdfRobot
+    from cpc2urdf.urdf.robot import UrdfRobot
 
     if not isinstance(spec, UrdfRobot):
         if measure is not None:
@@ -166,12 +166,12 @@ def _simulate_plan(args: argparse.Namespace, spec: RobotSpec, ref: str) -> Exper
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.cli._ranges import parse_ranges
     from cpc2urdf.errors import ConfigurationError, OutputError
-    from cpc2urdf.fileio import dumps, make_folder, write_all_atomic
+    from cpc2urdf.files.jsonio import dumps, make_folder, write_all_atomic
+    from cpc2urdf.files.measurements import measurements_to_json
+    from cpc2urdf.files.model_file import model_to_json
+    from cpc2urdf.files.robot_ref import load_robot, looks_like_path
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
     from cpc2urdf.identification.vision.stereo import StereoRig
-    from cpc2urdf.measurements import measurements_to_json
-    from cpc2urdf.model_file import model_to_json
-    from cpc2urdf.robot_ref import load_robot, looks_like_path
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():

@@ -123,7 +123,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.fileio import check_output_path, write_all_atomic
+    from cpc2urdf.files.jsonio import check_output_path, write_all_atomic
     from cpc2urdf.validation.view import load_view_robot, static_view_html
     from cpc2urdf.validation.view.robot import own_nominal
     from cpc2urdf.validation.view.screenshot import require_chromium, screenshot_page
@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         nominal = own_nominal(robot) if args.nominal == OWN_NOMINAL else args.nominal
         options["ghost"] = load_view_robot(nominal, package_dirs=args.package_path)
     if args.measurements:
-        from cpc2urdf.measurements import load_measurements
+        from cpc2urdf.files.measurements import load_measurements
 
         options["measurements"] = load_measurements(args.measurements)
     notes: list[str] = []

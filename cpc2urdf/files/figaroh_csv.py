@@ -1,4 +1,4 @@
-"""FIGAROH's calibration CSV (one row per posture) -> a :class:`~cpc2urdf.measurements.MeasurementSet`.
+"""FIGAROH's calibration CSV (one row per posture) -> a :class:`~cpc2urdf.files.measurements.MeasurementSet`.
 
 FIGAROH (and its example data) writes one row per static posture: measured points
 ``x1,y1,z1, …, xK,yK,zK`` [m] in the measuring frame, or 6-D poses ``x1,y1,z1,phix1,phiy1,phiz1``
@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.measurements import UNKNOWN_MOUNTS, Marker, MeasurementSet
+from cpc2urdf.files.measurements import UNKNOWN_MOUNTS, Marker, MeasurementSet
 from cpc2urdf.model import Joint
 from cpc2urdf.transforms import homogeneous, matrix_from_rpy
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 IGNORED_COLUMNS = ("t",)
 # A reading this far past a URDF limit is taken as it is (a limit set slightly inside the travel),

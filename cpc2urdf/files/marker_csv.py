@@ -26,8 +26,12 @@ from pathlib import Path
 from typing import Any
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.measurements import MEASUREMENTS_FORMAT_2, MeasurementSet, measurements_from_json
-from cpc2urdf.spec import RobotSpec
+from cpc2urdf.files.measurements import (
+    MEASUREMENTS_FORMAT_2,
+    MeasurementSet,
+    measurements_from_json,
+)
+from cpc2urdf.files.spec import RobotSpec
 
 POINT_COLUMNS = ("config", "marker", "x", "y", "z")
 
@@ -188,7 +192,7 @@ def load_marker_csv(
         InputFileError: Naming the file, row and column (see :func:`marker_csv_document`), or
             a measurement-file error (a marker on a link the robot does not have).
     """
-    from cpc2urdf.urdf_robot import UrdfRobot
+    from cpc2urdf.urdf.robot import UrdfRobot
 
     if isinstance(robot, UrdfRobot) and robot.tree is not None:
         names: list[str] = list(robot.tree.joints)

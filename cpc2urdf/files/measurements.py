@@ -22,12 +22,12 @@ plate's ``layout`` (same order; ``null`` for a circle that was not seen). The po
 estimated on load by rigid registration (Shih et al. sec. 3.3) unless the record also gives it
 under ``poses`` (a given pose wins; the points are kept). See ``docs/measurements.md``.
 
-With a URDF robot (``"robot": "robot.urdf"``, :mod:`cpc2urdf.urdf_robot`) the frames are link
+With a URDF robot (``"robot": "robot.urdf"``, :mod:`cpc2urdf.urdf.robot`) the frames are link
 names of the URDF and the joints its joint names; the robot is the sub-tree on the paths from the
 root to the links the records measure (their ``poses``/``points`` keys), so a record needs
 readings only for the joints on those paths. Readings of other joints of the URDF (a whole
 ``/joint_states`` message) are accepted and ignored. In memory the set uses the model's names
-(:class:`~cpc2urdf.urdf_robot.NameMap`); files use the URDF's.
+(:class:`~cpc2urdf.urdf.robot.NameMap`); files use the URDF's.
 
 **Position-only data** (``cpc2urdf/measurements@2``: everything of ``@1`` plus markers). A laser
 tracker, motion capture or a touch probe gives 3-D points of markers fixed to links, not poses::
@@ -57,14 +57,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError, UnknownNameError
-from cpc2urdf.fileio import finite_float, read_json, require_format, write_json
+from cpc2urdf.files.jsonio import finite_float, read_json, require_format, write_json
+from cpc2urdf.files.poses import pose_from_json, pose_to_json
+from cpc2urdf.files.robot_ref import load_robot
+from cpc2urdf.files.spec import RobotSpec
+from cpc2urdf.files.units import Units
 from cpc2urdf.model import RobotStructure
-from cpc2urdf.poses import pose_from_json, pose_to_json
 from cpc2urdf.registration import plate_pose_from_points, registration_rms
-from cpc2urdf.robot_ref import load_robot
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.units import Units
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 MEASUREMENTS_FORMAT = "cpc2urdf/measurements@1"
 # The version with marker points (position-only data); a superset of @1.

@@ -1,6 +1,6 @@
 """Model files (``cpc2urdf/model@1``): a nominal or identified robot, ready for URDF export.
 
-Same tree fields as a robot spec (see :mod:`cpc2urdf.spec`), but every joint and frame carries
+Same tree fields as a robot spec (see :mod:`cpc2urdf.files.spec`), but every joint and frame carries
 its CPC constants under ``"cpc"`` and ``world_to_base`` is required::
 
     {
@@ -17,11 +17,11 @@ its CPC constants under ``"cpc"`` and ``world_to_base`` is required::
       "urdf": {"path": "/abs/robot.urdf", "root": "base_footprint", ...}  # optional, see below
     }
 
-A model built from a URDF (:mod:`cpc2urdf.urdf_robot`) carries the optional ``"urdf"`` section:
+A model built from a URDF (:mod:`cpc2urdf.urdf.robot`) carries the optional ``"urdf"`` section:
 the source file, its root link, the CPC name of each URDF joint and link it models with each
 joint's axis rotation, and the origins and axes the constants were derived from
-(:class:`~cpc2urdf.urdf_robot.UrdfSource`), so that ``export`` writes that URDF back with the
-calibrated origins (:mod:`cpc2urdf.urdf_writeback`).
+(:class:`~cpc2urdf.urdf.robot.UrdfSource`), so that ``export`` writes that URDF back with the
+calibrated origins (:mod:`cpc2urdf.urdf.writeback`).
 
 Files are written in SI units with full float precision; they may be read in mm/deg.
 """
@@ -32,16 +32,16 @@ from pathlib import Path
 from typing import Any
 
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError
-from cpc2urdf.fileio import require_format, write_json
-from cpc2urdf.model import BASE, CPCModel
-from cpc2urdf.model_metadata import ModelMetadata
-from cpc2urdf.spec import (
+from cpc2urdf.files.jsonio import require_format, write_json
+from cpc2urdf.files.spec import (
     cpc_to_json,
     parse_placement,
     parse_tree,
 )
-from cpc2urdf.units import Units
-from cpc2urdf.urdf_robot import URDF_SECTION, UrdfSource, urdf_source, with_urdf_source
+from cpc2urdf.files.units import Units
+from cpc2urdf.model import BASE, CPCModel
+from cpc2urdf.model_metadata import ModelMetadata
+from cpc2urdf.urdf.robot import URDF_SECTION, UrdfSource, urdf_source, with_urdf_source
 
 MODEL_FORMAT = "cpc2urdf/model@1"
 # Optional sections a model file may carry: CPCModel.metadata (cpc2urdf.model_metadata) types them.

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.fileio import float_list
+from cpc2urdf.files.jsonio import float_list
+from cpc2urdf.files.units import Units
 from cpc2urdf.tolerances import ROTATION_TOL
 from cpc2urdf.transforms import Array, homogeneous, matrix_from_rpy, rotation_defect
-from cpc2urdf.units import Units
 
 POSE_KEYS = ("matrix", "xyz", "quat_xyzw", "rpy")
 

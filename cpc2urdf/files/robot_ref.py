@@ -6,7 +6,7 @@ path means the same thing everywhere: a measurement file's ``"robot"``, ``--robo
 file's folder first (``relative_to``).
 
 A path ending in ``.urdf``, or any other file whose text is XML (not ``.json``), is read as a
-URDF (:mod:`cpc2urdf.urdf_robot`): its tree is the robot, every link reachable from the root
+URDF (:mod:`cpc2urdf.urdf.robot`): its tree is the robot, every link reachable from the root
 through calibratable joints a frame; a measurement file then restricts it to the sub-tree of the
 links it measures.
 """
@@ -18,11 +18,11 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.fileio import read_json
+from cpc2urdf.files.jsonio import read_json
+from cpc2urdf.files.model_file import MODEL_FORMAT, model_from_json
+from cpc2urdf.files.spec import ROBOT_FORMAT, RobotSpec, spec_from_json
 from cpc2urdf.model import CPCModel
-from cpc2urdf.model_file import MODEL_FORMAT, model_from_json
-from cpc2urdf.spec import ROBOT_FORMAT, RobotSpec, spec_from_json
-from cpc2urdf.urdf_robot import load_urdf_robot
+from cpc2urdf.urdf.robot import load_urdf_robot
 
 RobotRef = str | os.PathLike[str] | RobotSpec
 
@@ -60,11 +60,11 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
     """The robot ``ref`` refers to.
 
     Args:
-        ref: A :class:`~cpc2urdf.spec.RobotSpec` (returned as is), a shipped robot name (e.g.
+        ref: A :class:`~cpc2urdf.files.spec.RobotSpec` (returned as is), a shipped robot name (e.g.
             ``"iis_head"``), or the path of a robot spec (``cpc2urdf/robot@1``), model file
             (``cpc2urdf/model@1``; its model becomes the spec's nominal model) or URDF (``.urdf``,
             or XML text in a file not named ``.json``: :func:`is_urdf_ref`; a
-            :class:`~cpc2urdf.urdf_robot.UrdfRobot` whose nominal model remembers the file).
+            :class:`~cpc2urdf.urdf.robot.UrdfRobot` whose nominal model remembers the file).
         relative_to: Folder against which a relative path is tried first (the folder of the file
             that named the robot).
 

@@ -38,9 +38,9 @@ Nominal geometry, per joint and frame, is one of:
   ``{"dh_frame": true}`` (it *is* DH frame i of its parent joint i) or a pose relative to DH
   frame i. This makes ``T_base_frame = A_1 ... A_i`` exact (:func:`cpc2urdf.dh.cpc_from_dh`).
 
-``up``, ``density`` and ``masses`` are for simulators (:mod:`cpc2urdf.physical`): which way is up
+``up``, ``density`` and ``masses`` are for simulators (:mod:`cpc2urdf.urdf.physical`): which way is up
 (``cpc2urdf export``'s gravity-aligned ``world``), and the link inertials of the URDF
-(:mod:`cpc2urdf.urdf`). ``masses`` names URDF links (:func:`cpc2urdf.urdf.urdf_link_names`).
+(:mod:`cpc2urdf.urdf.document`). ``masses`` names URDF links (:func:`cpc2urdf.urdf.document.urdf_link_names`).
 """
 
 from __future__ import annotations
@@ -55,12 +55,12 @@ import numpy as np
 
 from cpc2urdf.dh import dh_matrix
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError, SpecError
-from cpc2urdf.fileio import finite_float, float_list, read_json, require_format
+from cpc2urdf.files.jsonio import finite_float, float_list, read_json, require_format
+from cpc2urdf.files.poses import pose_from_json
+from cpc2urdf.files.units import Units
 from cpc2urdf.model import BASE, IDENTITY, CPCModel, CPCParams, Frame, Joint, RobotStructure
-from cpc2urdf.physical import SPEC_KEYS, PhysicalProperties, check_masses, physical_from_json
-from cpc2urdf.poses import pose_from_json
-from cpc2urdf.units import Units
-from cpc2urdf.urdf import urdf_link_names
+from cpc2urdf.urdf.document import urdf_link_names
+from cpc2urdf.urdf.physical import SPEC_KEYS, PhysicalProperties, check_masses, physical_from_json
 
 ROBOT_FORMAT = "cpc2urdf/robot@1"
 DEFAULT_VELOCITY = {"revolute": 1.0, "prismatic": 0.1}  # [rad/s], [m/s]
@@ -74,7 +74,7 @@ _FRAME_KEYS = {"name", "parent", "kind", "layout", "nominal", "cpc", "descriptio
 @dataclass
 class RobotSpec:
     """A parsed robot spec: its tree, the nominal model if the spec had geometry, and what a
-    simulator needs (density, masses, up: :class:`~cpc2urdf.physical.PhysicalProperties`)."""
+    simulator needs (density, masses, up: :class:`~cpc2urdf.urdf.physical.PhysicalProperties`)."""
 
     structure: RobotStructure
     nominal: CPCModel | None

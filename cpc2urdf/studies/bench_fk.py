@@ -33,9 +33,9 @@ def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5,
     """
     import pinocchio as pin
 
-    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.files.robot_ref import load_model
+    from cpc2urdf.urdf.pinocchio import PinocchioRobot
     from cpc2urdf.validation.crosscheck import sample_configurations
-    from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
     model = load_model(model_name)
     s = model.structure

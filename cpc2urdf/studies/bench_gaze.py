@@ -114,7 +114,7 @@ def calibrated_iis_head(seed: int = 0, model: CPCModel | None = None) -> CPCMode
     """
     from scipy.optimize import brentq
 
-    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.files.robot_ref import load_model
 
     nominal = model if model is not None else load_model("iis_head")
     rng = np.random.default_rng(seed)
@@ -851,9 +851,9 @@ def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
 
 def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()) -> BenchHead:
     """The head ``name`` (:data:`HEADS`), or with ``urdf`` any URDF and its ``cameras``."""
-    from cpc2urdf.robot_ref import load_model
+    from cpc2urdf.files.robot_ref import load_model
+    from cpc2urdf.urdf.pinocchio import PinocchioRobot
     from cpc2urdf.validation.gaze import GazeSolver
-    from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
     if urdf is not None:
         robot = PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
@@ -1142,7 +1142,7 @@ def main(argv: list[str] | None = None) -> int:
     if not (math.isfinite(args.track_seconds) and args.track_seconds >= TRACK_DT):
         raise ConfigurationError(f"--track-seconds must be at least {TRACK_DT:g} s, got {args.track_seconds}")
     if args.json:
-        from cpc2urdf.fileio import check_output_path
+        from cpc2urdf.files.jsonio import check_output_path
 
         check_output_path(args.json)
     res = run_benchmark(
@@ -1158,7 +1158,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(format_table(res))
     if args.json:
-        from cpc2urdf.fileio import write_json
+        from cpc2urdf.files.jsonio import write_json
 
         write_json(args.json, res)
     return 0

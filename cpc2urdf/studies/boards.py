@@ -160,12 +160,12 @@ def _rig_calibration(tmp: Path, views: int, seed: int) -> dict[str, Any]:
 
 def _stage1(tmp: Path, M: int, seed: int) -> dict[str, Any]:
 
+    from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.simulation.images import render_board_experiment
     from cpc2urdf.identification.simulation.noise import stereo_noise
     from cpc2urdf.identification.vision.board_poses import board_pose
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
-    from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.validation.accuracy import accuracy
 
     boards = {"plate_left": _board(PLATE, "left", first_marker_id=0), "plate_right": _board(PLATE, "right", first_marker_id=8)}
@@ -333,7 +333,7 @@ def run_study(*, views: int = 16, M: int = 3, seed: int = 0) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study boards [--views N] [--M M] [--seed S] [--out DIR]``."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder, write_atomic
+    from cpc2urdf.files.jsonio import make_folder, write_atomic
 
     parser = OneLineParser(prog="cpc2urdf study boards", description=__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -53,8 +53,8 @@ from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.progress import progress
 
 if TYPE_CHECKING:  # the library is imported inside the functions (fast `cpc2urdf --help`)
+    from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.identification.kinematics.refine import RefinementResult
-    from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.model import CPCModel
 
 ESTIMATORS = ("closed-form", "refined", "refined (rotation / sigma_r per axis)", "default: refined + consistency gate")
@@ -134,7 +134,7 @@ def corrupt(measured: MeasurementSet, fraction: float, rng: np.random.Generator,
     axis on one random plate of ``round(fraction * N)`` random records (at least one)."""
     from scipy.spatial.transform import Rotation
 
-    from cpc2urdf.measurements import MeasurementSet
+    from cpc2urdf.files.measurements import MeasurementSet
 
     n = measured.n_records
     frames = measured.frames
@@ -373,7 +373,7 @@ def plot(trials: list[dict[str, Any]], s: dict[str, Any], path: Path, setting: s
 def main(argv: list[str]) -> int:
     """``cpc2urdf study crb [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import make_folder, write_atomic, write_json
+    from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study crb", description=__doc__.split("\n\n")[0])
     p.add_argument("--trials", type=int, default=50, help="seeded trials (default 50)")
@@ -392,7 +392,7 @@ def main(argv: list[str]) -> int:
     if not 0.0 <= args.outliers < 0.5:
         raise Cpc2UrdfError(f"--outliers must be in [0, 0.5), got {args.outliers}")
     sigma_t, sigma_r = args.sigma_mm * 1e-3, math.radians(args.sigma_deg)
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.files.robot_ref import load_robot
 
     load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     trials = []

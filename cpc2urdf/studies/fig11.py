@@ -201,7 +201,7 @@ def _ints(text: str) -> tuple[int, ...]:
 def main(argv: list[str]) -> int:
     """``cpc2urdf study fig11 [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import make_folder, write_atomic, write_json
+    from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study fig11", description=__doc__.split("\n\n")[0])
     p.add_argument("--M", default="2:15", help="measurements per joint: LO:HI or a,b,c (default 2:15)")
@@ -219,7 +219,7 @@ def main(argv: list[str]) -> int:
         raise Cpc2UrdfError(f"--M/--sigmas: {e}") from e
     if min(M_values) < 2 or args.trials < 1 or args.heldout < 1 or min(sigmas) < 0:
         raise Cpc2UrdfError("need M >= 2, --trials >= 1, --heldout >= 1 and sigmas >= 0")
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.files.robot_ref import load_robot
 
     load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     out = make_folder(args.out)

@@ -49,6 +49,8 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, sigma_p: float,
     """One seed: both designs, both kinds of data; held-out RMS [m], the start used, seconds."""
     import time
 
+    from cpc2urdf.files.measurements import MeasurementSet
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.kinematics.methods import identify_refined
     from cpc2urdf.identification.kinematics.point_identify import identify_points, marker_positions
     from cpc2urdf.identification.simulation.design import (
@@ -59,8 +61,6 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, sigma_p: float,
     from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
     from cpc2urdf.identification.simulation.noise import fig10_noise
     from cpc2urdf.identification.simulation.truth import perturbed_model
-    from cpc2urdf.measurements import MeasurementSet
-    from cpc2urdf.robot_ref import load_robot
 
     nominal = load_robot(robot).nominal_model()
     streams = np.random.SeedSequence(seed).spawn(4)
@@ -158,7 +158,7 @@ def plot(trials: list[dict[str, Any]], path: Path, setting: str) -> None:
 def main(argv: list[str]) -> int:
     """``cpc2urdf study free-configs [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import make_folder, write_atomic, write_json
+    from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study free-configs", description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=20, help="seeded trials (default 20)")

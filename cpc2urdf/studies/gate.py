@@ -210,9 +210,9 @@ def _verdict(ms: Any) -> tuple[bool, str]:
 def clean_trials(kind: str, seeds: range) -> dict[str, Any]:
     """Run ``identify`` on clean simulated data of one kind; count the gate's passes."""
     from cpc2urdf.errors import Cpc2UrdfError
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.simulation.random_robots import random_model
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
-    from cpc2urdf.robot_ref import load_robot
 
     head = load_robot("iis_head")
     passed, skipped, failures, seconds = 0, 0, [], []
@@ -275,9 +275,9 @@ def _says(words: str) -> Callable[[Exception], bool]:
 def mistake_trials(seeds: range) -> dict[str, dict[str, Any]]:
     """Apply each mistake to seeded IIS-head experiments; count refusals with the right cause."""
     from cpc2urdf.errors import Cpc2UrdfError
+    from cpc2urdf.files.measurements import measurements_from_json, measurements_to_json
     from cpc2urdf.identification.kinematics.methods import identify
     from cpc2urdf.identification.simulation.simulate import simulate_experiment
-    from cpc2urdf.measurements import measurements_from_json, measurements_to_json
 
     out: dict[str, dict[str, Any]] = {}
 
@@ -323,7 +323,7 @@ def format_table(clean: list[dict[str, Any]], mistakes: dict[str, dict[str, Any]
 def main(argv: list[str]) -> int:
     """``cpc2urdf study gate [options]``."""
     from cpc2urdf.errors import Cpc2UrdfError
-    from cpc2urdf.fileio import make_folder, write_atomic, write_json
+    from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study gate", description=__doc__.split("\n\n")[0])
     p.add_argument("--trials", type=int, default=200, help="IIS-head trials with the noise stated (default 200)")

@@ -47,6 +47,7 @@ def _pct(x: np.ndarray) -> str:
 
 def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     """Run the study; returns the numbers (px, mm, deg) and a markdown report under ``"md"``."""
+    from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.simulation.images import render_experiment
     from cpc2urdf.identification.simulation.noise import stereo_noise
@@ -54,7 +55,6 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset, stereo_plate_poses
     from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
     from cpc2urdf.identification.vision.targets import robot_plate_designs
-    from cpc2urdf.measurements import MeasurementSet
     from cpc2urdf.transforms import inverse, rotation_error
     from cpc2urdf.validation.accuracy import accuracy
 
@@ -215,7 +215,7 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study images [--poses N] [--M M] [--seed S] [--out DIR]``."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder, write_atomic
+    from cpc2urdf.files.jsonio import make_folder, write_atomic
 
     parser = OneLineParser(prog="cpc2urdf study images", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

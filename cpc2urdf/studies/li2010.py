@@ -274,7 +274,7 @@ def plot(result: dict[str, Any], folder: Path) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study li2010 [--repeats N] [--seed S] [--max-poses M] [--out DIR]``."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder, write_atomic
+    from cpc2urdf.files.jsonio import make_folder, write_atomic
 
     parser = OneLineParser(prog="cpc2urdf study li2010", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

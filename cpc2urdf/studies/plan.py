@@ -79,6 +79,7 @@ def tiago_with_plate(folder: Path) -> Path:
 def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise: str = "fig10",
               pixel_sigma: float = 0.15, markers: int = 0, marker_sigma: float = 0.1e-3) -> dict[str, Any]:
     """Plans, predictions and observed held-out errors for one robot."""
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.planning.experiment import (
         heldout_errors,
         heldout_point_errors,
@@ -91,8 +92,7 @@ def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise:
         candidate_configurations,
         task_configurations,
     )
-    from cpc2urdf.robot_ref import load_robot
-    from cpc2urdf.urdf_robot import load_urdf_robot
+    from cpc2urdf.urdf.robot import load_urdf_robot
 
     spec = load_urdf_robot(tiago_with_plate(folder), ["calib_plate"]) if name == "tiago" else load_robot(name)
     nominal = spec.nominal_model()
@@ -215,7 +215,7 @@ def plot(results: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str]) -> int:
     """``cpc2urdf study plan [options]``."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder, write_atomic, write_json
+    from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study plan", description=__doc__.split("\n\n")[0])
     p.add_argument("--trials", type=int, default=100, help="seeded experiments per plan (default 100)")

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.argparsing import OneLineParser
-from cpc2urdf.figaroh_csv import load_figaroh_csv
+from cpc2urdf.files.figaroh_csv import load_figaroh_csv
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.map_identify import calibrate
 from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
@@ -33,9 +34,8 @@ from cpc2urdf.identification.kinematics.prior_fit import (
     fit_map,
     readings_within_limits,
 )
-from cpc2urdf.measurements import MeasurementSet
-from cpc2urdf.urdf_robot import UrdfRobot, load_urdf_robot
-from cpc2urdf.validation.pinocchio_robot import gravity_loads
+from cpc2urdf.urdf.pinocchio import gravity_loads
+from cpc2urdf.urdf.robot import UrdfRobot, load_urdf_robot
 
 DATA = Path(__file__).parent / "data" / "real"
 RANGE_SAMPLES = 500  # [-]: readings over the whole joint range for the divergence

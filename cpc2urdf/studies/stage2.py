@@ -35,8 +35,8 @@ def run_study(
         Per ``(noise, method)``, the median over seeds and both cameras of the ``T_link_camera``
         error: ``(translation [m], rotation [rad])``.
     """
+    from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye.stage2 import perturb_cameras, run_stage2
-    from cpc2urdf.robot_ref import load_model
 
     nominal = load_model("iis_head")
     truth = perturb_cameras(nominal, np.random.default_rng(1))

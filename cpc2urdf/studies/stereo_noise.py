@@ -48,6 +48,7 @@ def run_study(
     Returns:
         ``{"rows": [...], "rig": {...}, "fit": {...}}``; errors in mm and deg.
     """
+    from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.simulation.design import (
         calibration_ranges,
         measured_frames,
@@ -56,7 +57,6 @@ def run_study(
     from cpc2urdf.identification.simulation.noise import stereo_noise
     from cpc2urdf.identification.simulation.placement import place_in_front_of_rig
     from cpc2urdf.identification.vision.stereo import StereoRig
-    from cpc2urdf.robot_ref import load_robot
     from cpc2urdf.transforms import rotation_error
 
     rng = np.random.default_rng(seed)
@@ -183,7 +183,7 @@ def plot(result: dict[str, Any], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     """``cpc2urdf study stereo [--samples N] [--seed S] [--out DIR]``."""
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.fileio import make_folder, write_atomic
+    from cpc2urdf.files.jsonio import make_folder, write_atomic
 
     parser = OneLineParser(prog="cpc2urdf study stereo", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -9,8 +9,8 @@ The tree maps one to one (see :mod:`cpc2urdf.model`):
     ``base_joint`` is ``T_world_base``; every pose in the URDF equals the model's FK. The gaze
     solver, the view and ``check`` work in this frame.
   - ``mount="base"`` (the default of ``cpc2urdf export``): ``world`` is gravity-aligned (+z up, the
-    spec's ``up``, :mod:`cpc2urdf.physical`) with its origin at the base origin; ``base_joint`` is
-    the rotation :func:`cpc2urdf.physical.gravity_rotation` only. Simulators put gravity along
+    spec's ``up``, :mod:`cpc2urdf.urdf.physical`) with its origin at the base origin; ``base_joint`` is
+    the rotation :func:`cpc2urdf.urdf.physical.gravity_rotation` only. Simulators put gravity along
     -z of the root, so the robot stands upright. Poses relative to ``base`` are the model's.
 
 - joint ``<j>`` (revolute or prismatic, always with ``<limit>``, never ``continuous``) from its
@@ -24,9 +24,9 @@ The tree maps one to one (see :mod:`cpc2urdf.model`):
   :func:`camera_body_names`), then ``<frame>_joint`` with the fixed rotation
   :data:`T_BODY_OPTICAL` (rpy ``-pi/2 0 -pi/2``). The optical frame's pose is unchanged.
 
-Simulation: every link but ``world`` has an ``<inertial>`` (:mod:`cpc2urdf.mass_properties`) from
+Simulation: every link but ``world`` has an ``<inertial>`` (:mod:`cpc2urdf.urdf.mass_properties`) from
 its solid primitives at the stated density, or the stated mass, on principal axes (a diagonal
-tensor); a link with nothing solid on it gets 1 g (:func:`~cpc2urdf.mass_properties.frame_floor`).
+tensor); a link with nothing solid on it gets 1 g (:func:`~cpc2urdf.urdf.mass_properties.frame_floor`).
 Solid primitives also are the ``<collision>`` geometry (the base plate, plate circles and frame
 markers are paint only). Every ``<visual>`` and ``<collision>`` name is unique in the file. A ``<mujoco><compiler
 discardvisual="false" fusestatic="false"/></mujoco>`` element (``mujoco=False`` leaves it out)
@@ -49,11 +49,11 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.fileio import write_atomic
-from cpc2urdf.mass_properties import MassProperties, combined, frame_floor, solid
+from cpc2urdf.files.jsonio import write_atomic
 from cpc2urdf.model import BASE, RESERVED_NAMES, WORLD, CPCModel, RobotStructure
-from cpc2urdf.physical import PhysicalProperties, check_masses, gravity_rotation
 from cpc2urdf.transforms import Array, cpc_rotation, rpy_from_matrix
+from cpc2urdf.urdf.mass_properties import MassProperties, combined, frame_floor, solid
+from cpc2urdf.urdf.physical import PhysicalProperties, check_masses, gravity_rotation
 
 # name: rgba. HEAD_RGBA is the colour of the moving head links, which the browser test looks for.
 HEAD_RGBA = (0.15, 0.35, 0.85, 1.0)

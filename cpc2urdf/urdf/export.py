@@ -1,7 +1,7 @@
 """What ``cpc2urdf export`` writes for a robot reference: the model and its physical properties.
 
 The geometry is the reference's model (a model file, or a spec's nominal model). Density, masses
-and the up direction (:class:`~cpc2urdf.physical.PhysicalProperties`) are a robot's, not a
+and the up direction (:class:`~cpc2urdf.urdf.physical.PhysicalProperties`) are a robot's, not a
 calibration's, so they come from the robot spec: the reference itself when it is a spec or a
 shipped robot, else the robot a model file's provenance names (``provenance.robot``, tried
 against the model file's folder first). ``--up`` overrides the up direction. What cannot be found
@@ -17,11 +17,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, Cpc2UrdfError
+from cpc2urdf.files.robot_ref import RobotRef, load_robot
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.model import CPCModel
-from cpc2urdf.physical import PhysicalProperties
-from cpc2urdf.robot_ref import RobotRef, load_robot
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.urdf import urdf_link_names
+from cpc2urdf.urdf.document import urdf_link_names
+from cpc2urdf.urdf.physical import PhysicalProperties
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ def plan_export(ref: RobotRef | CPCModel, *, up: ArrayLike | None = None) -> Exp
         up: An up direction in base coordinates (shape (3,)) overriding the spec's.
 
     Raises:
-        InputFileError: ``ref`` cannot be read (:func:`~cpc2urdf.robot_ref.load_robot`).
+        InputFileError: ``ref`` cannot be read (:func:`~cpc2urdf.files.robot_ref.load_robot`).
         SpecError: A spec without nominal geometry.
         ConfigurationError: ``up`` is zero or not finite.
     """

@@ -32,7 +32,7 @@ from pathlib import Path
 from xml.parsers import expat
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.fileio import read_text_file
+from cpc2urdf.files.jsonio import read_text_file
 
 URDF_MAX_DEPTH = 64  # XML elements deep; a URDF needs 5 (robot/link/visual/geometry/box)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")

@@ -1,6 +1,6 @@
 """Where a calibrated model puts each joint of the URDF it was built from (the write-back's geometry).
 
-A model built from a URDF (:mod:`cpc2urdf.urdf_robot`) is written back by changing only the
+A model built from a URDF (:mod:`cpc2urdf.urdf.robot`) is written back by changing only the
 ``<origin>`` of the *calibrated joints*: every moving joint of the model, and the fixed joint
 carrying each of the model's frames (a measured link, or a camera link placed by hand-eye
 calibration). Every other joint keeps its origin, including the fixed joints whose transforms the
@@ -32,8 +32,8 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import InputFileError, SpecError
 from cpc2urdf.model import BASE, CPCModel
 from cpc2urdf.transforms import Array, homogeneous, inverse, rotation_error
-from cpc2urdf.urdf_robot import UrdfSource, urdf_source
-from cpc2urdf.urdf_tree import UrdfJoint, UrdfTree, read_urdf_tree
+from cpc2urdf.urdf.robot import UrdfSource, urdf_source
+from cpc2urdf.urdf.tree import UrdfJoint, UrdfTree, read_urdf_tree
 
 # A calibrated origin within this of the file's own [m] / [rad] is the file's own (rounding of the
 # CPC round trip, ~1e-16): its text is kept, so a nominal model writes back the file unchanged.
@@ -131,7 +131,7 @@ def writeback_plan(model: CPCModel, urdf: str | os.PathLike[str] | None = None) 
     """The calibrated joints' new origins (module docstring).
 
     Args:
-        model: A model built from a URDF (it carries a :class:`~cpc2urdf.urdf_robot.UrdfSource`).
+        model: A model built from a URDF (it carries a :class:`~cpc2urdf.urdf.robot.UrdfSource`).
         urdf: The URDF to write into (default: the file the model was built from).
 
     Raises:

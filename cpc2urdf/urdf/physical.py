@@ -1,6 +1,6 @@
 """What a simulator needs of a robot besides its kinematics: density, link masses, which way is up.
 
-A robot spec (:mod:`cpc2urdf.spec`) may state them; the URDF writer (:mod:`cpc2urdf.urdf`) uses them
+A robot spec (:mod:`cpc2urdf.files.spec`) may state them; the URDF writer (:mod:`cpc2urdf.urdf.document`) uses them
 for every link's ``<inertial>`` and for the gravity-aligned ``world`` of ``mount="base"``::
 
     "density": 2700,                     # kg/m^3 (SI whatever "units" says); default 1000
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.errors import SpecError, UnknownNameError
-from cpc2urdf.fileio import finite_float, float_list
+from cpc2urdf.files.jsonio import finite_float, float_list
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array, cpc_rotation
 

@@ -5,10 +5,10 @@ things from Pinocchio: the kinematic model of a URDF, its joints in configuratio
 their limits, and frame ids by name. :class:`PinocchioRobot` gives them once, with the checks
 every user needs:
 
-- the URDF must pass :func:`cpc2urdf.urdf_input.validate_urdf` (well-formed XML, one tree of
+- the URDF must pass :func:`cpc2urdf.urdf.input.validate_urdf` (well-formed XML, one tree of
   named links and joints, finite numbers, ...) before Pinocchio sees it, and Pinocchio must read
   it without complaint: one clear line otherwise, naming the file; urdfdom's own output is
-  captured (:func:`cpc2urdf.native_output.captured_output`), never shown;
+  captured (:func:`cpc2urdf.urdf.native_output.captured_output`), never shown;
 - every moving joint must be a 1-DoF revolute or prismatic joint (no floating or planar joints),
   so the configuration is one reading per joint, in :attr:`joint_names` order; a ``continuous``
   joint is refused too, unless asked to read it as an unlimited revolute joint
@@ -17,7 +17,7 @@ every user needs:
   name it does not know instead of raising.
 
 Which robot a name means (``HEAD.URDF``, a model file, a robot spec, a shipped robot) is decided
-by :mod:`cpc2urdf.robot_ref` (:meth:`PinocchioRobot.load`).
+by :mod:`cpc2urdf.files.robot_ref` (:meth:`PinocchioRobot.load`).
 
 Frames: ``T_world_<frame>`` is the pose of ``<frame>`` in ``world`` (Pinocchio's ``oMf``).
 """
@@ -34,15 +34,15 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import InputFileError, SpecError, UnknownNameError
-from cpc2urdf.fileio import read_text_file
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.jsonio import read_text_file
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.model import CPCModel
-from cpc2urdf.native_output import captured_output
-from cpc2urdf.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf import urdf_from_model
-from cpc2urdf.urdf_input import validate_urdf
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.document import urdf_from_model
+from cpc2urdf.urdf.input import validate_urdf
+from cpc2urdf.urdf.native_output import captured_output
+from cpc2urdf.urdf.robot import UrdfRobot
 
 PRISMATIC = ("PX", "PY", "PZ", "PrismaticUnaligned")  # Pinocchio joint model short names
 REVOLUTE = ("RX", "RY", "RZ", "RevoluteUnaligned")
@@ -202,7 +202,7 @@ class PinocchioRobot:
 
         Raises:
             InputFileError: A missing or unreadable file, a URDF
-                :func:`~cpc2urdf.urdf_input.validate_urdf` refuses, a URDF Pinocchio cannot read,
+                :func:`~cpc2urdf.urdf.input.validate_urdf` refuses, a URDF Pinocchio cannot read,
                 or (:class:`UnsupportedJointError`) joints other than revolute/prismatic.
         """
         text = os.fspath(urdf)
@@ -234,7 +234,7 @@ class PinocchioRobot:
         cls, model: CPCModel, *, source: str | None = None, visuals: bool = False
     ) -> PinocchioRobot:
         """The robot of a :class:`~cpc2urdf.model.CPCModel`, through its URDF
-        (:func:`cpc2urdf.urdf.urdf_from_model`; ``source`` is written in its comment)."""
+        (:func:`cpc2urdf.urdf.document.urdf_from_model`; ``source`` is written in its comment)."""
         label = source if source is not None else f"<model {model.structure.name}>"
         text = urdf_from_model(model, source=source)
         return cls.from_urdf(text, source=label, visuals=visuals, cpc_model=model)
@@ -248,8 +248,8 @@ class PinocchioRobot:
         continuous_as_revolute: bool = False,
     ) -> PinocchioRobot:
         """The robot ``ref`` names: a :class:`~cpc2urdf.model.CPCModel`, a URDF file (``.urdf`` in
-        any case, or XML text in a file not named ``.json``: :func:`cpc2urdf.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
-        robot name (:func:`cpc2urdf.robot_ref.load_model`). ``continuous_as_revolute`` as in
+        any case, or XML text in a file not named ``.json``: :func:`cpc2urdf.files.robot_ref.is_urdf_ref`), or a model file, robot spec or shipped
+        robot name (:func:`cpc2urdf.files.robot_ref.load_model`). ``continuous_as_revolute`` as in
         :meth:`from_urdf`.
 
         Raises:
@@ -346,7 +346,7 @@ def revolute_from_continuous(urdf: str) -> tuple[str, tuple[str, ...]]:
     """The URDF text with every ``continuous`` joint made ``revolute`` with limits
     +-:data:`UNLIMITED` (its effort and velocity kept, 0 if it had none), for Pinocchio, and the
     names of those joints. The text must have passed
-    :func:`~cpc2urdf.urdf_input.validate_urdf`; without continuous joints it is returned as is."""
+    :func:`~cpc2urdf.urdf.input.validate_urdf`; without continuous joints it is returned as is."""
     root = ET.fromstring(urdf)
     changed = []
     for joint in root.findall("joint"):

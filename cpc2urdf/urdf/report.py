@@ -1,6 +1,6 @@
 """The calibration report of a written-back URDF: what calibration changed, joint by joint.
 
-For every calibrated joint (:mod:`cpc2urdf.urdf_origins`) the report gives how far its origin
+For every calibrated joint (:mod:`cpc2urdf.urdf.origins`) the report gives how far its origin
 moved [mm] and turned [deg], how far a moving joint's axis tilted [deg] (its direction in the
 parent link's frame), both origins as the file writes them, and, when the model carries a
 covariance (``identify --method refined``), the standard deviation of each of the three. The
@@ -26,7 +26,7 @@ import numpy as np
 
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array, rpy_from_matrix
-from cpc2urdf.urdf_origins import OriginChange, WritebackPlan, writeback_plan
+from cpc2urdf.urdf.origins import OriginChange, WritebackPlan, writeback_plan
 
 REPORT_FORMAT = "cpc2urdf/calibration-report@1"
 
@@ -165,13 +165,13 @@ def calibration_report(
 
     Args:
         model: The calibrated model.
-        plan: Its write-back plan (default: :func:`~cpc2urdf.urdf_origins.writeback_plan`).
+        plan: Its write-back plan (default: :func:`~cpc2urdf.urdf.origins.writeback_plan`).
         uncertainty: Per URDF joint, the spread of its new origin (see the module docstring);
             None or empty: the report gives none.
         output: The calibrated URDF's path, for the report to name.
 
     Raises:
-        SpecError, InputFileError: As :func:`~cpc2urdf.urdf_origins.writeback_plan`.
+        SpecError, InputFileError: As :func:`~cpc2urdf.urdf.origins.writeback_plan`.
     """
     plan = plan if plan is not None else writeback_plan(model)
     notes = []

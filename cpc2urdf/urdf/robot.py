@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.errors import Cpc2UrdfError, InputFileError
+from cpc2urdf.files.spec import DEFAULT_EFFORT, DEFAULT_VELOCITY, RobotSpec
 from cpc2urdf.model import (
     BASE,
     IDENTITY,
@@ -55,11 +56,10 @@ from cpc2urdf.model import (
     RobotStructure,
 )
 from cpc2urdf.model_metadata import ModelMetadata
-from cpc2urdf.spec import DEFAULT_EFFORT, DEFAULT_VELOCITY, RobotSpec
 from cpc2urdf.transforms import Array, cpc_rotation, homogeneous
-from cpc2urdf.urdf_tree import CALIBRATABLE, UrdfJoint, UrdfTree, link_error, read_urdf_tree
+from cpc2urdf.urdf.tree import CALIBRATABLE, UrdfJoint, UrdfTree, link_error, read_urdf_tree
 
-URDF_SECTION = "urdf"  # the model file section (cpc2urdf.model_file)
+URDF_SECTION = "urdf"  # the model file section (cpc2urdf.files.model_file)
 
 
 def _legal(name: str) -> bool:
@@ -210,7 +210,7 @@ def with_urdf_source(model: CPCModel, source: UrdfSource | None) -> CPCModel:
 
 @dataclass
 class UrdfRobot(RobotSpec):
-    """A robot spec read from a URDF (:class:`~cpc2urdf.spec.RobotSpec` plus the file's tree).
+    """A robot spec read from a URDF (:class:`~cpc2urdf.files.spec.RobotSpec` plus the file's tree).
 
     Attributes:
         tree: The whole URDF.

@@ -1,10 +1,10 @@
 """A user's URDF as a kinematic tree: links, joints, their origins, axes and limits, read from the text.
 
-:func:`read_urdf_tree` first validates the file (:func:`cpc2urdf.urdf_input.read_urdf`, one line
+:func:`read_urdf_tree` first validates the file (:func:`cpc2urdf.urdf.input.read_urdf`, one line
 naming the file, element and line for anything a URDF parser would stumble on), then reads what
 kinematics needs. It also remembers where each joint's ``<origin>`` and ``<axis>`` tags sit in the
 text (byte offsets of the UTF-8 text), so that a calibrated URDF can be written by changing those
-tags alone and leaving every other byte of the file as it was (:mod:`cpc2urdf.urdf_writeback`).
+tags alone and leaving every other byte of the file as it was (:mod:`cpc2urdf.urdf.writeback`).
 
 URDF conventions (m, rad): a joint's ``<origin>`` is the pose of its frame in its parent link's
 frame, ``T_parent_joint``; the child link's frame is the joint frame moved by the joint:
@@ -24,7 +24,7 @@ import numpy as np
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.transforms import Array, homogeneous, matrix_from_rpy
-from cpc2urdf.urdf_input import read_urdf, validate_urdf
+from cpc2urdf.urdf.input import read_urdf, validate_urdf
 
 MOVING = ("revolute", "continuous", "prismatic")  # the joint types a calibration identifies
 CALIBRATABLE = (*MOVING, "fixed")  # the types a measured link's path may have
@@ -208,7 +208,7 @@ def _tag_end(data: bytes, start: int) -> tuple[int, bool]:
 
 
 def parse_urdf_tree(text: str, source: str | os.PathLike[str]) -> UrdfTree:
-    """The tree of URDF ``text`` (validated first; see :func:`cpc2urdf.urdf_input.validate_urdf`).
+    """The tree of URDF ``text`` (validated first; see :func:`cpc2urdf.urdf.input.validate_urdf`).
 
     Raises:
         InputFileError: Naming ``source``, the element and its line.
@@ -281,7 +281,7 @@ def read_urdf_tree(path: str | os.PathLike[str]) -> UrdfTree:
     """The tree of the URDF file ``path``.
 
     Raises:
-        InputFileError: Missing, unreadable, or a problem :func:`cpc2urdf.urdf_input.validate_urdf`
+        InputFileError: Missing, unreadable, or a problem :func:`cpc2urdf.urdf.input.validate_urdf`
             names (file, element, line).
     """
     return _tree(read_urdf(path), path)

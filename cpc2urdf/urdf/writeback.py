@@ -1,8 +1,8 @@
 """Write a calibrated model back into the URDF it was built from.
 
 ``write_calibrated_urdf(model, "calibrated.urdf")`` writes the source URDF (recorded in the model's
-``urdf`` section, :class:`~cpc2urdf.urdf_robot.UrdfSource`) with only the calibrated joints'
-``<origin>`` tags replaced (:mod:`cpc2urdf.urdf_origins` says which joints and where they go).
+``urdf`` section, :class:`~cpc2urdf.urdf.robot.UrdfSource`) with only the calibrated joints'
+``<origin>`` tags replaced (:mod:`cpc2urdf.urdf.origins` says which joints and where they go).
 The edit is made on the text: each ``<origin>`` start tag is located by the XML parser and
 replaced in place, so every other byte of the file (links, inertials, meshes and their paths,
 collisions, materials, transmissions, ``gazebo``/``ros2_control`` tags, other joints, comments,
@@ -11,7 +11,7 @@ indentation) stays as it was. A joint without ``<origin>`` gets one after its st
 (parsers disagree on those; the model uses the unit vector).
 An origin the model leaves where the file has it (to rounding) keeps its text.
 
-Next to the URDF go its calibration report (:mod:`cpc2urdf.urdf_report`):
+Next to the URDF go its calibration report (:mod:`cpc2urdf.urdf.report`):
 ``calibrated.report.json`` and ``calibrated.report.txt``. Every check runs before any file is
 written, and each file is written atomically.
 """
@@ -24,14 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cpc2urdf.fileio import check_output_path, dumps, write_atomic
+from cpc2urdf.files.jsonio import check_output_path, dumps, write_atomic
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf import origin_attributes, urdf_vector
-from cpc2urdf.urdf_input import validate_urdf
-from cpc2urdf.urdf_origins import WritebackPlan, writeback_plan
-from cpc2urdf.urdf_report import CalibrationReport, OriginStd, calibration_report, report_paths
-from cpc2urdf.urdf_tree import TagSpan
+from cpc2urdf.urdf.document import origin_attributes, urdf_vector
+from cpc2urdf.urdf.input import validate_urdf
+from cpc2urdf.urdf.origins import WritebackPlan, writeback_plan
+from cpc2urdf.urdf.report import CalibrationReport, OriginStd, calibration_report, report_paths
+from cpc2urdf.urdf.tree import TagSpan
 
 UNIT_AXIS_TOL = 1e-12  # [-]: an <axis> whose length differs from 1 by more is rewritten as a unit vector
 

@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.point_identify import marker_positions
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import rotation_error
 

@@ -6,25 +6,25 @@
   exposes no poses, so for it we check that it parses and that its tree equals the model's.
 
 Every named frame, ``base``, every joint's link frame and every camera body link the URDF has
-(:func:`cpc2urdf.urdf.camera_body_names`; URDFs of earlier versions have none) is compared, at
+(:func:`cpc2urdf.urdf.document.camera_body_names`; URDFs of earlier versions have none) is compared, at
 seeded random configurations inside the joint limits plus the two limit corners. A URDF that passes
 agrees with the CPC model to ``FK_AGREEMENT_TOL`` (1e-9 m / 1e-9 rad) in both FK parsers.
 
-Either mount of :mod:`cpc2urdf.urdf` passes: the URDF's ``world`` -> ``base`` must be the model's
+Either mount of :mod:`cpc2urdf.urdf.document` passes: the URDF's ``world`` -> ``base`` must be the model's
 ``T_world_base`` (``mount="rig"``: poses compared in the model's world) or a rotation at the base
 origin (``mount="base"``, the gravity-aligned world of ``cpc2urdf export``: poses compared relative
 to ``base``, i.e. the model's poses carried into that world). Anything else is a discrepancy.
 
-A model built from a user's URDF (it has a ``urdf`` section, :func:`cpc2urdf.urdf_robot.urdf_source`)
+A model built from a user's URDF (it has a ``urdf`` section, :func:`cpc2urdf.urdf.robot.urdf_source`)
 is checked against the URDF written back from it (:func:`cross_check_writeback`): the links are the
 user's, named as in that URDF, so the compared ones are every link on the paths from its root to
-the model's frames, where :func:`cpc2urdf.urdf_origins.urdf_link_poses` puts them (in the root
+the model's frames, where :func:`cpc2urdf.urdf.origins.urdf_link_poses` puts them (in the root
 link's frame; the write-back plan is made on the checked file), the rest of the robot at 0. A
 fourth row, ``source``, compares every joint the model was built from with its record (a
 calibrated joint may differ only in its origin), so an edit of a joint folded into the model is
 named. The first link off, root first, is named with the joint above it.
 
-A URDF that does not parse is bad input, not a discrepancy: :func:`cpc2urdf.urdf_input.read_urdf`
+A URDF that does not parse is bad input, not a discrepancy: :func:`cpc2urdf.urdf.input.read_urdf`
 checks it before any parser sees it, and a parser that still cannot read it raises
 :class:`~cpc2urdf.errors.InputFileError` naming the file and the parser's first complaint. What the
 parsers print themselves (urdfdom's C++ messages, yourdfpy's log) is captured, never shown. A
@@ -46,19 +46,19 @@ import pinocchio as pin
 
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.model import BASE, CPCModel
-from cpc2urdf.native_output import captured_output
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import Array, rotation_error
-from cpc2urdf.urdf import T_BODY_OPTICAL, camera_body_names, link_name
-from cpc2urdf.urdf_input import read_urdf
-from cpc2urdf.urdf_origins import WritebackPlan, plan_for_tree, urdf_link_poses
-from cpc2urdf.urdf_robot import UrdfSource, urdf_source
-from cpc2urdf.urdf_tree import UrdfTree, parse_urdf_tree
-from cpc2urdf.validation.pinocchio_robot import (
+from cpc2urdf.urdf.document import T_BODY_OPTICAL, camera_body_names, link_name
+from cpc2urdf.urdf.input import read_urdf
+from cpc2urdf.urdf.native_output import captured_output
+from cpc2urdf.urdf.origins import WritebackPlan, plan_for_tree, urdf_link_poses
+from cpc2urdf.urdf.pinocchio import (
     PinocchioRobot,
     UnsupportedJointError,
     build_pinocchio_model,
 )
+from cpc2urdf.urdf.robot import UrdfSource, urdf_source
+from cpc2urdf.urdf.tree import UrdfTree, parse_urdf_tree
 
 LIMIT_TOL = 1e-12  # [m] or [rad]: joint limits must survive the URDF round trip exactly
 
@@ -305,7 +305,7 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
     """FK of every compared frame with yourdfpy vs the CPC model.
 
     Raises:
-        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf.input.read_urdf`, or
             yourdfpy cannot load it).
     """
     rep = ParserReport("yourdfpy", True)
@@ -364,7 +364,7 @@ def _urdfdom_edges(urdf_path: str, rep: ParserReport) -> set[tuple[str, str]] | 
     failed) when ``check_urdf`` is not installed.
 
     Raises:
-        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf.input.read_urdf`, or
             ``check_urdf`` refuses it).
     """
     read_urdf(urdf_path)
@@ -404,7 +404,7 @@ def check_urdfdom(model: CPCModel, urdf_path: str) -> ParserReport:
     """urdfdom's ``check_urdf``: the file parses and its link tree equals the model's.
 
     Raises:
-        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf_input.read_urdf`, or
+        InputFileError: The URDF does not parse (:func:`~cpc2urdf.urdf.input.read_urdf`, or
             ``check_urdf`` refuses it).
     """
     rep = ParserReport("urdfdom", True, note="check_urdf prints no poses")
@@ -515,7 +515,7 @@ def _pinocchio_of(urdf_path: str) -> pin.Model:
 
 def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:
     """FK by Pinocchio of every link of ``plan`` (the paths from the root to the model's frames)
-    in the written-back URDF, against :func:`~cpc2urdf.urdf_origins.urdf_link_poses`; the other
+    in the written-back URDF, against :func:`~cpc2urdf.urdf.origins.urdf_link_poses`; the other
     joints of the file at Pinocchio's neutral configuration.
 
     Raises:
@@ -618,9 +618,9 @@ def check_urdfdom_writeback(urdf_path: str, plan: WritebackPlan) -> ParserReport
 
 def cross_check_writeback(model: CPCModel, path: str, Q: Array) -> CrossCheckReport:
     """:func:`cross_check` of a model built from a user's URDF against a URDF written back from
-    it (:mod:`cpc2urdf.urdf_writeback`): every link on the paths from the root to the model's
+    it (:mod:`cpc2urdf.urdf.writeback`): every link on the paths from the root to the model's
     frames (the measured links, cameras, and every link between) where
-    :func:`~cpc2urdf.urdf_origins.urdf_link_poses` puts it, in the root link's frame, by
+    :func:`~cpc2urdf.urdf.origins.urdf_link_poses` puts it, in the root link's frame, by
     Pinocchio and yourdfpy; urdfdom's tree has those links; and every joint the model depends on
     is as the model recorded it (a calibrated joint may differ only in its origin), the row
     ``source``.

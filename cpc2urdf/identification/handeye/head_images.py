@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, OutputError
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
 from cpc2urdf.identification.handeye.stage2 import (
     HAND_OF_CAMERA,
@@ -29,7 +30,6 @@ from cpc2urdf.identification.handeye.stage2 import (
 from cpc2urdf.identification.vision.measure_head import HeadCamera, HeadImageMeasurement
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import inverse
-from cpc2urdf.units import Units
 
 
 def stage2_observations(result: HeadImageMeasurement, cameras: Mapping[str, HeadCamera]) -> Stage2Observations:

@@ -30,9 +30,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from cpc2urdf.fileio import finite_float
+from cpc2urdf.files.jsonio import finite_float
+from cpc2urdf.files.units import Units
 from cpc2urdf.transforms import Array
-from cpc2urdf.units import Units
 
 NOISE_STREAMS = ("T_base_hand", "T_camera_target")
 _NOISE_KEYS = ("position", "angle")

@@ -417,7 +417,7 @@ def write_pose_files(result: Stage2Result, folder: str | Path, model: CPCModel |
     """Write one ``cpc2urdf/handeye-poses@1`` file per camera (``handeye_<camera>.json``, mm/deg),
     hand poses from ``model`` (default: the identified model of the result), so that
     ``cpc2urdf handeye`` can be run on them."""
-    from cpc2urdf.units import Units
+    from cpc2urdf.files.units import Units
 
     m = model or result.model
     obs = result.observations

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.transforms import Array
 
 Fix = Callable[[MeasurementSet], MeasurementSet]

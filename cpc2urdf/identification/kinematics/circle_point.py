@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.protocol import Protocol, recognise_protocol
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
 from cpc2urdf.registration import plate_pose_from_points, transforms_from_point_pairs
 from cpc2urdf.transforms import Array, inverse

@@ -55,8 +55,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.protocol import Protocol, recognise_protocol
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.transforms import (

@@ -32,6 +32,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.alternatives import alternatives
 from cpc2urdf.identification.kinematics.diagnosis import diagnose, diagnose_unfittable, unexplained
 from cpc2urdf.identification.kinematics.fit_statistics import fit_statistics
@@ -51,7 +52,6 @@ from cpc2urdf.identification.kinematics.verdict import (
     is_exact,
     noise_problems,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.special import fdtri
 
 from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError, InconsistentDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.alternatives import Alternative, alternatives
 from cpc2urdf.identification.kinematics.fit_statistics import FitStatistics, fit_statistics
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
@@ -43,7 +44,6 @@ from cpc2urdf.identification.kinematics.verdict import (
     noise_problems,
     times,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 

@@ -29,13 +29,13 @@ from numpy.typing import NDArray
 from scipy.linalg import solve_triangular
 from scipy.special import erfc, gammainc, gammaincc
 
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
     triangular_factor,
 )
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.problem import IdentificationProblem
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.map_gate import GateReport, check
 from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
@@ -37,11 +38,10 @@ from cpc2urdf.identification.kinematics.prior_fit import (
     readings_within_limits,
     select_model,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 RANGE_SAMPLES = 500  # [-]: seeded readings within the limits for the whole-range comparison
 SWEEP_SAMPLES = 101  # [-]: readings of one joint's sweep over its limits

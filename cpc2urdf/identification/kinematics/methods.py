@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.problem import DEFAULT_SIGMA_R, DEFAULT_SIGMA_T
 from cpc2urdf.identification.kinematics.start import (
     align_base,
@@ -35,7 +36,6 @@ from cpc2urdf.identification.kinematics.start import (
     on_the_parts,
     refinement_start,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.model_metadata import FrameResiduals, Provenance, RecordResiduals, Residuals
 from cpc2urdf.transforms import rotation_error

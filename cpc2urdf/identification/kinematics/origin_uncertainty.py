@@ -2,7 +2,7 @@
 
 A model identified with ``--method refined`` carries the covariance ``C`` of its identifiable
 parameters in its own local chart (:mod:`uncertainty`, :mod:`parametrization`). Each calibrated
-joint's new ``<origin>`` (:mod:`cpc2urdf.urdf_origins`) is a function ``O(x)`` of the chart's
+joint's new ``<origin>`` (:mod:`cpc2urdf.urdf.origins`) is a function ``O(x)`` of the chart's
 coordinates ``x``; to first order its position moves by ``G_p x``, its orientation by the rotation
 vector ``G_w x`` (in the joint frame) and a moving joint's axis direction (in the parent link's
 frame) by ``G_a x``, with the Jacobians taken by central differences (the map is smooth and cheap:
@@ -11,7 +11,7 @@ Euclidean position error [m] and the RMS angle errors [rad]. A Jacobian that see
 data leave undetermined (``C``'s null space) gives ``None``, never a number.
 
 This is in the identification layer because the chart is; the report that prints it is core
-(:mod:`cpc2urdf.urdf_report`), and ``cpc2urdf.api`` joins the two.
+(:mod:`cpc2urdf.urdf.report`), and ``cpc2urdf.api`` joins the two.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from cpc2urdf.identification.kinematics.uncertainty import NULL_VISIBILITY_TOL
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import NoUncertaintyError
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf_origins import OriginChange, WritebackPlan, plan_for_tree, writeback_plan
-from cpc2urdf.urdf_report import OriginStd
+from cpc2urdf.urdf.origins import OriginChange, WritebackPlan, plan_for_tree, writeback_plan
+from cpc2urdf.urdf.report import OriginStd
 
 FD_STEP = 1e-6  # [m] or [rad] per chart coordinate: central differences, error ~1e-12 relative
 
@@ -51,10 +51,10 @@ def origin_uncertainty(model: CPCModel, plan: WritebackPlan | None = None) -> di
 
     Args:
         model: A model built from a URDF; without an ``uncertainty`` section the result is empty.
-        plan: Its write-back plan (default: :func:`~cpc2urdf.urdf_origins.writeback_plan`).
+        plan: Its write-back plan (default: :func:`~cpc2urdf.urdf.origins.writeback_plan`).
 
     Returns:
-        URDF joint -> :class:`~cpc2urdf.urdf_report.OriginStd` [m, rad]. Joints the covariance
+        URDF joint -> :class:`~cpc2urdf.urdf.report.OriginStd` [m, rad]. Joints the covariance
         does not reach (a camera placed by hand-eye calibration) get none.
 
     Raises:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 
 # The data's robot is implausible if it is this many times larger or smaller than the nominal one

@@ -30,8 +30,8 @@ import numpy as np
 from scipy.special import gammainc, gammaincc
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.verdict import FALSE_ALARM, MIN_IMPROVEMENT, OUTLIER_RATIO
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 
 # Point residual below which no outlier is declared without a noise statement [m].

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpc2urdf.errors import Cpc2UrdfError, DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.circle_point import marker_sigma
 from cpc2urdf.identification.kinematics.point_consistency import (
     PointConsistency,
@@ -26,7 +27,6 @@ from cpc2urdf.identification.kinematics.point_refine import (
     refine_points,
 )
 from cpc2urdf.identification.kinematics.start import on_the_parts
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import FrameResiduals, Provenance, RecordResiduals, Residuals
 from cpc2urdf.transforms import Array

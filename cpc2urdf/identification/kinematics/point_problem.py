@@ -23,8 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import Marker
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.measurements import Marker
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 

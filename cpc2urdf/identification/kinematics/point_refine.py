@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.circle_point import circle_point_start, nominal_point_start
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
@@ -36,7 +37,6 @@ from cpc2urdf.identification.kinematics.refine import (
     solve_least_squares,
 )
 from cpc2urdf.identification.kinematics.uncertainty import with_uncertainty
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import Covariance
 from cpc2urdf.transforms import Array

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.prior_problem import (
     MapProblem,
     Noise,
@@ -34,7 +35,6 @@ from cpc2urdf.identification.kinematics.prior_problem import (
     perturbation,
     start_point,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, RobotStructure
 from cpc2urdf.transforms import Array
 

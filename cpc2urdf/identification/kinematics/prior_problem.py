@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.measurements import UNKNOWN_MOUNTS, MeasurementSet
+from cpc2urdf.files.measurements import UNKNOWN_MOUNTS, MeasurementSet
 from cpc2urdf.model import BASE, CPCModel, CPCParams, RobotStructure
 from cpc2urdf.registration import transforms_from_point_pairs
 from cpc2urdf.transforms import Array, homogeneous, inverse, skew

@@ -2,7 +2,7 @@
 
 The closed-form identification needs records taken at a reference configuration ``q0`` and, for
 every joint i, records ``q_ik`` equal to ``q0`` except in joint i. This module finds ``q0`` and
-each joint's sweep in a :class:`~cpc2urdf.measurements.MeasurementSet` whose records may come in
+each joint's sweep in a :class:`~cpc2urdf.files.measurements.MeasurementSet` whose records may come in
 any order (and may repeat ``q0``), and names what is missing when the data cannot determine the
 robot (:class:`~cpc2urdf.errors.DegenerateDataError`):
 
@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.model import RobotStructure
 
 # Two readings of a joint within this are the same reading: a joint driven back to q0 may read a

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from scipy.optimize import OptimizeResult, least_squares
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
     analyze_jacobian,
@@ -51,7 +52,6 @@ from cpc2urdf.identification.kinematics.uncertainty import (
     covariance_from_jacobian,
     with_uncertainty,
 )
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.registration import transforms_from_point_pairs
 

@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.closed_form import count_parameters
 from cpc2urdf.identification.kinematics.protocol import joint_tolerances
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 
 PROTOCOL_HINT = "one joint at a time from q0, Shih et al. sec. 4.1"

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from cpc2urdf.errors import InconsistentDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.fit_statistics import FitStatistics
 from cpc2urdf.identification.kinematics.plausibility import SizeCheck, size_check, times
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel
 from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.kinematics.circle_point import marker_sigma, nominal_point_start
 from cpc2urdf.identification.kinematics.methods import identify_refined
 from cpc2urdf.identification.kinematics.point_identify import identify_points, marker_positions
@@ -44,7 +45,6 @@ from cpc2urdf.identification.simulation.truth import (
     perturbed_model,
 )
 from cpc2urdf.identification.simulation.visibility import visible_heldout
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.transforms import rotation_error
 

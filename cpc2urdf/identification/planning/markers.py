@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from cpc2urdf.files.measurements import Marker
 from cpc2urdf.identification.kinematics.point_problem import PointChart, PointProblem
 from cpc2urdf.identification.planning.information import TaskSensitivity
 from cpc2urdf.identification.simulation.markers import place_markers_on
-from cpc2urdf.measurements import Marker
 from cpc2urdf.model import CPCModel
 
 Array = NDArray[np.float64]

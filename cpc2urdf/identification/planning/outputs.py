@@ -25,7 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, OutputError
-from cpc2urdf.fileio import check_output_path, dumps, write_all_atomic
+from cpc2urdf.files.jsonio import check_output_path, dumps, write_all_atomic
+from cpc2urdf.files.spec import RobotSpec
+from cpc2urdf.files.units import ANGLE_UNITS, LENGTH_UNITS
 from cpc2urdf.identification.planning.markers import DEFAULT_MARKER_SIGMA
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
 from cpc2urdf.identification.planning.plan import (
@@ -45,8 +47,6 @@ from cpc2urdf.identification.simulation.measure import (
 from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
 
 
 @dataclass
@@ -66,7 +66,7 @@ def robot_for_plan(spec: RobotSpec, measured: Sequence[str] | None) -> RobotSpec
     Raises:
         ConfigurationError: A URDF without ``measured`` links, or a name that is not a frame.
     """
-    from cpc2urdf.urdf_robot import UrdfRobot
+    from cpc2urdf.urdf.robot import UrdfRobot
 
     if isinstance(spec, UrdfRobot):
         if not measured:
@@ -133,7 +133,7 @@ def plan_robot(
     Raises:
         Cpc2UrdfError: Bad input (named).
     """
-    from cpc2urdf.urdf_robot import UrdfRobot
+    from cpc2urdf.urdf.robot import UrdfRobot
 
     is_urdf = isinstance(spec, UrdfRobot)
     spec = robot_for_plan(spec, measured)
@@ -225,7 +225,7 @@ def output_paths(plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
 
 def write_plan_outputs(out: PlanOutputs, plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
     """Write ``plan.json``, ``plan.csv`` and ``plan.png``, all or nothing
-    (:func:`~cpc2urdf.fileio.write_all_atomic`)."""
+    (:func:`~cpc2urdf.files.jsonio.write_all_atomic`)."""
     json_path, csv_path, png_path = output_paths(plan_path)
     try:
         text = dumps(out.doc)

@@ -51,7 +51,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.fileio import finite_float, float_list, read_json, require_format
+from cpc2urdf.files.jsonio import finite_float, float_list, read_json, require_format
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.planning.information import StereoPoseMeasurement
 from cpc2urdf.identification.planning.markers import MarkerMeasurement
 from cpc2urdf.identification.planning.measuring import SETUP_NOISE_MODELS, MeasuringSetup
@@ -59,7 +60,6 @@ from cpc2urdf.identification.planning.plan import PlanResult
 from cpc2urdf.identification.simulation.measure import DEFAULT_PIXEL_SIGMA
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
-from cpc2urdf.units import Units
 
 Array = NDArray[np.float64]
 
@@ -74,7 +74,7 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
     fields (``prediction``, ``target_error_mm``, ``curve``) say their unit in their names and are
     always mm / deg.
     """
-    from cpc2urdf.urdf_robot import urdf_source
+    from cpc2urdf.urdf.robot import urdf_source
 
     u = units or Units("mm", "deg")
     s = setup.nominal.structure

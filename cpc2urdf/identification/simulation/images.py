@@ -20,7 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, OutputError
-from cpc2urdf.fileio import write_json
+from cpc2urdf.files.jsonio import write_json
+from cpc2urdf.files.measurements import MeasurementSet, save_measurements
+from cpc2urdf.files.model_file import save_model
+from cpc2urdf.files.robot_ref import load_robot
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.identification.handeye import stage2
 from cpc2urdf.identification.handeye.stage2 import CameraIntrinsics
 from cpc2urdf.identification.simulation.placement import clear_placement
@@ -39,12 +43,8 @@ from cpc2urdf.identification.vision.render import (
 from cpc2urdf.identification.vision.rig_file import save_camera, save_rig
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs, target_design
-from cpc2urdf.measurements import MeasurementSet, save_measurements
 from cpc2urdf.model import CPCModel, CPCParams
-from cpc2urdf.model_file import save_model
 from cpc2urdf.progress import progress
-from cpc2urdf.robot_ref import load_robot
-from cpc2urdf.spec import RobotSpec
 from cpc2urdf.transforms import homogeneous, inverse
 
 Array = NDArray[np.float64]

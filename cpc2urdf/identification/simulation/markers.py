@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cpc2urdf.measurements import Marker, MeasurementSet
+from cpc2urdf.files.measurements import Marker, MeasurementSet
 from cpc2urdf.model import CPCModel
 
 # Markers drawn by place_markers_on lie this far from their frame's origin [m] (a marker ball on

@@ -1,7 +1,7 @@
 """Simulated stage-1 experiments (Shih et al. sec. 4.1 protocol, sec. 6 / Fig. 10 noise).
 
 A URDF robot is simulated as the sub-tree of its measured links
-(:meth:`~cpc2urdf.urdf_robot.UrdfRobot.restricted`; ``cpc2urdf simulate robot.urdf --measure
+(:meth:`~cpc2urdf.urdf.robot.UrdfRobot.restricted`; ``cpc2urdf simulate robot.urdf --measure
 LINK``): its records read only the joints on the paths to them, and its sets carry the robot, so
 that their files use the URDF's joint and link names and identification writes back into it.
 
@@ -22,7 +22,7 @@ In memory::
                                                    sigma_t=0.5e-3, sigma_r=np.radians(0.5))
 
 ``truth`` is a :class:`~cpc2urdf.model.CPCModel`; ``measured`` and ``heldout`` are
-:class:`~cpc2urdf.measurements.MeasurementSet` (held-out records carry the *true* poses).
+:class:`~cpc2urdf.files.measurements.MeasurementSet` (held-out records carry the *true* poses).
 ``cpc2urdf simulate`` writes the same three things as files.
 """
 
@@ -36,6 +36,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from cpc2urdf.errors import ConfigurationError
+from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.identification.simulation.design import (
     DEFAULT_M,
     calibration_ranges,
@@ -57,12 +59,10 @@ from cpc2urdf.identification.simulation.truth import (
 )
 from cpc2urdf.identification.simulation.visibility import ViewReport, check_view, visible_heldout
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.progress import progress
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 DEFAULT_HELDOUT = 50
 OCCLUDED_VIEWS_MAX = 0.05  # [-]: share of (configuration, plate) views with a hidden circle tolerated
@@ -81,7 +81,7 @@ def _as_spec(robot: str | Path | RobotSpec | CPCModel) -> tuple[RobotSpec, str]:
         return robot, robot.source
     if isinstance(robot, CPCModel):
         return RobotSpec(robot.structure, robot, "<memory>"), robot.structure.name
-    from cpc2urdf.robot_ref import load_robot
+    from cpc2urdf.files.robot_ref import load_robot
 
     return load_robot(robot), str(robot)
 

@@ -22,7 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, OutputError
-from cpc2urdf.fileio import write_json
+from cpc2urdf.files.jsonio import write_json
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.identification.vision.bag_reader import (
     IMAGE_TYPES,
     JOINT_STATES_TOPIC,
@@ -45,7 +46,6 @@ from cpc2urdf.identification.vision.bag_sync import (
 )
 from cpc2urdf.identification.vision.image_folders import write_image
 from cpc2urdf.identification.vision.joints_csv import write_joints_csv
-from cpc2urdf.spec import RobotSpec
 
 BAG_PROVENANCE = "bag_provenance.json"  # in an images folder: the bag, topics, rule and skipped samples
 

@@ -18,6 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, InputFileError
+from cpc2urdf.files.poses import pose_from_json
+from cpc2urdf.files.spec import RobotSpec
+from cpc2urdf.files.units import Units
 from cpc2urdf.identification.vision.bag_reader import (
     NS,
     POSE_TYPES,
@@ -33,10 +36,7 @@ from cpc2urdf.identification.vision.bag_sync import (
     pair_samples,
     stamp_label,
 )
-from cpc2urdf.poses import pose_from_json
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.units import Units
-from cpc2urdf.urdf_robot import UrdfRobot
+from cpc2urdf.urdf.robot import UrdfRobot
 
 Array = NDArray[np.float64]
 

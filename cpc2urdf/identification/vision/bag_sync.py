@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, InputFileError
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.identification.vision.bag_reader import NS, Message, Series
 from cpc2urdf.model import CPCModel, RobotStructure
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.urdf_robot import UrdfRobot, urdf_source
+from cpc2urdf.urdf.robot import UrdfRobot, urdf_source
 
 Array = NDArray[np.float64]
 

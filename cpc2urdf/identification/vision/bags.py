@@ -35,6 +35,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError
+from cpc2urdf.files.measurements import MeasurementSet, measurements_from_json
+from cpc2urdf.files.poses import pose_to_json
+from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.identification.vision.bag_images import (
     BAG_PROVENANCE,
     BagImages,
@@ -56,10 +59,7 @@ from cpc2urdf.identification.vision.bag_sync import (
     provenance,
 )
 from cpc2urdf.identification.vision.measure_head import HeadImageMeasurement
-from cpc2urdf.measurements import MeasurementSet, measurements_from_json
 from cpc2urdf.model import CPCModel
-from cpc2urdf.poses import pose_to_json
-from cpc2urdf.spec import RobotSpec
 
 Array = NDArray[np.float64]
 

@@ -35,9 +35,9 @@ from typing import Any
 import cv2
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.fileio import read_json, require_format, write_json
+from cpc2urdf.files.jsonio import read_json, require_format, write_json
+from cpc2urdf.files.units import LENGTH_UNITS
 from cpc2urdf.identification.vision.boards import BOARD_KINDS, Board
-from cpc2urdf.units import LENGTH_UNITS
 
 BOARD_FORMAT = "cpc2urdf/board@1"
 _COMMON = ("format", "kind", "units", "margin", "name")

@@ -27,11 +27,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.fileio import read_text_file, write_atomic
+from cpc2urdf.files.jsonio import read_text_file, write_atomic
+from cpc2urdf.files.spec import RobotSpec
+from cpc2urdf.files.units import ANGLE_UNITS, LENGTH_UNITS
 from cpc2urdf.model import CPCModel, RobotStructure
-from cpc2urdf.spec import RobotSpec
-from cpc2urdf.units import ANGLE_UNITS, LENGTH_UNITS
-from cpc2urdf.urdf_robot import UrdfRobot, urdf_source
+from cpc2urdf.urdf.robot import UrdfRobot, urdf_source
 
 Array = NDArray[np.float64]
 
@@ -171,7 +171,7 @@ def write_joints_csv(
 
 def urdf_joint_columns(robot: RobotSpec | CPCModel) -> dict[str, str]:
     """A URDF robot's own joint names -> the model's (``head_1_joint`` -> ``head_1``), for the
-    joints of ``robot`` (a :class:`~cpc2urdf.urdf_robot.UrdfRobot` or a model made from a URDF);
+    joints of ``robot`` (a :class:`~cpc2urdf.urdf.robot.UrdfRobot` or a model made from a URDF);
     empty for other robots. ``aliases`` of :func:`read_joints_csv`."""
     joints = robot.structure.joint_names
     if isinstance(robot, UrdfRobot) and robot.names is not None:

@@ -11,7 +11,7 @@ sec. 3). The folder layout (``docs/images.md``)::
 :func:`measure_stereo_images` reads the joint readings
 (:mod:`~cpc2urdf.identification.vision.joints_csv`), detects the plates in each pair,
 triangulates and registers them (:mod:`~cpc2urdf.identification.vision.plate_poses`) and returns
-a :class:`~cpc2urdf.measurements.MeasurementSet` with ``T_world_<plate>`` and the triangulated
+a :class:`~cpc2urdf.files.measurements.MeasurementSet` with ``T_world_<plate>`` and the triangulated
 circle centres (``points``). A plate that cannot be measured is handled by the ``on_error``
 policy of :mod:`~cpc2urdf.identification.vision.image_folders`.
 """
@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.vision.board_poses import stereo_board_pose
 from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import DetectionError
@@ -41,7 +42,6 @@ from cpc2urdf.identification.vision.joints_csv import read_joints_csv
 from cpc2urdf.identification.vision.plate_poses import StereoPlatePose, stereo_plate_poses
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs
-from cpc2urdf.measurements import MeasurementSet
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.progress import progress_checked
 

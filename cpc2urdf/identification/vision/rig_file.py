@@ -38,9 +38,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import InputFileError, OutputError
-from cpc2urdf.fileio import read_text_file, write_atomic
+from cpc2urdf.files.jsonio import read_text_file, write_atomic
+from cpc2urdf.files.units import LENGTH_UNITS
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.units import LENGTH_UNITS
 
 Array = NDArray[np.float64]
 
@@ -300,7 +300,7 @@ def save_rig(
 
 def _write_filestorage(path: str | os.PathLike[str], entries: list[tuple[str, Any]]) -> Path:
     """Write ``entries`` (name, matrix or string) as OpenCV FileStorage YAML, atomically: the
-    text is made in memory and written by :func:`cpc2urdf.fileio.write_atomic`."""
+    text is made in memory and written by :func:`cpc2urdf.files.jsonio.write_atomic`."""
     try:
         fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
         for name, value in entries:

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cpc2urdf.fileio import float_list
+from cpc2urdf.files.jsonio import float_list
 from cpc2urdf.transforms import homogeneous, inverse
 
 Array = NDArray[np.float64]

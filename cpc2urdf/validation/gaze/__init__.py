@@ -51,7 +51,7 @@ problem with isolated solutions (or none), and the policy only chooses the start
 solver reports that honestly through ``reachable``/``status`` instead of clamping.
 
 Modules: :mod:`.head` (camera frames and joint classes on a
-:class:`~cpc2urdf.validation.pinocchio_robot.PinocchioRobot`), :mod:`.fixation`, :mod:`.guess`,
+:class:`~cpc2urdf.urdf.pinocchio.PinocchioRobot`), :mod:`.fixation`, :mod:`.guess`,
 :mod:`.policies`, :mod:`.gauss_newton`, :mod:`.result`, :mod:`.tracking`, :mod:`.solver`; the
 compiled solver for any head: :mod:`.chain`, :mod:`.kernels`, :mod:`.batch`; :mod:`.reach` (where a
 head can fixate) and :mod:`.head_report` (the head's kind and disparity, reported once).

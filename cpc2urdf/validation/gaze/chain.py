@@ -1,6 +1,6 @@
 """A head's kinematics flattened to arrays for the compiled gaze loop: :class:`HeadChain`.
 
-Built once, in Python, from a :class:`~cpc2urdf.validation.pinocchio_robot.PinocchioRobot` and
+Built once, in Python, from a :class:`~cpc2urdf.urdf.pinocchio.PinocchioRobot` and
 one or two camera (optical, REP-103: z forward) frame names. Only the joints on the root->camera
 paths matter. Per such joint: its parent (an index into the chain, -1 for the root), its type
 (revolute / prismatic), its axis in its own frame and its fixed placement in the parent joint's
@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 
 REVOLUTE, PRISMATIC = 0, 1  # joint type codes of the compiled chain
 KIND_ONE_CAMERA = "look-at"  # one camera: its optical axis through the target

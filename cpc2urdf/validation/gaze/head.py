@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 
 Index = NDArray[np.intp]  # joint indices into q
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")

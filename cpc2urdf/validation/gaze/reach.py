@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
-from cpc2urdf.fileio import check_output_path, write_atomic
+from cpc2urdf.files.jsonio import check_output_path, write_atomic
 from cpc2urdf.transforms import Array
 from cpc2urdf.validation.gaze.chain import mid_limits
 from cpc2urdf.validation.gaze.result import (

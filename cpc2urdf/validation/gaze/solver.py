@@ -29,6 +29,7 @@ from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
     KIND_BINOCULAR,
@@ -63,7 +64,6 @@ from cpc2urdf.validation.gaze.result import (
     solution_from_state,
 )
 from cpc2urdf.validation.gaze.tracking import SaccadeRule, Trajectory, track
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
 
 _FLOAT64 = np.dtype(np.float64)  # numpy's one float64 descriptor: an `is` test (not ==, ~2x slower)
 

@@ -16,7 +16,7 @@ meshcat's viewer JavaScript inline and every scene command inline (decoded synch
 (:mod:`.screenshot`) renders it in headless Chromium.
 
 Modules: :mod:`.meshes` (where a URDF's meshes are; its visual geometry), :mod:`.robot` (the
-robot: :class:`ViewRobot` on a :class:`~cpc2urdf.validation.pinocchio_robot.PinocchioRobot`),
+robot: :class:`ViewRobot` on a :class:`~cpc2urdf.urdf.pinocchio.PinocchioRobot`),
 :mod:`.geometry` (meshcat shapes, inline meshes, materials, bars, triads), :mod:`.change` (how far
 calibration moved each link; colour scale, legend), :mod:`.camera` (up direction, framing, camera
 placement), :mod:`.scene`, :mod:`.summary` (:class:`ViewSummary`), :mod:`.page`,
@@ -27,7 +27,7 @@ Frames as in docs/architecture.md: ``T_world_link`` is the pose of ``link`` in `
 
 from __future__ import annotations
 
-from cpc2urdf.urdf import HEAD_RGBA
+from cpc2urdf.urdf.document import HEAD_RGBA
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS
 from cpc2urdf.validation.view.change import (
     CHANGE_GHOST_RGBA,

@@ -38,8 +38,8 @@ import numpy as np
 import pinocchio as pin
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.native_output import captured_output
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.urdf.native_output import captured_output
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
 
 PACKAGE_PATH_VARIABLES = ("ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH")
 PACKAGE_SCHEME = "package://"

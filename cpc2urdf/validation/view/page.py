@@ -19,7 +19,7 @@ import meshcat
 import umsgpack
 from meshcat.servers.tree import SceneTree, find_node, walk
 
-from cpc2urdf.fileio import write_atomic
+from cpc2urdf.files.jsonio import write_atomic
 from cpc2urdf.validation.view.change import LEGEND_CSS, legend_html
 from cpc2urdf.validation.view.region import REGION_LEGEND_CSS, region_legend_html
 from cpc2urdf.validation.view.robot import RobotSource, ViewRobot

@@ -27,7 +27,7 @@ import meshcat.geometry as mg
 import numpy as np
 
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf_robot import urdf_source
+from cpc2urdf.urdf.robot import urdf_source
 from cpc2urdf.validation.gaze.reach import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,

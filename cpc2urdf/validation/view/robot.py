@@ -13,15 +13,15 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
+from cpc2urdf.files.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.model import CPCModel
 from cpc2urdf.model_metadata import ModelMetadata
-from cpc2urdf.robot_ref import is_urdf_ref, load_model
 from cpc2urdf.transforms import Array
-from cpc2urdf.urdf import camera_body_names
-from cpc2urdf.urdf_origins import writeback_plan
-from cpc2urdf.urdf_robot import urdf_source
-from cpc2urdf.urdf_writeback import calibrated_urdf_text
-from cpc2urdf.validation.pinocchio_robot import PinocchioRobot
+from cpc2urdf.urdf.document import camera_body_names
+from cpc2urdf.urdf.origins import writeback_plan
+from cpc2urdf.urdf.pinocchio import PinocchioRobot
+from cpc2urdf.urdf.robot import urdf_source
+from cpc2urdf.urdf.writeback import calibrated_urdf_text
 from cpc2urdf.validation.view.meshes import PackageDirs, VisualMeshes, visual_geometry
 
 RobotSource = str | os.PathLike[str] | CPCModel  # what load_view_robot accepts
@@ -240,14 +240,14 @@ def own_nominal(robot: ViewRobot) -> str:
 
 def written_back_robot(model: CPCModel, label: str | None = None) -> PinocchioRobot:
     """The robot of a model built from a user's URDF: that URDF with the model's calibrated
-    origins (:func:`~cpc2urdf.urdf_writeback.calibrated_urdf_text`, in memory), so every one of
+    origins (:func:`~cpc2urdf.urdf.writeback.calibrated_urdf_text`, in memory), so every one of
     its meshes sits on its calibrated link; meshes resolve from the source URDF's folder. Its
-    names are the URDF's (not the model's, which may differ: :class:`~cpc2urdf.urdf_robot.NameMap`),
+    names are the URDF's (not the model's, which may differ: :class:`~cpc2urdf.urdf.robot.NameMap`),
     so it carries no :attr:`~PinocchioRobot.cpc_model`; :func:`view_robot` takes the model.
 
     Raises:
         InputFileError: The source URDF cannot be read or changed where the model depends on it
-            (:func:`~cpc2urdf.urdf_origins.writeback_plan`), or Pinocchio refuses the text.
+            (:func:`~cpc2urdf.urdf.origins.writeback_plan`), or Pinocchio refuses the text.
     """
     plan = writeback_plan(model)
     name = label if label is not None else f"<model {model.structure.name}>"

@@ -38,10 +38,10 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import ConfigurationError, InputFileError
-from cpc2urdf.measurements import MeasurementSet
+from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.model import BASE
 from cpc2urdf.transforms import Array, inverse, rotation_error
-from cpc2urdf.urdf_robot import urdf_source
+from cpc2urdf.urdf.robot import urdf_source
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
 from cpc2urdf.validation.gaze.reach import Region
 from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
@@ -67,7 +67,7 @@ from cpc2urdf.validation.view.summary import ViewSummary
 TARGET_RGBA = (0.95, 0.1, 0.75, 1.0)  # magenta: no other part of the scene has this hue
 GHOST_RGBA = (0.2, 0.75, 0.35, 0.35)
 MEASURED_RGBA = (0.1, 0.1, 0.1, 1.0)
-RAY_RGBA = (0.3, 0.8, 0.9, 1.0)  # the lens colour of cpc2urdf.urdf
+RAY_RGBA = (0.3, 0.8, 0.9, 1.0)  # the lens colour of cpc2urdf.urdf.document
 BACKGROUND_TOP = (0.98, 0.98, 0.98)  # [0-1] light, so that every scene colour stands out
 BACKGROUND_BOTTOM = (0.8, 0.82, 0.86)
 TARGET_RADIUS = 0.015  # [m]
@@ -133,7 +133,7 @@ def build_view(
             solution (:func:`gaze_configuration`) with a ray along each camera's optical axis.
         ghost: Another model of the same robot (e.g. the nominal one) drawn translucent, in the
             same joint readings (joints matched by name).
-        measurements: A :class:`cpc2urdf.measurements.MeasurementSet` of this robot.
+        measurements: A :class:`cpc2urdf.files.measurements.MeasurementSet` of this robot.
         cameras: The camera optical frames used for the gaze: one (look-at), or two (left, right:
             two eyes, or a rigid pair whose cyclopean axis is pointed).
         policy: The gaze solver's redundancy policy (``"cyclopean"``, ``"min-motion"``, ...).
