@@ -10,7 +10,7 @@ them all. A typical session::
     model = cpc2urdf.calibrate_cameras(model, "handeye_camera_left_optical.json")
     cpc2urdf.save_model(model, "model.json")
     cpc2urdf.export_urdf(model, "head.urdf")
-    assert cpc2urdf.check_urdf("head.urdf", model).ok
+    assert cpc2urdf.check_urdf(model, "head.urdf").ok
 
 Conventions: SI units (m, rad); ``T_a_b`` is the pose of frame b in frame a; camera optical
 frames follow REP-103 (z forward, x right, y down). The layers, and where each concept lives, are
@@ -19,52 +19,36 @@ described in ``docs/architecture.md``.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
-from cpc2urdf.identification.handeye.axxb import HandEyeResult
-from cpc2urdf.identification.handeye.pose_file import HandEyePoses, load_handeye_poses
-from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD, calibrate_poses
-from cpc2urdf.identification.handeye.stage2 import with_camera_frame
-from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
-from cpc2urdf.identification.kinematics.methods import identify as _identify
-from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
-from cpc2urdf.identification.planning.outputs import DEFAULT_CANDIDATES, PlanOutputs, plan_robot
-from cpc2urdf.identification.planning.plan_file import LoadedPlan, load_plan
-from cpc2urdf.files.marker_csv import load_marker_csv as _load_marker_csv
 from cpc2urdf.files.measurements import MeasurementSet, load_measurements
-from cpc2urdf.model import CPCModel
 from cpc2urdf.files.model_file import save_model
 from cpc2urdf.files.robot_ref import RobotRef, load_model, load_robot
 from cpc2urdf.files.spec import RobotSpec
-from cpc2urdf.urdf.document import write_urdf
-from cpc2urdf.urdf.export import plan_export
-from cpc2urdf.urdf.origins import writeback_plan
-from cpc2urdf.urdf.report import CalibrationReport
-from cpc2urdf.urdf.report import calibration_report as _calibration_report
-from cpc2urdf.urdf.robot import UrdfRobot, attach_urdf_source, urdf_source
-from cpc2urdf.urdf.writeback import write_calibrated_urdf
-from cpc2urdf.validation.accuracy import BranchAccuracy, accuracy
-from cpc2urdf.validation.crosscheck import CrossCheckReport, cross_check
-from cpc2urdf.validation.gaze import (
-    DEFAULT_CAMERAS,
-    DEFAULT_VIEWING_DISTANCE,
-    GazeSolution,
-    GazeSolver,
-    solver_for,
-)
-from cpc2urdf.validation.gaze.chain import Coupling
-from cpc2urdf.validation.gaze.reach import Region, make_grid
-from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
-from cpc2urdf.urdf.pinocchio import gravity_loads
-from cpc2urdf.validation.view import ViewRobot, ViewSummary, load_view_robot, write_view_html
-from cpc2urdf.validation.view.region import view_cameras
+from cpc2urdf.model import CPCModel
+
+if TYPE_CHECKING:  # the stages are imported inside the functions that use them
+    from cpc2urdf.identification.handeye.axxb import HandEyeResult
+    from cpc2urdf.identification.handeye.pose_file import HandEyePoses
+    from cpc2urdf.identification.planning.outputs import PlanOutputs
+    from cpc2urdf.identification.planning.plan_file import LoadedPlan
+    from cpc2urdf.identification.simulation.simulate import Experiment
+    from cpc2urdf.model import RobotStructure
+    from cpc2urdf.urdf.report import CalibrationReport
+    from cpc2urdf.validation.accuracy import BranchAccuracy
+    from cpc2urdf.validation.crosscheck import CrossCheckReport
+    from cpc2urdf.validation.gaze import GazeSolver
+    from cpc2urdf.validation.gaze.chain import Coupling
+    from cpc2urdf.validation.gaze.reach import Region
+    from cpc2urdf.validation.view import ViewRobot, ViewSummary
 
 PathLike = str | os.PathLike[str]
 
@@ -94,6 +78,8 @@ def load_marker_csv(
         length, angle: The files' units when no ``# units:`` header states them (``mm``, ``deg``...).
         noise_sigma_p: The instrument's noise per coordinate [m], if known.
     """
+    from cpc2urdf.files.marker_csv import load_marker_csv as _load_marker_csv
+
     return _load_marker_csv(points_csv, load_robot(robot), markers,
                  robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
                  joints_csv=joints_csv, known_positions=known_positions,
@@ -129,9 +115,51 @@ def measurements_from_bag(
     return _from_bag(bag, load_robot(robot), topics, robot_ref=ref, joint_topic=joint_topic, rule=rule).measurements
 
 
+def simulate(
+    robot: RobotRef = "iis_head",
+    *,
+    measure: Sequence[str] | None = None,
+    seed: int = 0,
+    M: int = 9,
+    sigma_mm: float = 0.5,
+    sigma_deg: float = 0.5,
+    heldout: int = 50,
+) -> Experiment:
+    """A simulated stage-1 experiment in memory (``cpc2urdf simulate``): a true robot (the nominal
+    one with random geometric error), its plates measured with Fig. 10 pose noise while one joint
+    moves at a time, and held-out configurations with their true poses.
+
+    Args:
+        robot: Shipped name, spec, model file or URDF path (a URDF needs ``measure``).
+        measure: A URDF's measured links (plate, marker or camera links on fixed joints).
+        seed: Seed of everything random (the same seed gives the same experiment).
+        M: Values per joint over its calibration range.
+        sigma_mm, sigma_deg: The pose noise (translation per entry, rotation angle).
+        heldout: Held-out configurations.
+
+    Returns:
+        ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.simulate.Experiment`.
+    """
+    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.urdf.robot import UrdfRobot
+
+    spec = load_robot(robot)
+    if isinstance(spec, UrdfRobot):
+        if measure is None:
+            raise ConfigurationError(f"{robot}: name the links the rig measures (measure=[LINK, ...])")
+        spec = spec.restricted(list(measure))
+    elif measure is not None:
+        raise ConfigurationError(f"measure= names links of a URDF robot; {robot!r} is not a URDF")
+    exp = simulate_experiment(spec, seed=seed, M=M, sigma_t=sigma_mm / 1000, sigma_r=np.radians(sigma_deg),
+                              n_heldout=heldout, robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None)
+    # the sets keep their robot, as when read from the files `cpc2urdf simulate` writes
+    return exp._replace(measured=dataclasses.replace(exp.measured, spec=spec),
+                        heldout=dataclasses.replace(exp.heldout, spec=spec))
+
+
 def identify(
     measurements: MeasurementSet | PathLike,
-    method: str = DEFAULT_METHOD,
+    method: str = "refined",
     nominal: CPCModel | None = None,
     *,
     robot: RobotRef | None = None,
@@ -159,20 +187,32 @@ def identify(
         The identified model; ``model.metadata`` (typed sections) holds ``provenance``, ``residuals``,
         ``uncertainty`` (refined methods) and ``notes``.
     """
+    from cpc2urdf.identification.kinematics.methods import identify as _identify
+    from cpc2urdf.urdf.robot import attach_urdf_source
+
     if isinstance(measurements, MeasurementSet):
         if robot is not None:
             raise ConfigurationError("robot= applies to a measurement file path, not to a MeasurementSet")
         ms = measurements
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
-    loads = gravity_loads(ms) if method == "map" and level in (None, "compliance") else None
+    loads = _gravity_loads(ms) if method == "map" and level in (None, "compliance") else None
     model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads, level=level,
                       joints=None if joints is None else _cpc_joints(ms, joints))
     return attach_urdf_source(model, ms.spec)
 
 
+def _gravity_loads(ms: MeasurementSet) -> Any:
+    """The joints' gravity loads for the compliance level (Pinocchio, loaded only for it)."""
+    from cpc2urdf.urdf.pinocchio import gravity_loads
+
+    return gravity_loads(ms)
+
+
 def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
     """The model's names of ``joints`` (a URDF robot's URDF names, or the model's own)."""
+    from cpc2urdf.urdf.robot import UrdfRobot
+
     s = ms.structure
     robot = ms.spec
     urdf_names = robot.names.joints if isinstance(robot, UrdfRobot) and robot.names is not None else {}
@@ -186,8 +226,23 @@ def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
     return out
 
 
+def load_handeye_poses(path: PathLike) -> HandEyePoses:
+    """Read a ``cpc2urdf/handeye-poses@1`` file (``docs/handeye.md``)."""
+    from cpc2urdf.identification.handeye.pose_file import load_handeye_poses as _load
+
+    return _load(path)
+
+
+def load_plan(path: PathLike, structure: RobotStructure | None = None) -> LoadedPlan:
+    """Read a ``cpc2urdf/plan@1`` file (``docs/planning.md``); with ``structure``, the plan's joints
+    must be exactly that robot's and ``q`` comes in its joint order."""
+    from cpc2urdf.identification.planning.plan_file import load_plan as _load
+
+    return _load(path, structure)
+
+
 def solve_handeye(
-    poses: HandEyePoses | PathLike, method: str = DEFAULT_HANDEYE_METHOD, *, accept_inconsistent: bool = False
+    poses: HandEyePoses | PathLike, method: str = "kronecker", *, accept_inconsistent: bool = False
 ) -> HandEyeResult:
     """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``),
     through the consistency gate (the poses' stated noise against the residuals; docs/handeye.md).
@@ -201,6 +256,9 @@ def solve_handeye(
     Returns:
         ``X = T_hand_camera``, ``Z = T_base_target`` and the residual of every pose.
     """
+    from cpc2urdf.identification.handeye.pose_file import HandEyePoses
+    from cpc2urdf.identification.handeye.solvers import calibrate_poses
+
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
     return calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
 
@@ -237,7 +295,7 @@ def camera_mount(
 def calibrate_cameras(
     model: CPCModel | RobotRef,
     poses: HandEyePoses | PathLike,
-    method: str = DEFAULT_HANDEYE_METHOD,
+    method: str = "kronecker",
     *,
     camera: str | None = None,
     hand: str | None = None,
@@ -262,6 +320,10 @@ def calibrate_cameras(
         ConfigurationError: See :func:`camera_mount`.
         DegenerateDataError: The poses cannot determine ``X`` (the solver says why).
     """
+    from cpc2urdf.identification.handeye.pose_file import HandEyePoses
+    from cpc2urdf.identification.handeye.solvers import calibrate_poses
+    from cpc2urdf.identification.handeye.stage2 import with_camera_frame
+
     m = model if isinstance(model, CPCModel) else load_model(model)
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
     camera, hand = camera_mount(m, data, camera=camera, hand=hand)
@@ -288,6 +350,12 @@ def export_urdf(
     ``up`` or ``up`` given here, in base coordinates) or the measuring rig (``mount="rig"``);
     ``source`` (default: the reference, when ``model`` is one) is named in the header.
     """
+    from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
+    from cpc2urdf.urdf.document import write_urdf
+    from cpc2urdf.urdf.export import plan_export
+    from cpc2urdf.urdf.robot import urdf_source
+    from cpc2urdf.urdf.writeback import write_calibrated_urdf
+
     plan = plan_export(model if not isinstance(model, RobotSpec) else model.nominal_model(), up=up)
     m = plan.model
     if urdf_source(m) is not None:
@@ -302,13 +370,17 @@ def export_urdf(
 def calibration_report(model: CPCModel | RobotRef, *, urdf: PathLike | None = None) -> CalibrationReport:
     """What calibration changed in the URDF the model came from, per joint in mm and degrees,
     with 1-sigma from the model's covariance (``docs/urdf.md``)."""
+    from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
+    from cpc2urdf.urdf.origins import writeback_plan
+    from cpc2urdf.urdf.report import calibration_report as _calibration_report
+
     m = model if isinstance(model, CPCModel) else load_model(model)
     plan = writeback_plan(m, None if urdf is None else Path(urdf))
     return _calibration_report(m, plan=plan, uncertainty=origin_uncertainty(m, plan))
 
 
 def check_urdf(
-    urdf: PathLike, model: CPCModel | RobotRef, configurations: int = 100, seed: int = 0
+    model: CPCModel | RobotRef, urdf: PathLike, configurations: int = 100, seed: int = 0
 ) -> CrossCheckReport:
     """FK of every frame of ``urdf`` by Pinocchio and yourdfpy against the CPC model, and urdfdom's
     parse of the tree, at ``configurations`` seeded random readings (``cpc2urdf check``).
@@ -319,8 +391,29 @@ def check_urdf(
     """
     if configurations < 1:
         raise ConfigurationError(f"configurations must be at least 1, got {configurations}")
+    from cpc2urdf.validation.crosscheck import cross_check
+
     m = model if isinstance(model, CPCModel) else load_model(model)
     return cross_check(m, urdf, configurations, seed)
+
+
+def accuracy(
+    model: CPCModel | RobotRef, measurements: MeasurementSet | PathLike, *, accept_inconsistent: bool = False
+) -> dict[str, BranchAccuracy]:
+    """Held-out accuracy (Table 4 of Shih et al.; ``cpc2urdf accuracy``) of every frame the model has
+    and the measurements hold, and of every marker the model identified, with the error the model's
+    covariance predicts when it has one.
+
+    Raises:
+        DegenerateDataError: The joints differ, or no measured frame or marker is in the model.
+        InconsistentDataError: The observed errors are far from the model's own prediction (unless
+            ``accept_inconsistent``), naming the likely cause.
+    """
+    from cpc2urdf.validation.accuracy import accuracy as _accuracy
+
+    m = model if isinstance(model, CPCModel) else load_model(model)
+    ms = measurements if isinstance(measurements, MeasurementSet) else load_measurements(measurements)
+    return _accuracy(m, ms, accept_inconsistent=accept_inconsistent)
 
 
 def plan_experiment(
@@ -333,7 +426,7 @@ def plan_experiment(
     sigma_deg: float = 0.5,
     one_joint: bool = False,
     task_region: str | ArrayLike = "calibration",
-    candidates: int = DEFAULT_CANDIDATES,
+    candidates: int = 500,
     seed: int = 0,
 ) -> PlanOutputs:
     """The I-optimal measurement plan for ``robot`` and its predicted accuracy (``cpc2urdf plan``).
@@ -351,6 +444,8 @@ def plan_experiment(
         task_region: ``"calibration"`` (the calibration ranges), ``"limits"`` or task configurations (N, n) [SI].
         candidates: Size of the seeded candidate set.
     """
+    from cpc2urdf.identification.planning.outputs import plan_robot
+
     return plan_robot(load_robot(robot), robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
                       measured=measure, sigma_t=sigma_mm / 1000, sigma_r=np.radians(sigma_deg), n=n,
                       target_error=None if target_error_mm is None else target_error_mm / 1000,
@@ -359,9 +454,9 @@ def plan_experiment(
 
 def gaze_solver(
     robot: CPCModel | RobotRef,
-    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    cameras: Sequence[str] = ("camera_left_optical", "camera_right_optical"),
     *,
-    viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
+    viewing_distance: float = 1.0,
     joints: Sequence[str] | None = None,
     coupling: Coupling | None = None,
     rigid: str = "cyclopean",
@@ -393,6 +488,8 @@ def gaze_solver(
             default 0.1 m, 0 for no limit. A target that only a nearer camera can fixate is
             still fixated.
     """
+    from cpc2urdf.validation.gaze import solver_for
+
     ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
     return solver_for(ref, cameras, viewing_distance=viewing_distance, joints=joints,
                       coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
@@ -401,7 +498,7 @@ def gaze_solver(
 
 def reachable_region(
     robot: CPCModel | RobotRef,
-    cameras: Sequence[str] = DEFAULT_CAMERAS,
+    cameras: Sequence[str] = ("camera_left_optical", "camera_right_optical"),
     *,
     grid: str = "shell",
     near: float = 0.2,
@@ -411,22 +508,16 @@ def reachable_region(
     """Where a head's cameras can fixate (``cpc2urdf reach``): a grid of targets in front of it
     (``grid`` ``"shell"`` or ``"box"``, ``near``-``far`` [m] from the cameras), each solved by the
     batch solver and sorted into fixated, disparity-limited, joint limits, behind or too close."""
+    from cpc2urdf.validation.gaze.reach import make_grid
+    from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
+
     solver = gaze_solver(robot, cameras)
     return _reachable_region(solver, make_grid(solver, grid, near, far, samples))
 
 
-def fixate(
-    robot: CPCModel | RobotRef, target: ArrayLike, q_current: Sequence[float] | None = None
-) -> GazeSolution:
-    """Joint readings that point both cameras at ``target`` [m] (world), as ``cpc2urdf gaze``."""
-    solver = gaze_solver(robot)
-    q = None if q_current is None else np.asarray(q_current, dtype=float)
-    return solver.solve(np.asarray(target, dtype=float), q_current=q)
-
-
 def write_view(
-    path: PathLike,
     robot: CPCModel | RobotRef,
+    path: PathLike,
     *,
     target: ArrayLike | None = None,
     q: ArrayLike | None = None,
@@ -440,8 +531,8 @@ def write_view(
     ``cpc2urdf reach --html``).
 
     Args:
-        path: The HTML file to write (atomically).
         robot: A model, model file, spec, shipped robot or URDF (drawn with its own meshes).
+        path: The HTML file to write (atomically).
         target: A 3D point [m] (world) to fixate and draw, with the gaze solution.
         q: The configuration to show (default: the gaze solution or the middle of the limits).
         ghost: The nominal model drawn translucent; with ``change_colours`` every link is
@@ -455,6 +546,8 @@ def write_view(
         region: A reachable region of this robot (:func:`reachable_region`), drawn as one point
             cloud per category (:mod:`cpc2urdf.validation.view.region`), with its legend.
     """
+    from cpc2urdf.validation.view import load_view_robot, write_view_html
+    from cpc2urdf.validation.view.region import view_cameras
 
     def view_robot(ref: CPCModel | RobotRef) -> ViewRobot:
         src = ref.nominal_model() if isinstance(ref, RobotSpec) else ref
@@ -471,43 +564,25 @@ def write_view(
 
 
 __all__ = [
-    "DEFAULT_HANDEYE_METHOD",
-    "DEFAULT_METHOD",
-    "METHODS",
-    "BranchAccuracy",
-    "CalibrationReport",
-    "CPCModel",
-    "CrossCheckReport",
-    "GazeSolution",
-    "GazeSolver",
-    "HandEyePoses",
-    "HandEyeResult",
-    "LoadedPlan",
-    "MeasurementSet",
-    "PlanOutputs",
-    "Region",
-    "Coupling",
-    "RobotSpec",
-    "ViewSummary",
     "accuracy",
-    "calibration_report",
     "calibrate_cameras",
+    "calibration_report",
     "camera_mount",
     "check_urdf",
     "export_urdf",
-    "fixate",
     "gaze_solver",
-    "plan_experiment",
-    "reachable_region",
     "identify",
     "load_handeye_poses",
     "load_marker_csv",
     "load_measurements",
-    "load_plan",
     "load_model",
+    "load_plan",
     "load_robot",
     "measurements_from_bag",
+    "plan_experiment",
+    "reachable_region",
     "save_model",
+    "simulate",
     "solve_handeye",
     "write_view",
 ]

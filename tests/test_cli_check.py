@@ -248,7 +248,7 @@ def test_written_back_urdf_agrees_with_its_model(tiago_written_back: tuple[Path,
     cap = capfd.readouterr()
     assert "7 links of the written-back URDF at 20 configurations" in cap.out
     assert "result: all parsers agree" in cap.out and cap.err == "" and not NATIVE.search(cap.out)
-    report = check_urdf(calibrated, model_file, 20, seed=3)
+    report = check_urdf(model_file, calibrated, 20, seed=3)
     assert report.ok and report.frames == ["base_footprint", "base_link", "torso_fixed_link", "torso_lift_link",
                                            "head_1_link", "head_2_link", "calib_plate"]
     fk = {p.parser: p for p in report.parsers if p.max_position_error is not None}
@@ -299,8 +299,8 @@ def test_written_back_small_robot_with_every_awkward_joint(tmp_path: Path, capfd
     import numpy as np
     from urdf_cases import SMALL, write
 
-    from cpc2urdf.identification.simulation.truth import perturbed_model
     from cpc2urdf.files.model_file import save_model
+    from cpc2urdf.identification.simulation.truth import perturbed_model
     from cpc2urdf.urdf.robot import load_urdf_robot, urdf_source, with_urdf_source
     from cpc2urdf.urdf.writeback import write_calibrated_urdf
 

@@ -168,7 +168,7 @@ def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys
     # the same page through the API, for where each target lands on screen
     solver = GazeSolver.from_model(load_model("iis_head"))
     r = reachable_region(solver, make_grid(solver, "shell", 0.3, 2.5, (4, 9, 7)))
-    summary = write_view(tmp_path / "api.html", "iis_head", region=r)
+    summary = write_view("iis_head", tmp_path / "api.html", region=r)
     assert summary.region is not None and summary.region.counts == r.counts()
     img = matplotlib.image.imread(str(screenshot_html(tmp_path / "api.html", tmp_path / "api.png", size=SIZE)))[..., :3]
     # green, also seen through the translucent blue points in front ((0.15, 0.58, 0.33))

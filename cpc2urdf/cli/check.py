@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         from cpc2urdf.errors import ConfigurationError
 
         raise ConfigurationError(f"--configurations must be at least 1, got {args.configurations}")
-    report = check_urdf(args.urdf, args.model, args.configurations, args.seed)
+    report = check_urdf(args.model, args.urdf, args.configurations, args.seed)
     head = _gaze_head(args.model)
     if args.json:
         out = report.to_json()
