@@ -1,4 +1,4 @@
-"""The bad-input corpus of issue 14 (item 7): what a hostile or careless user gives each command.
+"""The bad-input corpus: what a hostile or careless user gives each command.
 
 :class:`Corpus` holds the clean inputs every case starts from (a simulated IIS-head measurement, its
 held-out file, the model identified from it, the IIS-head URDF and spec, a clean hand-eye pose file,

@@ -1,4 +1,4 @@
-"""The hand-eye input mistakes of issue 14, applied to a clean pose file (``cpc2urdf/handeye-poses@1``).
+"""The hand-eye input mistakes a user makes, applied to a clean pose file (``cpc2urdf/handeye-poses@1``).
 
 :func:`clean_document` is a seeded, noisy, consistent set of poses in mm and deg with matrix poses
 (the camera 0.14 m from the hand, the target about 1 m from the base and the camera). Each function

@@ -1,4 +1,4 @@
-"""The stage-1 mistakes of issue 14 as functions of a measurement document (they live with the
+"""The stage-1 mistakes a user makes, as functions of a measurement document (they live with the
 study that measures the gate, :mod:`cpc2urdf.studies.gate`)."""
 
 from cpc2urdf.studies.gate import (

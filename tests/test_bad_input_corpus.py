@@ -1,4 +1,4 @@
-"""The bad-input corpus (issue 14, item 7): every command, refused the way the README promises.
+"""The bad-input corpus: every command, refused the way the README promises.
 
 Each case of :data:`bad_inputs.CASES` runs ``cpc2urdf.cli.main(argv)`` in-process in its own folder
 and must give exit code 2, exactly one line on stderr starting ``cpc2urdf <command>: error:`` that

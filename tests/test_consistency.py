@@ -1,4 +1,4 @@
-"""The stage-1 consistency gate: every mistake of issue 14 refused through ``cpc2urdf identify`` with
+"""The stage-1 consistency gate: every mistake a user makes refused through ``cpc2urdf identify`` with
 exit code 2, one stderr line naming the cause, and no output file; ``--accept-inconsistent`` keeps
 the model with the diagnosis in it; clean data pass.
 

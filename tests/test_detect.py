@@ -1,7 +1,7 @@
 """The plate detector on rendered images at the paper's geometry (600 mm baseline, ~1.5 m).
 
 Checks: circle centres within 0.1 px of the truth; plate poses within what the measured pixel
-error predicts (propagated by the stereo noise model of issue 3); identification of circles and
+error predicts (propagated by the stereo noise model); identification of circles and
 plates under any in-plane rotation; the ellipse-centre bias correction; and clear, typed failures
 for a missing plate, a plate half outside the frame, a blank image, a symmetric plate and a wrong
 rig -- never a silently wrong pose.

@@ -1,4 +1,4 @@
-"""Experiment planning (issue 17): prediction, optimal selection, plan files and the command."""
+"""Experiment planning: prediction, optimal selection, plan files and the command."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Real robots end to end (issue 13, "Must show"): URDFs no one here wrote, from pip packages.
+"""Real robots end to end: URDFs no one here wrote, from pip packages.
 
 For TIAGo's head (``torso_lift_joint`` prismatic, ``head_1_joint``, ``head_2_joint``; a
 ``calib_plate`` link added on ``head_2_link``), TALOS's head (``torso_1/2``, ``head_1/2``;
@@ -82,7 +82,7 @@ PACKAGES = {"example-robot-data": SHARE / "example-robot-data", "iCub": ICUB_SHA
 # At 1e-3 iCub's seed 10 (1.65) would leave its 1.61. Numbers: docs/urdf.md.
 HELDOUT_ALPHA = 1e-4
 CHUNK = 100_000  # draws of the ratio's distribution at a time
-LINK_FACTOR = 3.0  # [-]: every link within this x its true geometric error (issue 13; see link_errors)
+LINK_FACTOR = 3.0  # [-]: every link within this x its true geometric error (see link_errors)
 EXACT = 1e-9  # [m]: noise-free data, measured links of the written file vs the truth
 SIGMA_T = 0.5e-3  # [m]: Fig. 10 noise per translation entry (the paper's rig)
 SIGMA_R = np.radians(0.5)  # [rad]

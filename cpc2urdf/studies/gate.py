@@ -1,7 +1,7 @@
 """Study: the stage-1 consistency gate over seeded trials — clean data passed, mistakes named.
 
-Issue 14 asks that clean data pass the gate in every seeded trial and that each mistake a user can
-make in a stage-1 file be refused with its cause named. This study measures both:
+A gate must pass clean data in every seeded trial and refuse each mistake a user can
+make in a stage-1 file, naming its cause. This study measures both:
 
 - **clean data**: seeded IIS-head experiments (:func:`~cpc2urdf.identification.simulation.simulate.
   simulate_experiment`, Fig. 10 noise, 0.5 mm / 0.5 deg, M = 9) with the noise stated in the file,

@@ -1,4 +1,4 @@
-"""placo's axis-align task as a second reference for ``cpc2urdf bench gaze`` (issue 15).
+"""placo's axis-align task as a second reference for ``cpc2urdf bench gaze``.
 
 placo (Rhoban, ``pip install placo``) is a task-space inverse kinematics on Pinocchio: each
 ``KinematicsSolver.solve`` is one quadratic program over a joint step, with the joint limits as
@@ -12,7 +12,7 @@ fallen for :data:`STALL_STEPS` steps, or after :data:`MAX_STEPS`; the answer is 
 seen. The time spent in placo's own calls (the QP step and the kinematics) is kept apart from the
 Python around them (:attr:`PlacoGaze.core_seconds`).
 
-Two things limit it, both measured (docs/gaze.md, twentieth pass):
+Two things limit it, both measured (docs/gaze.md):
 
 - **Its error floor.** The task's error is ``acos(a . t)`` (placo's
   ``src/placo/kinematics/axis_align_task.cpp``). Near zero that resolves only ``sqrt(2 eps)``, about

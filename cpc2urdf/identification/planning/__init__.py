@@ -1,4 +1,4 @@
-"""Planning a stage-1 experiment before measuring it (issue 17).
+"""Planning a stage-1 experiment before measuring it.
 
 Which configurations should be measured, how many, and how good will the result be? Given a
 robot, a measuring setup (stereo rig, the robot's place in front of it, the noise: Fig. 10 pose
