@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -224,6 +224,45 @@ def _solve(problem: LeastSquaresProblem, x0: Array, max_nfev: int | None) -> Opt
 # The solver, for the other problems of the package (position-only data, :mod:`point_refine`).
 solve_least_squares = _solve
 
+def _drop_outliers(
+    problem_for: Callable[[dict[str, NDArray[np.bool_]]], IdentificationProblem],
+    seen: dict[str, NDArray[np.bool_]],
+    x: Array,
+    max_nfev: int | None,
+    outlier_alpha: float,
+    labels: Sequence[str],
+) -> tuple[Array, OptimizeResult, dict[str, NDArray[np.bool_]], list[Outlier], int]:
+    """Robust mode: reject the poses whose test fails at ``outlier_alpha``, refit plainly, re-test
+    every pose, until the rejected set is stable. Returns the estimate, the last solve, the poses
+    used, the outliers and the solver evaluations spent."""
+    all_poses = problem_for(seen)
+    rejected: set[tuple[str, int]] = set()
+    use, sol, nfev = dict(seen), OptimizeResult(success=True, message=""), 0
+    for it in range(5):
+        pv = all_poses.pose_p_values(x)
+        now = {(f, int(all_poses.rows[f][i])) for f in pv for i in np.flatnonzero(pv[f] < outlier_alpha)}
+        if now == rejected and it > 0:
+            break
+        rejected = now
+        use = {f: m.copy() for f, m in seen.items()}
+        for f, k in rejected:
+            use[f][k] = False
+        if not any(u.any() for u in use.values()):
+            raise DegenerateDataError("robust mode rejected every pose: are sigma_t/sigma_r far too small?")
+        sol = _solve(problem_for(use), x, max_nfev)
+        x, nfev = sol.x, nfev + sol.nfev
+    blocks = all_poses.residual_blocks(x)
+    pv = all_poses.pose_p_values(x)
+    outliers = []
+    for f, k in sorted(rejected, key=lambda t: (t[1], t[0])):
+        i = int(np.searchsorted(all_poses.rows[f], k))
+        dp, dr = blocks[f]
+        outliers.append(
+            Outlier(k, str(labels[k]), f, float(np.linalg.norm(dp[i])), float(np.linalg.norm(dr[i])), float(pv[f][i]))
+        )
+    return x, sol, use, outliers, nfev
+
+
 # ---- public API ----------------------------------------------------------------------------------
 
 
@@ -297,30 +336,9 @@ def refine(
         chart = Parametrization(chart.model_from_vector(x), frames)
         x = np.zeros(chart.n_params)
     if robust:
-        all_poses = problem_for(seen)
-        rejected: set[tuple[str, int]] = set()
-        for it in range(5):  # reject, refit plainly, re-test everything; stop when stable
-            pv = all_poses.pose_p_values(x)
-            now = {(f, int(all_poses.rows[f][i])) for f in pv for i in np.flatnonzero(pv[f] < outlier_alpha)}
-            if now == rejected and it > 0:
-                break
-            rejected = now
-            use = {f: seen[f].copy() for f in frames}
-            for f, k in rejected:
-                use[f][k] = False
-            if not any(u.any() for u in use.values()):
-                raise DegenerateDataError("robust mode rejected every pose: are sigma_t/sigma_r far too small?")
-            sol = _solve(problem_for(use), x, max_nfev)
-            x, nfev = sol.x, nfev + sol.nfev
-        blocks = all_poses.residual_blocks(x)
-        pv = all_poses.pose_p_values(x)
         labels = measurements.labels or [f"record {i}" for i in range(len(q))]
-        for f, k in sorted(rejected, key=lambda t: (t[1], t[0])):
-            i = int(np.searchsorted(all_poses.rows[f], k))
-            dp, dr = blocks[f]
-            outliers.append(
-                Outlier(k, str(labels[k]), f, float(np.linalg.norm(dp[i])), float(np.linalg.norm(dr[i])), float(pv[f][i]))
-            )
+        x, sol, use, outliers, more = _drop_outliers(problem_for, seen, x, max_nfev, outlier_alpha, labels)
+        nfev += more
 
     refined = chart.model_from_vector(x)
     # Everything below is about the refined model in its own chart (x = 0 there).
