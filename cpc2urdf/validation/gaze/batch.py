@@ -144,6 +144,10 @@ class CompiledGaze:
         policy_table: True: the table of starts holds the policy's own answers (see
             :meth:`_policy_table`; ``table_targets`` their targets); False: the seeded samples
             alone (for comparison).
+        exact: On two eyes that cannot fixate exactly (:attr:`disparity_head`): True solves
+            pointing alone along every direction, the weak one too (exact fixation where the
+            eyes' axes can meet, however far the neck turns); False leaves the weak direction
+            to the policy (the posture facing the target, status ``disparity``).
 
     Raises:
         ConfigurationError: ``min_distance`` negative or not finite.
@@ -156,8 +160,10 @@ class CompiledGaze:
         version_row: Array | None = None,
         min_distance: float | None = None,
         policy_table: bool = True,
+        exact: bool = False,
     ) -> None:
         self.chain = chain
+        self.exact = exact
         self.min_distance = MIN_VIEWING_DISTANCE if min_distance is None else float(min_distance)
         if not (math.isfinite(self.min_distance) and self.min_distance >= 0.0):
             raise ConfigurationError(f"min_distance must be a finite distance >= 0 [m], got {min_distance!r}")
@@ -182,7 +188,7 @@ class CompiledGaze:
         self.null_rel = EXACT_NULL
         if chain.kind == KIND_BINOCULAR:
             self.disparity_head = self._weak_direction() > 0.0
-            if self.disparity_head:
+            if self.disparity_head and not exact:
                 self.null_rel = NEAR_NULL
         self.n = len(robot.joint_names)
         self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
@@ -208,7 +214,7 @@ class CompiledGaze:
             self.ch, chain.lower, chain.upper, self.sw, self._table_T,
             (chain.robot_A, chain.robot_b, robot.lower, robot.upper, chain.robot_pinv),
             chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
-            self.tolerance, self.baseline, self.disparity_head, self._home_centre,
+            self.tolerance, self.baseline, self.disparity_head and not self.exact, self._home_centre,
         )
         # per thread, its solve_flat workspace (see _scratch), made again with the head: the
         # reference posture's cached scores are of the table packed here

@@ -33,6 +33,7 @@ from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
     KIND_BINOCULAR,
+    PRISMATIC,
     Coupling,
     HeadChain,
     build_chain,
@@ -167,6 +168,8 @@ class GazeSolver:
         self.n = robot.n_joints
         # The compiled solver: every head shape (one camera, two eyes, a rigid pair, couplings).
         self.chain: HeadChain = build_chain(robot, self.cameras, joints, coupling, rigid)
+        self._coupling, self._rigid = coupling, rigid
+        self._engines: dict[str, CompiledGaze] = {}
         self.compiled = CompiledGaze(self.chain, tolerance, min_distance=min_distance)
         self.min_distance = self.compiled.min_distance
         # The Python solver with its four policies: two independent eyes, every joint free.
@@ -439,13 +442,7 @@ class GazeSolver:
         self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None = None,
         comp: CompiledGaze | None = None,
     ) -> GazeSolution:
-        if policy not in ("cyclopean", "min-motion"):
-            raise ConfigurationError(
-                f"policy {policy!r} needs two independent eyes, every joint free with finite limits, and "
-                f"at most {PYTHON_SOLVER_MAX_NECK} revolute joints shared by the eyes; this head "
-                f"({self.chain.kind}) takes cyclopean or min-motion"
-            )
-        comp = comp or self._posture or self.compiled
+        comp = comp or self._policy_engine(policy)
         qs = None
         if q_start is not None:
             qs = np.asarray(q_start, dtype=float)
@@ -455,6 +452,34 @@ class GazeSolver:
         if out[0] == S_NOT_FINITE:  # a caller that skipped the check (solve_checked's contract)
             target_point(p)  # raises, naming the coordinates
         return solution_from_flat(self.joint_names, out, comp.S, policy)
+
+    def _policy_engine(self, policy: str) -> CompiledGaze:
+        """The compiled solver of ``policy`` (made on first use)."""
+        engine = self._engines.get(policy)
+        if engine is None:
+            engine = self._engines[policy] = self._make_engine(policy)
+        return engine
+
+    def _make_engine(self, policy: str) -> CompiledGaze:
+        chain = self.chain
+        if policy == "cyclopean":
+            return self._fast
+        if policy == "min-motion":
+            if self._head is None:
+                return self._posture or self.compiled
+            # the table stays; Euclidean in the readings; exact fixation wherever it exists
+            K = range(len(chain.joint_index))
+            moved = [k for k in K if not (chain.anc[0, k] and chain.anc[1, k] and chain.jtype[k] == PRISMATIC)]
+        else:  # eyes-only
+            if chain.kind != KIND_BINOCULAR:
+                raise ConfigurationError(f"policy 'eyes-only' needs two eyes; this head is {chain.kind}")
+            moved = [k for k in range(len(chain.joint_index)) if chain.anc[0, k] != chain.anc[1, k]]
+        names = [self.joint_names[chain.joint_index[k]] for k in moved]
+        if chain.moving:
+            names = [nm for nm in names if nm in chain.moving]
+        sub = build_chain(self.robot, self.cameras, names, self._coupling, self._rigid)
+        sub.weight = np.ones(sub.m)
+        return CompiledGaze(sub, self.tolerance, min_distance=self.min_distance, exact=True)
 
     def _solve_python(
         self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
