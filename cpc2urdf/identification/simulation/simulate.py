@@ -141,14 +141,8 @@ def simulate_experiment(
             configuration (the message names the plate and configuration), or bad arguments.
         SpecError: The robot has no nominal geometry.
     """
-    if noise not in NOISE_MODELS:
-        raise ConfigurationError(f"noise model must be one of {NOISE_MODELS}, got {noise!r}")
-    for name, v in (("sigma_t", sigma_t), ("sigma_r", sigma_r), ("pixel_sigma", pixel_sigma),
-                    ("geometry_error_t", geometry_error_t), ("geometry_error_r", geometry_error_r)):
-        if not (math.isfinite(v) and v >= 0):
-            raise ConfigurationError(f"{name} must be a finite number >= 0, got {v}")
-    if n_heldout < 0:
-        raise ConfigurationError(f"n_heldout must be >= 0, got {n_heldout}")
+    _check_arguments(noise, n_heldout, sigma_t=sigma_t, sigma_r=sigma_r, pixel_sigma=pixel_sigma,
+                     geometry_error_t=geometry_error_t, geometry_error_r=geometry_error_r)
     spec, ref = _as_spec(robot)
     ref = robot_ref or ref
     nominal = spec.nominal_model()
@@ -191,12 +185,7 @@ def simulate_experiment(
     poses = {f: np.concatenate([p[0][f] for p in parts]) for f in frames}
     points = {f: np.concatenate([p[1][f] for p in parts]) for f in parts[0][1]}
 
-    # A file states a noise as a positive number (a zero one is no noise in that part: not stated).
-    noise_doc: dict[str, Any] = {"model": noise if noise != "fig10" or sigma_t > 0 or sigma_r > 0 else "none"}
-    if noise == "fig10":
-        noise_doc.update({k: v for k, v in (("sigma_t_m", sigma_t), ("sigma_r_rad", sigma_r)) if v > 0})
-    elif noise == "stereo":
-        noise_doc.update(pixel_sigma_px=pixel_sigma)
+    noise_doc = _noise_doc(noise, sigma_t, sigma_r, pixel_sigma)
     provenance = {
         "simulator": "cpc2urdf.identification.simulation.simulate",
         "seed": seed,
@@ -238,6 +227,27 @@ def simulate_experiment(
                  "nominal_world_to_base": {"b": list(w2b.b), "beta": w2b.beta, "l": list(w2b.l)}},
     )))
     return Experiment(truth, measured, heldout)
+
+
+def _check_arguments(noise: str, n_heldout: int, **sigmas: float) -> None:
+    if noise not in NOISE_MODELS:
+        raise ConfigurationError(f"noise model must be one of {NOISE_MODELS}, got {noise!r}")
+    for name, v in sigmas.items():
+        if not (math.isfinite(v) and v >= 0):
+            raise ConfigurationError(f"{name} must be a finite number >= 0, got {v}")
+    if n_heldout < 0:
+        raise ConfigurationError(f"n_heldout must be >= 0, got {n_heldout}")
+
+
+def _noise_doc(noise: str, sigma_t: float, sigma_r: float, pixel_sigma: float) -> dict[str, Any]:
+    """The measurement file's ``noise`` section. A file states a noise as a positive number (a
+    zero one is no noise in that part: not stated)."""
+    doc: dict[str, Any] = {"model": noise if noise != "fig10" or sigma_t > 0 or sigma_r > 0 else "none"}
+    if noise == "fig10":
+        doc.update({k: v for k, v in (("sigma_t_m", sigma_t), ("sigma_r_rad", sigma_r)) if v > 0})
+    elif noise == "stereo":
+        doc.update(pixel_sigma_px=pixel_sigma)
+    return doc
 
 
 def _unmeasurable(view: ViewReport, n_configurations: int, n_frames: int) -> list[str]:
