@@ -45,43 +45,17 @@ def _pct(x: np.ndarray) -> str:
     return f"{np.mean(x):.4f} | {np.median(x):.4f} | {np.percentile(x, 95):.4f} | {np.max(x):.4f}"
 
 
-def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
-    """Run the study; returns the numbers (px, mm, deg) and a markdown report under ``"md"``."""
-    from cpc2urdf.files.measurements import MeasurementSet
-    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-    from cpc2urdf.identification.simulation.images import render_experiment
+def _noise_rows(q: np.ndarray, designs: list[Any], T_true: dict[str, np.ndarray], views: list[Any], rig: Any,
+                rng: np.random.Generator) -> tuple[list[dict[str, Any]], float | None]:
+    """Per grey-noise level: circle centres and plate poses from rendered stereo pairs against the
+    truth and against the stereo noise model at the measured pixel noise; and the detector's pixel
+    noise at grey level 2."""
     from cpc2urdf.identification.simulation.noise import stereo_noise
-    from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset, stereo_plate_poses
-    from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
-    from cpc2urdf.identification.vision.targets import robot_plate_designs
-    from cpc2urdf.transforms import inverse, rotation_error
-    from cpc2urdf.validation.accuracy import accuracy
+    from cpc2urdf.identification.vision.render import circle_centres_px, render_view
+    from cpc2urdf.transforms import rotation_error
 
-    rng = np.random.default_rng(seed)
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        exp = render_experiment(Path(tmp) / "images", M=M, n_heldout=max(poses, 30), seed=seed, show_progress=True)
-        t_render = time.perf_counter() - t0
-        rig = exp.rig
-        s = exp.truth.structure
-        designs = robot_plate_designs(s.frames)
-        t0 = time.perf_counter()
-        meas = measure_stereo_images(exp.folder, rig, s, robot_ref="iis_head", show_progress=True)
-        t_measure = time.perf_counter() - t0
-    n_images = 2 * exp.measured.n_records
-    views = [PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w))) for w in ("left", "right")]
     Ks = (rig.K1, rig.K2)
-    held = exp.heldout
-    q = held.q[:poses]
-    T_true = {d.name: held.poses[d.name][:poses] for d in designs}
-
-    # Ellipse-centre offsets at these configurations (exact conic geometry).
-    offsets = np.array([
-        np.linalg.norm(ellipse_centre_offset(K, v.T_camera_world @ T_true[d.name][i], d), axis=1)
-        for i in range(len(q)) for d in designs for v, K in zip(views, Ks, strict=True)
-    ]).ravel()
-
     rows = []
     sigma_det = None
     for noise in progress(NOISE_LEVELS, "images"):
@@ -122,6 +96,48 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
             "pred_pos_rms_mm": float(np.sqrt(np.mean(np.concatenate(pe) ** 2))) * 1e3,
             "pred_rot_rms_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(re) ** 2)))),
         })
+
+    return rows, sigma_det
+
+
+def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
+    """Run the study; returns the numbers (px, mm, deg) and a markdown report under ``"md"``."""
+    from cpc2urdf.files.measurements import MeasurementSet
+    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+    from cpc2urdf.identification.simulation.images import render_experiment
+    from cpc2urdf.identification.simulation.noise import stereo_noise
+    from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
+    from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset, stereo_plate_poses
+    from cpc2urdf.identification.vision.render import PinholeView, render_view
+    from cpc2urdf.identification.vision.targets import robot_plate_designs
+    from cpc2urdf.transforms import inverse, rotation_error
+    from cpc2urdf.validation.accuracy import accuracy
+
+    rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        exp = render_experiment(Path(tmp) / "images", M=M, n_heldout=max(poses, 30), seed=seed, show_progress=True)
+        t_render = time.perf_counter() - t0
+        rig = exp.rig
+        s = exp.truth.structure
+        designs = robot_plate_designs(s.frames)
+        t0 = time.perf_counter()
+        meas = measure_stereo_images(exp.folder, rig, s, robot_ref="iis_head", show_progress=True)
+        t_measure = time.perf_counter() - t0
+    n_images = 2 * exp.measured.n_records
+    views = [PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w))) for w in ("left", "right")]
+    Ks = (rig.K1, rig.K2)
+    held = exp.heldout
+    q = held.q[:poses]
+    T_true = {d.name: held.poses[d.name][:poses] for d in designs}
+
+    # Ellipse-centre offsets at these configurations (exact conic geometry).
+    offsets = np.array([
+        np.linalg.norm(ellipse_centre_offset(K, v.T_camera_world @ T_true[d.name][i], d), axis=1)
+        for i in range(len(q)) for d in designs for v, K in zip(views, Ks, strict=True)
+    ]).ravel()
+
+    rows, sigma_det = _noise_rows(q, designs, T_true, views, rig, rng)
 
     # Systematic effect of the offset: noise-free, supersampled images, with and without correction.
     sys_err: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
