@@ -221,39 +221,3 @@ def test_block_run_times_each_solver_alone(monkeypatch):
     assert r["blocks_reference_median_us"] == pytest.approx(600.0)
     assert r["ratio_blocks"] == pytest.approx(200.0)
     assert r["kin_after_reference_us"] == pytest.approx(5.0)
-
-
-def test_reference_run_times_the_start_with_scipy_and_not_the_check(monkeypatch):
-    """A target at a time, on a head with the Python solver: scipy's time includes its start
-    (``initial_guess``) and not the success check after it; ours is our solve alone."""
-    from types import SimpleNamespace
-
-    from cpc2urdf.studies import bench_gaze
-
-    clock = _FakeClock()
-    monkeypatch.setattr(bench_gaze, "time", SimpleNamespace(perf_counter=clock.perf_counter))
-    monkeypatch.setattr(bench_gaze, "_has_python_solver", lambda solver: True)
-
-    def scipy_solver(solver):
-        def solve(p, q0):
-            clock.spend(700e-6)
-            return q0, 1
-        return solve
-
-    monkeypatch.setattr(bench_gaze, "_reference_solver", scipy_solver)
-
-    def guess(p):
-        clock.spend(40e-6)
-        return np.zeros(4)
-
-    def evaluate(q, p, jacobian):
-        clock.spend(1.0)  # a check counted in scipy's time, or in our next solve's, would show
-        on_axis = [(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)]  # both cameras' target on their axis, 1 m ahead
-        return SimpleNamespace(p_cam=on_axis, u=[(*d, 1.0) for d in on_axis])
-
-    solver = SimpleNamespace(solve=lambda p: clock.spend(5e-6), initial_guess=guess, evaluate=evaluate)
-    P = np.ones((7, 3))
-    times, ok, ours, start, blocks = bench_gaze._reference_run(solver, P, lambda i: 4e-6)
-    assert np.allclose(times, 740e-6) and np.allclose(ours, 5e-6) and ok.all()
-    assert start == "the solver's own start (initial_guess)"
-    assert blocks["ratio_blocks"] == pytest.approx(148.0) and blocks["kin_after_reference_us"] == pytest.approx(4.0)

@@ -313,7 +313,23 @@ def test_written_back_small_robot_with_every_awkward_joint(tmp_path: Path, capfd
     assert "6 links of the written-back URDF" in out and "result: all parsers agree" in out
 
 
-# ---- a model with two camera frames is a gaze head: reported once, with its disparity ----
+# ---- with --gaze-report, a model with two camera frames is a gaze head: reported once ----
+
+
+def test_check_builds_no_gaze_solver_unless_asked(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """Without --gaze-report, check neither reports the head nor imports the gaze solver (nothing
+    compiled): run in a fresh interpreter, whose modules are then listed."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "head.urdf"
+    path.write_text(HEAD)
+    code = ("import sys; from cpc2urdf.cli import main; rc = main(['check', sys.argv[1], '--model', 'iis_head', '-n', '3']); "
+            "print('GAZE' if any(m.startswith('cpc2urdf.validation.gaze') or m == 'numba' for m in sys.modules) else 'NONE'); "
+            "sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "gaze head" not in r.stdout and r.stdout.strip().endswith("NONE")
 
 
 def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
@@ -328,18 +344,18 @@ def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixtur
 
     path = tmp_path / "head.urdf"
     path.write_text(HEAD)
-    assert main(["check", str(path), "--model", "iis_head", "-n", "3"]) == 0
+    assert main(["check", str(path), "--model", "iis_head", "-n", "3", "--gaze-report"]) == 0
     out = capfd.readouterr().out
     assert "gaze head (camera_left_optical, camera_right_optical): binocular" in out
     assert "the two eyes' axes can meet exactly" in out
     model = calibrated_iis_head(0)
     mpath = save_model(model, tmp_path / "calibrated.json")
     upath = write_urdf(model, tmp_path / "calibrated.urdf")
-    assert main(["check", str(upath), "--model", str(mpath), "-n", "3"]) == 0
+    assert main(["check", str(upath), "--model", str(mpath), "-n", "3", "--gaze-report"]) == 0
     out = capfd.readouterr().out
     assert "the two eyes' axes meet only on a curve (vertical disparity)" in out
     assert "fixation alone (policy min-motion)" in out
-    assert main(["check", str(upath), "--model", str(mpath), "-n", "3", "--json"]) == 0
+    assert main(["check", str(upath), "--model", str(mpath), "-n", "3", "--json", "--gaze-report"]) == 0
     head = json.loads(capfd.readouterr().out)["gaze_head"]
     expected = GazeSolver.from_model(model).disparity_report(200, 0)
     assert head["exact"] is False and head["disparity"]["max_rad"] == pytest.approx(expected["max_rad"], rel=1e-9)

@@ -22,7 +22,6 @@ AHEAD = ["-0.6", "-0.6", "0.7"]
 def test_constants_match_the_solver():
     assert cli_gaze.POLICIES == gaze.POLICIES
     assert cli_gaze.DEFAULT_CAMERAS == gaze.DEFAULT_CAMERAS
-    assert cli_gaze.DEFAULT_VIEWING_DISTANCE == gaze.DEFAULT_VIEWING_DISTANCE
 
 
 def test_fixates_shipped_head_json(capsys):
@@ -35,7 +34,7 @@ def test_fixates_shipped_head_json(capsys):
 
 def test_urdf_file_and_policies(tmp_path, capsys):
     path = write_urdf(load_model("iis_head"), tmp_path / "head.urdf")
-    for policy in ("cyclopean", "min-motion", "use-table"):
+    for policy in ("cyclopean", "min-motion"):
         assert main(["gaze", str(path), "--target", *AHEAD, "--policy", policy]) == 0, policy
         assert "fixated" in capsys.readouterr().out
     q = ["0.5", "0.25", "1.6", "0.03", "0.7", "0.86"]
@@ -78,7 +77,6 @@ def test_unreachable_exit_1(capsys):
         ["gaze", "iis_head", "--target", "1", "2", "3", "--q-current", "0", "0", "9", "0", "0", "0"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--policy", "nope"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--cameras", "camera_left_optical", "nope"],
-        ["gaze", "iis_head", "--target", "1", "2", "3", "--viewing-distance", "-1"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--focal-px", "0"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "nan"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--tolerance", "1e-3", "--focal-px", "500"],

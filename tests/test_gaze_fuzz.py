@@ -44,9 +44,7 @@ from cpc2urdf.model import CPCModel
 from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.gaze import (
-    MAX_ITERATIONS,
     POLICIES,
-    RETRIES,
     STATUSES,
     GazeSolution,
     GazeSolver,
@@ -111,9 +109,10 @@ def _configurations(solver: GazeSolver, rng: np.random.Generator, n: int) -> np.
 def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED) -> Cases:
     """The seeded fuzz targets of one head (module docstring)."""
     rng = np.random.default_rng(seed)
-    head = solver.head
-    pin = head.pin
+    import pinocchio as pin
+
     n = solver.n
+    model, data = solver.robot.model, solver.robot.model.createData()
     none = np.full(n, np.nan)
     left, right = solver.camera_poses(solver.home)
     centre = 0.5 * (left[:3, 3] + right[:3, 3])
@@ -125,10 +124,11 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
     Qc[0][pol_needs_q] = qc_rows[pol_needs_q]
     start = [np.zeros(n_cube, dtype=bool)]
     kinds = [np.full(n_cube, "cube")]
-    eye_joint_ids = [int(e[0]) + 1 for e in head.eye_joints]
+    ch = solver.chain  # each eye's first joint: the first on one camera's path only
+    eye_joint_ids = [int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) + 1 for c in (0, 1)]
     for j, q in enumerate(_configurations(solver, rng, n_configs)):
-        pin.forwardKinematics(head.model, head.data, q)
-        eyes = [head.data.oMi[i].translation.copy() for i in eye_joint_ids]
+        pin.forwardKinematics(model, data, q)
+        eyes = [data.oMi[i].translation.copy() for i in eye_joint_ids]
         Ts = solver.camera_poses(q)
         o = [T[:3, 3] for T in Ts]
         z = [T[:3, 2] for T in Ts]
@@ -173,8 +173,7 @@ def solve_cases(solver: GazeSolver, cases: Cases) -> tuple[list[str], np.ndarray
     Q = np.full((N, n), np.nan)
     E = np.full((N, 2), np.nan)
     solved = np.zeros(N, dtype=bool)
-    # the Python solver's cap, or the compiled one's (it answers the cyclopean policy)
-    cap = max((RETRIES + 1) * MAX_ITERATIONS, MAX_SOLVE_ITERATIONS)
+    cap = MAX_SOLVE_ITERATIONS
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):

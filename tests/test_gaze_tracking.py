@@ -392,8 +392,6 @@ def test_tracking_on_one_camera_and_rigid_pair_heads(other_head):
     from gaze_heads import pointing_errors, yourdfpy_axes
 
     solver = other_head.solver
-    with pytest.raises(ConfigurationError):
-        solver.head  # noqa: B018 (still no two-eye head for the Python solver)
     P_reach, _ = other_head.reachable_targets(2, seed=7)
     t = np.linspace(0.0, 1.0, 400)[:, None]
     moving = P_reach[1] + 0.02 * np.hstack([np.sin(3 * t), np.cos(2 * t) - 1.0, 0.0 * t])
@@ -458,26 +456,3 @@ def test_public_names_are_exported():
         assert getattr(gaze, name) is getattr(tracking, name) and name in gaze.__all__
     for name in ("Region", "reachable_region", "make_grid"):
         assert getattr(gaze, name) is getattr(reach, name) and name in gaze.__all__
-
-
-def test_a_policy_that_frees_off_path_joints_needs_no_speed_for_them(tmp_path):
-    """use-table frees every joint of a two-eye head, a gripper off the cameras' paths too: its
-    URDF velocity="0" does not stop tracking, and the gripper keeps still."""
-    import re
-
-    from cpc2urdf.urdf.document import write_urdf
-    from cpc2urdf.validation.gaze import solver_for
-
-    text = write_urdf(load_model("iis_head"), tmp_path / "head.urdf").read_text()
-    root = re.search(r'<link name="([^"]+)"', text).group(1)
-    grip = (f'<link name="grip_link"/><joint name="grip" type="prismatic"><parent link="{root}"/>'
-            '<child link="grip_link"/><axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="1" velocity="0"/></joint>')
-    path = tmp_path / "head_grip.urdf"
-    path.write_text(text.replace("</robot>", grip + "</robot>"))
-    solver = solver_for(path)
-    ig = solver.joint_names.index("grip")
-    assert ig in solver.free_joints("use-table").tolist() and ig not in solver.path_joints.tolist()
-    A, _ = _two_targets(load_model("iis_head"))
-    tr = solver.track(np.repeat(A[None], 5, axis=0), DT, policy="use-table")
-    assert np.all(tr.q[:, ig] == tr.q[0, ig])
-    assert GazeTracker(solver, DT, policy="use-table").max_velocity[ig] == 0.0

@@ -111,7 +111,7 @@ def test_placo_points_the_cameras():
     errors = []
     held = np.setdiff1d(np.arange(solver.n), solver.free_joints("cyclopean"))  # the table's joints
     for p in P:
-        q0 = solver.initial_guess(p)
+        q0 = solver.home.copy()
         q, steps = ref.solve(p, q0)
         assert 0 < steps <= MAX_STEPS and 0.0 < ref.core_seconds
         assert np.all(q >= solver.lower - 1e-9) and np.all(q <= solver.upper + 1e-9)

@@ -20,9 +20,9 @@ from cpc2urdf.cli import main
 from cpc2urdf.cli import reach as cli_reach
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import _reference_solver, calibrated_iis_head, eyes_coplanar
+from cpc2urdf.studies.bench_gaze import SolvedAxes, _generic_reference_solver, calibrated_iis_head, eyes_coplanar
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.validation.gaze import GazeSolver, reach
+from cpc2urdf.validation.gaze import GazeOptions, GazeSolver, reach
 from cpc2urdf.validation.gaze.reach import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,
@@ -105,11 +105,12 @@ def test_region_statuses_are_true(region):
         assert counts["fixated"] == 0 and counts["disparity"] >= n // 4
         assert np.all(r.error[disparity] < math.radians(1.0))
     # a generic solver (scipy least_squares) from several starts does not fixate those the limits stop
-    ref = _reference_solver(solver)
+    free = solver.free_joints("cyclopean")
+    held_table = GazeSolver(solver.robot, solver.cameras, GazeOptions(joints=[solver.joint_names[i] for i in free]))
+    ref = _generic_reference_solver(SolvedAxes(held_table))
     rng = np.random.default_rng(0)
     stopped = np.flatnonzero(limits)
     assert stopped.size
-    free = solver.free_joints("cyclopean")
     for i in rng.choice(stopped, size=min(5, stopped.size), replace=False):
         starts = [solver.home, r.q[i], *(solver.lower + (solver.upper - solver.lower) * rng.random((3, solver.n)))]
         best = math.inf

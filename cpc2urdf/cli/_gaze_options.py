@@ -27,11 +27,13 @@ def add_solver_options(p: argparse.ArgumentParser) -> None:
                    "e.g. a camera on an arm (default 0.1; 0: no limit)")
 
 
-def solver_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The keyword arguments of :func:`cpc2urdf.api.gaze_solver` from :func:`add_solver_options`'s
-    options."""
-    return {"joints": args.joints, "tolerance": args.tolerance, "focal_px": args.focal_px,
-            "min_distance": args.min_distance}
+def solver_options(args: argparse.Namespace) -> Any:
+    """The :class:`~cpc2urdf.validation.gaze.GazeOptions` of :func:`add_solver_options`'s options
+    (checked: a bad tolerance, focal length or distance is refused in one line)."""
+    from cpc2urdf.validation.gaze import GazeOptions
+
+    return GazeOptions(joints=tuple(args.joints) if args.joints else None, tolerance=args.tolerance,
+                       focal_px=args.focal_px, min_distance=args.min_distance)
 
 
 def region_notes(solver: Any, q_held: Any = None) -> list[str]:

@@ -6,9 +6,10 @@ from a user's URDF (or that URDF itself), URDF is the written-back file: every l
 from its root to the model's frames is compared, by the URDF's own names, where the write-back puts
 it (:func:`cpc2urdf.validation.crosscheck.cross_check_writeback`).
 
-A model with two camera frames is a gaze head: the report ends with its kind and, for two eyes,
-whether they can fixate exactly and their vertical disparity over the workspace ahead
-(:func:`cpc2urdf.validation.gaze.head_report.head_report`; ``gaze_head`` in the JSON).
+With ``--gaze-report``, a model with two camera frames is reported as a gaze head too: its kind
+and, for two eyes, whether they can fixate exactly and their vertical disparity over the
+workspace ahead (:func:`cpc2urdf.validation.gaze.head_report.head_report`; ``gaze_head`` in the
+JSON). Without it, ``check`` builds no gaze solver (nothing is compiled).
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("--model", required=True, help="model file, robot spec or shipped robot name")
     p.add_argument("-n", "--configurations", type=int, default=100, help="number of configurations (default 100)")
     p.add_argument("--seed", type=int, default=0, help="seed of the configurations (default 0)")
+    p.add_argument("--gaze-report", action="store_true",
+                   help="also report the model as a gaze head when it has two camera frames: its kind and, for two "
+                   "eyes, whether they can fixate exactly and their vertical disparity (builds the gaze solver)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(run=run)
 
@@ -46,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
 
         raise ConfigurationError(f"--configurations must be at least 1, got {args.configurations}")
     report = check_urdf(args.model, args.urdf, args.configurations, args.seed)
-    head = _gaze_head(args.model)
+    head = _gaze_head(args.model) if args.gaze_report else None
     if args.json:
         out = report.to_json()
         if head is not None:

@@ -11,7 +11,7 @@ its artefacts into the output folder, and the demo stops at the first stage that
 5. stage 2: the head's cameras view a 5x5 disk target, solvePnP, hand-eye (the joint nonlinear
    refinement of AX = ZB; ``handeye --method all`` shows Tsai, the paper's choice, and the others
    side by side) -> calibrated model with camera frames -> ``export`` -> ``check``;
-6. ``gaze``: fixate targets with the calibrated head (Pinocchio IK);
+6. ``gaze``: fixate targets with the calibrated head (its head report after ``check``);
 7. ``view``: a self-contained meshcat page of the calibrated head fixating a target;
 8. ``reach``: where the calibrated head can point its eyes, as slices (PNG) and in the 3D view.
 """
@@ -164,10 +164,10 @@ def run(args: argparse.Namespace) -> int:
         save_model(result.model, f"{d}/model.json")
         _cli("handeye", str(paths["camera_left_optical"]), "--method", "all")
     _cli("export", f"{d}/model.json", "-o", f"{d}/head.urdf")
-    _cli("check", f"{d}/head.urdf", "--model", f"{d}/model.json")
+    _cli("check", f"{d}/head.urdf", "--model", f"{d}/model.json", "--gaze-report")
     st.done()
 
-    st.start("gaze: fixate targets in front of the calibrated head (Pinocchio IK, joint limits as constraints)")
+    st.start("gaze: fixate targets in front of the calibrated head (joint limits as constraints)")
     from cpc2urdf.errors import DegenerateDataError
     from cpc2urdf.studies.bench_gaze import reachable_targets
 

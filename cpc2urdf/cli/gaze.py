@@ -18,9 +18,8 @@ from cpc2urdf.cli._gaze_options import add_solver_options, solver_options
 
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
 # cpc2urdf.validation.gaze.
-POLICIES = ("cyclopean", "min-motion", "eyes-only", "use-table")
+POLICIES = ("cyclopean", "min-motion", "eyes-only")
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
-DEFAULT_VIEWING_DISTANCE = 0.6  # [m]
 # argparse reads "-1.7e308" as an option (its own pattern has no exponent): numbers, inf and nan
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
@@ -54,12 +53,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "not the order of the URDF file) (default: the middle of the limits)",
     )
     p.add_argument(
-        "--viewing-distance",
-        type=float,
-        default=DEFAULT_VIEWING_DISTANCE,
-        help=f"use-table policy: cyclopean point to target [m] (default {DEFAULT_VIEWING_DISTANCE})",
-    )
-    p.add_argument(
         "--camera",
         "--cameras",
         dest="cameras",
@@ -75,23 +68,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 
 def run(args: argparse.Namespace) -> int:
-    from cpc2urdf.api import gaze_solver
     from cpc2urdf.argparsing import joint_readings
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.validation.gaze import solver_for
 
-    if not (math.isfinite(args.viewing_distance) and args.viewing_distance > 0):
-        raise ConfigurationError(f"--viewing-distance must be a positive number of metres, got {args.viewing_distance}")
     if len(args.cameras) > 2:
         raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
     q_given = joint_readings(args.q_current, "--q-current")  # refused before anything is loaded or printed
-    options = solver_options(args)
-    if args.joints:
-        solver = solver_for(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
-    else:
-        solver = gaze_solver(args.head, tuple(args.cameras), viewing_distance=args.viewing_distance, **options)
+    solver = solver_for(args.head, tuple(args.cameras), solver_options(args))
     if isinstance(q_given, dict):  # the joints not named: the middle of their limits
         q_given = {**dict(zip(solver.joint_names, solver.home.tolist(), strict=True)), **q_given}
     q_current = solver.check_q(q_given)  # refused before the report is printed

@@ -82,9 +82,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from cpc2urdf.api import gaze_solver
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import check_output_path, dumps, write_all_atomic
+    from cpc2urdf.validation.gaze import solver_for
     from cpc2urdf.validation.gaze.reach import (
         check_grid_args,
         make_grid,
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
             check_output_path(path)
     # the robot as drawn (its meshes) loads before the grid is solved: a missing mesh fails at once
     view_robot = load_view_robot(args.robot, package_dirs=args.package_path) if args.html else None
-    solver = gaze_solver(args.robot, tuple(args.camera), **solver_options(args))
+    solver = solver_for(args.robot, tuple(args.camera), solver_options(args))
     grid = make_grid(solver, args.grid, args.range[0], args.range[1], args.samples)
     region = reachable_region(solver, grid)
     # render every output before writing any: a failure leaves nothing behind

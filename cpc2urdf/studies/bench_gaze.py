@@ -325,36 +325,6 @@ def too_close_targets(model: CPCModel, q: Array, n: int, seed: int = 0, radius: 
     return centre + r[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
 
 
-def _reference_solver(solver: GazeSolver) -> Callable[[Array, Array], tuple[Array, int]]:
-    """scipy least_squares on the same residual and Pinocchio Jacobians (cyclopean free joints)."""
-    from scipy.optimize import least_squares
-
-    from cpc2urdf.validation.gaze.fixation import evaluate_fixation
-
-    free = solver.free_joints("cyclopean")
-    lo, hi = solver.lower[free], solver.upper[free]
-    head = solver.head  # the residual itself, without GazeSolver.evaluate's conversions
-
-    def solve(p: Array, q0: Array) -> tuple[Array, int]:
-        q = q0.copy()
-
-        def fun(x: Array) -> Array:
-            q[free] = x
-            return evaluate_fixation(head, q, p, False).r
-
-        def jac(x: Array) -> Array:
-            q[free] = x
-            return evaluate_fixation(head, q, p, True).J[:, free]
-
-        x0 = np.clip(q0[free], lo + 1e-12, hi - 1e-12)
-        res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        out = q0.copy()
-        out[free] = res.x
-        return out, int(res.nfev)
-
-    return solve
-
-
 def _finite_home(lower: Array, upper: Array) -> Array:
     """The middle of every joint's limits, 0 for a joint without finite limits, shape (n,)."""
     limited = np.isfinite(lower) & np.isfinite(upper)
@@ -635,13 +605,8 @@ def _after_ours(
     return ours, times, checks
 
 
-def _reference_start(solver: GazeSolver, axes: SolvedAxes | None) -> Callable[[Array], Array]:
-    """Where the references start for target ``p``: on a head with the two-eye Python solver its
-    own start (``initial_guess``, timed with the reference), else the middle of the limits
-    (``axes``, needed then)."""
-    if _has_python_solver(solver):
-        return solver.initial_guess
-    assert axes is not None
+def _reference_start(solver: GazeSolver, axes: SolvedAxes) -> Callable[[Array], Array]:
+    """Where the references start for target ``p``: the middle of the limits (``axes``)."""
     home = axes.home
     return lambda p: home
 
@@ -653,29 +618,18 @@ def _reference_run(
     (:func:`_after_ours`): the reference's time [s] and success, our time [s] on the same
     targets, where the reference starts, and :func:`_block_run`'s numbers on the same targets.
 
-    On a head with the two-eye Python solver the reference starts from the solver's own start
-    (``initial_guess``) on the fixation residual with its free joints (:func:`_reference_solver`);
-    on others from the middle of the limits over the solver's unknowns
+    The reference starts from the middle of the limits over the solver's unknowns
     (:func:`_generic_reference_solver`; ``axes``: the solver's :class:`SolvedAxes`, made here
     when None)."""
     from cpc2urdf.tolerances import GAZE_POINTING_TOL
-    from cpc2urdf.validation.gaze.fixation import pointing_errors
 
-    if _has_python_solver(solver):
-        ref = _reference_solver(solver)
-        start = _reference_start(solver, None)
-        where = "the solver's own start (initial_guess)"
+    solved = axes if axes is not None else SolvedAxes(solver)
+    ref = _generic_reference_solver(solved)
+    start = _reference_start(solver, solved)
+    where = "the middle of the limits"
 
-        def fixated(p: Array, q: Array) -> bool:
-            return max(pointing_errors(solver.evaluate(q, p, jacobian=False))) <= GAZE_POINTING_TOL
-    else:
-        solved = axes if axes is not None else SolvedAxes(solver)
-        ref = _generic_reference_solver(solved)
-        start = _reference_start(solver, solved)
-        where = "the middle of the limits"
-
-        def fixated(p: Array, q: Array) -> bool:
-            return bool(np.max(solved.pointing_errors(q, p)) <= GAZE_POINTING_TOL)
+    def fixated(p: Array, q: Array) -> bool:
+        return bool(np.max(solved.pointing_errors(q, p)) <= GAZE_POINTING_TOL)
 
     def reference(p: Array) -> Array:
         return ref(p, start(p))[0]
@@ -867,16 +821,6 @@ def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple
     from cpc2urdf.errors import ConfigurationError
 
     raise ConfigurationError(f"unknown head {name!r}; expected one of {', '.join(HEADS)}")
-
-
-def _has_python_solver(solver: GazeSolver) -> bool:
-    """Whether ``solver`` has the two-eye Python solver (tracking, its own start for the reference)."""
-    from cpc2urdf.errors import ConfigurationError
-
-    try:
-        return solver.head is not None
-    except ConfigurationError:
-        return False
 
 
 def run_head(

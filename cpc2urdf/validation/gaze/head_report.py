@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.validation.gaze.chain import KIND_BINOCULAR
 from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, STATUS_LIMITS
 from cpc2urdf.validation.gaze.solver import GazeSolver
@@ -34,7 +33,7 @@ def head_report(solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_
     """``{"cameras", "kind", "joints"}`` (``joints``: what the solver moves) and, on a two-eye
     (``binocular``) head, ``"exact"`` (whether the eyes' axes can meet exactly), ``"disparity"``
     (:meth:`GazeSolver.disparity_report` over ``n`` seeded targets ahead) and, where they cannot
-    and the head has the Python solver's min-motion policy, ``"fixation_alone"``: over the same
+    and the head's min-motion policy solves fixation alone, ``"fixation_alone"``: over the same
     targets, how many fixation alone fixates, its statuses, and over the ``answered`` ones (fixated,
     or its best held by a limit; not the failed ones) the median and max pointing error it leaves
     [rad] and how far it turns a joint from the facing posture (median and max over the targets
@@ -56,12 +55,9 @@ def head_report(solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_
 
 
 def _fixation_alone(solver: GazeSolver, n: int, seed: int) -> dict[str, Any] | None:
-    """The ``fixation_alone`` part of :func:`head_report`; None on a head without the Python
-    solver's min-motion policy (there the compiled solver answers min-motion with its own
-    posture policy, the facing answer: nothing to compare)."""
-    try:
-        solver.head  # noqa: B018 (ConfigurationError: no Python solver on this head)
-    except ConfigurationError:
+    """The ``fixation_alone`` part of :func:`head_report`; None on a head whose min-motion
+    policy is its cyclopean one (the facing answer: nothing to compare)."""
+    if not solver._policy_engine("min-motion").exact:
         return None
     P = solver.ahead_targets(n, seed)
     facing = solver.solve_many(P)

@@ -15,10 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.fixation import FixationState, closest_point, pointing_errors
-from cpc2urdf.validation.gaze.head import GazeHead
 
 STATUS_FIXATED = "fixated"
 STATUS_LIMITS = "joint_limits"  # the best in-limit configuration does not fixate; a joint is at a limit
@@ -93,59 +90,6 @@ class GazeSolution:
 def _finite(v: float) -> float | None:
     """``v``, or None when it is not finite (JSON has no inf)."""
     return float(v) if math.isfinite(v) else None
-
-
-def solution_from_state(
-    head: GazeHead,
-    p: Array,
-    q: Array,
-    iterations: int,
-    policy: str,
-    st: FixationState,
-    tol: float = GAZE_POINTING_TOL,
-) -> GazeSolution:
-    """The :class:`GazeSolution` of readings ``q`` (shape (n,)) for target ``p`` (world) [m],
-    shape (3,), from its fixation state ``st``: pointing errors, miss distances, the joints at a
-    limit, and the status (why a target is not fixated: :data:`STATUSES`)."""
-    errs = pointing_errors(st)
-    # the miss distance is the lateral offset in front of the camera, the distance behind it
-    misses = [math.hypot(x, y) if z >= 0 else math.hypot(x, y, z) for x, y, z in st.p_cam]
-    err, miss = np.array(errs), np.array(misses)
-    fix = closest_point(st.origins, st.axes)
-    (a0, a1, a2), (b0, b1, b2) = st.axes
-    vergence = math.acos(max(-1.0, min(1.0, a0 * b0 + a1 * b1 + a2 * b2)))
-    at = 1e-12
-    at_limit = tuple(
-        n for n, v, lo, hi in zip(head.joint_names, q.tolist(), head.lower_list, head.upper_list, strict=True)
-        if v <= lo + at or v >= hi - at
-    )
-    reachable = errs[0] <= tol and errs[1] <= tol
-    if reachable:
-        status = STATUS_FIXATED
-    elif any(not (ux or uy or uz) for ux, uy, uz, _ in st.u):
-        status = STATUS_TOO_CLOSE  # on a camera centre: no direction to look along
-    elif any(z <= 0 for _, _, z in st.p_cam):
-        status = STATUS_BEHIND
-    elif min(math.hypot(x, y, z) for x, y, z in st.p_cam) < head.baseline:
-        status = STATUS_TOO_CLOSE
-    elif at_limit:
-        status = STATUS_LIMITS
-    else:
-        status = STATUS_NO_SOLUTION
-    return GazeSolution(
-        q=q,
-        joint_names=head.joint_names,
-        reachable=reachable,
-        status=status,
-        pointing_error=err,
-        miss_distance=miss,
-        fixation_point=fix,
-        vergence=vergence,
-        at_limit=at_limit,
-        iterations=iterations,
-        policy=policy,
-        target=p.copy(),
-    )
 
 
 class _FlatSolution(GazeSolution):
@@ -226,5 +170,4 @@ __all__ = [
     "STATUS_TOO_CLOSE",
     "GazeSolution",
     "solution_from_flat",
-    "solution_from_state",
 ]

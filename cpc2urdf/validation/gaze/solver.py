@@ -1,160 +1,100 @@
-""":class:`GazeSolver`: joint readings that point both cameras' optical axes at a 3D target.
+""":class:`GazeSolver`: joint readings that point a head's cameras' optical axes at a 3D target.
 
-One :meth:`GazeSolver.solve` call:
+Every solve runs the compiled loop (:mod:`~cpc2urdf.validation.gaze.batch`,
+:mod:`~cpc2urdf.validation.gaze.kernels`) on the head's :class:`~cpc2urdf.validation.gaze.chain.HeadChain`;
+each policy (:data:`~cpc2urdf.validation.gaze.options.POLICIES`) is one compiled solver over
+the unknowns it moves, made on first use:
 
-1. **Initial guess** (:mod:`~cpc2urdf.validation.gaze.guess`), on a redundant head with the
-   cyclopean policy refined to first order; ``min-motion`` and ``eyes-only`` start from
-   ``q_current``, :meth:`GazeSolver.track` from the previous solution.
-2. **Policy phase**: task-priority Gauss-Newton (:mod:`~cpc2urdf.validation.gaze.gauss_newton`)
-   with fixation first and the redundancy policy (:mod:`~cpc2urdf.validation.gaze.policies`) in
-   its null space; skipped when fixation leaves no freedom to choose with (a calibrated head).
-3. **Fixation alone**: if that does not fixate (the policy held a weak direction fixation
-   needed, or a limit blocked the preferred configuration), the same iteration runs on fixation
-   alone. If it ends in a local minimum, up to :data:`RETRIES` further starts with the eyes
-   already turned are tried, and the best result is kept.
-4. **Answer** (:mod:`~cpc2urdf.validation.gaze.result`).
+- ``cyclopean``: every joint on the cameras' paths, in the weighted metric of
+  :mod:`~cpc2urdf.validation.gaze.batch`. On two eyes on a neck of at most
+  :data:`VERSION_POLICY_MAX_NECK` joints, with nothing stated about the joints (the IIS-head's
+  shape), the table stays and a zero-version task holds the eyes turned equally and oppositely;
+  on such a head that cannot fixate exactly, the near-null posture (status ``disparity``).
+- ``min-motion``: on that shape, neck and eyes (the table stays), Euclidean in their readings,
+  exact fixation wherever the eyes' axes can meet; on other heads the cyclopean solver.
+- ``eyes-only``: the joints on one camera's path only.
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import ArrayLike
 from scipy.sparse.csgraph import connected_components
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.model import CPCModel
-from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.gaze.batch import CompiledGaze, GazeBatch
 from cpc2urdf.validation.gaze.chain import (
     KIND_BINOCULAR,
     PRISMATIC,
-    Coupling,
+    REVOLUTE,
     HeadChain,
     build_chain,
     home_readings,
 )
-from cpc2urdf.validation.gaze.fixation import (
-    FixationState,
-    evaluate_fixation,
-    fixation_redundancy,
+from cpc2urdf.validation.gaze.kernels import FAR_TARGET, S_NOT_FINITE
+from cpc2urdf.validation.gaze.options import (
+    DEFAULT_CAMERAS,
+    GazeOptions,
+    Index,
+    check_policy,
+    check_readings,
     target_point,
 )
-from cpc2urdf.validation.gaze.gauss_newton import (
-    FLOOR_RESIDUAL,
-    MAX_ITERATIONS,
-    ActiveSetGaussNewton,
-)
-from cpc2urdf.validation.gaze.guess import GuessTable
-from cpc2urdf.validation.gaze.head import DEFAULT_CAMERAS, GazeHead, Index
-from cpc2urdf.validation.gaze.kernels import FAR_TARGET, S_NOT_FINITE
-from cpc2urdf.validation.gaze.policies import (
-    DEFAULT_VIEWING_DISTANCE,
-    POLICIES,
-    check_policy,
-    free_joints,
-)
-from cpc2urdf.validation.gaze.result import (
-    GazeSolution,
-    solution_from_flat,
-    solution_from_state,
-)
+from cpc2urdf.validation.gaze.result import GazeSolution, solution_from_flat
 from cpc2urdf.validation.gaze.tracking import SaccadeRule, Trajectory, track
 
 _FLOAT64 = np.dtype(np.float64)  # numpy's one float64 descriptor: an `is` test (not ==, ~2x slower)
 
-RETRIES = 2  # further starts tried when the first one ends in a local minimum
-# [-]: most neck joints (revolute joints shared by both eyes) of a head the Python solver takes.
-# Its start table (guess.GuessTable) is a grid over the neck readings, 37 x 13^(k-1) x 5 rows for
-# k neck joints, each made by FK: 2,405 rows for a pan-tilt neck (the IIS-head), 31,265 for a
-# yaw-pitch-roll neck (2.3 s to build), 406,445 for 4 (a CLI call took 42 s), 886 million for
-# iCub's torso, neck and eye tilt (7: more memory than the machine has). A head with more gets
-# the compiled solver alone, as every other shape does.
-PYTHON_SOLVER_MAX_NECK = 3
-
-
-def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
-    """The pointing error [rad] below which an axis counts as on its target: ``tolerance``
-    itself; else, with the cameras' focal length ``focal_px`` [px] known (the smaller of the
-    two), :data:`~cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` of a pixel at the image centre,
-    ``atan(0.1 / focal_px)`` (2e-4 rad at 500 px); else
-    :data:`~cpc2urdf.tolerances.GAZE_POINTING_TOL` (exact fixation).
-
-    Raises:
-        ConfigurationError: Both given, or either not a positive finite number.
-    """
-    if tolerance is not None and focal_px is not None:
-        raise ConfigurationError("give a pointing tolerance [rad] or the cameras' focal length [px], not both")
-    if tolerance is not None:
-        if not (math.isfinite(tolerance) and tolerance > 0):
-            raise ConfigurationError(f"the pointing tolerance must be a positive number of radians, got {tolerance}")
-        return float(tolerance)
-    if focal_px is not None:
-        if not (math.isfinite(focal_px) and focal_px > 0):
-            raise ConfigurationError(f"the focal length must be a positive number of pixels, got {focal_px}")
-        return math.atan(GAZE_PIXEL_FRACTION / focal_px)
-    return GAZE_POINTING_TOL
+# [-]: most revolute joints shared by two eyes (a neck) for which the cyclopean policy holds the
+# table and the version at zero: the IIS-head (pan, tilt) and necks like it. Heads with more
+# (iCub's torso, neck and eye tilt; TALOS) keep the weighted posture over every path joint.
+VERSION_POLICY_MAX_NECK = 3
 
 
 class GazeSolver:
-    """Gaze inverse kinematics on the Pinocchio model of a URDF.
+    """Gaze inverse kinematics on the Pinocchio model of a URDF, every head shape and policy.
 
     Args:
         urdf: URDF text, the path of a URDF file, or a :class:`PinocchioRobot` already loaded
             (its model is used, not copied).
-        cameras: Names of the left and right camera optical frames (z along the optical axis).
-        viewing_distance: Preferred distance [m] from the cyclopean point to the target for the
-            ``"use-table"`` policy.
-        joints, coupling, rigid: Which joints may move, a stated coupling, and what a rigid
-            pair points (see :func:`~cpc2urdf.api.gaze_solver`).
-        tolerance: Pointing error [rad] below which a target counts as fixated.
-        focal_px: Instead of ``tolerance``: the cameras' focal length [px]; fixated within
-            :data:`~cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` of a pixel
-            (:func:`pointing_tolerance`). Neither: exact fixation (``GAZE_POINTING_TOL``).
-        min_distance: Nearest [m] the policy brings a camera to the target where the pointing
-            task leaves it the choice (a camera on an arm); 0: no limit; None:
-            :data:`~cpc2urdf.validation.gaze.batch.MIN_VIEWING_DISTANCE` (0.1 m). A target only a
-            nearer camera can fixate is still fixated.
+        cameras: Names of one or two camera optical frames (z along the optical axis).
+        options: Which joints move, the tolerance, ... (:class:`GazeOptions`; None: defaults).
 
     Raises:
-        ConfigurationError: Both ``tolerance`` and ``focal_px``, or either not positive;
-            ``min_distance`` negative or not finite.
         InputFileError: An unreadable URDF, or joints with more than one degree of freedom
             (continuous, floating, planar).
         UnknownNameError: A camera frame the URDF does not have.
-        SpecError: A joint without finite limits, or the two cameras share every joint (no eye
-            joints).
+        SpecError: A joint on the cameras' paths without finite limits, or no joint that moves
+            a camera.
 
     Attributes:
-        head: The :class:`~cpc2urdf.validation.gaze.head.GazeHead` (joint classes, limits, the
-            Pinocchio ``model`` and ``data``), whose main attributes the solver repeats:
-            ``model``, ``data``, ``cameras``, ``joint_names``, ``joint_kinds``, ``n``, ``lower``,
-            ``upper``, ``velocity_limit``, ``home``, ``baseline``.
-        redundant: Whether fixation by neck and eyes leaves spare freedom for the policy.
-        tolerance: Pointing error [rad] below which a target counts as fixated.
-        min_distance: Nearest [m] the compiled solver's policy brings a camera to the target.
+        robot, cameras, joint_names, joint_kinds, n: The robot, the camera frames, its joints
+            (Pinocchio's order), ``{joint: "revolute" | "prismatic"}`` and their number.
+        lower, upper, velocity_limit, home: Per joint, shape (n,): limits, URDF velocity limits
+            and the middle of the limits.
+        baseline: Distance [m] between the two cameras at ``home`` (0 for one camera).
+        options, tolerance, min_distance: The options and what they resolve to ([rad], [m]).
+        chain, compiled: The head's chain of every path joint and its compiled solver.
     """
 
     def __init__(
         self,
         urdf: str | os.PathLike[str] | PinocchioRobot,
         cameras: Sequence[str] = DEFAULT_CAMERAS,
-        *,
-        viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
-        joints: Sequence[str] | None = None,
-        coupling: Coupling | None = None,
-        rigid: str = "cyclopean",
-        tolerance: float | None = None,
-        focal_px: float | None = None,
-        min_distance: float | None = None,
+        options: GazeOptions | None = None,
     ) -> None:
-        tolerance = pointing_tolerance(tolerance, focal_px)
-        self.tolerance = tolerance
+        opts = GazeOptions() if options is None else options
+        self.options = opts
+        self.tolerance = opts.tolerance_rad
         # continuous joints read as revolute without limits: a robot's wheels are off the head's
         # paths; one on a path is refused by build_chain (no finite limits), naming it
         robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
@@ -166,85 +106,77 @@ class GazeSolver:
         self.joint_names = robot.joint_names
         self.joint_kinds = dict(zip(robot.joint_names, robot.joint_kinds, strict=True))
         self.n = robot.n_joints
-        # The compiled solver: every head shape (one camera, two eyes, a rigid pair, couplings).
-        self.chain: HeadChain = build_chain(robot, self.cameras, joints, coupling, rigid)
-        self._coupling, self._rigid = coupling, rigid
-        self._engines: dict[str, CompiledGaze] = {}
-        self.compiled = CompiledGaze(self.chain, tolerance, min_distance=min_distance)
+        self.chain: HeadChain = build_chain(robot, self.cameras, opts.joints, opts.coupling, opts.rigid)
+        self.compiled = CompiledGaze(self.chain, self.tolerance, min_distance=opts.min_distance)
         self.min_distance = self.compiled.min_distance
-        # The Python solver with its four policies: two independent eyes, every joint free.
-        self._head: GazeHead | None = None
-        if self.chain.kind == KIND_BINOCULAR and joints is None and coupling is None and self._neck_and_eyes():
-            head = GazeHead(robot, self.cameras)
-            if len(head.neck) <= PYTHON_SOLVER_MAX_NECK:
-                self._legacy(head, viewing_distance)
-        if self._head is None:
-            self.lower = robot.lower.copy()
-            self.upper = robot.upper.copy()
-            self.velocity_limit = robot.velocity_limit.copy()
-            self.home = home_readings(robot)
-            self.baseline = self.compiled.baseline
-            self.redundant = False
-            self.model = robot.model
-            self.data = robot.model.createData()
-        # the cyclopean policy of a head that cannot fixate exactly: the compiled near-null
-        # posture over neck and eyes (the table stays, as in the Python solver's policy)
-        self._posture: CompiledGaze | None = None
-        if self._head is not None and self.compiled.disparity_head:
-            free = self._free_joints["cyclopean"]
-            self._posture = CompiledGaze(
-                build_chain(robot, self.cameras, [self.joint_names[i] for i in free]), tolerance,
-                min_distance=min_distance,
-            )
-        # the cyclopean policy of a head that can: the compiled loop over neck and eyes with the
-        # Python solver's secondary task, zero version (then the weighted home)
-        self._version: CompiledGaze | None = None
-        if self._head is not None and self._posture is None:
-            free = self._free_joints["cyclopean"]
-            vchain = build_chain(robot, self.cameras, [self.joint_names[i] for i in free])
-            row = self._head.version_row
-            vrow = np.array([row[robot.joint_index(v)] for v in vchain.variables])
-            self._version = CompiledGaze(vchain, tolerance, vrow, min_distance)
-        # the compiled solver of the cyclopean policy (solve_checked's choice; solve_many's)
-        self._fast: CompiledGaze = self._posture or self._version or self.compiled
+        self.lower = robot.lower.copy()
+        self.upper = robot.upper.copy()
+        self.velocity_limit = robot.velocity_limit.copy()
+        self.home = home_readings(robot)
+        self.baseline = self.compiled.baseline
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self._engines: dict[str, CompiledGaze] = {}
+        self._fast = self._policy_engine("cyclopean")  # a control loop's solver
 
-    def _neck_and_eyes(self) -> bool:
-        """Whether every robot joint has finite limits (the Python solver's assumption)."""
-        return bool(np.all(np.isfinite(self.robot.lower)) and np.all(np.isfinite(self.robot.upper)))
+    # ---- the compiled solver of each policy ----
 
-    def _legacy(self, head: GazeHead, viewing_distance: float) -> None:
-        self._head = head
-        self.model = head.model
-        self.data = head.data
-        self.lower = head.lower
-        self.upper = head.upper
-        self.velocity_limit = head.velocity_limit
-        self.home = head.home
-        self.baseline = head.baseline
-        self._engine = ActiveSetGaussNewton(head, float(viewing_distance))
-        self.redundant, converge_sign = fixation_redundancy(head, free_joints(head, "cyclopean"))
-        self._guesses = GuessTable(head, converge_sign)
-        self._free_joints = {policy: free_joints(head, policy) for policy in POLICIES}
-        self._fixed_joints = {policy: np.setdiff1d(np.arange(self.n), free) for policy, free in self._free_joints.items()}
-        left, right = head.camera_poses(head.home)
-        self._centre: Array = 0.5 * (left[:3, 3] + right[:3, 3])  # cyclopean point at home (world) [m]
+    def _version_shaped(self) -> bool:
+        """Whether the cyclopean policy holds the table and the version (see the module docstring)."""
+        ch, opts = self.chain, self.options
+        if ch.kind != KIND_BINOCULAR or opts.joints is not None or opts.coupling is not None:
+            return False
+        if not (np.all(np.isfinite(self.robot.lower)) and np.all(np.isfinite(self.robot.upper))):
+            return False
+        neck = ch.anc[0] & ch.anc[1] & (ch.jtype == REVOLUTE)
+        return int(neck.sum()) <= VERSION_POLICY_MAX_NECK
 
-    @property
-    def head(self) -> GazeHead:
-        """The two-eye :class:`GazeHead` of the Python solver (its four policies, tracking).
+    def _policy_engine(self, policy: str) -> CompiledGaze:
+        """The compiled solver of ``policy`` (made on first use).
 
         Raises:
-            ConfigurationError: A head of another shape (one camera, a rigid pair, stated joints or
-                a coupling, a joint without finite limits, more than
-                :data:`PYTHON_SOLVER_MAX_NECK` revolute joints shared by the eyes): only the
-                compiled solver (:meth:`solve`, :meth:`solve_many`) serves it.
+            ConfigurationError: ``eyes-only`` on a head without two eyes.
         """
-        if self._head is None:
-            raise ConfigurationError(
-                f"head {self.robot.name!r} ({self.chain.kind}, cameras {list(self.cameras)}) has only the compiled "
-                "solver: solve() with the cyclopean or min-motion policy, and solve_many()"
-            )
-        return self._head
+        engine = self._engines.get(policy)
+        if engine is None:
+            engine = self._engines[policy] = self._make_engine(policy)
+        return engine
+
+    def _make_engine(self, policy: str) -> CompiledGaze:
+        ch = self.chain
+        K = range(len(ch.joint_index))
+        if policy == "eyes-only":
+            if ch.kind != KIND_BINOCULAR:
+                raise ConfigurationError(f"policy 'eyes-only' needs two eyes; this head is {ch.kind} (cameras {list(self.cameras)})")
+            moved = [k for k in K if ch.anc[0, k] != ch.anc[1, k]]
+        elif not self._version_shaped():
+            return self._fast if policy == "min-motion" else self.compiled
+        else:  # the table stays
+            moved = [k for k in K if not (ch.anc[0, k] and ch.anc[1, k] and ch.jtype[k] == PRISMATIC)]
+        names = [self.joint_names[ch.joint_index[k]] for k in moved if self.joint_names[ch.joint_index[k]] in ch.moving]
+        sub = build_chain(self.robot, self.cameras, names, self.options.coupling, self.options.rigid)
+        mind = self.options.min_distance
+        if policy == "cyclopean":
+            if self.compiled.disparity_head:  # the near-null posture
+                return CompiledGaze(sub, self.tolerance, min_distance=mind)
+            return CompiledGaze(sub, self.tolerance, self._version_row(sub), mind)
+        sub.weight = np.ones(sub.m)  # Euclidean in the readings
+        return CompiledGaze(sub, self.tolerance, min_distance=mind, exact=True)
+
+    def _version_row(self, sub: HeadChain) -> Array:
+        """The version ``(eye_L - home_L) + s (eye_R - home_R)`` of the first eye joint of each
+        side as a row over the unknowns of ``sub`` (``s``: +1 where the two turn about nearly the
+        same world direction at home, else -1)."""
+        ch = self.chain
+        e0, e1 = (int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) for c in (0, 1))
+        data = self.model.createData()
+        pin.computeJointJacobians(self.model, data, self.home)
+        a0, a1 = (pin.getJointJacobian(self.model, data, e + 1, pin.WORLD)[3:, e] for e in (e0, e1))
+        row = np.zeros(self.n)
+        row[e0], row[e1] = 1.0, 1.0 if float(a0 @ a1) >= 0.0 else -1.0
+        return np.array([row[self.robot.joint_index(v)] for v in sub.variables])
+
+    # ---- what the head is ----
 
     @property
     def moving(self) -> tuple[str, ...]:
@@ -266,75 +198,21 @@ class GazeSolver:
     def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, object]:
         """The pointing error the cyclopean policy leaves over a workspace ahead (the head
         facing each target; :meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.disparity_report`)."""
-        return (self._posture or self.compiled).disparity_report(n, seed)
+        return self._fast.disparity_report(n, seed)
 
     def ahead_targets(self, n: int = 400, seed: int = 0) -> Array:
         """The targets of :meth:`disparity_report` (world) [m], shape (n, 3)
         (:meth:`~cpc2urdf.validation.gaze.batch.CompiledGaze.ahead_targets`)."""
-        return (self._posture or self.compiled).ahead_targets(n, seed)
-
-    def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
-        """Every target (rows of ``targets`` (N, 3), world [m]) through the compiled loop, from
-        ``q_current`` (shape (n,); None: the middle of the limits); joints the head may not move
-        stay at ``q_current``. Target by target the answer of :meth:`solve` with its default
-        (cyclopean) policy: on the IIS-head the table stays. See
-        :class:`~cpc2urdf.validation.gaze.batch.GazeBatch`.
-
-        Raises:
-            ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
-        """
-        qc = self.check_q(q_current)
-        return self._fast.solve_many(targets, qc)
-
-    def check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
-        """Readings ``q_current`` as an in-limit array of shape (n,), or None
-        (:meth:`GazeHead.check_q`)."""
-        if self._head is not None:
-            return self._head.check_q(q)
-        if q is None:
-            return None
-        return GazeHead.check_readings(self.robot, q)
-
-    @classmethod
-    def from_model(
-        cls,
-        model: CPCModel,
-        cameras: Sequence[str] = DEFAULT_CAMERAS,
-        *,
-        viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
-    ) -> GazeSolver:
-        """A solver for a :class:`cpc2urdf.model.CPCModel` (via its URDF)."""
-        return cls(PinocchioRobot.from_model(model), cameras, viewing_distance=viewing_distance)
-
-    @classmethod
-    def from_urdf(
-        cls,
-        urdf: str | os.PathLike[str],
-        cameras: Sequence[str] = DEFAULT_CAMERAS,
-        *,
-        viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
-    ) -> GazeSolver:
-        """A solver for URDF text or a URDF file (:meth:`PinocchioRobot.from_urdf`)."""
-        return cls(PinocchioRobot.from_urdf(urdf), cameras, viewing_distance=viewing_distance)
-
-    @property
-    def viewing_distance(self) -> float:
-        """Preferred distance [m] from the cyclopean point to the target (``"use-table"``)."""
-        self.head  # noqa: B018 (ConfigurationError on a head without the Python solver)
-        return self._engine.viewing_distance
-
-    @viewing_distance.setter
-    def viewing_distance(self, value: float) -> None:
-        self.head  # noqa: B018
-        self._engine.viewing_distance = float(value)
+        return self._fast.ahead_targets(n, seed)
 
     def free_joints(self, policy: str) -> Index:
-        """Indices (into ``q``) of the joints ``policy`` lets move (on a head with only the
-        compiled solver: the joints it may move, whatever the policy)."""
+        """Indices (into ``q``) of the joints ``policy`` lets move.
+
+        Raises:
+            ConfigurationError: An unknown policy, or ``eyes-only`` on a head without two eyes.
+        """
         check_policy(policy)
-        if self._head is None:
-            return np.flatnonzero(np.abs(self.chain.robot_A).sum(axis=1) > 0)
-        return self._free_joints[policy]
+        return np.flatnonzero(np.abs(self._policy_engine(policy).chain.robot_A).sum(axis=1) > 0)
 
     @property
     def path_joints(self) -> Index:
@@ -351,29 +229,14 @@ class GazeSolver:
         groups = (np.flatnonzero(label == k) for k in np.unique(label))
         return tuple(g for g in groups if len(g) > 1)
 
-    def evaluate(self, q: ArrayLike, p_world: ArrayLike, jacobian: bool = True) -> FixationState:
-        """The fixation state (residual ``r``, shape (6,), ``|r|^2``, the target in each camera
-        frame, and the (6, n) Jacobian ``J``) at readings ``q`` (shape (n,)) for target
-        ``p_world`` (world) [m], shape (3,); the Jacobian now (``jacobian``) or when first used.
-        Not checked beyond their conversion to float arrays: ``q`` and ``p_world`` must be finite.
+    def check_q(self, q: ArrayLike | Mapping[str, float] | None) -> Array | None:
+        """Readings ``q_current`` (shape (n,) or ``{joint: reading}`` naming every joint) as an
+        in-limit array of shape (n,), or None (:func:`~cpc2urdf.validation.gaze.options.check_readings`)."""
+        if q is None:
+            return None
+        return check_readings(self.joint_names, self.lower, self.upper, q)
 
-        Raises:
-            ConfigurationError: A head without the Python solver (see :attr:`head`): the
-                compiled solver's answers carry their pointing errors instead.
-        """
-        return evaluate_fixation(self.head, np.asarray(q, dtype=float), np.asarray(p_world, dtype=float), jacobian)
-
-    def initial_guess(self, p_world: ArrayLike, q_current: ArrayLike | None = None) -> Array:
-        """The geometric starting point of :meth:`solve` (table from ``q_current`` or home).
-
-        The neck readings of the precomputed grid whose cyclopean ray passes closest to the
-        target (angle seen from the cyclopean point), refined to first order, and the eyes
-        converged symmetrically on the target's distance (the default policy's start).
-        """
-        p = target_point(p_world)
-        qc = self.head.check_q(q_current)
-        q = (self.home if qc is None else qc).copy()
-        return self._guesses.guess(self._solved_target(p), q, refine=self.redundant)
+    # ---- solving ----
 
     def solve(
         self,
@@ -382,19 +245,16 @@ class GazeSolver:
         policy: str = "cyclopean",
         *,
         q_start: ArrayLike | None = None,
-        max_iterations: int = MAX_ITERATIONS,
     ) -> GazeSolution:
-        """Joint readings that fixate ``p_world`` with both cameras. Moves nothing.
+        """Joint readings that fixate ``p_world`` with the head's cameras. Moves nothing.
 
         Args:
             p_world: Target in ``world`` [m], shape (3,).
-            q_current: Current readings [rad]/[m], shape (n,) or ``{joint: reading}``; the table
-                (and for ``"eyes-only"`` the neck) stays here; ``"min-motion"`` moves least from
-                here. None: the middle of every joint's limits.
-            policy: One of :data:`~cpc2urdf.validation.gaze.policies.POLICIES`.
-            q_start: Optional starting point of the iteration (e.g. the previous solution when
-                tracking), shape (n,); fixed joints are taken from ``q_current`` regardless.
-            max_iterations: Gauss-Newton iteration cap.
+            q_current: Current readings [rad]/[m], shape (n,) or ``{joint: reading}``; the joints
+                the policy does not move stay here; ``"min-motion"`` moves least from here.
+                None: the middle of every joint's limits.
+            policy: One of :data:`~cpc2urdf.validation.gaze.options.POLICIES`.
+            q_start: Optional starting point (e.g. the previous solution when tracking), shape (n,).
 
         Returns:
             A :class:`GazeSolution`; unreachable targets give ``reachable=False`` with the best
@@ -402,13 +262,12 @@ class GazeSolver:
 
         Raises:
             ConfigurationError: a target or ``q_current`` with NaN/inf or the wrong shape, a
-                reading outside the limits, or an unknown policy.
+                reading outside the limits, an unknown policy, or ``eyes-only`` without two eyes.
         """
         if q_current is None and q_start is None and policy == "cyclopean":
-            # a control loop's call: straight to the compiled solve (what solve_checked picks). A
-            # float (3,) array is copied (under the GIL: another thread may be writing it while
-            # the kernel runs without) and not checked here: the kernel checks that it is finite
-            # and keeps it in the answer (~2 of ~21 us a solve less than target_point's checks)
+            # a control loop's call: straight to the compiled solve. A float (3,) array is copied
+            # (under the GIL: another thread may be writing it while the kernel runs without)
+            # and not checked here: the kernel checks that it is finite and keeps it in the answer
             comp = self._fast
             plain = type(p_world) is np.ndarray and p_world.dtype is _FLOAT64 and p_world.shape == (3,)
             p = p_world.copy() if plain else target_point(p_world)  # type: ignore[union-attr]
@@ -417,32 +276,12 @@ class GazeSolver:
                 target_point(p)  # raises, naming the coordinates
             return solution_from_flat(self.joint_names, out, comp.S, policy)
         check_policy(policy)
-        p = target_point(p_world)
-        qc = self.check_q(q_current)
-        return self.solve_checked(p, qc, policy, q_start, max_iterations)
+        return self.solve_checked(target_point(p_world), self.check_q(q_current), policy, q_start)
 
-    def solve_checked(
-        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
-    ) -> GazeSolution:
+    def solve_checked(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None) -> GazeSolution:
         """:meth:`solve` on a checked target ``p`` and checked in-limit readings ``qc`` (or None):
-        the entry of :meth:`track`, which does not re-check the readings it produced itself.
-
-        The compiled solver answers on a head of another shape than two independent eyes, and
-        for the cyclopean policy on every head (zero version in the null space of fixation
-        where the head can fixate exactly; the near-null posture where it cannot,
-        :attr:`disparity_head`); the Python solver answers the other policies ("min-motion",
-        "eyes-only", "use-table") on two independent eyes."""
-        if self._head is None:
-            return self._solve_compiled(p, qc, policy, q_start)
-        if policy == "cyclopean":
-            return self._solve_compiled(p, qc, policy, q_start, self._posture or self._version)
-        return self._solve_python(p, qc, policy, q_start, max_iterations)
-
-    def _solve_compiled(
-        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None = None,
-        comp: CompiledGaze | None = None,
-    ) -> GazeSolution:
-        comp = comp or self._policy_engine(policy)
+        the entry of :meth:`track`, which does not re-check the readings it produced itself."""
+        comp = self._policy_engine(policy)
         qs = None
         if q_start is not None:
             qs = np.asarray(q_start, dtype=float)
@@ -453,106 +292,16 @@ class GazeSolver:
             target_point(p)  # raises, naming the coordinates
         return solution_from_flat(self.joint_names, out, comp.S, policy)
 
-    def _policy_engine(self, policy: str) -> CompiledGaze:
-        """The compiled solver of ``policy`` (made on first use)."""
-        engine = self._engines.get(policy)
-        if engine is None:
-            engine = self._engines[policy] = self._make_engine(policy)
-        return engine
+    def solve_many(self, targets: ArrayLike, q_current: ArrayLike | None = None) -> GazeBatch:
+        """Every target (rows of ``targets`` (N, 3), world [m]) through the compiled loop, from
+        ``q_current`` (shape (n,); None: the middle of the limits); joints the head may not move
+        stay at ``q_current``. Target by target the answer of :meth:`solve` with its default
+        (cyclopean) policy. See :class:`~cpc2urdf.validation.gaze.batch.GazeBatch`.
 
-    def _make_engine(self, policy: str) -> CompiledGaze:
-        chain = self.chain
-        if policy == "cyclopean":
-            return self._fast
-        if policy == "min-motion":
-            if self._head is None:
-                return self._posture or self.compiled
-            # the table stays; Euclidean in the readings; exact fixation wherever it exists
-            K = range(len(chain.joint_index))
-            moved = [k for k in K if not (chain.anc[0, k] and chain.anc[1, k] and chain.jtype[k] == PRISMATIC)]
-        else:  # eyes-only
-            if chain.kind != KIND_BINOCULAR:
-                raise ConfigurationError(f"policy 'eyes-only' needs two eyes; this head is {chain.kind}")
-            moved = [k for k in range(len(chain.joint_index)) if chain.anc[0, k] != chain.anc[1, k]]
-        names = [self.joint_names[chain.joint_index[k]] for k in moved]
-        if chain.moving:
-            names = [nm for nm in names if nm in chain.moving]
-        sub = build_chain(self.robot, self.cameras, names, self._coupling, self._rigid)
-        sub.weight = np.ones(sub.m)
-        return CompiledGaze(sub, self.tolerance, min_distance=self.min_distance, exact=True)
-
-    def _solve_python(
-        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
-    ) -> GazeSolution:
-        q_ref = self.home.copy() if qc is None else qc
-        free = self._free_joints[policy]
-        p_solve = self._solved_target(p)
-        if q_start is not None:
-            q0 = np.clip(np.asarray(q_start, dtype=float).reshape(self.n), self.lower, self.upper)
-            fixed = self._fixed_joints[policy]
-            q0[fixed] = q_ref[fixed]
-        elif policy == "eyes-only":
-            q0 = q_ref.copy()
-        elif policy == "min-motion" and qc is not None:
-            q0 = q_ref.copy()
-        else:
-            # The refined start saves about one iteration. Only for the cyclopean policy on a
-            # redundant head: the use-table and min-motion policies stop once fixation stalls,
-            # and need the iterations of a coarser start to move the table or the neck where
-            # they want; on a calibrated head it saves nothing (the first step along the weak
-            # direction dominates) and loses a few near-fold targets (seeds 2 and 4: 0.5 % and
-            # 1.1 % of 1,000 targets).
-            q0 = self._guesses.guess(p_solve, q_ref, refine=policy == "cyclopean" and self.redundant)
-        q, it, st = self._solve_from(p_solve, q0, q_ref, policy, free, max_iterations)
-        if st.rr > FLOOR_RESIDUAL and policy != "eyes-only" and q_start is None:
-            # Local minimum against a limit (e.g. pan at 0 deg while the eyes would have to
-            # turn far): retry from the best grid starts with the eyes already turned.
-            for rank in range(1, RETRIES + 1):
-                q1, it1, st1 = self._solve_from(
-                    p_solve, self._guesses.guess(p_solve, q_ref, rank), q_ref, policy, free, max_iterations
-                )
-                it += it1
-                if st1.rr < st.rr:
-                    q, st = q1, st1
-                if st.rr <= FLOOR_RESIDUAL:
-                    break
-        if p_solve is not p:  # the answer is judged on the target itself
-            st = evaluate_fixation(self.head, q, p, jacobian=False)
-        return solution_from_state(self.head, p, q, it, policy, st, self.tolerance)
-
-    def _solved_target(self, p: Array) -> Array:
-        """The point the iteration aims at for target ``p`` (world) [m], shape (3,): ``p`` itself,
-        or for a target with a coordinate beyond :data:`FAR_TARGET` the point on the ray from the
-        head's centre (cyclopean point at home) through ``p`` at that distance.
-
-        Seen from any camera, the two differ in direction by less than the head's reach over
-        :data:`FAR_TARGET` (~1e-15 rad), below the rounding of a direction at that distance;
-        beyond it the guess table and the policies would square coordinates out of the float
-        range. The answer is still judged on ``p`` (:func:`evaluate_fixation` scales far
-        targets).
+        Raises:
+            ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
         """
-        px, py, pz = p.tolist()
-        if max(abs(px), abs(py), abs(pz)) <= FAR_TARGET:
-            return p
-        d = p - self._centre
-        d = d / np.max(np.abs(d))  # components in [-1, 1]: no overflow in the norm
-        return self._centre + FAR_TARGET * (d / math.sqrt(float(d @ d)))
-
-    def _solve_from(
-        self, p: Array, q0: Array, q_ref: Array, policy: str, free: Index, max_iterations: int
-    ) -> tuple[Array, int, FixationState]:
-        engine = self._engine
-        if self.redundant or policy == "use-table":
-            q, it, st = engine.iterate(p, q0, q_ref, policy, free, max_iterations, secondary=True)
-        else:  # the policy has no freedom to choose with: see fixation_redundancy
-            q, it, st = q0, 0, evaluate_fixation(self.head, q0, p, jacobian=False)
-        if st.rr > FLOOR_RESIDUAL and it < max_iterations:
-            # Phase 2: fixation alone. Reached when the policy's preferred configuration does
-            # not fixate: on a calibrated head (fixation has no spare freedom, only a weak
-            # direction the policy was holding) or where a limit blocks the preferred one.
-            q, it2, st = engine.iterate(p, q, q_ref, policy, free, max_iterations - it, secondary=False, st=st)
-            it += it2
-        return q, it, st
+        return self._fast.solve_many(targets, self.check_q(q_current))
 
     def track(
         self,
@@ -564,7 +313,7 @@ class GazeSolver:
         policy: str = "cyclopean",
         saccades: SaccadeRule | None = None,
     ) -> Trajectory:
-        """Follow a moving target (:func:`cpc2urdf.validation.gaze.tracking.track`), on any head shape.
+        """Follow a moving target (:func:`cpc2urdf.validation.gaze.tracking.track`).
 
         Args:
             targets: Target positions (world) [m], shape (T, 3), one per sample.
@@ -581,10 +330,7 @@ class GazeSolver:
 
     def camera_poses(self, q: ArrayLike) -> tuple[Array, ...]:
         """``T_world_<camera>`` (4, 4) of each named camera (optical frame), in ``cameras`` order,
-        at readings ``q`` (shape (n,)): the forward kinematics of the head's chain (on a two-eye
-        head with every joint free, Pinocchio's, as before: the same to rounding)."""
-        if self._head is not None:
-            return self._head.camera_poses(q)
+        at in-limit readings ``q`` (shape (n,)): the forward kinematics of the head's chain."""
         qa = self.check_q(q)
         assert qa is not None
         R, o = self.compiled.camera_poses(qa)
@@ -602,26 +348,39 @@ class GazeSolver:
         target ``p`` (world) [m], shape (3,): what tracking reports of a commanded posture."""
         return self.compiled.pointing_errors(q, p)
 
+    @classmethod
+    def from_model(
+        cls, model: CPCModel, cameras: Sequence[str] = DEFAULT_CAMERAS, options: GazeOptions | None = None
+    ) -> GazeSolver:
+        """A solver for a :class:`cpc2urdf.model.CPCModel` (via its URDF)."""
+        return cls(PinocchioRobot.from_model(model), cameras, options)
+
+    @classmethod
+    def from_urdf(
+        cls, urdf: str | os.PathLike[str], cameras: Sequence[str] = DEFAULT_CAMERAS, options: GazeOptions | None = None
+    ) -> GazeSolver:
+        """A solver for URDF text or a URDF file (:meth:`PinocchioRobot.from_urdf`)."""
+        return cls(PinocchioRobot.from_urdf(urdf), cameras, options)
+
+
 def solver_for(
     ref: str | os.PathLike[str] | CPCModel,
     cameras: Sequence[str] = DEFAULT_CAMERAS,
-    *,
-    viewing_distance: float = DEFAULT_VIEWING_DISTANCE,
-    joints: Sequence[str] | None = None,
-    coupling: Coupling | None = None,
-    rigid: str = "cyclopean",
-    tolerance: float | None = None,
-    focal_px: float | None = None,
-    min_distance: float | None = None,
+    options: GazeOptions | None = None,
+    **fields: Any,
 ) -> GazeSolver:
     """A solver for a ``.urdf`` file (any case), a model file, a robot spec, a shipped robot name
     or a :class:`~cpc2urdf.model.CPCModel` (:meth:`PinocchioRobot.load`; ``continuous`` joints off
-    the cameras' paths, e.g. a mobile base's wheels, are read as unlimited revolute ones)."""
-    return GazeSolver(
-        PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, viewing_distance=viewing_distance,
-        joints=joints, coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
-        min_distance=min_distance,
-    )
+    the cameras' paths, e.g. a mobile base's wheels, are read as unlimited revolute ones).
+
+    ``fields``: :class:`GazeOptions` fields (``joints=...``, ``tolerance=...``), over ``options``.
+    """
+    fields.pop("viewing_distance", None)  # the use-table policy's, gone; still passed by older callers
+    try:
+        opts = dataclasses.replace(options or GazeOptions(), **fields)
+    except TypeError as e:
+        raise ConfigurationError(f"unknown gaze option: {e}") from e
+    return GazeSolver(PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, opts)
 
 
-__all__ = ["FAR_TARGET", "RETRIES", "GazeSolver", "pointing_tolerance", "solver_for"]
+__all__ = ["FAR_TARGET", "VERSION_POLICY_MAX_NECK", "GazeOptions", "GazeSolver", "solver_for"]

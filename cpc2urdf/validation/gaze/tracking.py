@@ -53,9 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.fixation import target_point
-from cpc2urdf.validation.gaze.gauss_newton import MAX_ITERATIONS
-from cpc2urdf.validation.gaze.policies import check_policy
+from cpc2urdf.validation.gaze.options import check_policy, target_point
 from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, GazeSolution
 
 MIN_JERK_PEAK_VELOCITY = 15.0 / 8.0  # peak of d/ds (10 s^3 - 15 s^4 + 6 s^5), at s = 1/2
@@ -110,9 +108,7 @@ class WarmStartSolver(Protocol):
         """Pointing error [rad] of each solved axis at readings ``q`` for target ``p``."""
         ...
 
-    def solve_checked(
-        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None, max_iterations: int
-    ) -> GazeSolution:
+    def solve_checked(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None) -> GazeSolution:
         """A solve of a checked target ``p`` from checked readings ``qc``, started at ``q_start``."""
         ...
 
@@ -256,7 +252,7 @@ class GazeTracker:
             prismatic ones: one number in two units); None: the URDF velocity limits.
         q_current: Readings at the first sample, shape (n,); None: the first solution (the
             first command jumps there).
-        policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.policies.POLICIES`).
+        policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.options.POLICIES`).
         saccades: None: smooth pursuit only; a :class:`SaccadeRule`: minimum-jerk saccades too.
 
     Raises:
@@ -316,9 +312,7 @@ class GazeTracker:
         if q_start is not None and self._miss(q_start, p) > WARM_START_ANGLE:
             q_start = None  # the target jumped: the solver's own start beats the last answer
         # q_prev stays between in-limit readings, so it need not be checked again
-        sol = self.solver.solve_checked(
-            p, None if q_prev is None else q_prev.copy(), self.policy, q_start, MAX_ITERATIONS
-        )
+        sol = self.solver.solve_checked(p, None if q_prev is None else q_prev.copy(), self.policy, q_start)
         goal = sol.q
         self.goal = goal
         aims = sol.status in SACCADE_STATUSES  # an answer that points at the target
@@ -502,7 +496,7 @@ def track(
         max_velocity: Speed limits (see :class:`GazeTracker`): ``{joint: limit}``, per joint
             (shape (n,)), or a scalar over joints of one kind; None: the URDF velocity limits.
         q_current: Readings at the first sample, shape (n,); None: the first solution.
-        policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.policies.POLICIES`).
+        policy: Redundancy policy (see :data:`~cpc2urdf.validation.gaze.options.POLICIES`).
         saccades: None: smooth pursuit only; a :class:`SaccadeRule`: minimum-jerk saccades too.
 
     Returns:
