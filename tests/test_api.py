@@ -89,9 +89,17 @@ def test_api_defaults_are_the_stages_defaults():
     assert default(cpc2urdf.simulate, "sigma_deg") == pytest.approx(np.degrees(sim.DEFAULT_SIGMA_R))
 
 
-def test_identify_from_a_path_equals_identify_of_the_loaded_set(demo_run):
-    demo_dir, _, _ = demo_run
-    path = demo_dir / "sim" / "measurements.json"
+@pytest.fixture(scope="module")
+def measurement_file(tmp_path_factory):
+    """``cpc2urdf simulate iis_head``'s measurement file."""
+    d = tmp_path_factory.mktemp("sim")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["simulate", "iis_head", "-o", str(d)]) == 0
+    return d / "measurements.json"
+
+
+def test_identify_from_a_path_equals_identify_of_the_loaded_set(measurement_file):
+    path = measurement_file
     a = cpc2urdf.identify(path, "closed-form")
     b = cpc2urdf.identify(cpc2urdf.load_measurements(path), "closed-form")
     assert_same_geometry(a, b, tol=0.0)
@@ -99,9 +107,8 @@ def test_identify_from_a_path_equals_identify_of_the_loaded_set(demo_run):
     assert "camera_left_optical" in a.structure.frame_names
 
 
-def test_api_refuses_robot_override_with_a_loaded_set(demo_run):
-    demo_dir, _, _ = demo_run
-    ms = cpc2urdf.load_measurements(demo_dir / "sim" / "measurements.json")
+def test_api_refuses_robot_override_with_a_loaded_set(measurement_file):
+    ms = cpc2urdf.load_measurements(measurement_file)
     with pytest.raises(ConfigurationError, match="robot= applies to a measurement file path"):
         cpc2urdf.identify(ms, robot="iis_head")
 
@@ -118,11 +125,11 @@ def test_import_cpc2urdf_is_light_and_lists_the_api():
     assert len(cpc2urdf.__all__) <= 22  # the pipeline's verbs and the model type; result types stay in their subpackages
 
 
-def test_identify_from_a_file_loads_no_pinocchio_opencv_meshcat_or_numba(demo_run):
+def test_identify_from_a_file_loads_no_pinocchio_opencv_meshcat_or_numba(measurement_file):
     import subprocess
     import sys
 
-    path = demo_run[0] / "sim" / "measurements.json"
+    path = measurement_file
     code = (f"import sys, cpc2urdf; cpc2urdf.identify({str(path)!r}); "
             "print([m for m in ('pinocchio', 'cv2', 'meshcat', 'numba') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

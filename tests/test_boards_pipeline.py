@@ -46,6 +46,8 @@ CAMERAS = ("camera_left_optical", "camera_right_optical")
 TARGET = {"format": "cpc2urdf/board@1", "kind": "charuco", "squares": [7, 5], "square_size": 30, "marker_size": 22,
           "dictionary": "DICT_5X5_100", "units": "mm"}
 
+pytestmark = pytest.mark.slow  # long end-to-end runs; CI runs them
+
 
 def plate_board(first: int) -> dict[str, object]:
     """A 160 mm ChArUco plate: 4 x 4 squares of 40 mm, 4x4-bit markers ~5 px per bit at 1.5 m."""

@@ -86,6 +86,7 @@ def test_bench_fk_small(capsys):
     assert code == 0 and r["max_abs_difference"] < 1e-12 and r["cpc_vectorised_per_s"] > 0
 
 
+@pytest.mark.slow
 def test_demo_runs(demo_run):
     d, code, out = demo_run
     assert code == 0, out
@@ -99,6 +100,7 @@ def test_demo_runs(demo_run):
     assert model.metadata.uncertainty is not None
 
 
+@pytest.mark.slow
 def test_demo_from_images_runs(tmp_path, capsys):
     code, out, _ = run(["demo", "-o", str(tmp_path / "demo"), "--from-images"], capsys)
     assert code == 0, out
@@ -117,6 +119,7 @@ def test_study_and_bench_options_return_exit_codes(group, capsys):
     assert code == 0 and "usage:" in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, option, read",
     [
@@ -210,6 +213,7 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     assert out.read_text().startswith("<?xml")
 
 
+@pytest.mark.slow
 def test_a_bare_robot_name_is_the_shipped_robot_not_a_file_beside(demo_run, tmp_path, capsys):
     """A measurement file's robot "iis_head" is the shipped robot even with a file of that name
     beside it (the loader's rule): an output there is not refused."""
@@ -223,6 +227,7 @@ def test_a_bare_robot_name_is_the_shipped_robot_not_a_file_beside(demo_run, tmp_
     assert load_model(folder / "iis_head").structure.joint_names[0] == "table_x"
 
 
+@pytest.mark.slow
 def test_handeye_may_update_its_model_in_place(demo_run, tmp_path, capsys):
     """``handeye --model M -o M`` adds the camera frame to M, as its help says (atomically)."""
     d, _, _ = demo_run

@@ -132,6 +132,7 @@ def test_default_method_is_refined_and_exact_on_noise_free_data(user_robot, caps
         assert np.max(np.abs(A[f] - B[f])) < FK_AGREEMENT_TOL
 
 
+@pytest.mark.slow
 def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
     """A spec without geometry, noise-free data without a noise statement: the refits still tell a
     swapped pair of plates (which the closed form cannot even fit as read), transposed rotations,

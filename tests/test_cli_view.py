@@ -35,6 +35,7 @@ def test_view_is_a_registered_command(capsys: pytest.CaptureFixture[str]) -> Non
     assert "--target" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_html_page_with_screenshot_in_chromium(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -170,6 +171,7 @@ def _served_url(proc: subprocess.Popen[str], timeout: float) -> tuple[str | None
     return None, lines
 
 
+@pytest.mark.slow
 def test_serves_until_interrupted(tmp_path: Path) -> None:
     """Without --html: prints the URL, the page is served, Ctrl-C stops it (exit 0, server gone)."""
     proc = subprocess.Popen(
@@ -288,6 +290,7 @@ def test_keep_colours(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert "cpc2urdf-legend" not in html.read_text()
 
 
+@pytest.mark.slow
 def test_serves_the_reachable_region(tmp_path: Path) -> None:
     """``view ROBOT --reach`` without --html: the region's counts and notes printed (a served view
     has no legend), and the region in the served scene (green points in the browser's picture)."""

@@ -37,6 +37,7 @@ def test_real_data_pass_and_a_noise_five_times_too_small_is_unmodelled_error(nam
     assert any("INCONSISTENT DATA" in n for n in kept.metadata.notes)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_planted_gross_outliers_are_named_exactly(name: str) -> None:
     ms, nominal, loads = _set(name)

@@ -20,6 +20,7 @@ from cpc2urdf.model_metadata import (
 )
 
 
+@pytest.mark.slow
 def test_identified_model_file_round_trips_every_section(demo_run, tmp_path):
     demo_dir, _, _ = demo_run
     doc = json.loads((demo_dir / "model.json").read_text())

@@ -91,6 +91,7 @@ def real_rows() -> dict[str, dict]:
     return {rs.name: run_set(rs) for rs in SETS}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [s.name for s in SETS])
 def test_real_data_held_out_beat_the_urdf_and_figaroh(real_rows: dict[str, dict], name: str) -> None:
     """The data's 5-fold split: ``--method map`` at or below the URDF's and FIGAROH's held-out RMS

@@ -296,6 +296,7 @@ def test_plain_urdf_gets_triads_from_frame_names(tmp_path: Path) -> None:
 # ---- the page in a real browser ---------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_page_in_headless_chromium(tmp_path: Path) -> None:
     """The page shows the head, target, ghost and residual bars; its sweep really moves the
     head (pressing play, scripted)."""
@@ -402,6 +403,7 @@ def near(mask: np.ndarray, uv: tuple[float, float], radius: float = 50.0) -> int
     return int((mask & ((cols - uv[0]) ** 2 + (rows - uv[1]) ** 2 < radius**2)).sum())
 
 
+@pytest.mark.slow
 def test_tiago_meshes_in_headless_chromium(tmp_path: Path) -> None:
     """TIAGo (example-robot-data, 44 STL meshes under package://) drawn from its own meshes:
     the robot covers a plausible area, its orange base ring is where its base link projects, and
@@ -433,6 +435,7 @@ def test_tiago_meshes_in_headless_chromium(tmp_path: Path) -> None:
     assert dark.sum() > 3000 and white.sum() > 8000, (dark.sum(), white.sum())
 
 
+@pytest.mark.slow
 def test_change_colours_in_headless_chromium(tmp_path: Path) -> None:
     """A head whose tilt joint moved 12 mm against the nominal one: the links below tilt red,
     those above green, where they project; the legend's green-yellow-red bar in the page."""

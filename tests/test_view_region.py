@@ -152,6 +152,7 @@ def test_a_model_identified_from_a_users_urdf_gets_the_region_on_its_camera(tmp_
     assert summary.region.moved() in summary.format()
 
 
+@pytest.mark.slow
 def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``reach --html --screenshot`` writes the PNG, the page and its picture; in the picture the
     fixated targets are green where the viewer camera projects them, and the translucent

@@ -186,6 +186,7 @@ def test_measurements_of_the_model_land_on_its_plate(tiago: tuple[Path, CPCModel
     assert summary.n_measured == len(ms.q) and summary.residual_max < 1e-9
 
 
+@pytest.mark.slow
 def test_tiago_model_in_headless_chromium(tiago: tuple[Path, CPCModel, Path], tmp_path: Path) -> None:
     """The page as a browser shows it: the hand, which the calibrated torso lift carried about
     2.4 mm, in its change colour (yellow-green), the base, which nothing moved, green."""
