@@ -117,7 +117,7 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
     left, right = solver.camera_poses(solver.home)
     centre = 0.5 * (left[:3, 3] + right[:3, 3])
     P = [centre + rng.uniform(-CUBE_HALF, CUBE_HALF, (n_cube, 3))]
-    pol = [np.where(np.arange(n_cube) % 2 == 0, 0, 1 + (np.arange(n_cube) // 2) % 3)]
+    pol = [np.where(np.arange(n_cube) % 2 == 0, 0, 1 + (np.arange(n_cube) // 2) % (len(POLICIES) - 1))]
     Qc = [np.tile(none, (n_cube, 1))]
     qc_rows = solver.lower + (solver.upper - solver.lower) * rng.random((n_cube, n))
     pol_needs_q = np.isin(pol[0], [POLICIES.index("min-motion"), POLICIES.index("eyes-only")])

@@ -29,7 +29,7 @@ from cpc2urdf.validation.gaze.batch import (
     CompiledGaze,
     _pool,
 )
-from cpc2urdf.validation.gaze.solver import pointing_tolerance
+from cpc2urdf.validation.gaze.options import pointing_tolerance
 
 N_TARGETS = 200
 N_YOURDFPY = 25

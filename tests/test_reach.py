@@ -104,6 +104,8 @@ def test_region_statuses_are_true(region):
     else:  # a calibrated head cannot: its error is the vertical disparity, a fraction of a degree
         assert counts["fixated"] == 0 and counts["disparity"] >= n // 4
         assert np.all(r.error[disparity] < math.radians(1.0))
+    if not eyes_coplanar(model):  # limits stop the facing posture; fixation may exist turned away
+        return
     # a generic solver (scipy least_squares) from several starts does not fixate those the limits stop
     free = solver.free_joints("cyclopean")
     held_table = GazeSolver(solver.robot, solver.cameras, GazeOptions(joints=[solver.joint_names[i] for i in free]))

@@ -68,6 +68,7 @@ class GazeSolver:
             (its model is used, not copied).
         cameras: Names of one or two camera optical frames (z along the optical axis).
         options: Which joints move, the tolerance, ... (:class:`GazeOptions`; None: defaults).
+        fields: :class:`GazeOptions` fields (``joints=...``, ``tolerance=...``), over ``options``.
 
     Raises:
         InputFileError: An unreadable URDF, or joints with more than one degree of freedom
@@ -91,8 +92,9 @@ class GazeSolver:
         urdf: str | os.PathLike[str] | PinocchioRobot,
         cameras: Sequence[str] = DEFAULT_CAMERAS,
         options: GazeOptions | None = None,
+        **fields: Any,
     ) -> None:
-        opts = GazeOptions() if options is None else options
+        opts = _options(options, fields)
         self.options = opts
         self.tolerance = opts.tolerance_rad
         # continuous joints read as revolute without limits: a robot's wheels are off the head's
@@ -376,11 +378,24 @@ def solver_for(
     ``fields``: :class:`GazeOptions` fields (``joints=...``, ``tolerance=...``), over ``options``.
     """
     fields.pop("viewing_distance", None)  # the use-table policy's, gone; still passed by older callers
-    try:
-        opts = dataclasses.replace(options or GazeOptions(), **fields)
-    except TypeError as e:
-        raise ConfigurationError(f"unknown gaze option: {e}") from e
+    opts = _options(options, fields)
     return GazeSolver(PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, opts)
+
+
+def _options(options: GazeOptions | None, fields: dict[str, Any]) -> GazeOptions:
+    """``options`` (None: the defaults) with ``fields`` over it.
+
+    Raises:
+        ConfigurationError: A field :class:`GazeOptions` does not have, or a bad value.
+    """
+    opts = GazeOptions() if options is None else options
+    if not fields:
+        return opts
+    unknown = sorted(set(fields) - {f.name for f in dataclasses.fields(GazeOptions)})
+    if unknown:
+        raise ConfigurationError(f"unknown gaze option {unknown[0]!r}; expected one of "
+                                 f"{', '.join(f.name for f in dataclasses.fields(GazeOptions))}")
+    return dataclasses.replace(opts, **fields)
 
 
 __all__ = ["FAR_TARGET", "VERSION_POLICY_MAX_NECK", "GazeOptions", "GazeSolver", "solver_for"]
