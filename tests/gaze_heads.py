@@ -7,8 +7,8 @@ the limits; one axis: points on it; two eyes whose axes meet: their meeting poin
 Shapes (``HEAD_SHAPES``):
 
 - ``iis_nominal`` / ``iis_calibrated``: the shipped IIS-head (table, pan, tilt, two vergence
-  eyes) and ``bench_gaze.calibrated_iis_head(0)``; calibrated targets from
-  ``bench_gaze.reachable_targets`` (the eyes' axes meet only on a curve);
+  eyes) and ``heads.calibrated_iis_head(0)``; calibrated targets from
+  ``heads.reachable_targets`` (the eyes' axes meet only on a curve);
 - ``tiago``: TIAGo (example-robot-data), torso lift + pan-tilt, one RGB-D camera
   (``xtion_rgb_optical_frame``);
 - ``talos``: TALOS (example-robot-data, ``talos_reduced.urdf``), torso + pan-tilt, one camera
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import calibrated_iis_head, reachable_targets
+from cpc2urdf.identification.simulation.heads import calibrated_iis_head, reachable_targets
 from cpc2urdf.urdf.document import write_urdf
 from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.crosscheck import yourdfpy_pose

@@ -11,19 +11,16 @@ import numpy as np
 import pytest
 
 from cpc2urdf.cli import main
-from cpc2urdf.studies.bench_gaze import (
-    REAL_HEADS,
+from cpc2urdf.studies.bench_gaze import REAL_HEADS, _real_urdf, bench_head, tracking_targets
+from cpc2urdf.tolerances import GAZE_POINTING_TOL
+from cpc2urdf.validation.crosscheck import yourdfpy_pose
+from cpc2urdf.validation.gaze.reference import (
     SolvedAxes,
-    _real_urdf,
     audit_targets,
-    bench_head,
     generic_reachable_targets,
     generic_unreachable_targets,
     missed_targets,
-    tracking_targets,
 )
-from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.validation.crosscheck import yourdfpy_pose
 
 KEYS = (
     "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",

@@ -338,7 +338,7 @@ def test_check_reports_the_gaze_head(tmp_path: Path, capfd: pytest.CaptureFixtur
     import json
 
     from cpc2urdf.files.model_file import save_model
-    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+    from cpc2urdf.identification.simulation.heads import calibrated_iis_head
     from cpc2urdf.urdf.document import write_urdf
     from cpc2urdf.validation.gaze import GazeSolver
 

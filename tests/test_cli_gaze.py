@@ -148,7 +148,7 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     """A calibrated IIS-head (eyes mounted a little off): cannot fixate exactly, its vertical
     disparity reported once (median and max over the workspace ahead), then the solution."""
     from cpc2urdf.files.model_file import save_model
-    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+    from cpc2urdf.identification.simulation.heads import calibrated_iis_head
     from cpc2urdf.validation.gaze import GazeSolver
 
     model = calibrated_iis_head(0)

@@ -3,7 +3,7 @@
 Fixation is checked by FK the solver does not use: the CPC model's own vectorised FK for every
 solution, and yourdfpy on the same URDF file for a seeded random subset (yourdfpy costs ~1 ms
 per configuration, too slow for all 20,000 within the test budget). Reachable targets come from
-``bench_gaze.reachable_targets``: sampled readings whose two optical axes meet (see its module
+``heads.reachable_targets``: sampled readings whose two optical axes meet (see its module
 docstring), so every one of them is fixatable by construction.
 """
 
@@ -22,7 +22,7 @@ from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError, InputFileError, SpecError, UnknownNameError
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import (
+from cpc2urdf.identification.simulation.heads import (
     calibrated_iis_head,
     reachable_targets,
     too_close_targets,
@@ -292,7 +292,7 @@ _LEAK_CHECK = """
 import numpy as np
 from numba.core.runtime import rtsys
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import reachable_targets, unreachable_targets
+from cpc2urdf.identification.simulation.heads import reachable_targets, unreachable_targets
 from cpc2urdf.validation.gaze import GazeSolver
 
 model = load_model("iis_head")
@@ -459,7 +459,7 @@ def test_target_on_camera_centre_is_not_fixated(nominal, solver):
 # Reachable (each is fixated at the readings after it) only with an eye at its lower bound and
 # tilt 0.03 rad below its limit: the weighted home's pull of the eyes to their middle led
 # pointing into the corner pan = 0, tilt at its limit (joint_limits, 0.27 / 0.42 deg); 2 of
-# 40,000 bench_gaze.reachable_targets (seeds 10-19, indices 3072 of seed 11, 3054 of seed 18)
+# 40,000 heads.reachable_targets (seeds 10-19, indices 3072 of seed 11, 3054 of seed 18)
 CORNER_TARGETS = (
     ([-0.3156096808719948, 0.1461449846005398, 0.21604715033419486],
      [0.5, 0.25, 0.24914717090413305, 1.0205095036362168, 0.00520147806113107, 0.47137090259605297]),

@@ -40,8 +40,8 @@ import numpy as np
 import pytest
 
 from cpc2urdf.files.robot_ref import load_model
+from cpc2urdf.identification.simulation.heads import calibrated_iis_head
 from cpc2urdf.model import CPCModel
-from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.gaze import (
     POLICIES,

@@ -16,7 +16,7 @@ from gaze_heads import HEAD_SHAPES, OPTICAL_RPY, head_case, pointing_errors, you
 
 from cpc2urdf.errors import ConfigurationError, SpecError, UnknownNameError
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+from cpc2urdf.identification.simulation.heads import calibrated_iis_head
 from cpc2urdf.tolerances import GAZE_PIXEL_FRACTION, GAZE_POINTING_TOL
 from cpc2urdf.urdf.document import write_urdf
 from cpc2urdf.urdf.pinocchio import PinocchioRobot

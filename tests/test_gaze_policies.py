@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import calibrated_iis_head, reachable_targets
+from cpc2urdf.identification.simulation.heads import calibrated_iis_head, reachable_targets
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.gaze import GazeSolver
 

@@ -16,7 +16,11 @@ from gaze_heads import model_pointing_errors
 
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import calibrated_iis_head, eyes_coplanar, reachable_targets
+from cpc2urdf.identification.simulation.heads import (
+    calibrated_iis_head,
+    eyes_coplanar,
+    reachable_targets,
+)
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import GazeSolver

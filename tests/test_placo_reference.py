@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from gaze_heads import head_case
 
-from cpc2urdf.studies.bench_gaze import SolvedAxes, bench_head, format_table, reachable_targets
+from cpc2urdf.identification.simulation.heads import reachable_targets
+from cpc2urdf.studies.bench_gaze import bench_head, format_table
 from cpc2urdf.studies.placo_reference import (
     FLOOR,
     MAX_STEPS,
@@ -21,6 +22,7 @@ from cpc2urdf.studies.placo_reference import (
     placo_reference,
 )
 from cpc2urdf.urdf.pinocchio import PinocchioRobot
+from cpc2urdf.validation.gaze.reference import SolvedAxes
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from cpc2urdf.cli import main
 from cpc2urdf.cli import reach as cli_reach
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.studies.bench_gaze import SolvedAxes, _generic_reference_solver, calibrated_iis_head, eyes_coplanar
+from cpc2urdf.identification.simulation.heads import calibrated_iis_head, eyes_coplanar
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
 from cpc2urdf.validation.gaze import GazeOptions, GazeSolver, reach
 from cpc2urdf.validation.gaze.reach import (
@@ -34,6 +34,7 @@ from cpc2urdf.validation.gaze.reach import (
     reachable_region,
     shell_grid,
 )
+from cpc2urdf.validation.gaze.reference import SolvedAxes, generic_reference_solver
 
 SAMPLES = (3, 7, 5)  # 105 targets: small enough for a per-target solve loop
 
@@ -109,7 +110,7 @@ def test_region_statuses_are_true(region):
     # a generic solver (scipy least_squares) from several starts does not fixate those the limits stop
     free = solver.free_joints("cyclopean")
     held_table = GazeSolver(solver.robot, solver.cameras, GazeOptions(joints=[solver.joint_names[i] for i in free]))
-    ref = _generic_reference_solver(SolvedAxes(held_table))
+    ref = generic_reference_solver(SolvedAxes(held_table))
     rng = np.random.default_rng(0)
     stopped = np.flatnonzero(limits)
     assert stopped.size
@@ -295,7 +296,7 @@ def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
     cannot fixate exactly: every target 'disparity') a target counts as fixated within 0.1 px of a
     200 px camera; with the neck held (--joints on the eyes only) fewer targets are fixated."""
     from cpc2urdf.files.model_file import save_model
-    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
+    from cpc2urdf.identification.simulation.heads import calibrated_iis_head
 
     model = save_model(calibrated_iis_head(0), tmp_path / "calibrated.json")
     grid = ["--samples", "2", "5", "3", "--range", "0.6", "2"]

@@ -171,8 +171,8 @@ def test_camera_body_names_avoid_taken_names():
 def test_mounts_rig_and_base():
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.robot_ref import load_robot
+    from cpc2urdf.identification.simulation.heads import calibrated_iis_head
     from cpc2urdf.model import CPCParams
-    from cpc2urdf.studies.bench_gaze import calibrated_iis_head
 
     spec = load_robot("iis_head")
     model = calibrated_iis_head(0).with_params(world_to_base=CPCParams((0.6, 0.0, 0.8), 0.3, (0.1, 0.2, 1.5)))

@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
 
     st.start("gaze: fixate targets in front of the calibrated head (joint limits as constraints)")
     from cpc2urdf.errors import DegenerateDataError
-    from cpc2urdf.studies.bench_gaze import reachable_targets
+    from cpc2urdf.identification.simulation.heads import reachable_targets
 
     model = load_model(f"{d}/model.json")
     q_home, ahead = _target_ahead(model)

@@ -64,18 +64,30 @@ from numpy.typing import NDArray
 
 from cpc2urdf.argparsing import OneLineParser, check_outputs_are_not_inputs
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.identification.simulation.heads import (
+    calibrated_iis_head,
+    reachable_targets,
+    unreachable_targets,
+)
+from cpc2urdf.model import CPCModel
 from cpc2urdf.studies.placo_reference import FLOOR as PLACO_FLOOR
 from cpc2urdf.studies.placo_reference import placo_reference
 from cpc2urdf.studies.placo_reference import summary as placo_summary
+from cpc2urdf.validation.gaze.reference import (
+    AUDIT_HALF_WIDTH,
+    AUDIT_STARTS,
+    SolvedAxes,
+    audit_targets,
+    generic_reachable_targets,
+    generic_reference_solver,
+    generic_unreachable_targets,
+    missed_targets,
+)
 
 if TYPE_CHECKING:
     from cpc2urdf.validation.gaze import GazeSolver
 
 Array = NDArray[np.float64]
-CAMERAS = ("camera_left_optical", "camera_right_optical")
-MIN_DISTANCE = 0.15  # [m]: targets closer than this to a camera are not generated
-MAX_DISTANCE = 5.0  # [m]
 # the real robot heads in example-robot-data: URDF (under its robots/ folder) and camera frame
 REAL_HEADS = {
     "tiago": ("tiago_description/robots/tiago.urdf", ("xtion_rgb_optical_frame",)),
@@ -87,431 +99,7 @@ TRACK_DEADLINE = TRACK_DT  # [s]: a tracking step must end within its period
 TRACK_RADIUS = 0.05  # [m]: the tracked target circles this far about a reachable target
 TRACK_HOLD = 1.0  # [s]: then jumps to the next one (a saccade)
 TRACK_POOL = 200  # reachable targets the tracked target's centres are chosen from
-PERTURB_ANGLE = math.radians(0.1)  # [rad]: std of the random rotation of each CPC transform
-PERTURB_LENGTH = 0.5e-3  # [m]: std of the random translation of each CPC transform
-AUDIT_HALF_WIDTH = 3.0  # [m]: the audit's random targets are uniform in a cube this far about the head's centre
-AUDIT_STARTS = 20  # random postures each audited target is solved again from
 REFERENCE_BLOCK = 25  # targets a block when the reference and ours alternate in blocks (_block_run)
-
-
-def _rotvec_matrix(v: Array) -> Array:
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_rotvec(v).as_matrix()
-
-
-def calibrated_iis_head(seed: int = 0, model: CPCModel | None = None) -> CPCModel:
-    """A plausible calibrated IIS-head: the nominal with seeded small errors, right camera trimmed.
-
-    Every joint's and frame's CPC transform is multiplied by a random rotation (std
-    :data:`PERTURB_ANGLE` per axis) and shifted (std :data:`PERTURB_LENGTH`); then the right
-    camera is rotated about its own x axis so that both optical axes meet straight ahead when
-    the head is at home with symmetric vergence (see module docstring).
-
-    Args:
-        seed: Seed of the perturbation.
-        model: The model to perturb; None: the shipped ``iis_head`` nominal.
-    """
-    from scipy.optimize import brentq
-
-    from cpc2urdf.files.robot_ref import load_model
-
-    nominal = model if model is not None else load_model("iis_head")
-    rng = np.random.default_rng(seed)
-
-    def perturb(p: CPCParams) -> CPCParams:
-        T = p.matrix()
-        T2 = T.copy()
-        T2[:3, :3] = T[:3, :3] @ _rotvec_matrix(rng.normal(0.0, PERTURB_ANGLE, 3))
-        T2[:3, 3] = T[:3, 3] + rng.normal(0.0, PERTURB_LENGTH, 3)
-        return CPCParams.from_matrix(T2)
-
-    joints = {n: perturb(p) for n, p in nominal.joints.items()}
-    frames = {n: perturb(p) for n, p in nominal.frames.items()}
-    m = nominal.with_params(joints=joints, frames=frames)
-    s = m.structure
-    q = 0.5 * (s.lower + s.upper)
-    iL, iR = s.joint_index("vergence_left"), s.joint_index("vergence_right")
-    q[iL] -= math.radians(5.0)  # converge symmetrically on a point ~0.7 m ahead
-    q[iR] += math.radians(5.0)
-    base = frames[CAMERAS[1]].matrix()
-
-    def trimmed(phi: float) -> CPCModel:
-        T = base.copy()
-        T[:3, :3] = T[:3, :3] @ _rotvec_matrix(np.array([phi, 0.0, 0.0]))
-        return m.with_params(frames={CAMERAS[1]: CPCParams.from_matrix(T)})
-
-    phi = brentq(lambda a: float(axis_distance(trimmed(a), q)), -0.05, 0.05, xtol=1e-15)
-    return trimmed(phi)
-
-
-def _axes(model: CPCModel, Q: Array) -> tuple[Array, Array, Array, Array]:
-    T = model.fk(Q, CAMERAS)
-    L, R = T[CAMERAS[0]], T[CAMERAS[1]]
-    return L[..., :3, 3], L[..., :3, 2], R[..., :3, 3], R[..., :3, 2]
-
-
-def axis_distance(model: CPCModel, Q: Array) -> Array:
-    """Signed distance between the two optical axes [m], shape (N,) for Q of shape (N, n)."""
-    oL, zL, oR, zR = _axes(model, Q)
-    n = np.cross(zL, zR)
-    return np.einsum("...i,...i", oR - oL, n) / np.linalg.norm(n, axis=-1)
-
-
-def axis_meeting(model: CPCModel, Q: Array) -> tuple[Array, Array, Array]:
-    """Closest points of the two optical axes: (midpoint (N, 3), s_left (N,), s_right (N,)).
-
-    ``s`` is the distance along each optical axis from the camera centre [m].
-    """
-    oL, zL, oR, zR = _axes(model, Q)
-    w = oL - oR
-    b = np.einsum("ij,ij->i", zL, zR)
-    d, e = np.einsum("ij,ij->i", zL, w), np.einsum("ij,ij->i", zR, w)
-    den = 1.0 - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - d) / den
-        t = (e - b * d) / den
-    mid = 0.5 * (oL + s[:, None] * zL + oR + t[:, None] * zR)
-    return mid, s, t
-
-
-def eyes_coplanar(model: CPCModel, tol: float = 1e-8) -> bool:
-    """True if the two optical axes always meet (to ``tol`` [m]), as on the nominal IIS-head.
-
-    Checked on 200 seeded configurations whose eyes differ by at least 10 deg.
-    """
-    s = model.structure
-    rng = np.random.default_rng(12345)
-    Q = s.lower + (s.upper - s.lower) * rng.random((200, s.n_joints))
-    iL, iR = s.joint_index("vergence_left"), s.joint_index("vergence_right")
-    Q = Q[np.abs(Q[:, iL] - Q[:, iR]) > math.radians(10.0)]
-    return bool(np.max(np.abs(axis_distance(model, Q))) < tol)
-
-
-def reachable_targets(
-    model: CPCModel, n: int, seed: int = 0, *, q_table: Array | None = None, max_rounds: int = 200
-) -> tuple[Array, Array]:
-    """``n`` targets that ``model`` fixates exactly, and the readings that do it.
-
-    See the module docstring for the construction. Only the CPC model's forward kinematics is
-    used (not Pinocchio, not the solver).
-
-    Args:
-        model: Head model with joints table_x, table_y, pan, tilt, vergence_left/right.
-        n: Number of targets.
-        seed: Seed of the sampled readings.
-        q_table: Table readings [m], shape (2,); None: the middle of the limits.
-        max_rounds: Rounds of sampled readings before giving up.
-
-    Returns:
-        ``(P, Q)``: targets (world) [m], shape (n, 3); readings, shape (n, 6).
-
-    Raises:
-        DegenerateDataError: Fewer than ``n`` targets after ``max_rounds`` rounds: this head's
-            two optical axes (almost) never meet in front of the cameras within its limits.
-    """
-    s = model.structure
-    rng = np.random.default_rng(seed)
-    lo, hi = s.lower, s.upper
-    iR = s.joint_index("vergence_right")
-    home = 0.5 * (lo + hi)
-    table = [s.joint_index("table_x"), s.joint_index("table_y")]
-    out_P: list[Array] = []
-    out_Q: list[Array] = []
-    grid = np.linspace(lo[iR], hi[iR], 19)
-    coplanar = eyes_coplanar(model)
-    for _round in range(max_rounds):
-        if sum(len(p) for p in out_P) >= n:
-            break
-        m = max(2 * n, 64)
-        Q = lo + (hi - lo) * rng.random((m, s.n_joints))
-        Q[:, table] = home[table] if q_table is None else q_table
-        # signed axis distance over the right eye's range, all samples at once
-        if not coplanar:
-            G = np.repeat(Q[:, None, :], grid.size, axis=1)
-            G[:, :, iR] = grid
-            f = axis_distance(model, G.reshape(-1, s.n_joints)).reshape(m, grid.size)
-        if coplanar:  # every right-eye reading meets the left axis
-            Qs = Q
-        else:
-            sign = np.sign(f)
-            change = (sign[:, :-1] * sign[:, 1:] < 0) & (np.abs(f[:, :-1] - f[:, 1:]) < 0.05)
-            has = change.any(axis=1)
-            Q, f, change = Q[has], f[has], change[has]
-            k = np.argmax(change, axis=1)
-            a, b = grid[k], grid[k + 1]
-            fa = f[np.arange(len(Q)), k]
-            for _ in range(50):  # vectorised bisection: grid step / 2^50 < 1e-16 rad
-                c = 0.5 * (a + b)
-                Qc = Q.copy()
-                Qc[:, iR] = c
-                fc = axis_distance(model, Qc)
-                left = np.sign(fc) == np.sign(fa)
-                a = np.where(left, c, a)
-                fa = np.where(left, fc, fa)
-                b = np.where(left, b, c)
-            Qs = Q.copy()
-            Qs[:, iR] = 0.5 * (a + b)
-        mid, sl, sr = axis_meeting(model, Qs)
-        ok = (sl > MIN_DISTANCE) & (sr > MIN_DISTANCE) & (sl < MAX_DISTANCE) & (sr < MAX_DISTANCE)
-        ok &= np.abs(axis_distance(model, Qs)) < (1e-9 if coplanar else 1e-12)
-        out_P.append(mid[ok])
-        out_Q.append(Qs[ok])
-    found = sum(len(p) for p in out_P)
-    if found < n:
-        raise DegenerateDataError(
-            f"{model.structure.name}: only {found} of {n} targets found where both optical axes meet "
-            f"{MIN_DISTANCE:g}-{MAX_DISTANCE:g} m in front of the cameras, in {max_rounds} rounds of "
-            f"{max(2 * n, 64)} sampled readings within the limits (table fixed)"
-        )
-    return np.concatenate(out_P)[:n], np.concatenate(out_Q)[:n]
-
-
-def unreachable_targets(model: CPCModel, n: int, seed: int = 0) -> Array:
-    """``n`` targets no configuration can fixate (world) [m], shape (n, 3), in two families.
-
-    - Behind the head: pan turns through [0, 180] deg about home (90 deg, facing forward), the
-      eyes add at most 45 deg either way, so directions within 17 deg of straight back (here
-      lateral slope <= 0.3), 0.5-3 m away, are out of reach.
-    - Beyond the tilt range: 10-20 m up or down the pan axis (elevation ~90 deg; tilt spans
-      60 deg).
-
-    (Targets merely closer than the baseline are *not* unreachable on the IIS-head: the cameras
-    orbit the vergence axis and can converge on points between them once the head moves; see
-    :func:`too_close_targets` for the head-still case.)
-    """
-    s = model.structure
-    rng = np.random.default_rng(seed)
-    home = 0.5 * (s.lower + s.upper)
-    T = model.fk(home)
-    p_axes, axes_dir = model.joint_axes_world(home)
-    ip = s.joint_index("pan")
-    pan_axis, pan_point = axes_dir[0, ip], p_axes[0, ip]
-    fwd = (T[CAMERAS[0]][:3, 2] + T[CAMERAS[1]][:3, 2]) / 2.0
-    fwd -= (fwd @ pan_axis) * pan_axis
-    fwd /= np.linalg.norm(fwd)
-    side = np.cross(pan_axis, fwd)
-    k = n // 2
-    d = rng.uniform(0.5, 3.0, k)
-    lat = rng.uniform(-0.3, 0.3, k)
-    up = rng.uniform(-0.2, 0.2, k)
-    behind = pan_point - d[:, None] * fwd + (lat * d)[:, None] * side + up[:, None] * pan_axis
-    m = n - k
-    sign = np.where(rng.random(m) < 0.5, -1.0, 1.0)
-    far = pan_point + (sign * rng.uniform(10.0, 20.0, m))[:, None] * pan_axis
-    return np.concatenate([behind, far])
-
-
-def too_close_targets(model: CPCModel, q: Array, n: int, seed: int = 0, radius: float = 0.04) -> Array:
-    """Targets the eyes alone cannot fixate at readings ``q``: inside the cameras' orbit.
-
-    Each camera orbits its vergence axis (radius ~60 mm on the IIS-head) with its optical axis
-    tangent to the orbit, so with the head still no optical axis passes within the orbit. The
-    targets lie in the left eye's plane (through its camera centre, normal to its vergence
-    axis) within ``radius`` [m] of that axis. Shape (n, 3), world [m].
-    """
-    s = model.structure
-    rng = np.random.default_rng(seed)
-    iL = s.joint_index("vergence_left")
-    p_axes, axes_dir = model.joint_axes_world(q)
-    a, u = p_axes[0, iL], axes_dir[0, iL]
-    o = model.fk(q)[CAMERAS[0]][:3, 3]
-    centre = a + ((o - a) @ u) * u
-    e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(u, e1)
-    r = radius * np.sqrt(rng.random(n))
-    phi = rng.uniform(0.0, 2.0 * math.pi, n)
-    return centre + r[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
-
-
-def _finite_home(lower: Array, upper: Array) -> Array:
-    """The middle of every joint's limits, 0 for a joint without finite limits, shape (n,)."""
-    limited = np.isfinite(lower) & np.isfinite(upper)
-    return np.where(limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0)
-
-
-class SolvedAxes:
-    """The optical axes a solver points (``chain.solve_cameras``), by Pinocchio on a copy of the
-    solver's model: the camera frames, and for a rigid pair solved on its cyclopean axis a frame
-    added at the midpoint of the centres, z along the sum of the optical axes (it is rigid, so
-    placed once at home). Used for targets and the reference, not by the solver."""
-
-    def __init__(self, solver: GazeSolver) -> None:
-        import pinocchio as pin
-
-        self.pin = pin
-        chain = solver.chain
-        model = pin.Model(solver.model)
-        fids = [model.getFrameId(c) for c in solver.cameras]
-        self.home: Array = _finite_home(solver.lower, solver.upper)
-        self.frames: list[int] = []
-        for c in chain.solve_cameras.tolist():
-            if c < len(fids):
-                self.frames.append(fids[c])
-                continue
-            data = model.createData()
-            pin.framesForwardKinematics(model, data, self.home)
-            T0, T1 = data.oMf[fids[0]], data.oMf[fids[1]]
-            z = T0.rotation[:, 2] + T1.rotation[:, 2]
-            z /= np.linalg.norm(z)
-            x = T1.translation - T0.translation
-            x -= (x @ z) * z
-            x /= np.linalg.norm(x)
-            M = pin.SE3(np.column_stack([x, np.cross(z, x), z]), 0.5 * (T0.translation + T1.translation))
-            jid = model.frames[fids[0]].parentJoint
-            self.frames.append(model.addFrame(pin.Frame("bench_cyclopean", jid, data.oMi[jid].actInv(M), pin.FrameType.OP_FRAME)))
-        self.model = model
-        self.data = model.createData()
-        self.chain = chain
-
-    def axes(self, Q: Array) -> tuple[Array, Array]:
-        """Centres (N, S, 3) [m] and unit optical axes (N, S, 3) (world) at readings Q (N, n)."""
-        pin, model, data = self.pin, self.model, self.data
-        O = np.empty((len(Q), len(self.frames), 3))
-        Z = np.empty_like(O)
-        for i, q in enumerate(Q):
-            pin.framesForwardKinematics(model, data, q)
-            for s, f in enumerate(self.frames):
-                O[i, s], Z[i, s] = data.oMf[f].translation, data.oMf[f].rotation[:, 2]
-        return O, Z
-
-    def residual(self, q: Array, p: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        """Per solved axis ``u - e_z`` (``u`` the unit target direction in its frame), shape (3S,),
-        and its Jacobian by the readings (3S, n): ``dp_cam = -v + [p_cam]x w`` from the LOCAL
-        frame Jacobian, ``du = (I - u u^T) dp_cam / |p_cam|``."""
-        pin, model, data = self.pin, self.model, self.data
-        if jacobian:
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
-        else:
-            pin.framesForwardKinematics(model, data, q)
-        r, J = [], []
-        for f in self.frames:
-            pc = data.oMf[f].actInv(p)
-            d = float(np.linalg.norm(pc))
-            u = pc / d
-            r.append(u - np.array([0.0, 0.0, 1.0]))
-            if jacobian:
-                Jl = pin.getFrameJacobian(model, data, f, pin.LOCAL)
-                skew = np.array([[0.0, -pc[2], pc[1]], [pc[2], 0.0, -pc[0]], [-pc[1], pc[0], 0.0]])
-                dp = -Jl[:3] + skew @ Jl[3:]
-                J.append((np.eye(3) - np.outer(u, u)) @ dp / d)
-        return np.concatenate(r), (np.vstack(J) if jacobian else None)
-
-    def pointing_errors(self, q: Array, p: Array) -> Array:
-        """Angle [rad] between each solved axis and the direction to target ``p`` at readings
-        ``q``, shape (S,)."""
-        O, Z = self.axes(q[None, :])
-        d = p - O[0]
-        return np.arctan2(np.linalg.norm(np.cross(d, Z[0]), axis=1), np.einsum("ij,ij->i", d, Z[0]))
-
-
-def generic_reachable_targets(axes: SolvedAxes, n: int, seed: int = 0) -> tuple[Array, Array]:
-    """``n`` targets (world) [m], shape (n, 3), that readings sampled inside the bounds of the
-    solver's unknowns fixate, and those readings (n, n_joints): one solved axis, a point on it
-    0.3-3 m ahead; two, the meeting point of axes that meet (to 1e-12 m) 0.15-5 m ahead of both.
-
-    Raises:
-        DegenerateDataError: Fewer than ``n`` after 200 rounds (two axes that seldom meet).
-    """
-    rng = np.random.default_rng(seed)
-    chain = axes.chain
-    lo, hi = chain.lower, chain.upper
-    P: list[Array] = []
-    Qs: list[Array] = []
-    for _round in range(200):
-        if len(P) >= n:
-            break
-        k = 2 * (n - len(P)) + 16
-        U = rng.uniform(lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo), (k, chain.m))
-        Q = chain.q_from_u(U)
-        O, Z = axes.axes(Q)
-        if O.shape[1] == 1:
-            pts = O[:, 0] + rng.uniform(0.3, 3.0, k)[:, None] * Z[:, 0]
-            ok = np.ones(k, dtype=bool)
-        else:
-            w = O[:, 0] - O[:, 1]
-            b = np.einsum("ij,ij->i", Z[:, 0], Z[:, 1])
-            d, e = np.einsum("ij,ij->i", Z[:, 0], w), np.einsum("ij,ij->i", Z[:, 1], w)
-            den = np.where(1.0 - b * b > 1e-12, 1.0 - b * b, np.nan)
-            s, t = (b * e - d) / den, (e - b * d) / den
-            p0, p1 = O[:, 0] + s[:, None] * Z[:, 0], O[:, 1] + t[:, None] * Z[:, 1]
-            pts = 0.5 * (p0 + p1)
-            with np.errstate(invalid="ignore"):
-                ok = (np.linalg.norm(p0 - p1, axis=1) < 1e-12) & (s > 0.15) & (s < 5.0) & (t > 0.15) & (t < 5.0)
-        P += list(pts[ok])
-        Qs += list(Q[ok])
-    if len(P) < n:
-        raise DegenerateDataError(f"only {len(P)} of {n} targets found where the solved axes meet in front")
-    return np.array(P[:n]), np.array(Qs[:n])
-
-
-def generic_unreachable_targets(solver: GazeSolver, n: int, seed: int = 0) -> Array:
-    """``n`` targets behind the head (world) [m], shape (n, 3): within 15 deg of straight back
-    from the head frame's origin (:func:`~cpc2urdf.validation.gaze.reach.head_frame`), 0.5-3 m
-    away. Behind a pan-tilt head whose pan cannot turn round; the benchmark reports how many the
-    solver fixates all the same."""
-    from cpc2urdf.validation.gaze.reach import head_frame
-
-    frame = head_frame(solver)
-    rng = np.random.default_rng(seed)
-    d = rng.uniform(0.5, 3.0, n)
-    a = np.radians(15.0) * np.sqrt(rng.random(n))
-    phi = rng.uniform(0.0, 2.0 * math.pi, n)
-    dirs = np.column_stack([-np.cos(a), np.sin(a) * np.cos(phi), np.sin(a) * np.sin(phi)])
-    return frame.to_world(d[:, None] * dirs)
-
-
-def _generic_reference_solver(axes: SolvedAxes) -> Callable[[Array, Array], tuple[Array, int]]:
-    """scipy least_squares over the solver's unknowns (its coupling and bounds), on
-    :meth:`SolvedAxes.residual`."""
-    from scipy.optimize import least_squares
-
-    chain = axes.chain
-    A, b = chain.robot_A, chain.robot_b
-    lo, hi = chain.lower, chain.upper
-
-    def solve(p: Array, q0: Array) -> tuple[Array, int]:
-        def fun(u: Array) -> Array:
-            return axes.residual(A @ u + b, p, False)[0]
-
-        def jac(u: Array) -> Array:
-            J = axes.residual(A @ u + b, p, True)[1]
-            assert J is not None
-            return J @ A
-
-        u0 = np.clip(chain.u_from_q(q0), lo + 1e-12, hi - 1e-12)
-        res = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        return A @ res.x + b, int(res.nfev)
-
-    return solve
-
-
-def audit_targets(axes: SolvedAxes, n: int, seed: int = 0) -> Array:
-    """``n`` targets (world) [m], shape (n, 3), uniform in a cube :data:`AUDIT_HALF_WIDTH` about
-    the solved cameras' mean centre at home: near and far, in front, beside and behind; most out
-    of reach."""
-    O, _ = axes.axes(axes.home[None])
-    rng = np.random.default_rng(seed)
-    return O[0].mean(axis=0) + rng.uniform(-AUDIT_HALF_WIDTH, AUDIT_HALF_WIDTH, (n, 3))
-
-
-def missed_targets(solver: GazeSolver, P: Array, reachable: NDArray[np.bool_], starts: int = AUDIT_STARTS,
-                   seed: int = 0) -> NDArray[np.intp]:
-    """The targets of ``P`` (N, 3) answered as not fixated (``reachable`` False) that ``solve``
-    fixates from one of ``starts`` random postures (its unknowns uniform in their bounds, as a
-    warm start ``q_start``): indices into ``P``. Each is a fixatable target the solver called
-    unreachable. A lower bound: a target fixated from none of them may still be fixatable."""
-    rng = np.random.default_rng(seed)
-    chain = solver.chain  # (its bounds are finite: a joint without limits on a camera's path is refused)
-    missed = []
-    for i in np.flatnonzero(~np.asarray(reachable)):
-        for q in chain.q_from_u(rng.uniform(chain.lower, chain.upper, (starts, chain.m))):
-            if solver.solve(P[i], q_start=q).reachable:
-                missed.append(i)
-                break
-    return np.array(missed, dtype=np.intp)
 
 
 KIN_BLOCK = 100  # solves timed between two blocks of as many kinematics calls
@@ -624,7 +212,7 @@ def _reference_run(
     from cpc2urdf.tolerances import GAZE_POINTING_TOL
 
     solved = axes if axes is not None else SolvedAxes(solver)
-    ref = _generic_reference_solver(solved)
+    ref = generic_reference_solver(solved)
     start = _reference_start(solver, solved)
     where = "the middle of the limits"
 
@@ -1109,39 +697,20 @@ def main(argv: list[str] | None = None) -> int:
 
 
 __all__ = [
-    "AUDIT_HALF_WIDTH",
-    "AUDIT_STARTS",
-    "CAMERAS",
     "HEADS",
     "REAL_HEADS",
     "BenchHead",
-    "SolvedAxes",
     "TRACK_DEADLINE",
     "TRACK_DT",
     "TRACK_HOLD",
     "TRACK_POOL",
     "TRACK_RADIUS",
-    "MAX_DISTANCE",
-    "MIN_DISTANCE",
-    "PERTURB_ANGLE",
-    "PERTURB_LENGTH",
-    "audit_targets",
-    "axis_distance",
-    "axis_meeting",
     "bench_head",
-    "generic_reachable_targets",
-    "generic_unreachable_targets",
-    "calibrated_iis_head",
-    "eyes_coplanar",
     "format_table",
     "kinematics_call_us",
     "kinematics_timer",
     "main",
-    "missed_targets",
-    "reachable_targets",
     "run_benchmark",
     "run_head",
-    "too_close_targets",
     "tracking_targets",
-    "unreachable_targets",
 ]

@@ -18,13 +18,9 @@ Run: ``python -m cpc2urdf.studies.gaze_ahead [SEED ...]`` (default 0-9).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import sys
-import tempfile
 from collections import Counter
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -38,25 +34,15 @@ NEAR, FAR = 0.8, 3.0  # [m]: the targets' distances from the home cyclopean poin
 MAX_DEVIATION = math.radians(5.0)  # [rad]: pan and tilt of the calibrated head's answer vs the nominal's
 
 
-def demo_head(seed: int, folder: str | Path | None = None) -> CPCModel:
+def demo_head(seed: int) -> CPCModel:
     """The calibrated IIS-head of ``cpc2urdf demo --seed SEED`` (its ``model.json``): the demo's
-    simulate, identify and hand-eye stages, in ``folder`` (None: a temporary one), quietly."""
-    from cpc2urdf.api import load_model
-    from cpc2urdf.cli import main
+    simulate, identify and hand-eye stages, in memory."""
+    from cpc2urdf.api import identify, simulate
     from cpc2urdf.identification.handeye.stage2 import perturb_cameras, run_stage2
 
-    with contextlib.ExitStack() as stack:
-        d = Path(folder) if folder is not None else Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            for argv in (
-                ["simulate", "iis_head", "-o", f"{d}/sim", "--seed", str(seed)],
-                ["identify", f"{d}/sim/measurements.json", "-o", f"{d}/stage1_model.json"],
-            ):
-                if main(argv) != 0:
-                    raise RuntimeError(f"cpc2urdf {' '.join(argv)} failed")
-            truth = perturb_cameras(load_model(f"{d}/sim/truth.json"), np.random.default_rng(seed))
-            result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=seed, method="refined")
-    return result.model
+    truth, measured, _ = simulate("iis_head", seed=seed)
+    truth = perturb_cameras(truth, np.random.default_rng(seed))
+    return run_stage2(identify(measured), truth, seed=seed, method="refined").model
 
 
 def _axis_points(model: CPCModel, Q: Array) -> Array:
