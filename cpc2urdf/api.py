@@ -40,14 +40,14 @@ if TYPE_CHECKING:  # the stages are imported inside the functions that use them
     from cpc2urdf.identification.handeye.pose_file import HandEyePoses
     from cpc2urdf.identification.planning.outputs import PlanOutputs
     from cpc2urdf.identification.planning.plan_file import LoadedPlan
-    from cpc2urdf.identification.simulation.simulate import Experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import Experiment
     from cpc2urdf.model import RobotStructure
     from cpc2urdf.urdf.report import CalibrationReport
-    from cpc2urdf.validation.accuracy import BranchAccuracy
     from cpc2urdf.validation.crosscheck import CrossCheckReport
     from cpc2urdf.validation.gaze import GazeSolver
-    from cpc2urdf.validation.gaze.chain import Coupling
+    from cpc2urdf.validation.gaze.options import GazeOptions
     from cpc2urdf.validation.gaze.reach import Region
+    from cpc2urdf.validation.heldout import BranchAccuracy
     from cpc2urdf.validation.view import ViewRobot, ViewSummary
 
 PathLike = str | os.PathLike[str]
@@ -106,8 +106,8 @@ def measurements_from_bag(
         sync_tolerance: Largest gap [s] between a pose and the joint state paired with it.
         rest_window: Every joint reading within this time [s] of a sample must agree with it (0: off).
     """
-    from cpc2urdf.identification.vision.bags import PoseTopic, SyncRule
-    from cpc2urdf.identification.vision.bags import measurements_from_bag as _from_bag
+    from cpc2urdf.identification.vision.bags.bag_source import PoseTopic, SyncRule
+    from cpc2urdf.identification.vision.bags.bag_source import measurements_from_bag as _from_bag
 
     topics = [PoseTopic.parse(f"{frame}={topic}") for frame, topic in poses.items()]
     rule = SyncRule(sync_tolerance=sync_tolerance, rest_window=rest_window)
@@ -138,9 +138,9 @@ def simulate(
         heldout: Held-out configurations.
 
     Returns:
-        ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.simulate.Experiment`.
+        ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.stage1_experiment.Experiment`.
     """
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
     from cpc2urdf.urdf.robot import UrdfRobot
 
     spec = load_robot(robot)
@@ -352,7 +352,7 @@ def export_urdf(
     """
     from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
     from cpc2urdf.urdf.document import write_urdf
-    from cpc2urdf.urdf.export import plan_export
+    from cpc2urdf.urdf.export_plan import plan_export
     from cpc2urdf.urdf.robot import urdf_source
     from cpc2urdf.urdf.writeback import write_calibrated_urdf
 
@@ -409,7 +409,7 @@ def accuracy(
         InconsistentDataError: The observed errors are far from the model's own prediction (unless
             ``accept_inconsistent``), naming the likely cause.
     """
-    from cpc2urdf.validation.accuracy import accuracy as _accuracy
+    from cpc2urdf.validation.heldout import accuracy as _accuracy
 
     m = model if isinstance(model, CPCModel) else load_model(model)
     ms = measurements if isinstance(measurements, MeasurementSet) else load_measurements(measurements)
@@ -455,45 +455,26 @@ def plan_experiment(
 def gaze_solver(
     robot: CPCModel | RobotRef,
     cameras: Sequence[str] = ("camera_left_optical", "camera_right_optical"),
-    *,
-    viewing_distance: float = 1.0,
-    joints: Sequence[str] | None = None,
-    coupling: Coupling | None = None,
-    rigid: str = "cyclopean",
-    tolerance: float | None = None,
-    focal_px: float | None = None,
-    min_distance: float | None = None,
+    options: GazeOptions | None = None,
+    **fields: Any,
 ) -> GazeSolver:
     """A gaze solver (``cpc2urdf gaze``) for a model, model file, robot spec, shipped robot or
-    URDF path, pointing the optical axes of ``cameras``.
+    URDF path, pointing the optical axes of ``cameras``. Build it once; ``solve`` then runs at
+    control rate.
 
     Args:
         robot: The head.
         cameras: One or two camera optical frames (REP-103). One camera: look-at; two on
-            independent eyes: binocular fixation; two rigidly coupled: see ``rigid``.
-        viewing_distance: Distance [m] at which the start's grid looks for the target.
-        joints: The joints allowed to move (default: every joint on the cameras' paths); the
-            others stay at ``q_current``.
-        coupling: A stated linear coupling of the joints (e.g. ``Coupling.version_vergence``);
-            URDF ``<mimic>`` joints are coupled without it.
-        rigid: For two rigidly coupled cameras: ``"cyclopean"`` (the mid axis through the target)
-            or the name of the master camera.
-        tolerance: Pointing error [rad] below which a target counts as fixated (default
-            :data:`cpc2urdf.tolerances.GAZE_POINTING_TOL`).
-        focal_px: Instead of ``tolerance``, the cameras' focal length [px] when known: a target
-            counts as fixated within :data:`cpc2urdf.tolerances.GAZE_PIXEL_FRACTION` (0.1) of a
-            pixel, ``atan(0.1 / focal_px)`` rad.
-        min_distance: Nearest [m] the policy brings a camera to the target where the pointing
-            task leaves it the choice (a camera on an arm could otherwise be walked onto it);
-            default 0.1 m, 0 for no limit. A target that only a nearer camera can fixate is
-            still fixated.
+            independent eyes: binocular fixation; two rigidly coupled: see ``GazeOptions.rigid``.
+        options: How the solver treats the head
+            (:class:`~cpc2urdf.validation.gaze.options.GazeOptions`: the joints that may move, a
+            coupling, the rigid-pair mode, the pointing tolerance or the focal length, the minimum
+            viewing distance); its fields may also be given as keywords (``joints=[...]``).
     """
     from cpc2urdf.validation.gaze import solver_for
 
     ref = robot.nominal_model() if isinstance(robot, RobotSpec) else robot
-    return solver_for(ref, cameras, viewing_distance=viewing_distance, joints=joints,
-                      coupling=coupling, rigid=rigid, tolerance=tolerance, focal_px=focal_px,
-                      min_distance=min_distance)
+    return solver_for(ref, cameras, options, **fields)
 
 
 def reachable_region(

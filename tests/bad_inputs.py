@@ -621,9 +621,6 @@ def _gaze() -> list[Case]:
         Case("gaze-q-current-named-out-of-limits", (*g, *TARGET, "--q-current", "pan=9"), "q_current: joint 'pan' reading 9 outside its limits"),
         Case("gaze-cameras-unknown", (*g, *TARGET, "--cameras", "camera_left_optical", "nope"), "nope"),
         Case("gaze-cameras-same", (*g, *TARGET, "--cameras", "camera_left_optical", "camera_left_optical"), "named twice"),
-        Case("gaze-viewing-distance-negative", (*g, *TARGET, "--viewing-distance", "-1"), "--viewing-distance"),
-        Case("gaze-viewing-distance-zero", (*g, *TARGET, "--viewing-distance", "0", "--policy", "use-table"), "--viewing-distance"),
-        Case("gaze-viewing-distance-nan", (*g, *TARGET, "--viewing-distance", "nan"), "--viewing-distance"),
         Case("gaze-model-without-cameras", ("gaze", "{bad}", *TARGET), "camera_left_optical",
              lambda c: edit(c.model, lambda d: d.__setitem__("frames", [f for f in d["frames"] if f["kind"] != "camera"]))),
     ]

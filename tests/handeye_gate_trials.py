@@ -32,8 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from test_handeye import add_noise, make_data  # noqa: E402
 
-from cpc2urdf.identification.handeye.consistency import check_consistency  # noqa: E402
-from cpc2urdf.identification.handeye.noise import PoseNoise  # noqa: E402
+from cpc2urdf.identification.handeye.gate.handeye_gate import check_consistency  # noqa: E402
+from cpc2urdf.identification.handeye.pose_noise import PoseNoise  # noqa: E402
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, Gate, calibrate  # noqa: E402
 from cpc2urdf.transforms import Array, inverse  # noqa: E402
 

@@ -5,7 +5,7 @@ Truth: the nominal IIS-head (or any model) with every placement perturbed
 protocol (sec. 4.1) or random configurations in the calibration ranges
 (:mod:`~cpc2urdf.identification.simulation.design`); noise: Fig. 10 (N(0, sigma_t) per translation
 entry, rotation pre-multiplied by a random-axis rotation of angle N(0, sigma_r),
-:func:`~cpc2urdf.identification.simulation.noise.fig10_noise`). No placement search, no view
+:func:`~cpc2urdf.identification.simulation.measurement_noise.fig10_noise`). No placement search, no view
 check: the data are exactly the model's poses plus noise.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 
 from cpc2urdf.files.measurements import MeasurementSet
 from cpc2urdf.identification.simulation import design
-from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
 from cpc2urdf.identification.simulation.truth import perturbed_model
 from cpc2urdf.model import CPCModel
 

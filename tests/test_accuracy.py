@@ -15,7 +15,7 @@ from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.model import CPCParams
 from cpc2urdf.transforms import homogeneous
-from cpc2urdf.validation.accuracy import accuracy, format_table
+from cpc2urdf.validation.heldout import accuracy, format_table
 
 
 def _heldout(n: int = 30, seed: int = 0) -> tuple[object, MeasurementSet]:
@@ -71,7 +71,7 @@ def test_refined_model_shows_predicted_next_to_observed() -> None:
     """A refined model carries a covariance: accuracy puts its predicted RMS beside the observed
     one; the closed form has none. Averaged over seeds the two agree (here within a factor 1.5)."""
     from cpc2urdf.identification.kinematics.methods import identify
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     ratios = []
     for seed in range(4):
@@ -95,7 +95,7 @@ def identified(tmp_path_factory):
     """A refined model of a simulated head, its stage-1 file and its held-out file (SI units)."""
     from cpc2urdf.files.measurements import measurements_to_json
     from cpc2urdf.identification.kinematics.methods import identify
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     d = tmp_path_factory.mktemp("accuracy")
     _, measured, heldout = simulate_experiment("iis_head", seed=0, n_heldout=30)
@@ -147,7 +147,7 @@ def test_clean_heldout_data_are_consistent_with_the_prediction(identified, capsy
     from cpc2urdf.files.jsonio import write_json
     from cpc2urdf.files.measurements import measurements_from_json
     from cpc2urdf.files.robot_ref import load_model
-    from cpc2urdf.validation.accuracy import prediction_check
+    from cpc2urdf.validation.heldout import prediction_check
 
     d, _, held = identified
     write_json(d / "held.json", held)

@@ -74,8 +74,8 @@ def test_api_defaults_are_the_stages_defaults():
 
     from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD
-    from cpc2urdf.identification.planning.plan import DEFAULT_CANDIDATES
-    from cpc2urdf.identification.simulation import simulate as sim
+    from cpc2urdf.identification.planning.plan_selection import DEFAULT_CANDIDATES
+    from cpc2urdf.identification.simulation import stage1_experiment as sim
 
     def default(f, name):
         return inspect.signature(f).parameters[name].default

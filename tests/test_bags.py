@@ -35,9 +35,13 @@ from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.handeye import stage2 as s2
 from cpc2urdf.identification.handeye.head_images import write_handeye_files
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
-from cpc2urdf.identification.simulation.images import RenderedExperiment, render_experiment
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
-from cpc2urdf.identification.vision import bag_images, bags
+from cpc2urdf.identification.simulation.image_experiment import (
+    RenderedExperiment,
+    render_experiment,
+)
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
+from cpc2urdf.identification.vision.bags import bag_images
+from cpc2urdf.identification.vision.bags import bag_source as bags
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
 from cpc2urdf.identification.vision.measure_head import HeadImageMeasurement
 from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images

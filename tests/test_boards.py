@@ -18,15 +18,15 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from cpc2urdf.errors import InputFileError
-from cpc2urdf.identification.simulation.images import random_board_poses
-from cpc2urdf.identification.vision.board_file import board_from_json, load_board, save_board
-from cpc2urdf.identification.vision.board_poses import (
+from cpc2urdf.identification.simulation.image_experiment import random_board_poses
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.boards.board_file import board_from_json, load_board, save_board
+from cpc2urdf.identification.vision.boards.board_poses import (
     _solve,
     board_pose,
     detect_board,
     pnp_pose_covariance,
 )
-from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import PlateAmbiguousError, PlateNotFoundError
 from cpc2urdf.identification.vision.render import PinholeView, render_board_view
 from cpc2urdf.transforms import homogeneous
@@ -207,7 +207,7 @@ def test_rendered_chessboard_is_its_area_coverage() -> None:
     exact area of black and white it covers (products of 1-D overlaps). The edges are put on the
     16 x 16 sub-sample grid's boundaries (at 1/16 px steps), where sub-sampling is exact, so only
     the 8-bit rounding remains (an edge between sub-samples would be off by up to 1/32 px)."""
-    from cpc2urdf.identification.vision.boards import BLACK_LEVEL, WHITE_LEVEL
+    from cpc2urdf.identification.vision.boards.board import BLACK_LEVEL, WHITE_LEVEL
 
     b = board("chessboard")
     f, z = 500.0, 0.5

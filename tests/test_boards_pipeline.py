@@ -26,13 +26,13 @@ from cpc2urdf.identification.handeye.stage2 import (
     calibrate_cameras,
     camera_errors,
 )
-from cpc2urdf.identification.simulation.images import (
+from cpc2urdf.identification.simulation.image_experiment import (
     render_board_experiment,
     render_head_board_experiment,
 )
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
-from cpc2urdf.identification.vision.board_file import board_from_json, save_board
-from cpc2urdf.identification.vision.board_poses import _solve, board_pose, detect_board
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
+from cpc2urdf.identification.vision.boards.board_file import board_from_json, save_board
+from cpc2urdf.identification.vision.boards.board_poses import _solve, board_pose, detect_board
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import inverse, rotation_error
@@ -77,7 +77,7 @@ def _true_C(truth: CPCModel, head: Path, cam: str, q: np.ndarray) -> np.ndarray:
 def _detector_sigma(truth: CPCModel, folder: Path, board_file: Path, q: np.ndarray) -> float:
     """The detector's pixel noise on the stage-2 images: RMS per coordinate of the detected
     corners vs their true projections [px]."""
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
 
     board = load_board(board_file)
     intr = DEFAULT_INTRINSICS
@@ -96,8 +96,8 @@ def test_stage2_board_images_to_handeye_files(truth: CPCModel, head: tuple[Path,
     through the PnP Jacobian (mean squared Mahalanobis distance per dof, chi-square)."""
     from scipy.spatial.transform import Rotation
 
-    from cpc2urdf.identification.vision.board_file import load_board
-    from cpc2urdf.identification.vision.board_poses import pnp_pose_covariance
+    from cpc2urdf.identification.vision.boards.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_poses import pnp_pose_covariance
 
     folder, board, model = head
     out = tmp_path / "poses"
@@ -123,7 +123,7 @@ def test_camera_frames_from_board_images_as_accurate_as_exact_poses_with_the_sam
     truth: CPCModel, head: tuple[Path, Path, Path]
 ) -> None:
     from cpc2urdf.identification.handeye.head_images import stage2_observations
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
     from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.identification.vision.rig_file import load_camera
 
@@ -175,8 +175,8 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
     exact = load_measurements(folder / "exact.json")
     assert ms.n_records == exact.n_records == 13
     # the detector's pixel noise: corners of the views measured vs the true projections, both cameras
-    from cpc2urdf.identification.simulation.noise import stereo_noise
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
+    from cpc2urdf.identification.vision.boards.board_file import load_board
     from cpc2urdf.identification.vision.rig_file import load_rig
 
     rig = load_rig(folder / "rig.yaml")
@@ -214,7 +214,7 @@ def test_stage1_board_plates_through_the_stereo_rig(stage1: tuple[Path, Path, Pa
     # above 10 % (plate_left) and 5 % (plate_right) of the draws)
     from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-    from cpc2urdf.validation.accuracy import accuracy
+    from cpc2urdf.validation.heldout import accuracy
 
     held = load_measurements(folder / "heldout.json")
 
@@ -283,7 +283,7 @@ def test_plate_boards_from_prefix_dictionaries_are_told_apart_by_id() -> None:
 
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.robot_ref import load_model
-    from cpc2urdf.identification.vision.boards import Board
+    from cpc2urdf.identification.vision.boards.board import Board
     from cpc2urdf.identification.vision.measure_stereo import check_plate_boards, dictionary_family
 
     small = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50).bytesList

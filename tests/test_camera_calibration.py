@@ -14,9 +14,9 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.cli import main
 from cpc2urdf.identification.handeye.stage2 import CameraIntrinsics
-from cpc2urdf.identification.simulation.images import render_board_calibration
-from cpc2urdf.identification.vision.board_file import board_from_json, save_board
-from cpc2urdf.identification.vision.board_poses import detect_board
+from cpc2urdf.identification.simulation.image_experiment import render_board_calibration
+from cpc2urdf.identification.vision.boards.board_file import board_from_json, save_board
+from cpc2urdf.identification.vision.boards.board_poses import detect_board
 from cpc2urdf.identification.vision.render import PinholeView
 from cpc2urdf.identification.vision.rig_file import load_camera, load_rig, save_rig
 from cpc2urdf.identification.vision.stereo import StereoRig
@@ -48,7 +48,7 @@ def rig_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.
 
 def _corner_sigma(folder: Path, board_file: Path, view: PinholeView, T_world_board: np.ndarray) -> float:
     """RMS error per coordinate of the detected corners vs their true projections [px]."""
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
 
     b = load_board(board_file)
     res = []
@@ -71,7 +71,7 @@ def test_calibrate_camera_recovers_the_intrinsics(camera_views: tuple[Path, Path
     K, D, size = load_camera(out)
     assert size == (640, 480)
     # OpenCV's standard deviations from the residuals: the errors are within 3 of them
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
     from cpc2urdf.identification.vision.camera_calibration import calibrate_camera_images
 
     cal = calibrate_camera_images(folder, load_board(board))
@@ -84,7 +84,7 @@ def test_calibrate_camera_recovers_the_intrinsics(camera_views: tuple[Path, Path
 def _mc_rig_spread(T_world_board: np.ndarray, board_file: Path, sigma: float, draws: int = 12) -> tuple[float, float]:
     """Monte Carlo on exact corners: std of the baseline error [m] and of the rotation error [rad]
     of the same calibration pipeline with Gaussian pixel noise ``sigma`` on the true projections."""
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
 
     b = load_board(board_file)
     P = b.object_points()

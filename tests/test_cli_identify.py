@@ -172,7 +172,7 @@ def marker_sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _heldout_marker_rms(model: CPCModel, held: MeasurementSet) -> float:
     """RMS distance [m] between the model's predicted marker points and the held-out (true) ones."""
-    from cpc2urdf.identification.kinematics.point_identify import marker_positions
+    from cpc2urdf.identification.kinematics.points.point_identify import marker_positions
 
     pos = marker_positions(model)
     assert set(pos) == set(held.markers)
@@ -243,7 +243,7 @@ def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim
     measurement file give the same model (the CSV does not state the noise: a-posteriori scale, same
     estimate)."""
     from cpc2urdf.files.measurements import load_measurements
-    from cpc2urdf.identification.kinematics.point_identify import marker_positions
+    from cpc2urdf.identification.kinematics.points.point_identify import marker_positions
 
     ms = load_measurements(marker_sim / "measurements.json")
     csv_path = _as_csv(ms, tmp_path / "tracker.csv")

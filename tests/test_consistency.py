@@ -21,11 +21,11 @@ from cpc2urdf.errors import InconsistentDataError
 from cpc2urdf.files.jsonio import write_json
 from cpc2urdf.files.measurements import measurements_from_json, measurements_to_json
 from cpc2urdf.files.robot_ref import load_model
-from cpc2urdf.identification.kinematics.consistency import Noise, check_consistency
-from cpc2urdf.identification.kinematics.fit_statistics import fit_statistics
+from cpc2urdf.identification.kinematics.gate.fit_statistics import fit_statistics
+from cpc2urdf.identification.kinematics.gate.pose_gate import Noise, check_consistency
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.kinematics.start import closed_form_model
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
 
 @pytest.fixture(scope="module")

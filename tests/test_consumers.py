@@ -30,7 +30,7 @@ from cpc2urdf.files.model_file import save_model
 from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 from cpc2urdf.model import CPCModel
 from cpc2urdf.urdf.document import camera_body_names, write_urdf
 from cpc2urdf.urdf.mass_properties import is_physical

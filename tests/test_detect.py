@@ -16,7 +16,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.files.robot_ref import load_robot
-from cpc2urdf.identification.simulation.noise import stereo_noise
+from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
 from cpc2urdf.identification.vision.detect import (
     InconsistentDetectionError,
     PlateAmbiguousError,

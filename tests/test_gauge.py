@@ -14,7 +14,7 @@ from cpc2urdf.identification.kinematics.gauge import (
     gauge_transforms,
 )
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
 EXACT = 1e-12  # [m]
 

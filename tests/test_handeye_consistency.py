@@ -17,20 +17,24 @@ from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError, InputFileError
 from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.files.units import Units
-from cpc2urdf.identification.handeye import mistakes as mk
 from cpc2urdf.identification.handeye import stage2 as s2
-from cpc2urdf.identification.handeye.consistency import check_consistency
-from cpc2urdf.identification.handeye.consistency_report import InconsistentPosesError
-from cpc2urdf.identification.handeye.noise import PoseNoise, estimate_noise, residual_covariance
+from cpc2urdf.identification.handeye.gate import mistakes as mk
+from cpc2urdf.identification.handeye.gate.gate_report import InconsistentPosesError
+from cpc2urdf.identification.handeye.gate.handeye_gate import check_consistency
+from cpc2urdf.identification.handeye.gate.reference_fit import (
+    matrix_from_rotvec,
+    residual_vectors,
+    rotvec_from_matrix,
+)
 from cpc2urdf.identification.handeye.pose_file import (
     handeye_poses_from_json,
     load_handeye_poses,
     save_handeye_poses,
 )
-from cpc2urdf.identification.handeye.reference_fit import (
-    matrix_from_rotvec,
-    residual_vectors,
-    rotvec_from_matrix,
+from cpc2urdf.identification.handeye.pose_noise import (
+    PoseNoise,
+    estimate_noise,
+    residual_covariance,
 )
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, Gate, calibrate, calibrate_poses
 from cpc2urdf.transforms import homogeneous, inverse

@@ -1,4 +1,4 @@
-"""The gate of ``identify --method map`` (:mod:`cpc2urdf.identification.kinematics.map_gate`) on the
+"""The gate of ``identify --method map`` (:mod:`cpc2urdf.identification.kinematics.gate.map_gate`) on the
 real robots' data: it passes them with the noise it estimates, names unmodelled error when the
 stated noise is 5x too small, and names exactly the records where gross outliers were planted."""
 

@@ -23,14 +23,14 @@ from cpc2urdf.files.measurements import (
     save_measurements,
 )
 from cpc2urdf.files.robot_ref import load_robot
-from cpc2urdf.identification.kinematics.circle_point import circle_point_start
 from cpc2urdf.identification.kinematics.methods import identify
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.kinematics.point_identify import marker_positions
-from cpc2urdf.identification.kinematics.point_problem import PointChart, PointProblem
-from cpc2urdf.identification.kinematics.point_refine import refine_points
+from cpc2urdf.identification.kinematics.points.circle_point import circle_point_start
+from cpc2urdf.identification.kinematics.points.point_identify import marker_positions
+from cpc2urdf.identification.kinematics.points.point_problem import PointChart, PointProblem
+from cpc2urdf.identification.kinematics.points.point_refine import refine_points
 from cpc2urdf.identification.simulation.design import protocol_q, random_configurations
-from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
+from cpc2urdf.identification.simulation.marker_points import place_markers_on, simulate_markers
 from cpc2urdf.identification.simulation.truth import perturbed_model
 from cpc2urdf.model import CPCModel
 from cpc2urdf.urdf.robot import load_urdf_robot

@@ -13,7 +13,7 @@ from cpc2urdf.errors import InputFileError
 from cpc2urdf.files.marker_csv import load_marker_csv
 from cpc2urdf.files.robot_ref import load_robot
 from cpc2urdf.identification.simulation.design import protocol_q
-from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
+from cpc2urdf.identification.simulation.marker_points import place_markers_on, simulate_markers
 from cpc2urdf.identification.simulation.truth import perturbed_model
 
 

@@ -22,17 +22,17 @@ from cpc2urdf.files.measurements import MeasurementSet, load_measurements
 from cpc2urdf.files.robot_ref import load_model, load_robot
 from cpc2urdf.identification.handeye.pose_file import load_handeye_poses
 from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-from cpc2urdf.identification.simulation.images import (
+from cpc2urdf.identification.simulation.image_experiment import (
     RenderedExperiment,
     render_experiment,
     render_head_experiment,
 )
-from cpc2urdf.identification.simulation.noise import stereo_noise
+from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv, write_joints_csv
 from cpc2urdf.identification.vision.render import PinholeView, circle_centres_px, render_view
 from cpc2urdf.identification.vision.targets import robot_plate_designs
 from cpc2urdf.transforms import inverse, rotation_error
-from cpc2urdf.validation.accuracy import accuracy
+from cpc2urdf.validation.heldout import accuracy
 
 STRUCTURE = load_robot("iis_head").structure
 

@@ -6,7 +6,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.files.robot_ref import load_robot
-from cpc2urdf.identification.simulation.noise import fig10_noise, random_rotations, stereo_noise
+from cpc2urdf.identification.simulation.measurement_noise import (
+    fig10_noise,
+    random_rotations,
+    stereo_noise,
+)
 from cpc2urdf.identification.vision.stereo import StereoRig
 
 LAYOUT = np.array(load_robot("iis_head").structure.frame("plate_left").layout)

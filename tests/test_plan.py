@@ -21,13 +21,13 @@ from cpc2urdf.identification.planning.experiment import heldout_errors, simulate
 from cpc2urdf.identification.planning.information import task_sensitivity
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
 from cpc2urdf.identification.planning.optimal import select
-from cpc2urdf.identification.planning.plan import (
+from cpc2urdf.identification.planning.plan_file import load_plan
+from cpc2urdf.identification.planning.plan_selection import (
     Planner,
     candidate_configurations,
     make_plan,
     task_configurations,
 )
-from cpc2urdf.identification.planning.plan_file import load_plan
 from cpc2urdf.identification.planning.prediction import predict_plan
 from cpc2urdf.identification.simulation.design import protocol_q
 
@@ -349,8 +349,8 @@ def stereo_setup(setup: MeasuringSetup) -> MeasuringSetup:
 
 
 def test_stereo_pose_covariance_matches_a_monte_carlo_of_the_simulator(stereo_setup: MeasuringSetup) -> None:
-    from cpc2urdf.identification.planning.stereo import pose_error, stereo_pose_covariance
-    from cpc2urdf.identification.simulation.noise import stereo_noise
+    from cpc2urdf.identification.planning.stereo_views import pose_error, stereo_pose_covariance
+    from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
 
     s = stereo_setup
     q = protocol_q(s.nominal, 3)[[0, 5, 12]]
@@ -447,8 +447,8 @@ def marker_setup(setup: MeasuringSetup) -> MeasuringSetup:
 
 
 def test_marker_prediction_is_the_point_problems_bound(marker_setup: MeasuringSetup) -> None:
-    from cpc2urdf.identification.kinematics.point_problem import PointProblem
-    from cpc2urdf.identification.planning.markers import MarkerMeasurement
+    from cpc2urdf.identification.kinematics.points.point_problem import PointProblem
+    from cpc2urdf.identification.planning.marker_setup import MarkerMeasurement
 
     s = marker_setup
     m = s.measurement()

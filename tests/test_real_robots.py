@@ -5,7 +5,7 @@ For TIAGo's head (``torso_lift_joint`` prismatic, ``head_1_joint``, ``head_2_joi
 its own RGB-D optical frame measured) and iCub's neck on its torso (``torso_pitch/roll/yaw``,
 ``neck_pitch/roll/yaw``; the icub-models URDFs have no eye joints, so two camera links are added on
 ``head`` with fixed joints): a seeded perturbed true robot is measured with the one-joint-at-a-time
-protocol (:func:`~cpc2urdf.identification.simulation.simulate.simulate_experiment`, Fig. 10
+protocol (:func:`~cpc2urdf.identification.simulation.stage1_experiment.simulate_experiment`, Fig. 10
 noise), identified by the default pipeline with its consistency gate (``cpc2urdf.api.identify``),
 written back into the URDF (``cpc2urdf.api.export_urdf``), and the written file is read back by
 Pinocchio and checked:
@@ -60,7 +60,7 @@ from cpc2urdf.identification.kinematics.uncertainty import (
     covariance_of_model,
     predicted_position_std,
 )
-from cpc2urdf.identification.simulation.simulate import Experiment, simulate_experiment
+from cpc2urdf.identification.simulation.stage1_experiment import Experiment, simulate_experiment
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf.origins import WritebackPlan, writeback_plan

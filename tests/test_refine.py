@@ -87,7 +87,7 @@ def test_refined_beats_the_closed_form_on_seeded_trials():
     held-out error drops on average (per trial it is one noisy draw: 88/100 in the study)."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     e_cf, e_ref = [], []
     for seed in range(4):
@@ -201,7 +201,7 @@ def test_identify_cli_method_refined(tmp_path):
     from cpc2urdf.cli import main
     from cpc2urdf.files.measurements import save_measurements
     from cpc2urdf.identification.kinematics.uncertainty import predicted_position_std
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)
     path = save_measurements(measured, tmp_path / "m.json", robot="iis_head")

@@ -22,10 +22,10 @@ from cpc2urdf.identification.simulation.design import (
     protocol_configurations,
     protocol_q,
 )
-from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
 from cpc2urdf.identification.simulation.placement import place_in_front_of_rig
 from cpc2urdf.identification.simulation.random_robots import random_model
-from cpc2urdf.identification.simulation.simulate import simulate_experiment
+from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 from cpc2urdf.identification.simulation.truth import perturb_params, perturbed_model
 from cpc2urdf.identification.simulation.visibility import OCCLUSION_MARGIN_PX, check_view
 from cpc2urdf.identification.vision.render import PinholeView, hidden_circles

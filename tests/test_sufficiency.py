@@ -14,7 +14,7 @@ from cpc2urdf.identification.kinematics.sufficiency import (
     noise_evident,
 )
 from cpc2urdf.identification.simulation.design import protocol_q
-from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
 from cpc2urdf.identification.simulation.random_robots import random_model
 
 

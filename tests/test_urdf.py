@@ -290,7 +290,7 @@ def test_export_says_where_the_physical_properties_came_from(tmp_path, capsys):
     from cpc2urdf.files.model_file import save_model
     from cpc2urdf.model_metadata import Provenance
     from cpc2urdf.robots import spec_path
-    from cpc2urdf.urdf.export import plan_export
+    from cpc2urdf.urdf.export_plan import plan_export
 
     model = load_model("iis_head")
     assert plan_export(model).physical_from == "defaults (none stated)"

@@ -354,7 +354,7 @@ def test_urdf_text_resolves_from_the_file_it_stands_for(tmp_path: Path) -> None:
     """URDF text (e.g. written back from a user's URDF) given with the file it stands for finds
     that file's relative meshes; without it, the current folder is the URDF's folder."""
     from cpc2urdf.urdf.pinocchio import PinocchioRobot
-    from cpc2urdf.validation.view.robot import view_robot
+    from cpc2urdf.validation.view.view_robot import view_robot
 
     write_stl(tmp_path / "robot" / "meshes" / "a.stl")
     text = urdf_with_meshes(

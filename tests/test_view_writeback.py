@@ -36,7 +36,7 @@ from cpc2urdf.validation.view import (
     write_view_html,
 )
 from cpc2urdf.validation.view.change import GREEN_RGBA
-from cpc2urdf.validation.view.robot import own_nominal
+from cpc2urdf.validation.view.view_robot import own_nominal
 
 TIAGO_MESHES = SHARE / "example-robot-data" / "robots" / "tiago_description" / "meshes"
 

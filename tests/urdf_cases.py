@@ -12,7 +12,7 @@ from consumer_checks import pinocchio_q
 
 from cpc2urdf.files.measurements import MeasurementSet, save_measurements
 from cpc2urdf.identification.simulation.design import protocol_q
-from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
 from cpc2urdf.identification.simulation.truth import perturbed_model
 from cpc2urdf.model import CPCModel
 from cpc2urdf.urdf.robot import UrdfRobot

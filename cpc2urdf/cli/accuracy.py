@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from cpc2urdf.api import accuracy, load_measurements, load_model
-    from cpc2urdf.validation.accuracy import format_table, prediction_check
+    from cpc2urdf.validation.heldout import format_table, prediction_check
 
     model = load_model(args.model)
     ms = load_measurements(args.heldout)

@@ -23,7 +23,7 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from cpc2urdf.identification.vision.bags import SyncRule
+    from cpc2urdf.identification.vision.bags.bag_source import SyncRule
 
 # The library's defaults (identification/vision/bag_sync.py, bag_reader.py), repeated so that `--help` does not load
 # numpy and OpenCV; tests/test_bags.py checks that they agree.
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.files.jsonio import check_output_path
     from cpc2urdf.files.measurements import save_measurements
     from cpc2urdf.files.robot_ref import load_robot
-    from cpc2urdf.identification.vision.bags import (
+    from cpc2urdf.identification.vision.bags.bag_source import (
         ImageTopic,
         PoseTopic,
         SyncRule,
@@ -130,7 +130,7 @@ def _run_targets(args: argparse.Namespace, rule: SyncRule) -> int:
     from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye.head_images import write_handeye_files
     from cpc2urdf.identification.handeye.stage2 import HAND_OF_CAMERA
-    from cpc2urdf.identification.vision.bags import PoseTopic, target_poses_from_bag
+    from cpc2urdf.identification.vision.bags.bag_source import PoseTopic, target_poses_from_bag
 
     if not args.model:
         raise ConfigurationError("--target needs --model identified.json (it gives T_base_hand)")

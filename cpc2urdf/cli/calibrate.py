@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from cpc2urdf.files.jsonio import check_output_path
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
     from cpc2urdf.identification.vision.camera_calibration import (
         calibrate_camera_images,
         calibrate_rig_images,

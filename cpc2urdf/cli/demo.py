@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("render the stage-1 experiment as stereo images, then measure them (circle detector)")
-        from cpc2urdf.identification.simulation.images import render_experiment
+        from cpc2urdf.identification.simulation.image_experiment import render_experiment
 
         exp = render_experiment(out / "images", seed=args.seed, show_progress=True)
         truth = perturb_cameras(exp.truth, np.random.default_rng(args.seed))
@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.from_images:
         st.start("stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye")
-        from cpc2urdf.identification.simulation.images import render_head_experiment
+        from cpc2urdf.identification.simulation.image_experiment import render_head_experiment
 
         render_head_experiment(out / "head", truth, seed=args.seed)
         _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")

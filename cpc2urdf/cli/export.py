@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import check_output_path
     from cpc2urdf.urdf.document import total_mass
-    from cpc2urdf.urdf.export import describe, plan_export
+    from cpc2urdf.urdf.export_plan import describe, plan_export
     from cpc2urdf.urdf.robot import urdf_source
 
     check_output_path(args.output)  # before any work (-o . is a folder: one line, no traceback)

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from cpc2urdf.identification.vision.boards import Board
+    from cpc2urdf.identification.vision.boards.board import Board
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -148,7 +148,7 @@ def _run_stage2(args: argparse.Namespace) -> int:
     cams = {c: HeadCamera(*load_camera(f)) for c, f in files.items()}
     board = None
     if args.board:
-        from cpc2urdf.identification.vision.board_file import load_board
+        from cpc2urdf.identification.vision.boards.board_file import load_board
 
         if len(args.board) > 1 or "=" in args.board[0]:
             raise ConfigurationError(f"--stage2 takes one --board FILE (the target), got {' '.join(args.board)}")
@@ -181,7 +181,7 @@ def _plate_boards(items: list[str], plates: list[str]) -> dict[str, Board] | Non
     if not items:
         return None
     from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.identification.vision.board_file import load_board
+    from cpc2urdf.identification.vision.boards.board_file import load_board
 
     out: dict[str, Board] = {}
     for item in items:

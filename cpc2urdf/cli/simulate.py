@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.files.spec import RobotSpec
-    from cpc2urdf.identification.simulation.simulate import Experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import Experiment
 
 
 FILES = ("measurements.json", "truth.json", "heldout.json")  # what simulate writes into its folder
@@ -122,7 +122,7 @@ def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[Mea
 
     import numpy as np
 
-    from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
+    from cpc2urdf.identification.simulation.marker_points import place_markers_on, simulate_markers
 
     truth, measured, heldout = exp
     rng = np.random.default_rng([seed, 1])  # its own stream: the true robot and q stay those of the pose data
@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.files.measurements import measurements_to_json
     from cpc2urdf.files.model_file import model_to_json
     from cpc2urdf.files.robot_ref import load_robot, looks_like_path
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
     from cpc2urdf.identification.vision.stereo import StereoRig
 
     out = Path(args.output)

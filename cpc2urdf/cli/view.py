@@ -125,8 +125,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.files.jsonio import check_output_path, write_all_atomic
     from cpc2urdf.validation.view import load_view_robot, static_view_html
-    from cpc2urdf.validation.view.robot import own_nominal
     from cpc2urdf.validation.view.screenshot import require_chromium, screenshot_page
+    from cpc2urdf.validation.view.view_robot import own_nominal
 
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")

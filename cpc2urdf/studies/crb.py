@@ -2,7 +2,7 @@
 
 Seeded Monte Carlo trials at the paper's setting (IIS-head, one joint at a time, M = 9, Fig. 10
 noise σ_t = 0.5 mm per translation entry and a random-axis rotation of angle N(0, 0.5°)). Each
-trial draws a true robot (:func:`cpc2urdf.identification.simulation.simulate.simulate_experiment`),
+trial draws a true robot (:func:`cpc2urdf.identification.simulation.stage1_experiment.simulate_experiment`),
 identifies it in closed form (sec. 4.2) and refines that with :func:`refine.refine`, and compares
 both with the bound:
 
@@ -24,7 +24,7 @@ useful reference.) A third row refines with rotation residuals divided by σ_r p
 of σ_r/√3, to show what that weighting costs.
 
 A fourth row is the pipeline ``cpc2urdf identify`` runs by default (closed form, refinement and
-the consistency gate, :mod:`~cpc2urdf.identification.kinematics.consistency`): its estimate is the
+the consistency gate, :mod:`~cpc2urdf.identification.kinematics.gate.pose_gate`): its estimate is the
 refinement's, and the table counts the trials whose clean data the gate passed.
 
 Robust mode (``--outliers 0.05``, default): the same trials with one plate of 5 % of the records
@@ -70,7 +70,7 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     from cpc2urdf.identification.kinematics.parametrization import Parametrization
     from cpc2urdf.identification.kinematics.refine import refine
     from cpc2urdf.identification.kinematics.uncertainty import cramer_rao_covariance
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     truth, measured, heldout = simulate_experiment(
         robot, seed=seed, M=M, noise="fig10", sigma_t=sigma_t, sigma_r=sigma_r, n_heldout=n_heldout

@@ -3,7 +3,7 @@
 For each noise level σ (Fig. 10 model: N(0, σ) mm on each translation entry and a rotation about a
 random axis by N(0, σ) degrees, the paper's single σ_O) and each number M of measurements per joint
 (M = 2..15), several seeded trials each: simulate the IIS-head (a true robot = nominal + random
-geometric error, :func:`cpc2urdf.identification.simulation.simulate.simulate_experiment`), identify it in
+geometric error, :func:`cpc2urdf.identification.simulation.stage1_experiment.simulate_experiment`), identify it in
 closed form (sec. 4.2), and compute the mean positioning error (Euclidean distance between the true
 and the predicted plate origins, both plates) over held-out configurations drawn from the
 calibration range. A noise-free run in the same study is the reference (the method is exact, so
@@ -39,7 +39,7 @@ COMPARE_M, COMPARE_SIGMA = 9, 0.5  # the paper's choice of M, and its rig's accu
 def trial_error(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int) -> tuple[float, float]:
     """One simulate-identify-test run: (mean held-out positioning error [m], identification time [s])."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     truth, measured, heldout = simulate_experiment(
         robot, seed=seed, M=M, noise="fig10" if sigma_mm > 0 else "none",
@@ -61,7 +61,7 @@ def shared_vs_paper(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: i
         identify_closed_form,
         identify_paper_branches,
     )
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     _, measured, heldout = simulate_experiment(
         robot, seed=seed, M=M, noise="fig10", sigma_t=sigma_mm * 1e-3, sigma_r=math.radians(sigma_mm),

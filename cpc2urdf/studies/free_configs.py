@@ -52,14 +52,17 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, sigma_p: float,
     from cpc2urdf.files.measurements import MeasurementSet
     from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.kinematics.methods import identify_refined
-    from cpc2urdf.identification.kinematics.point_identify import identify_points, marker_positions
+    from cpc2urdf.identification.kinematics.points.point_identify import (
+        identify_points,
+        marker_positions,
+    )
     from cpc2urdf.identification.simulation.design import (
         measured_frames,
         protocol_q,
         random_configurations,
     )
-    from cpc2urdf.identification.simulation.markers import place_markers_on, simulate_markers
-    from cpc2urdf.identification.simulation.noise import fig10_noise
+    from cpc2urdf.identification.simulation.marker_points import place_markers_on, simulate_markers
+    from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
     from cpc2urdf.identification.simulation.truth import perturbed_model
 
     nominal = load_robot(robot).nominal_model()

@@ -3,7 +3,7 @@
 A gate must pass clean data in every seeded trial and refuse each mistake a user can
 make in a stage-1 file, naming its cause. This study measures both:
 
-- **clean data**: seeded IIS-head experiments (:func:`~cpc2urdf.identification.simulation.simulate.
+- **clean data**: seeded IIS-head experiments (:func:`~cpc2urdf.identification.simulation.stage1_experiment.
   simulate_experiment`, Fig. 10 noise, 0.5 mm / 0.5 deg, M = 9) with the noise stated in the file,
   the same without a noise statement, stereo-measured ones (pixel noise, no statement), and seeded
   random robots (:mod:`~cpc2urdf.identification.simulation.random_robots`, 1-6 joints, M = 2-7,
@@ -212,7 +212,7 @@ def clean_trials(kind: str, seeds: range) -> dict[str, Any]:
     from cpc2urdf.errors import Cpc2UrdfError
     from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.simulation.random_robots import random_model
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     head = load_robot("iis_head")
     passed, skipped, failures, seconds = 0, 0, [], []
@@ -277,7 +277,7 @@ def mistake_trials(seeds: range) -> dict[str, dict[str, Any]]:
     from cpc2urdf.errors import Cpc2UrdfError
     from cpc2urdf.files.measurements import measurements_from_json, measurements_to_json
     from cpc2urdf.identification.kinematics.methods import identify
-    from cpc2urdf.identification.simulation.simulate import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     out: dict[str, dict[str, Any]] = {}
 

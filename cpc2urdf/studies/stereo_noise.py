@@ -2,7 +2,7 @@
 
 Shih et al. measure the plates with a 600 mm-baseline rig "which provides the accuracy of 0.5 mm
 if the object distance is approximately 1.5 meter". This study simulates that measurement
-(:func:`cpc2urdf.identification.simulation.noise.stereo_noise`: project the nine circle centres into both
+(:func:`cpc2urdf.identification.simulation.measurement_noise.stereo_noise`: project the nine circle centres into both
 cameras, add N(0, sigma_px) to each pixel coordinate, triangulate, register the layout) for the
 IIS-head's plates at random configurations inside the calibration range, placed in front of the
 default rig exactly as ``cpc2urdf simulate`` places them, and reports per pixel noise:
@@ -54,7 +54,7 @@ def run_study(
         measured_frames,
         random_configurations,
     )
-    from cpc2urdf.identification.simulation.noise import stereo_noise
+    from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
     from cpc2urdf.identification.simulation.placement import place_in_front_of_rig
     from cpc2urdf.identification.vision.stereo import StereoRig
     from cpc2urdf.transforms import rotation_error

@@ -8,12 +8,12 @@ Modules (hand-eye imports the core package, vision and kinematics):
   Kronecker, dual quaternions, Zhuang; joint refinement);
 - :mod:`~cpc2urdf.identification.handeye.solvers`: the one registry of every solver and
   ``calibrate(T_base_hand, T_camera_target, method)``;
-- :mod:`~cpc2urdf.identification.handeye.consistency`: the consistency gate (do the poses agree
+- :mod:`~cpc2urdf.identification.handeye.gate.handeye_gate`: the consistency gate (do the poses agree
   with ``A X = Z B`` and their noise? which mistake explains them?), with its report
-  (:mod:`~cpc2urdf.identification.handeye.consistency_report`), the mistakes it tests
-  (:mod:`~cpc2urdf.identification.handeye.mistakes`), the noise model
-  (:mod:`~cpc2urdf.identification.handeye.noise`) and its own fits
-  (:mod:`~cpc2urdf.identification.handeye.reference_fit`);
+  (:mod:`~cpc2urdf.identification.handeye.gate.gate_report`), the mistakes it tests
+  (:mod:`~cpc2urdf.identification.handeye.gate.mistakes`), the noise model
+  (:mod:`~cpc2urdf.identification.handeye.pose_noise`) and its own fits
+  (:mod:`~cpc2urdf.identification.handeye.gate.reference_fit`);
 - :mod:`~cpc2urdf.identification.handeye.pose_file`: the ``cpc2urdf/handeye-poses@1`` file;
 - :mod:`~cpc2urdf.identification.handeye.stage2`: the stage-2 pipeline (simulated cameras,
   solvePnP, hand-eye, camera frames into the model);

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.consistency_report import ConsistencyReport
+from cpc2urdf.identification.handeye.gate.gate_report import ConsistencyReport
 from cpc2urdf.transforms import (
     Array,
     dual_quat_from_transform,
@@ -129,7 +129,7 @@ def check_directions(T_base_hand: Array, T_camera_target: Array) -> list[str]:
     Limits: inverting one list fits exactly as well as inverting the other (inverting *both* lists
     is an exact symmetry of ``A X = Z B``: it swaps X and Z), so the message names both
     possibilities, and both lists inverted at once cannot be detected from the residuals at all.
-    The consistency gate (:mod:`~cpc2urdf.identification.handeye.consistency`) replaces this check
+    The consistency gate (:mod:`~cpc2urdf.identification.handeye.gate.handeye_gate`) replaces this check
     in ``calibrate(..., gate=True)`` and tells the cases apart by plausibility.
 
     Returns:

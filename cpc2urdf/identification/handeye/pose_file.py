@@ -20,7 +20,7 @@ On disk::
 frame, from the robot's kinematics. ``T_camera_target`` is the pose of the calibration target in
 the camera's optical frame, as ``cv2.solvePnP`` returns it (``rvec, tvec``: target points to
 camera coordinates). Each pose is a 4x4 ``matrix`` or ``xyz`` + ``quat_xyzw`` (or ``xyz`` +
-``rpy``), see :mod:`cpc2urdf.files.poses`. ``noise`` (optional, :class:`~cpc2urdf.identification.handeye.noise.PoseNoise`)
+``rpy``), see :mod:`cpc2urdf.files.poses`. ``noise`` (optional, :class:`~cpc2urdf.identification.handeye.pose_noise.PoseNoise`)
 is what the consistency gate tests the residuals against. Documented in ``docs/handeye.md``.
 """
 
@@ -39,7 +39,7 @@ from cpc2urdf.errors import InputFileError
 from cpc2urdf.files.jsonio import read_json, require_format, write_json
 from cpc2urdf.files.poses import pose_from_json, pose_to_json
 from cpc2urdf.files.units import Units
-from cpc2urdf.identification.handeye.noise import PoseNoise
+from cpc2urdf.identification.handeye.pose_noise import PoseNoise
 from cpc2urdf.transforms import Array
 
 HANDEYE_POSES_FORMAT = "cpc2urdf/handeye-poses@1"

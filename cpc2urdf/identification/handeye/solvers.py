@@ -15,9 +15,9 @@ Every solver takes the same absolute poses -- ``T_base_hand`` and ``T_camera_tar
 (:func:`~cpc2urdf.identification.handeye.axxb.diagnose`, plus a solver's own check), solves and
 returns a :class:`~cpc2urdf.identification.handeye.axxb.HandEyeResult` with per-pose residuals
 and warnings. With ``gate=True`` (the API, the CLI and the stage-2 pipeline) the consistency gate
-(:func:`~cpc2urdf.identification.handeye.consistency.check_consistency`) replaces the quick
+(:func:`~cpc2urdf.identification.handeye.gate.handeye_gate.check_consistency`) replaces the quick
 direction check: data inconsistent with ``A X = Z B`` and their noise are refused with
-:class:`~cpc2urdf.identification.handeye.consistency_report.InconsistentPosesError` naming the most
+:class:`~cpc2urdf.identification.handeye.gate.gate_report.InconsistentPosesError` naming the most
 likely mistake, or kept with the diagnosis (``accept_inconsistent=True``).
 :func:`calibrate_hand_eye` and :func:`calibrate_robot_world` do the same restricted to one
 equation's solvers.
@@ -49,13 +49,13 @@ from cpc2urdf.identification.handeye.axzb import (
     solve_zhuang,
     zhuang_a0_check,
 )
-from cpc2urdf.identification.handeye.consistency import check_consistency
-from cpc2urdf.identification.handeye.consistency_report import (
+from cpc2urdf.identification.handeye.gate.gate_report import (
     ConsistencyReport,
     InconsistentPosesError,
 )
-from cpc2urdf.identification.handeye.noise import PoseNoise
+from cpc2urdf.identification.handeye.gate.handeye_gate import check_consistency
 from cpc2urdf.identification.handeye.pose_file import HandEyePoses
+from cpc2urdf.identification.handeye.pose_noise import PoseNoise
 from cpc2urdf.transforms import Array, inverse
 
 AX_XB = "AX = XB"

@@ -32,7 +32,7 @@ import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.axxb import HandEyeResult
-from cpc2urdf.identification.handeye.consistency_report import InconsistentPosesError
+from cpc2urdf.identification.handeye.gate.gate_report import InconsistentPosesError
 from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
 from cpc2urdf.identification.handeye.solvers import Gate, calibrate
 from cpc2urdf.identification.vision.targets import TARGET_LAYOUT
@@ -243,7 +243,7 @@ def calibrate_cameras(
     """Solve X = T_plate_camera for every observed camera and set the camera frames.
 
     Every camera's poses pass the consistency gate
-    (:func:`~cpc2urdf.identification.handeye.consistency.check_consistency`, noise estimated).
+    (:func:`~cpc2urdf.identification.handeye.gate.handeye_gate.check_consistency`, noise estimated).
 
     Args:
         model: The identified kinematic model (gives ``T_base_hand``).

@@ -26,7 +26,7 @@ import numpy as np
 
 from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
 from cpc2urdf.files.measurements import MeasurementSet
-from cpc2urdf.identification.kinematics.map_gate import GateReport, check
+from cpc2urdf.identification.kinematics.gate.map_gate import GateReport, check
 from cpc2urdf.identification.kinematics.prior_fit import (
     LEVELS,
     MapFit,

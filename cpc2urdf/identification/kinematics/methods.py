@@ -231,7 +231,7 @@ def identify(
             ``accept_inconsistent``), or the method cannot fit the data as read and a likely
             mistake's fix makes them fit (always); one line naming the most likely cause.
     """
-    from cpc2urdf.identification.kinematics.consistency import (
+    from cpc2urdf.identification.kinematics.gate.pose_gate import (
         Noise,
         check_consistency,
         diagnose_unfittable,
@@ -252,7 +252,7 @@ def identify(
         return model if ms.has_points else model.with_params(
             metadata=model.metadata.replace(residuals=residuals(model, ms)))
     if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)
-        from cpc2urdf.identification.kinematics.point_identify import identify_points
+        from cpc2urdf.identification.kinematics.points.point_identify import identify_points
 
         return identify_points(ms, method, nominal, accept_inconsistent=accept_inconsistent)
     check_data_suffice(ms)

@@ -1,6 +1,6 @@
 """Measuring a plan in simulation, identifying, and the held-out error: the prediction's check.
 
-:func:`simulate_plan` is :func:`~cpc2urdf.identification.simulation.simulate.simulate_experiment`
+:func:`simulate_plan` is :func:`~cpc2urdf.identification.simulation.stage1_experiment.simulate_experiment`
 for any list of configurations: the same random streams (``seed`` spawns the true geometry, the
 noise and the held-out streams, in that order), so a plan and the protocol measured with the same
 seed measure the same true robot; the robot is placed as :func:`~cpc2urdf.identification.planning.
@@ -29,16 +29,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError
 from cpc2urdf.files.measurements import MeasurementSet
-from cpc2urdf.identification.kinematics.circle_point import marker_sigma, nominal_point_start
 from cpc2urdf.identification.kinematics.methods import identify_refined
-from cpc2urdf.identification.kinematics.point_identify import identify_points, marker_positions
-from cpc2urdf.identification.kinematics.point_refine import refine_points
-from cpc2urdf.identification.planning.markers import MarkerMeasurement
+from cpc2urdf.identification.kinematics.points.circle_point import marker_sigma, nominal_point_start
+from cpc2urdf.identification.kinematics.points.point_identify import (
+    identify_points,
+    marker_positions,
+)
+from cpc2urdf.identification.kinematics.points.point_refine import refine_points
+from cpc2urdf.identification.planning.marker_setup import MarkerMeasurement
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
 from cpc2urdf.identification.planning.plan_file import LoadedPlan
-from cpc2urdf.identification.simulation.markers import simulate_markers
-from cpc2urdf.identification.simulation.measure import measure_poses
-from cpc2urdf.identification.simulation.simulate import DEFAULT_HELDOUT, Experiment
+from cpc2urdf.identification.simulation.marker_points import simulate_markers
+from cpc2urdf.identification.simulation.measure_poses import measure_poses
+from cpc2urdf.identification.simulation.stage1_experiment import DEFAULT_HELDOUT, Experiment
 from cpc2urdf.identification.simulation.truth import (
     DEFAULT_GEOMETRY_ERROR_R,
     DEFAULT_GEOMETRY_ERROR_T,

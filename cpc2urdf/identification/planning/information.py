@@ -39,7 +39,7 @@ from cpc2urdf.identification.kinematics.problem import (
     DEFAULT_SIGMA_T,
     IdentificationProblem,
 )
-from cpc2urdf.identification.planning.stereo import stereo_pose_covariance
+from cpc2urdf.identification.planning.stereo_views import stereo_pose_covariance
 from cpc2urdf.identification.vision.stereo import StereoRig
 
 Array = NDArray[np.float64]

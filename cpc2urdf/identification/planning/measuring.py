@@ -1,6 +1,6 @@
 """The measuring setup of a plan: the rig, where the robot stands in front of it, and the noise.
 
-The robot is placed exactly as :func:`~cpc2urdf.identification.simulation.simulate.
+The robot is placed exactly as :func:`~cpc2urdf.identification.simulation.stage1_experiment.
 simulate_experiment` places it (:func:`~cpc2urdf.identification.simulation.placement.
 experiment_placement` over the paper's protocol with ``M = DEFAULT_M``), so that a plan, the paper's protocol and the simulator all see the same
 scene. A configuration is *measurable* when :func:`~cpc2urdf.identification.simulation.visibility.
@@ -36,7 +36,7 @@ from cpc2urdf.identification.planning.information import (
     PoseMeasurement,
     StereoPoseMeasurement,
 )
-from cpc2urdf.identification.planning.markers import (
+from cpc2urdf.identification.planning.marker_setup import (
     DEFAULT_MARKER_SIGMA,
     MarkerMeasurement,
     plan_markers,
@@ -47,7 +47,7 @@ from cpc2urdf.identification.simulation.design import (
     measured_frames,
     protocol_configurations,
 )
-from cpc2urdf.identification.simulation.measure import (
+from cpc2urdf.identification.simulation.measure_poses import (
     DEFAULT_PIXEL_SIGMA,
     DEFAULT_SIGMA_R,
     DEFAULT_SIGMA_T,

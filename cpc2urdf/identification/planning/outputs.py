@@ -28,9 +28,10 @@ from cpc2urdf.errors import ConfigurationError, OutputError
 from cpc2urdf.files.jsonio import check_output_path, dumps, write_all_atomic
 from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.files.units import ANGLE_UNITS, LENGTH_UNITS
-from cpc2urdf.identification.planning.markers import DEFAULT_MARKER_SIGMA
+from cpc2urdf.identification.planning.marker_setup import DEFAULT_MARKER_SIGMA
 from cpc2urdf.identification.planning.measuring import MeasuringSetup, measuring_setup
-from cpc2urdf.identification.planning.plan import (
+from cpc2urdf.identification.planning.plan_file import plan_to_json
+from cpc2urdf.identification.planning.plan_selection import (
     DEFAULT_CANDIDATES,
     DEFAULT_TASK,
     CurvePoint,
@@ -38,8 +39,7 @@ from cpc2urdf.identification.planning.plan import (
     make_plan,
     task_configurations,
 )
-from cpc2urdf.identification.planning.plan_file import plan_to_json
-from cpc2urdf.identification.simulation.measure import (
+from cpc2urdf.identification.simulation.measure_poses import (
     DEFAULT_PIXEL_SIGMA,
     DEFAULT_SIGMA_R,
     DEFAULT_SIGMA_T,

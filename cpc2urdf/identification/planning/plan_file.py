@@ -54,10 +54,10 @@ from cpc2urdf.errors import InputFileError
 from cpc2urdf.files.jsonio import finite_float, float_list, read_json, require_format
 from cpc2urdf.files.units import Units
 from cpc2urdf.identification.planning.information import StereoPoseMeasurement
-from cpc2urdf.identification.planning.markers import MarkerMeasurement
+from cpc2urdf.identification.planning.marker_setup import MarkerMeasurement
 from cpc2urdf.identification.planning.measuring import SETUP_NOISE_MODELS, MeasuringSetup
-from cpc2urdf.identification.planning.plan import PlanResult
-from cpc2urdf.identification.simulation.measure import DEFAULT_PIXEL_SIGMA
+from cpc2urdf.identification.planning.plan_selection import PlanResult
+from cpc2urdf.identification.simulation.measure_poses import DEFAULT_PIXEL_SIGMA
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.model import RobotStructure
 

@@ -23,8 +23,8 @@ and :attr:`Prediction.bound_position_rms` is the Cramér-Rao bound with per-view
 (``sum J_c^T Sigma_c^-1 J_c``, what the optimiser maximises), which only a per-view weighting
 would reach. Under Fig. 10 noise the two coincide.
 
-With a marker setup (:class:`~cpc2urdf.identification.planning.markers.MarkerMeasurement`) the
-parameters are those of the :class:`~cpc2urdf.identification.kinematics.point_problem.PointChart`
+With a marker setup (:class:`~cpc2urdf.identification.planning.marker_setup.MarkerMeasurement`) the
+parameters are those of the :class:`~cpc2urdf.identification.kinematics.points.point_problem.PointChart`
 (the model without the frame placements, plus the unknown markers' positions) and the task
 region's targets are the markers' points: ``position_rms`` is their RMS error, ``orientation_rms``
 NaN (position-only data). ``sqrt`` of these
@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.identification.kinematics.identifiability import analyze_jacobian
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
-from cpc2urdf.identification.kinematics.point_problem import PointChart
+from cpc2urdf.identification.kinematics.points.point_problem import PointChart
 from cpc2urdf.identification.kinematics.uncertainty import (
     NULL_VISIBILITY_TOL,
     covariance_from_jacobian,
@@ -66,7 +66,7 @@ from cpc2urdf.identification.planning.information import (
     TaskSensitivity,
     task_sensitivity,
 )
-from cpc2urdf.identification.planning.markers import MarkerMeasurement
+from cpc2urdf.identification.planning.marker_setup import MarkerMeasurement
 from cpc2urdf.identification.planning.measuring import MeasuringSetup
 
 Array = NDArray[np.float64]

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from cpc2urdf.identification.simulation.noise import fig10_noise
+from cpc2urdf.identification.simulation.measurement_noise import fig10_noise
 from cpc2urdf.model import CPCModel, CPCParams
 from cpc2urdf.transforms import homogeneous
 

@@ -16,5 +16,5 @@ Modules, lowest first (vision imports only the core package):
 - :mod:`~cpc2urdf.identification.vision.measure_head`: stage 2, head-camera images -> target poses.
 
 Hand-eye input from these target poses is :mod:`cpc2urdf.identification.handeye.head_images`;
-rendering whole experiments is :mod:`cpc2urdf.identification.simulation.images`.
+rendering whole experiments is :mod:`cpc2urdf.identification.simulation.image_experiment`.
 """

@@ -17,7 +17,7 @@ user decides). Distortion is OpenCV's 5-term model with ``k3`` fixed at 0 unless
 
 A stereo calibration needs the same point ids in both images of a view, so the board must give a
 unique orientation (:attr:`Board.pose_ambiguity`): each camera is calibrated alone first, its
-intrinsics fix every view's orientation (:func:`~cpc2urdf.identification.vision.board_poses.board_pose`),
+intrinsics fix every view's orientation (:func:`~cpc2urdf.identification.vision.boards.board_poses.board_pose`),
 then ``cv2.stereoCalibrate`` refines all parameters together from those intrinsics.
 """
 
@@ -32,13 +32,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
-from cpc2urdf.identification.vision.board_poses import (
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.boards.board_poses import (
     MIN_BOARD_POINTS,
     board_pose,
     common_points,
     detect_board,
 )
-from cpc2urdf.identification.vision.boards import Board
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
     IMAGE_EXTENSIONS,

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
-from cpc2urdf.identification.vision.board_poses import BoardPose, board_pose
-from cpc2urdf.identification.vision.boards import Board
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.boards.board_poses import BoardPose, board_pose
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
     RecordError,
@@ -102,8 +102,8 @@ def measure_head_images(
         structure: The robot (for the joint columns).
         joints: The ``joints.csv`` (default ``images_dir/joints.csv``).
         design: The target (default :func:`~cpc2urdf.identification.vision.targets.target_design`).
-        board: A standard board as the target instead (:mod:`~cpc2urdf.identification.vision.boards`;
-            OpenCV's detector, :func:`~cpc2urdf.identification.vision.board_poses.board_pose`).
+        board: A standard board as the target instead (:mod:`~cpc2urdf.identification.vision.boards.board`;
+            OpenCV's detector, :func:`~cpc2urdf.identification.vision.boards.board_poses.board_pose`).
         on_error: ``"skip"``/``"skip-record"`` (the image) or ``"stop"``.
         correct_bias: Remove the ellipse-centre offset before the final solvePnP.
         show_progress: Progress bar on stderr.

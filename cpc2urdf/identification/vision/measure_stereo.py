@@ -27,8 +27,8 @@ import numpy as np
 
 from cpc2urdf.errors import ConfigurationError, DegenerateDataError, InputFileError
 from cpc2urdf.files.measurements import MeasurementSet
-from cpc2urdf.identification.vision.board_poses import stereo_board_pose
-from cpc2urdf.identification.vision.boards import Board
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.boards.board_poses import stereo_board_pose
 from cpc2urdf.identification.vision.detect import DetectionError
 from cpc2urdf.identification.vision.image_folders import (
     IMAGE_EXTENSIONS,
@@ -87,7 +87,7 @@ def measure_stereo_images(
         designs: Plate designs (default :func:`~cpc2urdf.identification.vision.targets.robot_plate_designs`).
         boards: Standard boards as the plates instead: plate frame -> board
             (:func:`check_plate_boards`); each is measured by
-            :func:`~cpc2urdf.identification.vision.board_poses.stereo_board_pose` (the corners both
+            :func:`~cpc2urdf.identification.vision.boards.board_poses.stereo_board_pose` (the corners both
             cameras see, triangulated, and the board registered to them). The measurement file then
             has no ``points`` (they are the board's corners, not the spec's layout).
         on_error: ``"skip"`` (the plate), ``"skip-record"`` or ``"stop"`` (module docstring).

@@ -1,7 +1,7 @@
 """Synthetic camera images of calibration plates, so the detector runs on real pixels.
 
 The renderer draws planar targets -- standard boards (:func:`render_board_view`: chessboard,
-ChArUco, circle grids, :mod:`~cpc2urdf.identification.vision.boards`), the stage-1 end-effector plates (dark circles on a light
+ChArUco, circle grids, :mod:`~cpc2urdf.identification.vision.boards.board`), the stage-1 end-effector plates (dark circles on a light
 plate, Shih et al. sec. 3.2, Fig. 7) and the stage-2 disk target (light disks on a black plate,
 sec. 5, Fig. 9) -- into a grey-level image of a pinhole camera with OpenCV's lens distortion
 model. It works backwards from pixels to the plate plane: every pixel (or sub-pixel sample) is
@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cpc2urdf.identification.vision.boards import Board
+from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.identification.vision.targets import PlateDesign
 
 _T = TypeVar("_T", PlateDesign, Board)
@@ -286,7 +286,7 @@ def render_view(
 
 
 def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Array, supersample: int) -> None:
-    """Composite one standard board (:mod:`~cpc2urdf.identification.vision.boards`) into ``img``
+    """Composite one standard board (:mod:`~cpc2urdf.identification.vision.boards.board`) into ``img``
     in place. Pixels where the board's texture changes (its centre and four corners disagree) are
     supersampled (``supersample`` x ``supersample`` samples from the local Jacobian of the plane
     coordinates, as :func:`_draw_plate` does at edges); the others take their centre's level."""
@@ -344,7 +344,7 @@ def render_board_view(
     Args:
         view: The camera.
         boards: (board, ``T_world_board`` of shape (4, 4)) pairs; the board frame is
-            :mod:`~cpc2urdf.identification.vision.boards`' (printed face towards +z).
+            :mod:`~cpc2urdf.identification.vision.boards.board`' (printed face towards +z).
         background: Grey level behind the boards (0..1).
         supersample: Sub-samples per axis at pixels where the board's texture changes.
         blur_sigma: Gaussian blur [px] (0: none).

@@ -13,8 +13,6 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-import numpy as np
-
 from cpc2urdf.transforms import Array
 
 STATUS_FIXATED = "fixated"

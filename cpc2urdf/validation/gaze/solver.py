@@ -377,7 +377,6 @@ def solver_for(
 
     ``fields``: :class:`GazeOptions` fields (``joints=...``, ``tolerance=...``), over ``options``.
     """
-    fields.pop("viewing_distance", None)  # the use-table policy's, gone; still passed by older callers
     opts = _options(options, fields)
     return GazeSolver(PinocchioRobot.load(ref, continuous_as_revolute=True), cameras, opts)
 

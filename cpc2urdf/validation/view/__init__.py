@@ -44,10 +44,10 @@ from cpc2urdf.validation.view.page import (
     static_visualizer,
     write_view_html,
 )
-from cpc2urdf.validation.view.robot import RobotSource, ViewRobot, load_view_robot
 from cpc2urdf.validation.view.scene import GHOST_RGBA, TARGET_RGBA, build_view, gaze_configuration
 from cpc2urdf.validation.view.screenshot import find_chromium, screenshot_html
 from cpc2urdf.validation.view.summary import ViewSummary
+from cpc2urdf.validation.view.view_robot import RobotSource, ViewRobot, load_view_robot
 
 __all__ = [
     "CHANGE_GHOST_RGBA",

@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from cpc2urdf.transforms import Array, cpc_rotation
 from cpc2urdf.validation.view.geometry import Visual
-from cpc2urdf.validation.view.robot import ViewRobot
+from cpc2urdf.validation.view.view_robot import ViewRobot
 
 FRAME_MARGIN = 0.02  # [m]: space around what frames the view
 VIEWER_FOV = 75.0  # [deg]: meshcat's default perspective camera

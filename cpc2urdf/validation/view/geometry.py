@@ -20,7 +20,7 @@ import umsgpack
 from numpy.typing import NDArray
 
 from cpc2urdf.transforms import Array, cpc_rotation
-from cpc2urdf.validation.view.robot import ViewRobot
+from cpc2urdf.validation.view.view_robot import ViewRobot
 
 TRIAD_LENGTH = 0.05  # [m]
 TRIAD_RADIUS = 0.002  # [m]

@@ -22,9 +22,9 @@ from meshcat.servers.tree import SceneTree, find_node, walk
 from cpc2urdf.files.jsonio import write_atomic
 from cpc2urdf.validation.view.change import LEGEND_CSS, legend_html
 from cpc2urdf.validation.view.region import REGION_LEGEND_CSS, region_legend_html
-from cpc2urdf.validation.view.robot import RobotSource, ViewRobot
 from cpc2urdf.validation.view.scene import build_view
 from cpc2urdf.validation.view.summary import ViewSummary
+from cpc2urdf.validation.view.view_robot import RobotSource, ViewRobot
 
 
 class SceneCommand(Protocol):

@@ -36,7 +36,7 @@ from cpc2urdf.validation.gaze.reach import (
     head_frame_at,
 )
 from cpc2urdf.validation.view.geometry import hex_colour
-from cpc2urdf.validation.view.robot import ViewRobot
+from cpc2urdf.validation.view.view_robot import ViewRobot
 
 REGION_NODE = "reach"  # /meshcat/reach/<category>
 COLOUR_NAMES = {"fixated": "green", "disparity": "orange", "joint_limits": "blue", "behind": "grey",

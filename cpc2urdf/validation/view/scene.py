@@ -61,8 +61,8 @@ from cpc2urdf.validation.view.geometry import (
     translation,
 )
 from cpc2urdf.validation.view.region import draw_region_points
-from cpc2urdf.validation.view.robot import RobotSource, ViewRobot, load_view_robot
 from cpc2urdf.validation.view.summary import ViewSummary
+from cpc2urdf.validation.view.view_robot import RobotSource, ViewRobot, load_view_robot
 
 TARGET_RGBA = (0.95, 0.1, 0.75, 1.0)  # magenta: no other part of the scene has this hue
 GHOST_RGBA = (0.2, 0.75, 0.35, 0.35)

@@ -1,0 +1,1 @@
+"""Position-only data (marker points): residuals, circle-point start, refinement, gate, identification."""

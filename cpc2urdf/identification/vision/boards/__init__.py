@@ -1,0 +1,1 @@
+"""Standard calibration boards: definition, board files, detection and poses."""
