@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # the stages are imported inside the functions that use them
     from cpc2urdf.validation.crosscheck import CrossCheckReport
     from cpc2urdf.validation.gaze import GazeSolver
     from cpc2urdf.validation.gaze.options import GazeOptions
-    from cpc2urdf.validation.gaze.reach import Region
+    from cpc2urdf.validation.gaze.reachable import Region
     from cpc2urdf.validation.heldout import BranchAccuracy
     from cpc2urdf.validation.view import ViewRobot, ViewSummary
 
@@ -489,8 +489,8 @@ def reachable_region(
     """Where a head's cameras can fixate (``cpc2urdf reach``): a grid of targets in front of it
     (``grid`` ``"shell"`` or ``"box"``, ``near``-``far`` [m] from the cameras), each solved by the
     batch solver and sorted into fixated, disparity-limited, joint limits, behind or too close."""
-    from cpc2urdf.validation.gaze.reach import make_grid
-    from cpc2urdf.validation.gaze.reach import reachable_region as _reachable_region
+    from cpc2urdf.validation.gaze.reachable import make_grid
+    from cpc2urdf.validation.gaze.reachable import reachable_region as _reachable_region
 
     solver = gaze_solver(robot, cameras)
     return _reachable_region(solver, make_grid(solver, grid, near, far, samples))

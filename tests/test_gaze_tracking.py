@@ -454,7 +454,8 @@ def test_warm_start_is_honoured(other_head):
 
 def test_public_names_are_exported():
     import cpc2urdf.validation.gaze as gaze
-    from cpc2urdf.validation.gaze import reach, tracking
+    from cpc2urdf.validation.gaze import reachable as reach
+    from cpc2urdf.validation.gaze import tracking
 
     for name in ("GazeTracker", "SaccadeRule", "TrackingStep", "minimum_jerk"):
         assert getattr(gaze, name) is getattr(tracking, name) and name in gaze.__all__

@@ -1,4 +1,4 @@
-"""The reachable region (cpc2urdf/validation/gaze/reach.py) and ``cpc2urdf reach``.
+"""The reachable region (cpc2urdf/validation/gaze/reachable.py) and ``cpc2urdf reach``.
 
 Fixation of every target the region calls fixated is checked with the CPC model's own FK (not
 Pinocchio, which the solver uses); the grid's geometry against the cameras' poses from that FK;
@@ -22,8 +22,9 @@ from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.identification.simulation.heads import calibrated_iis_head, eyes_coplanar
 from cpc2urdf.tolerances import GAZE_POINTING_TOL
-from cpc2urdf.validation.gaze import GazeOptions, GazeSolver, reach
-from cpc2urdf.validation.gaze.reach import (
+from cpc2urdf.validation.gaze import GazeOptions, GazeSolver
+from cpc2urdf.validation.gaze import reachable as reach
+from cpc2urdf.validation.gaze.reachable import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,
     box_grid,

@@ -20,7 +20,7 @@ from cpc2urdf.cli import main
 from cpc2urdf.files.robot_ref import load_model
 from cpc2urdf.validation.gaze import GazeSolver, solver_for
 from cpc2urdf.validation.gaze.chain import mid_limits
-from cpc2urdf.validation.gaze.reach import (
+from cpc2urdf.validation.gaze.reachable import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,
     make_grid,
@@ -238,7 +238,7 @@ def test_a_far_region_moves_the_viewer_cameras_far_plane() -> None:
 
 def test_cli_reach_screenshot_without_chromium_fails_before_solving(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
-    from cpc2urdf.validation.gaze import reach
+    from cpc2urdf.validation.gaze import reachable as reach
 
     monkeypatch.setenv("CPC2URDF_CHROMIUM", str(tmp_path / "no-chromium"))
     monkeypatch.setattr(reach, "reachable_region", lambda *a, **k: pytest.fail("solved before checking Chromium"))

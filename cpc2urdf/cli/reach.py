@@ -12,7 +12,7 @@ import argparse
 from cpc2urdf.cli._gaze_options import add_solver_options, region_notes, solver_options
 
 # Kept here so that `cpc2urdf --help` does not import numpy; tests check they match
-# cpc2urdf.validation.gaze.reach.
+# cpc2urdf.validation.gaze.reachable.
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
 DEFAULT_RANGE = (0.2, 3.0)  # [m]
 DEFAULT_SAMPLES = (16, 37, 25)
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import check_output_path, dumps, write_all_atomic
     from cpc2urdf.validation.gaze import solver_for
-    from cpc2urdf.validation.gaze.reach import (
+    from cpc2urdf.validation.gaze.reachable import (
         check_grid_args,
         make_grid,
         reachable_region,

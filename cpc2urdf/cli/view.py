@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
         from cpc2urdf.cli._gaze_options import region_notes
         from cpc2urdf.validation.gaze import GazeSolver
         from cpc2urdf.validation.gaze.chain import mid_limits
-        from cpc2urdf.validation.gaze.reach import make_grid, reachable_region
+        from cpc2urdf.validation.gaze.reachable import make_grid, reachable_region
 
         # the joints that do not move are held where shown (--q, else the middle of their limits);
         # the moving ones start, and the grid is laid out, at the middle of theirs, as reach does:

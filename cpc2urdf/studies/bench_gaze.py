@@ -298,7 +298,7 @@ def _placo_run(solver: GazeSolver, axes: SolvedAxes, P: Array) -> dict[str, Any]
 def _batch_throughput(solver: GazeSolver, P: Array, repeats: int = 7) -> tuple[float, str]:
     """Targets per second of one batch solve of ``P`` (best of ``repeats``), and the path used:
     ``"solve_many"`` or ``"loop"`` (one ``solve`` per target, where the solver has no batch entry)."""
-    from cpc2urdf.validation.gaze.reach import solve_batch
+    from cpc2urdf.validation.gaze.reachable import solve_batch
 
     best = math.inf
     for _ in range(repeats):
@@ -422,7 +422,7 @@ def run_head(
     audit: int = 1500,
 ) -> dict[str, Any]:
     """Every number of ``cpc2urdf bench gaze`` for one head (see :func:`run_benchmark`)."""
-    from cpc2urdf.validation.gaze.reach import solve_batch
+    from cpc2urdf.validation.gaze.reachable import solve_batch
 
     solver = head.solver
     axes = SolvedAxes(solver)

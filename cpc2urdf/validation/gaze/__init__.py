@@ -37,7 +37,7 @@ from cpc2urdf.validation.gaze.options import (
     pointing_tolerance,
     target_point,
 )
-from cpc2urdf.validation.gaze.reach import Region, make_grid, reachable_region
+from cpc2urdf.validation.gaze.reachable import Region, make_grid, reachable_region
 from cpc2urdf.validation.gaze.result import (
     STATUS_BEHIND,
     STATUS_DISPARITY,

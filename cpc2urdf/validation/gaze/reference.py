@@ -148,10 +148,10 @@ def generic_reachable_targets(axes: SolvedAxes, n: int, seed: int = 0) -> tuple[
 
 def generic_unreachable_targets(solver: GazeSolver, n: int, seed: int = 0) -> Array:
     """``n`` targets behind the head (world) [m], shape (n, 3): within 15 deg of straight back
-    from the head frame's origin (:func:`~cpc2urdf.validation.gaze.reach.head_frame`), 0.5-3 m
+    from the head frame's origin (:func:`~cpc2urdf.validation.gaze.reachable.head_frame`), 0.5-3 m
     away. Behind a pan-tilt head whose pan cannot turn round; the benchmark reports how many the
     solver fixates all the same."""
-    from cpc2urdf.validation.gaze.reach import head_frame
+    from cpc2urdf.validation.gaze.reachable import head_frame
 
     frame = head_frame(solver)
     rng = np.random.default_rng(seed)

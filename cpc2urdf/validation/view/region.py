@@ -1,5 +1,5 @@
 """The reachable region in the 3D view (``cpc2urdf reach --html``): a
-:class:`~cpc2urdf.validation.gaze.reach.Region` drawn as one point cloud per category, in the
+:class:`~cpc2urdf.validation.gaze.reachable.Region` drawn as one point cloud per category, in the
 PNG's colours (fixated and disparity opaque, the others translucent), under
 ``/meshcat/reach/<category>/<k>`` (a cloud per sample ``k`` of the grid's first axis, each with
 its point size; a category can be hidden in meshcat's "Open Controls"), and its legend for the
@@ -7,7 +7,7 @@ static page.
 
 Where the points go: the grid lies in the *head frame* of the solver's model
 (``Region.grid.points_head``: the cameras' mid-point at the home posture, x along their mean
-optical axis, z up; :mod:`cpc2urdf.validation.gaze.reach`). The view puts it on the head frame of
+optical axis, z up; :mod:`cpc2urdf.validation.gaze.reachable`). The view puts it on the head frame of
 the robot it draws, taken the same way (the same cameras at the middle of the joints' limits).
 For a URDF, a model file or a spec, solver and view load one model and the points land where the
 solver put them (to rounding); for a model identified from a user's URDF the view draws the
@@ -28,7 +28,7 @@ import numpy as np
 
 from cpc2urdf.transforms import Array
 from cpc2urdf.urdf.robot import urdf_source
-from cpc2urdf.validation.gaze.reach import (
+from cpc2urdf.validation.gaze.reachable import (
     CATEGORY_COLOURS,
     REGION_CATEGORIES,
     HeadFrame,
@@ -55,7 +55,7 @@ class RegionShown:
     """What the view drew of a region.
 
     Attributes:
-        counts: Targets per category (:data:`~cpc2urdf.validation.gaze.reach.REGION_CATEGORIES`).
+        counts: Targets per category (:data:`~cpc2urdf.validation.gaze.reachable.REGION_CATEGORIES`).
         grid: The grid's kind (``"shell"``, ``"box"``).
         point_sizes: Side of the smallest and of the largest drawn points [m] (a shell's grow
             with distance: :func:`point_sizes`).

@@ -43,7 +43,7 @@ from cpc2urdf.model import BASE
 from cpc2urdf.transforms import Array, inverse, rotation_error
 from cpc2urdf.urdf.robot import urdf_source
 from cpc2urdf.validation.gaze import DEFAULT_CAMERAS, GazeSolution, GazeSolver, target_point
-from cpc2urdf.validation.gaze.reach import Region
+from cpc2urdf.validation.gaze.reachable import Region
 from cpc2urdf.validation.view.camera import focus_points, place_camera, up_direction
 from cpc2urdf.validation.view.change import (
     CHANGE_GHOST_RGBA,
@@ -147,7 +147,7 @@ def build_view(
         align: How the ghost is placed: ``"auto"``, ``"base"`` or ``"world"``
             (:func:`ghost_alignment`; :attr:`ViewSummary.alignment` says what was done).
         region: A reachable region of this robot's cameras
-            (:func:`cpc2urdf.validation.gaze.reach.reachable_region`), drawn as points
+            (:func:`cpc2urdf.validation.gaze.reachable.reachable_region`), drawn as points
             (:func:`cpc2urdf.validation.view.region.draw_region_points`, numbers in
             :attr:`ViewSummary.region`); the view frames it whole.
 
