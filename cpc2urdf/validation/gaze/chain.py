@@ -256,6 +256,61 @@ def build_chain(
     m = len(variables)
     if m == 0:
         raise SpecError(f"no joint moves the cameras {list(cameras)}")
+    lower, upper, rA, rb = _unknowns_map(robot, drivers, variables, moving, mimic, coupled, coupling)
+    A = rA[joint_index]
+    b = rb[joint_index]
+
+    kind, solve_cameras, cam_parent, cam_R, cam_t, anc = _camera_placements(model, fids, paths, chain_of, rigid)
+    C = len(cam_parent)
+    eye, weight = _eyes_and_weights(kind, A, anc, jtype)
+    return HeadChain(
+        robot=robot,
+        cameras=cameras,
+        kind=kind,
+        joint_index=joint_index,
+        parent=parent,
+        jtype=jtype,
+        axis=np.ascontiguousarray(axis),
+        R=np.ascontiguousarray(R),
+        t=np.ascontiguousarray(t),
+        cam_parent=np.array(cam_parent, dtype=np.int64),
+        cam_R=np.ascontiguousarray(np.array(cam_R).reshape(C, 3, 3)),
+        cam_t=np.ascontiguousarray(np.array(cam_t).reshape(C, 3)),
+        anc=np.ascontiguousarray(anc[:C]),
+        solve_cameras=np.array(solve_cameras, dtype=np.int64),
+        A=np.ascontiguousarray(A),
+        b=np.ascontiguousarray(b),
+        variables=tuple(variables),
+        lower=lower,
+        upper=upper,
+        weight=weight,
+        eye=eye,
+        robot_A=rA,
+        robot_b=rb,
+        moving=tuple(moving),
+    )
+
+
+def _unknowns_map(
+    robot: PinocchioRobot,
+    drivers: list[str],
+    variables: list[str],
+    moving: list[str],
+    mimic: dict[str, tuple[str, float, float]],
+    coupled: set[str],
+    coupling: Coupling | None,
+) -> tuple[Array, Array, Array, Array]:
+    """The unknowns' bounds ``lower``, ``upper`` (m,) and the map ``q = rA u + rb`` from them to
+    every joint reading (n, m), (n,): drivers as themselves, mimic followers through their driver
+    (the driver bounded so the follower stays inside its limits), coupled joints through the
+    coupling.
+
+    Raises:
+        SpecError: A limit PyBullet reads as none, a coupling outside the joints' limits, a
+            moving joint without finite limits, or followers' limits that leave no range.
+        ConfigurationError: A coupling of the wrong shape or with bad bounds.
+    """
+    m = len(variables)
     for name in moving:
         i = robot.joint_index(name)
         if robot.lower[i] > robot.upper[i]:  # PyBullet's way of writing "no limit"
@@ -264,7 +319,7 @@ def build_chain(
                 f"{robot.upper[i]:.9g} (PyBullet reads that as no limit); gaze control needs finite "
                 "limits with lower <= upper"
             )
-    n = len(names)
+    n = len(robot.joint_names)
     lower = np.empty(m)
     upper = np.empty(m)
     rA = np.zeros((n, m))
@@ -310,18 +365,23 @@ def build_chain(
     if np.any(lower > upper):
         bad = [variables[v] for v in range(m) if lower[v] > upper[v]]
         raise SpecError(f"joints {bad}: their mimic followers' limits leave no range")
-    A = rA[joint_index]
-    b = rb[joint_index]
+    return lower, upper, rA, rb
 
-    # cameras: placements; a rigid pair adds the virtual camera (index 2)
+
+def _camera_placements(
+    model: pin.Model, fids: list[int], paths: list[list[int]], chain_of: dict[int, int], rigid: str
+) -> tuple[str, list[int], list[int], list[Array], list[Array], NDArray[np.bool_]]:
+    """The head's kind, the cameras it solves, each camera's parent in the chain and placement
+    (a rigid pair solved on its cyclopean axis adds a virtual camera, index 2), and which chain
+    joints move each camera (3, K)."""
     cam_parent = [chain_of.get(model.frames[f].parentJoint, -1) for f in fids]
     cam_R = [model.frames[f].placement.rotation for f in fids]
     cam_t = [model.frames[f].placement.translation for f in fids]
-    anc = np.zeros((3, K), dtype=bool)
+    anc = np.zeros((3, len(chain_of)), dtype=bool)
     for c, path in enumerate(paths):
         for j in path:
             anc[c, chain_of[j]] = True
-    if len(cameras) == 1:
+    if len(fids) == 1:
         kind, solve_cameras = KIND_ONE_CAMERA, [0]
     elif set(paths[0]) == set(paths[1]):
         kind = KIND_RIGID_STEREO
@@ -336,7 +396,13 @@ def build_chain(
             solve_cameras = [0 if rigid == "left" else 1]
     else:
         kind, solve_cameras = KIND_BINOCULAR, [0, 1]
-    C = len(cam_parent)
+    return kind, solve_cameras, cam_parent, cam_R, cam_t, anc
+
+
+def _eyes_and_weights(kind: str, A: Array, anc: NDArray[np.bool_], jtype: NDArray[np.int64]) -> tuple[NDArray[np.bool_], Array]:
+    """Which unknowns are an eye's (on a binocular head, moving joints on one camera's path only),
+    and each unknown's step weight (prismatic, eye, or 1)."""
+    m = A.shape[1]
     eye = np.zeros(m, dtype=bool)
     if kind == KIND_BINOCULAR:  # an eye unknown moves joints on one camera's path only
         for v in range(m):
@@ -349,32 +415,7 @@ def build_chain(
             weight[v] = PRISMATIC_WEIGHT
         elif eye[v]:
             weight[v] = EYE_WEIGHT
-    return HeadChain(
-        robot=robot,
-        cameras=cameras,
-        kind=kind,
-        joint_index=joint_index,
-        parent=parent,
-        jtype=jtype,
-        axis=np.ascontiguousarray(axis),
-        R=np.ascontiguousarray(R),
-        t=np.ascontiguousarray(t),
-        cam_parent=np.array(cam_parent, dtype=np.int64),
-        cam_R=np.ascontiguousarray(np.array(cam_R).reshape(C, 3, 3)),
-        cam_t=np.ascontiguousarray(np.array(cam_t).reshape(C, 3)),
-        anc=np.ascontiguousarray(anc[:C]),
-        solve_cameras=np.array(solve_cameras, dtype=np.int64),
-        A=np.ascontiguousarray(A),
-        b=np.ascontiguousarray(b),
-        variables=tuple(variables),
-        lower=lower,
-        upper=upper,
-        weight=weight,
-        eye=eye,
-        robot_A=rA,
-        robot_b=rb,
-        moving=tuple(moving),
-    )
+    return eye, weight
 
 
 def _cyclopean_placement(model: pin.Model, fids: list[int], jid: int) -> tuple[Array, Array]:
