@@ -25,14 +25,17 @@ from cpc2urdf.validation.gaze.kernels import _cache, _progress
 _cache.install()  # before any kernel is defined: each is keyed on the whole package's source
 _progress.install()  # a line on stderr while the kernels compile
 
+import numpy as np  # noqa: E402
+from numba import njit  # noqa: E402
+
+from cpc2urdf.validation.gaze.kernels import buffers as _workspace_module  # noqa: E402
 from cpc2urdf.validation.gaze.kernels import eigen as _eigen  # noqa: E402
 from cpc2urdf.validation.gaze.kernels import flat as _flat  # noqa: E402
 from cpc2urdf.validation.gaze.kernels import iterate as _iterate_module  # noqa: E402
 from cpc2urdf.validation.gaze.kernels import pointing as _pointing  # noqa: E402
-from cpc2urdf.validation.gaze.kernels import buffers as _workspace_module  # noqa: E402
-from numba import njit  # noqa: E402
-
+from cpc2urdf.validation.gaze.kernels import starts as _starts  # noqa: E402
 from cpc2urdf.validation.gaze.kernels._jit import kernel, kernel_without_refcounts  # noqa: E402
+from cpc2urdf.validation.gaze.kernels.buffers import Workspace, scratch, workspace  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.constants import *  # noqa: E402,F403
 from cpc2urdf.validation.gaze.kernels.constants import (  # noqa: E402
     BACKTRACKS,
@@ -63,9 +66,7 @@ from cpc2urdf.validation.gaze.kernels.constants import (  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.flat import out_size, pack_flat, solve_flat, solve_flat_many  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.kinematics import Chain, fk, pack, pointing_error  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.pointing import residual  # noqa: E402
-from cpc2urdf.validation.gaze.kernels import starts as _starts  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.step import Problem  # noqa: E402
-from cpc2urdf.validation.gaze.kernels.buffers import Workspace, _workspace, scratch, workspace  # noqa: E402
 
 # Python-callable kernels over internal ones, for tests that call them one by one (compiled on their
 # first call only; functions of their own, so that numba caches them apart from the internal ones)
@@ -97,6 +98,26 @@ def _sizes(I):  # type: ignore[no-untyped-def]
 
 
 _carve_workspace = _workspace_module._carve_in_python
+_carve_workspace_counted = njit(error_model="numpy")(_workspace_module._carve_workspace.py_func)
+
+
+@njit(error_model="numpy")
+def _new_workspace(n_float, n_int, sizes):  # type: ignore[no-untyped-def]
+    return _carve_workspace_counted(np.empty(n_float), np.empty(n_int, dtype=np.int64), sizes)
+
+
+def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
+    """A :class:`Workspace` carved by numba from two buffers it allocates (the arrays' base is numba's
+    MemInfo), started as :func:`~.buffers.scratch` starts one."""
+    sizes = (int(K), int(C), int(S), int(m), int(G), int(n_top))
+    f, ints = _workspace_module._buffers_in_python(sizes)  # the sizes and starting values
+    ws = _new_workspace(f.size, ints.size, sizes)
+    ws.ref_key[:] = np.nan
+    ws.eig[:] = 0.0
+    ws.ones[:] = 1.0
+    return ws
+
+
 # the kernels that return views, as copies of their own with reference counting (not cached: the
 # solve's copies, without it, are cached under the same name)
 _unpack = njit(error_model="numpy")(_flat._unpack.py_func)

@@ -18,7 +18,7 @@ from numba.core import caching
 _DIR = os.path.dirname(os.path.abspath(__file__))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _package_stamp() -> bytes:
     """One hash of the contents of every module of this package."""
     digest = hashlib.sha256()

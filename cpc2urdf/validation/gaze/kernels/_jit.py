@@ -14,10 +14,12 @@ Internal kernels carry no Python wrappers (a wrapper of a kernel taking the work
 
 from __future__ import annotations
 
+from typing import Any
+
 from numba import njit
 
-_BASE = {"cache": True, "error_model": "numpy", "nogil": True}
-_INTERNAL = {**_BASE, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+_BASE: dict[str, Any] = {"cache": True, "error_model": "numpy", "nogil": True}
+_INTERNAL: dict[str, Any] = {**_BASE, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 
 # kernels called from Python: cached across runs; IEEE division (every division that matters is
 # guarded); the GIL released (a batch is split over threads, one per core)

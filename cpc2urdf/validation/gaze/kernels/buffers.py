@@ -11,7 +11,6 @@ from collections import namedtuple
 from typing import Any
 
 import numpy as np
-
 from numpy.typing import NDArray
 
 from cpc2urdf.validation.gaze.chain import HeadChain
@@ -43,12 +42,6 @@ Workspace = namedtuple(
 
 
 @view_kernel
-def _carve(buf, o, n):  # type: ignore[no-untyped-def]
-    """The ``n`` elements of ``buf`` from offset ``o`` (a view), and the offset after them."""
-    return buf[o:o + n], o + n
-
-
-@view_kernel
 def _sizes(I):  # type: ignore[no-untyped-def]
     """``(K, C, S, m, G, n_top)`` of a workspace for the packed head whose ints are ``I``
     (:func:`~.flat.pack_flat`)."""
@@ -61,50 +54,95 @@ def _carve_workspace(f, ints, sizes):  # type: ignore[no-untyped-def]
     ``sizes`` (:func:`_sizes`); nothing written or allocated (~0.5 us a call)."""
     K, C, S, m, G, n_top = sizes
     M = 2 * S
-    JR, o = _carve(f, 0, 9 * K)
-    Jp, o = _carve(f, o, 3 * K)
-    Ja, o = _carve(f, o, 3 * K)
-    CR, o = _carve(f, o, 9 * C)
-    Co, o = _carve(f, o, 3 * C)
-    Jc, o = _carve(f, o, 6 * K)
-    Pc, o = _carve(f, o, (5 + m) * S)
-    r, o = _carve(f, o, 3 * S)
-    J, o = _carve(f, o, M * m)
-    r2, o = _carve(f, o, 3 * S)
-    J2, o = _carve(f, o, M * m)
-    g, o = _carve(f, o, m)
-    H, o = _carve(f, o, m * m)
-    V, o = _carve(f, o, m * m)
-    lam, o = _carve(f, o, m)
-    dx, o = _carve(f, o, m)
-    trial, o = _carve(f, o, m)
-    Hb, o = _carve(f, o, m * m)
-    Vp, o = _carve(f, o, m * m)
-    eig, o = _carve(f, o, 3)
-    s_prev, o = _carve(f, o, m)
-    u_near, o = _carve(f, o, m)
-    acc, o = _carve(f, o, (4 * HISTORY + 2) * m)
-    u, o = _carve(f, o, m)
-    score, o = _carve(f, o, G + 1)
-    ps, o = _carve(f, o, 3)
-    b, o = _carve(f, o, K)
-    u_ref, o = _carve(f, o, m)
-    u_start, o = _carve(f, o, m)
-    starts, o = _carve(f, o, n_top * m)
-    u_out, o = _carve(f, o, m)
-    e_out, o = _carve(f, o, S)
-    u1, o = _carve(f, o, m)
-    e1, o = _carve(f, o, S)
-    best_start, o = _carve(f, o, m)
-    u2, o = _carve(f, o, m)
-    e2, o = _carve(f, o, S)
-    ones, o = _carve(f, o, m)
-    null_z, o = _carve(f, o, m)
-    null_c, o = _carve(f, o, m)
-    ref_key, o = _carve(f, o, m + K)
-    ref_axis, o = _carve(f, o, 6)
-    ref_cost, o = _carve(f, o, G)
-    vw_plain, o = _carve(f, o, 4)
+    o = 0
+    JR = f[o:o + 9 * K]
+    o += 9 * K
+    Jp = f[o:o + 3 * K]
+    o += 3 * K
+    Ja = f[o:o + 3 * K]
+    o += 3 * K
+    CR = f[o:o + 9 * C]
+    o += 9 * C
+    Co = f[o:o + 3 * C]
+    o += 3 * C
+    Jc = f[o:o + 6 * K]
+    o += 6 * K
+    Pc = f[o:o + (5 + m) * S]
+    o += (5 + m) * S
+    r = f[o:o + 3 * S]
+    o += 3 * S
+    J = f[o:o + M * m]
+    o += M * m
+    r2 = f[o:o + 3 * S]
+    o += 3 * S
+    J2 = f[o:o + M * m]
+    o += M * m
+    g = f[o:o + m]
+    o += m
+    H = f[o:o + m * m]
+    o += m * m
+    V = f[o:o + m * m]
+    o += m * m
+    lam = f[o:o + m]
+    o += m
+    dx = f[o:o + m]
+    o += m
+    trial = f[o:o + m]
+    o += m
+    Hb = f[o:o + m * m]
+    o += m * m
+    Vp = f[o:o + m * m]
+    o += m * m
+    eig = f[o:o + 3]
+    o += 3
+    s_prev = f[o:o + m]
+    o += m
+    u_near = f[o:o + m]
+    o += m
+    acc = f[o:o + (4 * HISTORY + 2) * m]
+    o += (4 * HISTORY + 2) * m
+    u = f[o:o + m]
+    o += m
+    score = f[o:o + G + 1]
+    o += G + 1
+    ps = f[o:o + 3]
+    o += 3
+    b = f[o:o + K]
+    o += K
+    u_ref = f[o:o + m]
+    o += m
+    u_start = f[o:o + m]
+    o += m
+    starts = f[o:o + n_top * m]
+    o += n_top * m
+    u_out = f[o:o + m]
+    o += m
+    e_out = f[o:o + S]
+    o += S
+    u1 = f[o:o + m]
+    o += m
+    e1 = f[o:o + S]
+    o += S
+    best_start = f[o:o + m]
+    o += m
+    u2 = f[o:o + m]
+    o += m
+    e2 = f[o:o + S]
+    o += S
+    ones = f[o:o + m]
+    o += m
+    null_z = f[o:o + m]
+    o += m
+    null_c = f[o:o + m]
+    o += m
+    ref_key = f[o:o + m + K]
+    o += m + K
+    ref_axis = f[o:o + 6]
+    o += 6
+    ref_cost = f[o:o + G]
+    o += G
+    vw_plain = f[o:o + 4]
+    o += 4
     return Workspace(
         JR.reshape((K, 3, 3)), Jp.reshape((K, 3)), Ja.reshape((K, 3)), CR.reshape((C, 3, 3)), Co.reshape((C, 3)),
         Jc.reshape((6, K)), Pc.reshape((S, 5 + m)), r, J.reshape((M, m)), r2, J2.reshape((M, m)), g,
@@ -172,13 +210,7 @@ def _allocate(n_float, n_int):  # type: ignore[no-untyped-def]
     return np.empty(n_float), np.empty(n_int, dtype=np.int64)
 
 
-def _workspace(K: int, C: int, S: int, m: int, G: int, n_top: int) -> Workspace:
-    """A :class:`Workspace` carved from two new buffers numba allocates."""
-    sizes = (int(K), int(C), int(S), int(m), int(G), int(n_top))
-    return _carve_in_python(*_buffers_in_python(sizes, _allocate), sizes)
-
-
-def scratch(I: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def scratch(I: NDArray[Any]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The two buffers (float, int) of a workspace for the packed head whose ints are ``I``
     (:func:`~.flat.pack_flat`): what :func:`~.flat.solve_flat` carves its workspace from."""
     return _buffers_in_python((int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1))

@@ -18,7 +18,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.transforms import Array
-from cpc2urdf.validation.gaze.kernels._jit import hot_kernel, inline_kernel, kernel_without_refcounts, view_kernel
+from cpc2urdf.validation.gaze.kernels._jit import (
+    hot_kernel,
+    inline_kernel,
+    kernel_without_refcounts,
+    view_kernel,
+)
+from cpc2urdf.validation.gaze.kernels.buffers import _carve_workspace, _sizes, scratch
 from cpc2urdf.validation.gaze.kernels.constants import (
     AT_BOUND,
     FAR_TARGET,
@@ -31,12 +37,17 @@ from cpc2urdf.validation.gaze.kernels.constants import (
     S_NOT_FINITE,
     STATIONARY,
 )
-from cpc2urdf.validation.gaze.kernels.kinematics import TASK_MIN_DISTANCE, TASK_NEAR_NULL, TASK_WEIGHT, Chain, fk
-from cpc2urdf.validation.gaze.kernels.pointing import _gradient_entry, _residual_hot
+from cpc2urdf.validation.gaze.kernels.kinematics import (
+    TASK_MIN_DISTANCE,
+    TASK_NEAR_NULL,
+    TASK_WEIGHT,
+    Chain,
+    fk,
+)
+from cpc2urdf.validation.gaze.kernels.pointing import WITH_JACOBIAN, _gradient_entry, residual
 from cpc2urdf.validation.gaze.kernels.solve import Settings, solve_one
 from cpc2urdf.validation.gaze.kernels.starts import best_starts
 from cpc2urdf.validation.gaze.kernels.step import Problem
-from cpc2urdf.validation.gaze.kernels.buffers import _carve_workspace, _sizes, scratch
 
 I_HEADER = 9  # K, C, S, m, G, n, starts per target, iteration cap, disparity head (0/1)
 F_SCALARS = 7  # null_rel, tolerance, baseline, has a zero-version task (0/1), the head's centre (3)
@@ -273,7 +284,7 @@ def _solve_target(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-unt
     _report(head, I[5], ws, p, qin, mode, st, it, out)
 
 
-@inline_kernel
+@hot_kernel
 def _readings(head, n, qin, mode, ws):  # type: ignore[no-untyped-def]
     """The readings offset ``ws.b`` and reference ``ws.u_ref`` of one target (the chain's and the
     home, or from ``q_current`` with :data:`~.constants.MODE_Q_CURRENT`: the held joints read there),
@@ -301,7 +312,7 @@ def _keep(ch, u, e, b, ws):  # type: ignore[no-untyped-def]
     fk(ch, ws.u_out, b, ws.JR, ws.Jp, ws.Ja, ws.CR, ws.Co)
 
 
-@inline_kernel
+@hot_kernel
 def _report(head, n, ws, p, qin, mode, st, it, out):  # type: ignore[no-untyped-def]
     """``out`` (:func:`out_size`) from the answer ``ws.u_out`` and the cameras there (``ws.CR``,
     ``ws.Co``): status, iterations, readings (n), pointing errors (S), miss distances (S), fixation
@@ -341,7 +352,7 @@ def _report(head, n, ws, p, qin, mode, st, it, out):  # type: ignore[no-untyped-
     out[o], out[o + 1], out[o + 2] = p[0], p[1], p[2]
 
 
-@inline_kernel
+@hot_kernel
 def _fixation_point(CR, Co, solve_cams, out):  # type: ignore[no-untyped-def]
     """``out`` (4,): the midpoint of the closest points of two solved axes and their vergence (NaN,
     NaN, NaN, 0 with one axis; the point NaN when the axes are parallel)."""
@@ -378,7 +389,7 @@ def _u_of_q(q, robot_b, pinv, lower, upper, u):  # type: ignore[no-untyped-def]
         u[v] = min(max(s, lower[v]), upper[v])
 
 
-@inline_kernel
+@hot_kernel
 def _aim_point(p, centre, ps):  # type: ignore[no-untyped-def]
     """Writes into ``ps`` (3,) the point the iteration aims at for target ``p``: ``p`` itself, or for
     a target with a coordinate beyond :data:`~.constants.FAR_TARGET` the point on the ray from
@@ -430,7 +441,7 @@ def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-unty
     at is at most :data:`~.constants.STATIONARY` ``|J| |r|`` (a KKT point of the pointing error).
     Leaves the FK at ``u`` in the workspace."""
     r, J = ws.r, ws.J
-    rr = _residual_hot(ch, u, b, p, r, J, True, ws)
+    rr = residual(ch, u, b, p, r, J, WITH_JACOBIAN, ws.JR, ws.Jp, ws.Ja, ws.CR, ws.Co, ws.Jc, ws.Pc)
     M, m = J.shape
     g2 = 0.0
     j2 = 0.0

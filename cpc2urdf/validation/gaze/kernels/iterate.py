@@ -38,8 +38,18 @@ from cpc2urdf.validation.gaze.kernels.constants import (
     VERSION_POLISH,
     VERSION_SETTLED,
 )
-from cpc2urdf.validation.gaze.kernels.kinematics import TASK_MIN_DISTANCE, TASK_NEAR_NULL, TASK_VERSION_REF, TASK_WEIGHT
-from cpc2urdf.validation.gaze.kernels.pointing import _residual_hot, residual_at_fk
+from cpc2urdf.validation.gaze.kernels.kinematics import (
+    TASK_MIN_DISTANCE,
+    TASK_NEAR_NULL,
+    TASK_VERSION_REF,
+    TASK_WEIGHT,
+)
+from cpc2urdf.validation.gaze.kernels.pointing import (
+    RESIDUAL_ONLY,
+    WITH_JACOBIAN,
+    _residual_hot,
+    residual_at_fk,
+)
 from cpc2urdf.validation.gaze.kernels.step import (
     DN,
     _capped,
@@ -77,7 +87,7 @@ def _iterate(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyped-def]
     nh = 0  # pairs (x, F) in the acceleration's history
     h_free = 0  # the free unknowns of the pairs in the history, as bits
     rr_old = 0.0  # |r|^2 before the last accepted step
-    rr = rr_at_u if rr_at_u >= 0.0 else _residual_hot(ch, u, pb.b, pb.p, ws.r, ws.J, True, ws)
+    rr = rr_at_u if rr_at_u >= 0.0 else _residual_hot(ch, u, pb.b, pb.p, ws.r, ws.J, WITH_JACOBIAN, ws)
     it = 0
     while it < max_it:
         if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
@@ -112,7 +122,7 @@ def _iterate(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyped-def]
         # step or a step cut at a bound
         moved_before = not accel and not limited
         rr_old = rr
-        rr = residual_at_fk(ch, pb.p, ws.r, ws.J, True, ws)  # the FK of the trial
+        rr = residual_at_fk(ch, pb.p, ws.r, ws.J, WITH_JACOBIAN, ws)  # the FK of the trial
         if eig[EIG_PROBE] > 0.0 and _distance(u, ws.u_near) < SAME_BASIN:
             break
         if moved < (STEP_TOL if gain == 0.0 else POLICY_STEP_TOL) and not accel and not limited:
@@ -313,15 +323,23 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
     allow = allowance * scale * scale
     tries = BACKTRACKS + 1 if accel else BACKTRACKS  # the fallback to the plain step is not a halving
     cut_tried = gain == 0.0  # the policy phase's cut at the first bound, tried once
+    cut_now = False  # this trial is the step cut at its first bound (not a halving)
     sb = -1.0  # the step's scale at the first bound it reaches (-1: not yet found)
     vb = -1  # the unknown there
-    for k in range(tries):
+    k = 0
+    while k < tries:
         for v in range(m):
-            trial[v] = min(max(u[v] + scale * dx[v] / sw[v], lower[v]), upper[v])
-        rr_new = _residual_hot(ch, trial, pb.b, pb.p, ws.r2, ws.J2, False, ws)
-        if rr_new <= rr + allow or rr_new <= EXACT_RESIDUAL:
+            trial[v] = min(max(u[v] + (sb if cut_now else scale) * dx[v] / sw[v], lower[v]), upper[v])
+        if cut_now:
+            trial[vb] = lower[vb] if dx[vb] / sw[vb] < 0.0 else upper[vb]
+        rr_new = _residual_hot(ch, trial, pb.b, pb.p, ws.r2, ws.J2, RESIDUAL_ONLY, ws)
+        if cut_now:
+            cut_now = False
+            if rr_new <= rr + allowance * sb * sb or rr_new <= EXACT_RESIDUAL:
+                return True, True, sb, accel, nh
+        elif rr_new <= rr + allow or rr_new <= EXACT_RESIDUAL:
             return True, False, scale, accel, nh
-        if accel:  # the accelerated step failed: the plain one (its own allowance), a fresh history
+        elif accel:  # the accelerated step failed: the plain one (its own allowance), a fresh history
             accel = False
             nh = 0
             for v in range(m):
@@ -329,8 +347,9 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
             scale = _capped(dx, sw, m)[1]
             allowance = _policy_allowance(dx, sw, scale, gain, m)
             allow = allowance * scale * scale
+            k += 1
             continue
-        if not cut_tried:
+        elif not cut_tried:
             if sb < 0.0:
                 sb, vb = _first_bound(u, dx, sw, lower, upper, scale)
                 if vb < 0:
@@ -339,14 +358,11 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
             # near a fixating posture, where the step's null move is the walk
             if vb >= 0 and ((rr <= ACCELERATE_BELOW and 0.5 * scale < sb) or k == tries - 1):
                 cut_tried = True
-                for v in range(m):
-                    trial[v] = min(max(u[v] + sb * dx[v] / sw[v], lower[v]), upper[v])
-                trial[vb] = lower[vb] if dx[vb] / sw[vb] < 0.0 else upper[vb]
-                rr_new = _residual_hot(ch, trial, pb.b, pb.p, ws.r2, ws.J2, False, ws)
-                if rr_new <= rr + allowance * sb * sb or rr_new <= EXACT_RESIDUAL:
-                    return True, True, sb, accel, nh
+                cut_now = True
+                continue
         allow *= 0.25
         scale *= 0.5
+        k += 1
     return False, False, scale, accel, nh
 
 

@@ -14,9 +14,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from cpc2urdf.validation.gaze.kernels._jit import hot_kernel, kernel
 from cpc2urdf.validation.gaze.kernels.constants import MIN_TARGET_DISTANCE
 from cpc2urdf.validation.gaze.kernels.kinematics import _fk_scalars, camera_jacobian
+
+# ``want_jac`` as numpy bools, not Python's: numba types a Python bool argument as a literal and
+# compiles the helpers once per value (their call sites are inlined, so the branch goes either way)
+WITH_JACOBIAN, RESIDUAL_ONLY = np.bool_(True), np.bool_(False)
 
 
 @hot_kernel

@@ -31,9 +31,9 @@ from cpc2urdf.validation.gaze.kernels.constants import (
     SAME_BASIN,
     SECONDARY_GAIN,
 )
-from cpc2urdf.validation.gaze.kernels.kinematics import fk, pointing_error
 from cpc2urdf.validation.gaze.kernels.iterate import _distance, _iterate
-from cpc2urdf.validation.gaze.kernels.pointing import _residual_hot
+from cpc2urdf.validation.gaze.kernels.kinematics import fk, pointing_error
+from cpc2urdf.validation.gaze.kernels.pointing import RESIDUAL_ONLY, residual
 from cpc2urdf.validation.gaze.kernels.starts import further_start
 
 #: A head's solve settings: the pointing ``tol`` [rad] under which an axis is on its target, the
@@ -124,7 +124,7 @@ def _run_start(pb, u, u_out, first, best_rr, max_it, ws):  # type: ignore[no-unt
 def _decided_by_geometry(pb, u, baseline, ws):  # type: ignore[no-untyped-def]
     """Whether the answer ``u`` leaves the target behind a solved camera or nearer than the
     baseline: no other start would fixate it."""
-    _residual_hot(pb.ch, u, pb.b, pb.p, ws.r, ws.J, False, ws)
+    residual(pb.ch, u, pb.b, pb.p, ws.r, ws.J, RESIDUAL_ONLY, ws.JR, ws.Jp, ws.Ja, ws.CR, ws.Co, ws.Jc, ws.Pc)
     Pc = ws.Pc
     for s in range(Pc.shape[0]):
         if Pc[s, 2] <= 0.0 or Pc[s, 3] < baseline:
@@ -132,7 +132,7 @@ def _decided_by_geometry(pb, u, baseline, ws):  # type: ignore[no-untyped-def]
     return False
 
 
-@inline_kernel
+@hot_kernel
 def _judge(pb, p, settings, u_out, err_out, ws):  # type: ignore[no-untyped-def]
     """The status of the answer ``u_out`` on the target ``p`` itself, its solved cameras' pointing
     errors into ``err_out``; the cameras at ``u_out`` left in ``ws.CR``, ``ws.Co``."""

@@ -7,8 +7,14 @@ import math
 import numpy as np
 
 from cpc2urdf.validation.gaze.kernels._jit import hot_kernel, internal_kernel
-from cpc2urdf.validation.gaze.kernels.constants import DISTINCT_START, START_DISTANCE, START_DISTANCE_REDUNDANT
+from cpc2urdf.validation.gaze.kernels.constants import (
+    DISTINCT_START,
+    START_DISTANCE,
+    START_DISTANCE_REDUNDANT,
+)
 from cpc2urdf.validation.gaze.kernels.kinematics import fk
+
+DISTINCT, ANY = np.bool_(True), np.bool_(False)  # _best_other's choice (numpy bools: one compiled copy)
 
 
 @internal_kernel
@@ -103,9 +109,9 @@ def further_start(j, n_table, u_ref, sw, table_u, score, top_g, out):  # type: i
     G = table_u.shape[1]
     g = -1
     if j == n_table - 1:
-        g = _best_other(score, top_g, j, True, u_ref, sw, table_u)
+        g = _best_other(score, top_g, j, DISTINCT, u_ref, sw, table_u)
     if g < 0:
-        g = _best_other(score, top_g, j, False, u_ref, sw, table_u)
+        g = _best_other(score, top_g, j, ANY, u_ref, sw, table_u)
     top_g[j] = G if g < 0 else g  # (a table of one entry: u_ref again)
     _entry(top_g[j], u_ref, table_u, out)
 

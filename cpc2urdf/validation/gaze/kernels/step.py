@@ -28,7 +28,11 @@ from cpc2urdf.validation.gaze.kernels.constants import (
     VERSION_POLISH,
 )
 from cpc2urdf.validation.gaze.kernels.eigen import _eigh_warm
-from cpc2urdf.validation.gaze.kernels.kinematics import TASK_MIN_DISTANCE, TASK_VERSION_REF, TASK_WEIGHT
+from cpc2urdf.validation.gaze.kernels.kinematics import (
+    TASK_MIN_DISTANCE,
+    TASK_VERSION_REF,
+    TASK_WEIGHT,
+)
 from cpc2urdf.validation.gaze.kernels.pointing import _gradient_entry, _tangent_residual
 
 #: What one iteration solves: the :class:`~.kinematics.Chain` ``ch``, the aim point ``p`` (world, (3,)), the
