@@ -1,4 +1,4 @@
-"""The hand-eye consistency gate (identification/handeye/consistency.py and its helpers): noise
+"""The hand-eye consistency gate (identification/handeye/gate/ and its helpers): noise
 propagation and estimation, the tested mistakes, outliers, the residual level, and the command's
 refusals (``cpc2urdf handeye``: exit 2, one line, the cause named, no model written)."""
 

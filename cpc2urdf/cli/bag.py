@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from cpc2urdf.identification.vision.bags.bag_source import SyncRule
 
-# The library's defaults (identification/vision/bag_sync.py, bag_reader.py), repeated so that `--help` does not load
+# The library's defaults (identification/vision/bags/bag_sync.py, bag_reader.py), repeated so that `--help` does not load
 # numpy and OpenCV; tests/test_bags.py checks that they agree.
 JOINT_STATES_TOPIC = "/joint_states"
 SYNC_TOLERANCE = 0.02  # [s]
