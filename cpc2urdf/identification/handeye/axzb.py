@@ -38,10 +38,9 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axxb import null_space_combination
+from cpc2urdf.identification.handeye.axxb import dual_quats, null_space_combination, quat_matrices
 from cpc2urdf.transforms import (
     Array,
-    dual_quat_from_transform,
     homogeneous,
     inverse,
     project_to_rotation,
@@ -58,6 +57,8 @@ NEAR_180_WARN = math.radians(10.0)
 # Weight of rotation residuals in the joint refinement [m/rad]: 1 mrad counts as 0.1 mm, about
 # the ratio of Li et al.'s noise levels (1 mm : 0.5 deg).
 ROTATION_SCALE = 0.1
+# align_quaternion_signs: a maximum spanning tree over all poses up to this many (O(N^3)), hubs beyond.
+SIGN_HUBS = 32
 
 
 def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array, Array]:
@@ -76,34 +77,50 @@ def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array
         return Si @ Xs @ S, Si @ Zs @ S
     n = len(A)
     I3 = np.eye(3)
-    M = np.zeros((12 * n, 24))
-    rhs = np.zeros(12 * n)
-    for k in range(n):
-        RA, tA = A[k, :3, :3], A[k, :3, 3]
-        RB, tB = B[k, :3, :3], B[k, :3, 3]
-        r = 12 * k
-        M[r : r + 9, 0:9] = np.kron(RA, I3)  # eq. (17)
-        M[r : r + 9, 9:18] = -np.kron(I3, RB.T)
-        M[r + 9 : r + 12, 9:18] = np.kron(I3, tB[None, :])  # eq. (18), unknown vec(R_Z)
-        M[r + 9 : r + 12, 18:21] = -RA
-        M[r + 9 : r + 12, 21:24] = I3
-        rhs[r + 9 : r + 12] = tA
-    w = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    RA, tA, RB, tB = A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3]
+    M = np.zeros((n, 12, 24))  # 12 rows per pose, built for all poses at once
+    M[:, :9, 0:9] = np.einsum("kac,bd->kabcd", RA, I3).reshape(n, 9, 9)  # eq. (17): RA kron I
+    M[:, :9, 9:18] = -np.einsum("ac,kdb->kabcd", I3, RB).reshape(n, 9, 9)  # I kron RB^T
+    M[:, 9:, 9:18] = np.einsum("ac,kd->kacd", I3, tB).reshape(n, 3, 9)  # eq. (18): I kron tB^T
+    M[:, 9:, 18:21] = -RA
+    M[:, 9:, 21:24] = I3
+    rhs = np.zeros((n, 12))
+    rhs[:, 9:] = tA
+    w = np.linalg.lstsq(M.reshape(12 * n, 24), rhs.reshape(-1), rcond=None)[0]
     R_X = project_to_rotation(w[0:9].reshape(3, 3))
     R_Z = project_to_rotation(w[9:18].reshape(3, 3))
     return homogeneous(R_X, w[18:21]), homogeneous(R_Z, w[21:24])
 
 
-def align_quaternion_signs(qa: Array, qb: Array) -> tuple[Array, Array]:
+def align_quaternion_signs(qa: Array, qb: Array, hubs: int = SIGN_HUBS) -> tuple[Array, Array]:
     """Choose signs so that ``a_i x = z b_i`` holds with one sign for all poses.
 
     Scalar parts of ``a_i a_j^*`` and ``b_i b_j^*`` are equal (conjugate rotations), i.e.
-    ``a_i . a_j = b_i . b_j``; each pose is aligned against the already aligned pose with the
-    largest ``|a_i . a_j|`` (avoids pairs 180 deg apart). Shapes (N, 4) each.
+    ``a_i . a_j = b_i . b_j``; a pose is aligned against an aligned pose j with a large
+    ``|a_i . a_j|`` (avoids pairs 180 deg apart, where the sign is lost in the noise). Up to
+    ``hubs`` poses: each against the already aligned pose with the largest ``|a_i . a_j|`` (a
+    maximum spanning tree). Beyond, in O(N hubs) time and O(N) memory: ``hubs`` poses spread over
+    the rotations (farthest-point: each next one the pose least similar to those chosen) are
+    aligned that way among themselves, then every other pose against the hub of largest
+    ``|a_i . a_j|`` (with 32 hubs that is above ~0.7 whatever the rotations). Shapes (N, 4) each.
     """
     qa, qb = qa.copy(), qb.copy()
+    n = len(qa)
+    if n > hubs:
+        chosen = [0]
+        near = np.abs(qa @ qa[0])  # |a_i . a_hub| of the most similar hub so far
+        for _ in range(hubs - 1):
+            chosen.append(int(np.argmin(near)))
+            near = np.maximum(near, np.abs(qa @ qa[chosen[-1]]))
+        H = np.array(chosen)
+        qa[H], qb[H] = align_quaternion_signs(qa[H], qb[H], hubs)
+        dots = qa @ qa[H].T  # (N, hubs)
+        best = H[np.argmax(np.abs(dots), axis=1)]
+        flip_a = np.einsum("ki,ki->k", qa, qa[best]) < 0
+        flip_b = np.einsum("ki,ki->k", qb, qb[best]) < 0
+        return np.where(flip_a[:, None], -qa, qa), np.where(flip_b[:, None], -qb, qb)
     done = [0]
-    todo = list(range(1, len(qa)))
+    todo = list(range(1, n))
     while todo:
         dots = np.abs(qa[todo] @ qa[done].T)
         t, d = np.unravel_index(np.argmax(dots), dots.shape)
@@ -118,24 +135,23 @@ def align_quaternion_signs(qa: Array, qb: Array) -> tuple[Array, Array]:
 
 def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
     """Li et al. eqs. (9)-(14): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4)."""
-    dq_a = [dual_quat_from_transform(T) for T in A]
-    dq_b = [dual_quat_from_transform(T) for T in B]
-    qa, qb = align_quaternion_signs(np.array([d[0] for d in dq_a]), np.array([d[0] for d in dq_b]))
-    rows = []
-    for k in range(len(A)):
-        sa = 1.0 if qa[k] @ dq_a[k][0] > 0 else -1.0
-        sb = 1.0 if qb[k] @ dq_b[k][0] > 0 else -1.0
-        a, ad = sa * dq_a[k][0], sa * dq_a[k][1]
-        b, bd = sb * dq_b[k][0], sb * dq_b[k][1]
-        S = np.zeros((8, 16))  # eq. (12) with the signs of eq. (11)
-        S[:4, 0:4] = quat_left_matrix(a)
-        S[:4, 8:12] = -quat_right_matrix(b)
-        S[4:, 0:4] = quat_left_matrix(ad)
-        S[4:, 4:8] = quat_left_matrix(a)
-        S[4:, 8:12] = -quat_right_matrix(bd)
-        S[4:, 12:16] = -quat_right_matrix(b)
-        rows.append(S)
-    _, _, Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)
+    a, ad = dual_quats(A)
+    b, bd = dual_quats(B)
+    qa, qb = align_quaternion_signs(a, b)
+    sa = np.where(np.einsum("ki,ki->k", qa, a) > 0, 1.0, -1.0)[:, None]
+    sb = np.where(np.einsum("ki,ki->k", qb, b) > 0, 1.0, -1.0)[:, None]
+    La, _ = quat_matrices(sa * a)
+    Lad, _ = quat_matrices(sa * ad)
+    _, Rb = quat_matrices(sb * b)
+    _, Rbd = quat_matrices(sb * bd)
+    S = np.zeros((len(A), 8, 16))  # eq. (12) with the signs of eq. (11), all poses at once
+    S[:, :4, 0:4] = La
+    S[:, :4, 8:12] = -Rb
+    S[:, 4:, 0:4] = Lad
+    S[:, 4:, 4:8] = La
+    S[:, 4:, 8:12] = -Rbd
+    S[:, 4:, 12:16] = -Rb
+    _, _, Vt = np.linalg.svd(S.reshape(-1, 16), full_matrices=False)
     v1, v2 = Vt[-1], Vt[-2]  # eq. (13): the two right singular vectors of (near) zero
     lam = null_space_combination(
         [(v1[0:4], v2[0:4], v1[4:8], v2[4:8]), (v1[8:12], v2[8:12], v1[12:16], v2[12:16])]
@@ -231,6 +247,7 @@ __all__ = [
     "NEAR_180_REFUSE",
     "NEAR_180_WARN",
     "ROTATION_SCALE",
+    "SIGN_HUBS",
     "align_quaternion_signs",
     "refine",
     "solve_dual_quaternion",
