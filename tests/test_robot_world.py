@@ -14,14 +14,21 @@ from test_handeye import EXACT, add_noise, make_data, random_pose
 
 from cpc2urdf.cli import main
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axzb import refine, solve_kronecker
+from cpc2urdf.identification.handeye.axzb import align_quaternion_signs, refine, solve_kronecker
 from cpc2urdf.identification.handeye.solvers import (
     ALL_METHODS,
     ROBOT_WORLD_METHODS,
     calibrate,
     calibrate_robot_world,
 )
-from cpc2urdf.transforms import homogeneous, inverse, rotation_error
+from cpc2urdf.transforms import (
+    homogeneous,
+    inverse,
+    quat_left_matrix,
+    quat_right_matrix,
+    quat_wxyz_from_matrix,
+    rotation_error,
+)
 
 
 @pytest.mark.parametrize("method", ALL_METHODS)
@@ -131,6 +138,27 @@ def test_dual_quaternion_with_quaternion_sign_flips() -> None:
     Z = homogeneous(Rotation.from_rotvec([math.pi, 0.0, 0.0]).as_matrix(), [0.5, 0.2, 1.0])
     H = np.array([random_pose(rng, max_angle=3.1) for _ in range(8)])
     C = inverse(X)[None] @ inverse(H) @ Z[None]
+    r = calibrate_robot_world(H, C, "dual_quaternion")
+    assert np.abs(r.X - X).max() < EXACT and np.abs(r.Z - Z).max() < EXACT
+
+
+def test_quaternion_signs_aligned_through_hubs_beyond_32_poses() -> None:
+    # 300 poses rotating up to 178 deg, quaternion signs scrambled: the hubs (O(N)) align them.
+    rng = np.random.default_rng(7)
+    X = random_pose(rng, scale=0.1)
+    Z = homogeneous(Rotation.from_rotvec([math.pi, 0.0, 0.0]).as_matrix(), [0.5, 0.2, 1.0])
+    H = np.array([random_pose(rng, max_angle=3.1) for _ in range(300)])
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    qa = quat_wxyz_from_matrix(H[:, :3, :3]) * rng.choice([-1.0, 1.0], (300, 1))
+    qb = quat_wxyz_from_matrix(inverse(C)[:, :3, :3]) * rng.choice([-1.0, 1.0], (300, 1))
+    a, b = align_quaternion_signs(qa, qb)
+    assert np.allclose(np.abs(a), np.abs(qa)) and np.allclose(np.abs(b), np.abs(qb))
+    x = quat_wxyz_from_matrix(X[:3, :3])
+    z = quat_wxyz_from_matrix(Z[:3, :3])
+    lhs = np.array([quat_left_matrix(ak) @ x for ak in a])  # a x = +-(z b), one sign for all
+    rhs = np.array([quat_right_matrix(bk) @ z for bk in b])
+    s = np.sign(np.einsum("ki,ki->k", lhs, rhs))
+    assert np.all(s == s[0]) and np.abs(lhs - s[0] * rhs).max() < 1e-12
     r = calibrate_robot_world(H, C, "dual_quaternion")
     assert np.abs(r.X - X).max() < EXACT and np.abs(r.Z - Z).max() < EXACT
 
