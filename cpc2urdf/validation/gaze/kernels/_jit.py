@@ -1,15 +1,13 @@
 """The ways the gaze kernels are compiled (numba, ``cache=True``, IEEE division, no GIL).
 
-Why the solve is compiled the way it is: numba compiles every kernel a kernel calls into a library
-of its own and links a copy of its code into the caller's, which LLVM optimises and emits again, so
-a chain of kernels five deep optimised the iteration six times (solve_one, solve_single,
-_solve_into, solve_flat and solve_flat_many each over _iterate: 80 CPU-s of a cold start). Now
-the solve has one compiled entry (:func:`~.flat._solve_rows`, for one target and for a batch) over
-one compiled iteration (:func:`~.iterate._iterate`), and what lies between them is inlined by numba
-before typing (``inline_kernel``). numba's inlining copies the callee's IR, which costs more the
-bigger the caller, so the iteration is a library of its own rather than inlined into the solve.
-Internal kernels carry no Python wrappers (a wrapper of a kernel taking the workspace unboxes its
-47 arrays: a quarter of its compile).
+numba compiles every kernel a kernel calls into a library of its own and links a copy of its code
+into the caller's, which LLVM optimises and emits again: each level of a chain of kernels compiles
+the code below it once more. So the solve is one compiled entry (:func:`~.flat._solve_rows`, for one
+target and for a batch) over one compiled iteration (:func:`~.iterate._iterate`), and what lies
+between them is inlined by numba before typing (``inline_kernel``). numba's inlining copies the
+callee's IR and types the grown caller again, which costs more the bigger the caller, so the
+iteration stays a library of its own. Internal kernels carry no Python wrappers (a wrapper of a
+kernel taking the workspace unboxes its 47 arrays).
 """
 
 from __future__ import annotations
