@@ -77,14 +77,18 @@ def as_pose_stack(poses: ArrayLike | Sequence[ArrayLike], name: str) -> Array:
     T = np.asarray(poses, dtype=float)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
         raise ValueError(f"{name} must be a list of 4x4 transforms, got shape {T.shape}")
-    for k, Tk in enumerate(T):
-        if not np.all(np.isfinite(Tk)):
+    finite = np.all(np.isfinite(T), axis=(1, 2))
+    R = np.where(finite[:, None, None], T, 0.0)[:, :3, :3]
+    not_rotation = (np.max(np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)), axis=(1, 2)) > 1e-6) | (
+        np.linalg.det(R) < 0
+    )
+    bad_row = np.max(np.abs(T[:, 3] - [0.0, 0.0, 0.0, 1.0]), axis=1) > 1e-12
+    for k in np.flatnonzero(~finite | not_rotation | bad_row)[:1]:  # the first bad pose, as a loop would
+        if not finite[k]:
             raise ValueError(f"{name}[{k}] contains NaN or inf")
-        R = Tk[:3, :3]
-        if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+        if not_rotation[k]:
             raise ValueError(f"{name}[{k}] rotation part is not a rotation matrix")
-        if np.max(np.abs(Tk[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-12:
-            raise ValueError(f"{name}[{k}] last row must be [0, 0, 0, 1]")
+        raise ValueError(f"{name}[{k}] last row must be [0, 0, 0, 1]")
     return T
 
 
