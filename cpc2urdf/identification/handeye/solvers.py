@@ -5,7 +5,8 @@ Every solver takes the same absolute poses -- ``T_base_hand`` and ``T_camera_tar
 ``X = T_hand_camera`` and ``Z = T_base_target``:
 
 - ``A X = X B`` (:mod:`~cpc2urdf.identification.handeye.axxb`): ``tsai``, ``park_martin``,
-  ``daniilidis`` solve X from the all-pairs relative motions; Z is then the chordal mean of
+  ``daniilidis`` solve X from relative motions (all pairs up to 31 poses, 15 per pose beyond:
+  :func:`~cpc2urdf.identification.handeye.axxb.motion_pairs`); Z is then the chordal mean of
   ``T_base_hand[k] X T_camera_target[k]``;
 - ``A X = Z B`` (:mod:`~cpc2urdf.identification.handeye.axzb`): ``kronecker``,
   ``dual_quaternion``, ``zhuang``, ``refined`` solve X and Z together from ``A_k = T_base_hand[k]``,
