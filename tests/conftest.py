@@ -6,6 +6,9 @@ import pytest
 
 os.environ.setdefault("CPC2URDF_PROGRESS", "0")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the gaze kernels compile on their first call, as they did before a first use in Python
+# (kernels.interpreted); tests/test_first_use.py runs that first use
+os.environ.setdefault("CPC2URDF_GAZE_FIRST_USE", "compile")
 
 
 @pytest.fixture(scope="session")

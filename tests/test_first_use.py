@@ -129,3 +129,49 @@ def test_first_use_script_times_a_command():
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "check" in done.stdout and "first" in done.stdout
+
+
+# ---- the first use: the kernels as Python until the compiled ones are cached (kernels.interpreted) ----
+
+@pytest.mark.parametrize("head", ["iis_head"])
+def test_python_kernels_answer_as_the_compiled_ones_bit_for_bit(head):
+    """The kernels' Python functions give the compiled answers exactly: one target, a batch,
+    another policy; every kernel is a Python function meanwhile, and compiled again after."""
+    from cpc2urdf.validation.gaze import solver_for
+    from cpc2urdf.validation.gaze.kernels import interpreted
+
+    solver = solver_for(head)
+    targets = np.array([[-0.6, -0.6, 0.7], [-0.5, -0.55, 0.8], [0.3, 2.0, -1.0], [-0.6, -0.6, 0.7001]])
+    compiled = [solver.solve(t).q for t in targets]
+    compiled_many = solver.solve_many(targets).q
+    compiled_mm = solver.solve(targets[1], solver.home, "min-motion").q
+    assert interpreted.compiled()  # the solve above is in numba's cache now
+    interpreted.run_interpreted()
+    try:
+        assert not hasattr(kernels.flat._solve_rows, "py_func")  # a plain function now
+        assert interpreted.compiled_now() is False  # Python by choice: no compile running
+        for t, q in zip(targets, compiled, strict=True):
+            assert np.array_equal(solver.solve(t).q, q)
+        assert np.array_equal(solver.solve_many(targets).q, compiled_many)
+        assert np.array_equal(solver.solve(targets[1], solver.home, "min-motion").q, compiled_mm)
+    finally:
+        interpreted.run_compiled()
+    assert hasattr(kernels.flat._solve_rows, "py_func")
+
+
+def test_first_cli_gaze_solves_in_python_and_compiles_nothing(tmp_path):
+    """A fresh install (an empty numba cache) with ``CPC2URDF_GAZE_FIRST_USE=python``: ``cpc2urdf
+    gaze`` answers as the compiled solver does and writes nothing to the cache. (By default it also
+    starts the background compile: ``python -m cpc2urdf.studies.first_use`` times that.)"""
+    import os
+
+    from cpc2urdf.validation.gaze import solver_for
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "CPC2URDF_GAZE_FIRST_USE": "python"}
+    out = subprocess.run([sys.executable, "-m", "cpc2urdf", "gaze", "iis_head", "--target", "-0.6", "-0.6", "0.7",
+                          "--json"], capture_output=True, text=True, env=env, timeout=120, check=True)
+    import json
+
+    q = list(json.loads(out.stdout)["joints"].values())  # repr of floats: exact
+    assert np.array_equal(np.array(q), solver_for("iis_head").solve(np.array([-0.6, -0.6, 0.7])).q)
+    assert not any((tmp_path / "cache").rglob("*.nbi"))  # nothing compiled

@@ -40,7 +40,7 @@ from cpc2urdf.validation.gaze.chain import (
     build_chain,
     home_readings,
 )
-from cpc2urdf.validation.gaze.kernels import FAR_TARGET, S_NOT_FINITE
+from cpc2urdf.validation.gaze.kernels import FAR_TARGET, S_NOT_FINITE, interpreted
 from cpc2urdf.validation.gaze.options import (
     DEFAULT_CAMERAS,
     GazeOptions,
@@ -58,6 +58,9 @@ _FLOAT64 = np.dtype(np.float64)  # numpy's one float64 descriptor: an `is` test 
 # table and the version at zero: the IIS-head (pan, tilt) and necks like it. Heads with more
 # (iCub's torso, neck and eye tilt; TALOS) keep the weighted posture over every path joint.
 VERSION_POLICY_MAX_NECK = 3
+
+
+_SWAPPED = interpreted._swapped  # non-empty while the kernels run as Python (the first use)
 
 
 class GazeSolver:
@@ -95,6 +98,7 @@ class GazeSolver:
         **fields: Any,
     ) -> None:
         opts = _options(options, fields)
+        interpreted.compile_in_background()  # the first use after an install: see kernels.interpreted
         self.options = opts
         self.tolerance = opts.tolerance_rad
         # continuous joints read as revolute without limits: a robot's wheels are off the head's
@@ -266,6 +270,8 @@ class GazeSolver:
             ConfigurationError: a target or ``q_current`` with NaN/inf or the wrong shape, a
                 reading outside the limits, an unknown policy, or ``eyes-only`` without two eyes.
         """
+        if _SWAPPED:
+            interpreted.compiled_now()
         if q_current is None and q_start is None and policy == "cyclopean":
             # a control loop's call: straight to the compiled solve. A float (3,) array is copied
             # (under the GIL: another thread may be writing it while the kernel runs without)
@@ -303,6 +309,8 @@ class GazeSolver:
         Raises:
             ConfigurationError: Targets not (N, 3) or not finite, or bad ``q_current``.
         """
+        if _SWAPPED:
+            interpreted.compiled_now()
         return self._fast.solve_many(targets, self.check_q(q_current))
 
     def track(
