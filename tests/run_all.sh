@@ -22,4 +22,4 @@ fi
 python -m pip install -q -e ".[dev]"
 ruff check .
 mypy
-python -m pytest "$@"
+python -m pytest -n auto "$@"   # one worker per core
