@@ -53,7 +53,6 @@ if TYPE_CHECKING:  # the stages are imported inside the functions that use them
 PathLike = str | os.PathLike[str]
 
 
-
 def load_marker_csv(
     points_csv: PathLike,
     robot: RobotRef,
@@ -80,10 +79,17 @@ def load_marker_csv(
     """
     from cpc2urdf.files.marker_csv import load_marker_csv as _load_marker_csv
 
-    return _load_marker_csv(points_csv, load_robot(robot), markers,
-                 robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
-                 joints_csv=joints_csv, known_positions=known_positions,
-                 length=length, angle=angle, noise_sigma_p=noise_sigma_p)
+    return _load_marker_csv(
+        points_csv,
+        load_robot(robot),
+        markers,
+        robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
+        joints_csv=joints_csv,
+        known_positions=known_positions,
+        length=length,
+        angle=angle,
+        noise_sigma_p=noise_sigma_p,
+    )
 
 
 def measurements_from_bag(
@@ -112,7 +118,9 @@ def measurements_from_bag(
     topics = [PoseTopic.parse(f"{frame}={topic}") for frame, topic in poses.items()]
     rule = SyncRule(sync_tolerance=sync_tolerance, rest_window=rest_window)
     ref = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot"
-    return _from_bag(bag, load_robot(robot), topics, robot_ref=ref, joint_topic=joint_topic, rule=rule).measurements
+    return _from_bag(
+        bag, load_robot(robot), topics, robot_ref=ref, joint_topic=joint_topic, rule=rule
+    ).measurements
 
 
 def simulate(
@@ -146,15 +154,26 @@ def simulate(
     spec = load_robot(robot)
     if isinstance(spec, UrdfRobot):
         if measure is None:
-            raise ConfigurationError(f"{robot}: name the links the rig measures (measure=[LINK, ...])")
+            raise ConfigurationError(
+                f"{robot}: name the links the rig measures (measure=[LINK, ...])"
+            )
         spec = spec.restricted(list(measure))
     elif measure is not None:
         raise ConfigurationError(f"measure= names links of a URDF robot; {robot!r} is not a URDF")
-    exp = simulate_experiment(spec, seed=seed, M=M, sigma_t=sigma_mm / 1000, sigma_r=np.radians(sigma_deg),
-                              n_heldout=heldout, robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None)
+    exp = simulate_experiment(
+        spec,
+        seed=seed,
+        M=M,
+        sigma_t=sigma_mm / 1000,
+        sigma_r=np.radians(sigma_deg),
+        n_heldout=heldout,
+        robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
+    )
     # the sets keep their robot, as when read from the files `cpc2urdf simulate` writes
-    return exp._replace(measured=dataclasses.replace(exp.measured, spec=spec),
-                        heldout=dataclasses.replace(exp.heldout, spec=spec))
+    return exp._replace(
+        measured=dataclasses.replace(exp.measured, spec=spec),
+        heldout=dataclasses.replace(exp.heldout, spec=spec),
+    )
 
 
 def identify(
@@ -192,13 +211,22 @@ def identify(
 
     if isinstance(measurements, MeasurementSet):
         if robot is not None:
-            raise ConfigurationError("robot= applies to a measurement file path, not to a MeasurementSet")
+            raise ConfigurationError(
+                "robot= applies to a measurement file path, not to a MeasurementSet"
+            )
         ms = measurements
     else:
         ms = load_measurements(measurements, robot=load_robot(robot) if robot is not None else None)
     loads = _gravity_loads(ms) if method == "map" and level in (None, "compliance") else None
-    model = _identify(ms, method, nominal, accept_inconsistent=accept_inconsistent, loads=loads, level=level,
-                      joints=None if joints is None else _cpc_joints(ms, joints))
+    model = _identify(
+        ms,
+        method,
+        nominal,
+        accept_inconsistent=accept_inconsistent,
+        loads=loads,
+        level=level,
+        joints=None if joints is None else _cpc_joints(ms, joints),
+    )
     return attach_urdf_source(model, ms.spec)
 
 
@@ -215,12 +243,18 @@ def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
 
     s = ms.structure
     robot = ms.spec
-    urdf_names = robot.names.joints if isinstance(robot, UrdfRobot) and robot.names is not None else {}
+    urdf_names = (
+        robot.names.joints if isinstance(robot, UrdfRobot) and robot.names is not None else {}
+    )
     out = []
     for j in joints:
         name = urdf_names.get(j, j)
         if name not in s.joint_names:
-            known = [u for u, c in urdf_names.items() if c in s.joint_names] if urdf_names else list(s.joint_names)
+            known = (
+                [u for u, c in urdf_names.items() if c in s.joint_names]
+                if urdf_names
+                else list(s.joint_names)
+            )
             raise UnknownNameError("joint", j, known)
         out.append(name)
     return out
@@ -288,7 +322,9 @@ def camera_mount(
     except UnknownNameError as e:
         raise ConfigurationError(f"model {model.structure.name!r}: hand {e}") from e
     if camera in model.structure.frame_names and model.structure.frame(camera).kind != "camera":
-        raise ConfigurationError(f"model {model.structure.name!r}: frame {camera!r} exists and is not a camera frame")
+        raise ConfigurationError(
+            f"model {model.structure.name!r}: frame {camera!r} exists and is not a camera frame"
+        )
     return camera, hand
 
 
@@ -327,7 +363,11 @@ def calibrate_cameras(
     m = model if isinstance(model, CPCModel) else load_model(model)
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
     camera, hand = camera_mount(m, data, camera=camera, hand=hand)
-    solution = result if result is not None else calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
+    solution = (
+        result
+        if result is not None
+        else calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
+    )
     return with_camera_frame(m, camera, hand, solution, {"poses": data.source})
 
 
@@ -360,14 +400,19 @@ def export_urdf(
     m = plan.model
     if urdf_source(m) is not None:
         return write_calibrated_urdf(
-            m, Path(path), urdf=None if urdf is None else Path(urdf), uncertainty=origin_uncertainty(m)
+            m,
+            Path(path),
+            urdf=None if urdf is None else Path(urdf),
+            uncertainty=origin_uncertainty(m),
         )
     if source is None and not isinstance(model, CPCModel | RobotSpec):
         source = os.fspath(model)
     return write_urdf(m, Path(path), source=source, mount=mount, physical=plan.physical)
 
 
-def calibration_report(model: CPCModel | RobotRef, *, urdf: PathLike | None = None) -> CalibrationReport:
+def calibration_report(
+    model: CPCModel | RobotRef, *, urdf: PathLike | None = None
+) -> CalibrationReport:
     """What calibration changed in the URDF the model came from, per joint in mm and degrees,
     with 1-sigma from the model's covariance (``docs/urdf.md``)."""
     from cpc2urdf.identification.kinematics.origin_uncertainty import origin_uncertainty
@@ -398,7 +443,10 @@ def check_urdf(
 
 
 def accuracy(
-    model: CPCModel | RobotRef, measurements: MeasurementSet | PathLike, *, accept_inconsistent: bool = False
+    model: CPCModel | RobotRef,
+    measurements: MeasurementSet | PathLike,
+    *,
+    accept_inconsistent: bool = False,
 ) -> dict[str, BranchAccuracy]:
     """Held-out accuracy (Table 4 of Shih et al.; ``cpc2urdf accuracy``) of every frame the model has
     and the measurements hold, and of every marker the model identified, with the error the model's
@@ -412,7 +460,11 @@ def accuracy(
     from cpc2urdf.validation.heldout import accuracy as _accuracy
 
     m = model if isinstance(model, CPCModel) else load_model(model)
-    ms = measurements if isinstance(measurements, MeasurementSet) else load_measurements(measurements)
+    ms = (
+        measurements
+        if isinstance(measurements, MeasurementSet)
+        else load_measurements(measurements)
+    )
     return _accuracy(m, ms, accept_inconsistent=accept_inconsistent)
 
 
@@ -446,10 +498,19 @@ def plan_experiment(
     """
     from cpc2urdf.identification.planning.outputs import plan_robot
 
-    return plan_robot(load_robot(robot), robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
-                      measured=measure, sigma_t=sigma_mm / 1000, sigma_r=np.radians(sigma_deg), n=n,
-                      target_error=None if target_error_mm is None else target_error_mm / 1000,
-                      one_joint=one_joint, task_region=task_region, n_candidates=candidates, seed=seed)
+    return plan_robot(
+        load_robot(robot),
+        robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
+        measured=measure,
+        sigma_t=sigma_mm / 1000,
+        sigma_r=np.radians(sigma_deg),
+        n=n,
+        target_error=None if target_error_mm is None else target_error_mm / 1000,
+        one_joint=one_joint,
+        task_region=task_region,
+        n_candidates=candidates,
+        seed=seed,
+    )
 
 
 def gaze_solver(
@@ -539,9 +600,16 @@ def write_view(
     if region is not None:
         options["region"] = region
         options["cameras"] = view_cameras(shown, region.cameras)
-    return write_view_html(path, shown, target=target, q=q,
-                           ghost=None if ghost is None else view_robot(ghost), change_colours=change_colours,
-                           align=align, **options)
+    return write_view_html(
+        path,
+        shown,
+        target=target,
+        q=q,
+        ghost=None if ghost is None else view_robot(ghost),
+        change_colours=change_colours,
+        align=align,
+        **options,
+    )
 
 
 __all__ = [

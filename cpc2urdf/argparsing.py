@@ -18,7 +18,9 @@ from cpc2urdf.errors import ConfigurationError
 # What argparse takes for a negative number rather than an option: its own pattern knows only
 # -1 and -1.5, so "--target -1e-3 0 1" was "expected 3 arguments"; exponents, -inf and -nan too
 # (the last two are then refused as not finite by the command, naming the option).
-NEGATIVE_NUMBER = re.compile(r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)$", re.IGNORECASE)
+NEGATIVE_NUMBER = re.compile(
+    r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf|infinity|nan)$", re.IGNORECASE
+)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -41,11 +43,17 @@ class OneLineParser(argparse.ArgumentParser):
         return parsed
 
 
-def _innermost(parser: argparse.ArgumentParser, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+def _innermost(
+    parser: argparse.ArgumentParser, parsed: argparse.Namespace
+) -> argparse.ArgumentParser:
     """The sub-command parser (``cpc2urdf demo``) that ``parsed`` was parsed with, or ``parser``."""
     while True:
         sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
-        name = getattr(parsed, sub.dest, None) if sub is not None and sub.dest != argparse.SUPPRESS else None
+        name = (
+            getattr(parsed, sub.dest, None)
+            if sub is not None and sub.dest != argparse.SUPPRESS
+            else None
+        )
         if sub is None or name not in sub.choices:
             return parser
         parser = sub.choices[name]
@@ -73,7 +81,9 @@ def finite_numbers(values: Sequence[str], what: str) -> list[float]:
     return out
 
 
-def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float] | list[float] | None:
+def joint_readings(
+    values: Sequence[str] | None, option: str
+) -> dict[str, float] | list[float] | None:
     """Joint readings given to ``option`` (e.g. ``"--q"``): ``{joint: value}`` from
     ``NAME=VALUE`` items, or a list of values in the robot's joint order; None if none given."""
     if not values:
@@ -85,14 +95,24 @@ def joint_readings(values: Sequence[str] | None, option: str) -> dict[str, float
             out[name] = finite_numbers([value], f"{option} {name}")[0]
         return out
     if any("=" in v for v in values):
-        raise ConfigurationError(f"{option} takes either NAME=VALUE pairs or one number per joint, not both")
+        raise ConfigurationError(
+            f"{option} takes either NAME=VALUE pairs or one number per joint, not both"
+        )
     return finite_numbers(values, f"{option} values")
 
 
 # Options that name a file a command writes (``--json`` only where it takes a path, not a flag).
 OUTPUT_OPTIONS = {"output": "-o", "json": "--json", "html": "--html", "screenshot": "--screenshot"}
-MAX_REFERENCING_FILE = 16 * 2**20  # [bytes]: inputs larger than this are not searched for files they name
-_HOOKS = ("run", "command", "may_replace", "written", "read")  # parser defaults that are not arguments
+MAX_REFERENCING_FILE = (
+    16 * 2**20
+)  # [bytes]: inputs larger than this are not searched for files they name
+_HOOKS = (
+    "run",
+    "command",
+    "may_replace",
+    "written",
+    "read",
+)  # parser defaults that are not arguments
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -137,7 +157,11 @@ def referenced_files(path: str) -> list[str]:
         return []
     found = []
     urdf = doc.get("urdf")
-    if isinstance(urdf, dict) and isinstance(urdf.get("path"), str) and os.path.isfile(urdf["path"]):
+    if (
+        isinstance(urdf, dict)
+        and isinstance(urdf.get("path"), str)
+        and os.path.isfile(urdf["path"])
+    ):
         found.append(urdf["path"])
     robot = doc.get("robot")
     if isinstance(robot, str) and robot:
@@ -179,7 +203,11 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
     M -o M``): only that file itself, when it is a JSON file (a model, not a URDF), not the files
     it names.
     """
-    outputs = {opt: v for dest, opt in OUTPUT_OPTIONS.items() if isinstance(v := getattr(args, dest, None), str)}
+    outputs = {
+        opt: v
+        for dest, opt in OUTPUT_OPTIONS.items()
+        if isinstance(v := getattr(args, dest, None), str)
+    }
     for opt, path in outputs.items():
         if not path:
             raise ConfigurationError(f"{opt} '': an empty path; name the file or folder to write")
@@ -192,7 +220,9 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
     for k, (opt, path) in enumerate(items):
         for opt2, path2 in items[:k]:
             if _same_file(path, path2):
-                raise ConfigurationError(f"{opt} {path}: the same file as {opt2} ({path2}); give each output its own path")
+                raise ConfigurationError(
+                    f"{opt} {path}: the same file as {opt2} ({path2}); give each output its own path"
+                )
     allowed = set(getattr(args, "may_replace", ()))
     inputs: list[tuple[str, str]] = []  # (what it is, path)
     for dest, value in vars(args).items():
@@ -202,10 +232,16 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
         for v in _named_files(value):
             if dest not in allowed or json_object(v) is None:  # in place: a model file, not a URDF
                 inputs.append((f"the same file as the input {label} ({v})", v))
-            inputs.extend((f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v))
+            inputs.extend(
+                (f"the file the input {label} ({v}) refers to", ref) for ref in referenced_files(v)
+            )
     read = getattr(args, "read", None)
     if callable(read):
-        inputs.extend((f"the same file as the input {k}", v) for k, v in read(args).items() if v and os.path.isfile(v))
+        inputs.extend(
+            (f"the same file as the input {k}", v)
+            for k, v in read(args).items()
+            if v and os.path.isfile(v)
+        )
     for opt, path in outputs.items():
         for what, source in inputs:
             if _same_file(path, source):

@@ -51,7 +51,9 @@ class UnknownNameError(Cpc2UrdfError):
         if len(self.known) <= UNKNOWN_NAME_LISTED:
             listed = f"known {kind}s: {', '.join(self.known)}"
         else:  # a whole robot (TIAGo: ~180 frames): the most alike, not a 3 kB line
-            close = difflib.get_close_matches(str(name), [str(k) for k in self.known], n=UNKNOWN_NAME_LISTED // 2, cutoff=0.5)
+            close = difflib.get_close_matches(
+                str(name), [str(k) for k in self.known], n=UNKNOWN_NAME_LISTED // 2, cutoff=0.5
+            )
             if close:
                 listed = f"closest known {kind}s: {', '.join(close)} (of {len(self.known)})"
             else:

@@ -75,7 +75,9 @@ class CPCParams:
     def __post_init__(self) -> None:
         values = (*self.b, self.beta, *self.l)
         if not all(math.isfinite(v) for v in values):
-            raise SpecError(f"CPC parameters must be finite, got b={self.b}, beta={self.beta}, l={self.l}")
+            raise SpecError(
+                f"CPC parameters must be finite, got b={self.b}, beta={self.beta}, l={self.l}"
+            )
         n = math.sqrt(sum(v * v for v in self.b))
         if abs(n - 1.0) > 1e-6:
             raise SpecError(f"CPC axis b must be a unit vector, |b| = {n:.9g} (b = {list(self.b)})")
@@ -194,9 +196,13 @@ class RobotStructure:
         joint_names = {j.name for j in joints}
         for j in joints:
             if j.type not in JOINT_TYPES:
-                problems.append(f"joint {j.name!r}: type must be revolute or prismatic, got {j.type!r}")
+                problems.append(
+                    f"joint {j.name!r}: type must be revolute or prismatic, got {j.type!r}"
+                )
             if j.parent != BASE and j.parent not in joint_names:
-                problems.append(f"joint {j.name!r}: parent {j.parent!r} is neither 'base' nor a joint")
+                problems.append(
+                    f"joint {j.name!r}: parent {j.parent!r} is neither 'base' nor a joint"
+                )
             lims = (j.lower, j.upper, j.velocity, j.effort)
             if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lims):
                 problems.append(f"joint {j.name!r}: limits must be finite numbers")
@@ -213,9 +219,13 @@ class RobotStructure:
                     )
         for f in frames:
             if f.parent != BASE and f.parent not in joint_names:
-                problems.append(f"frame {f.name!r}: parent {f.parent!r} is neither 'base' nor a joint")
+                problems.append(
+                    f"frame {f.name!r}: parent {f.parent!r} is neither 'base' nor a joint"
+                )
             if f.kind not in FRAME_KINDS:
-                problems.append(f"frame {f.name!r}: kind must be one of {FRAME_KINDS}, got {f.kind!r}")
+                problems.append(
+                    f"frame {f.name!r}: kind must be one of {FRAME_KINDS}, got {f.kind!r}"
+                )
         if not joints:
             problems.append("a robot needs at least one joint")
         if problems:
@@ -295,7 +305,9 @@ class RobotStructure:
         q = np.asarray(q, dtype=float)
         return {n: float(v) for n, v in zip(self.joint_names, q, strict=True)}
 
-    def calibration_ranges(self, overrides: Mapping[str, tuple[float, float]] | None = None) -> Array:
+    def calibration_ranges(
+        self, overrides: Mapping[str, tuple[float, float]] | None = None
+    ) -> Array:
         """The part of each joint's travel a calibration measures: per joint ``[lo, hi]``
         [m]/[rad], shape (n, 2). The one rule every simulator, planner, study and test uses:
 
@@ -492,7 +504,9 @@ class CPCModel:
                 self.structure.frame(name)  # raises UnknownNameError
                 p = self._frame_parent[name]
                 if p < 0:  # a frame fixed to the base: the same pose at every configuration
-                    T = np.broadcast_to(self._T_world_base @ self._frame_E[name], (qq.shape[0], 4, 4)).copy()
+                    T = np.broadcast_to(
+                        self._T_world_base @ self._frame_E[name], (qq.shape[0], 4, 4)
+                    ).copy()
                 else:
                     T = link[:, p] @ self._frame_E[name]
             out[name] = T[0] if single else T

@@ -123,15 +123,20 @@ class RecordResiduals:
     per_frame: Mapping[str, tuple[float, float]]
 
     def to_json(self) -> dict[str, Any]:
-        return {"label": self.label, **{
-            f: {"translation_m": t, "rotation_rad": r} for f, (t, r) in self.per_frame.items()
-        }}
+        return {
+            "label": self.label,
+            **{f: {"translation_m": t, "rotation_rad": r} for f, (t, r) in self.per_frame.items()},
+        }
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> RecordResiduals:
         return cls(
             str(d["label"]),
-            {f: (float(v["translation_m"]), float(v["rotation_rad"])) for f, v in d.items() if f != "label"},
+            {
+                f: (float(v["translation_m"]), float(v["rotation_rad"]))
+                for f, v in d.items()
+                if f != "label"
+            },
         )
 
 
@@ -193,8 +198,23 @@ class Covariance:
     sigma_r: float
     details: Mapping[str, Any] = field(default_factory=dict)
 
-    _KEYS = ("format", "units", "method", "chart", "scale", "variance_factor", "dof", "sigma_t", "sigma_r",
-             "frames", "parameters", "parameter_units", "std", "covariance", "null_space")
+    _KEYS = (
+        "format",
+        "units",
+        "method",
+        "chart",
+        "scale",
+        "variance_factor",
+        "dof",
+        "sigma_t",
+        "sigma_r",
+        "frames",
+        "parameters",
+        "parameter_units",
+        "std",
+        "covariance",
+        "null_space",
+    )
 
     @property
     def std(self) -> Array:
@@ -295,8 +315,18 @@ class HandEyeRecord:
     def rms_rotation_deg(self) -> float:
         return float(np.sqrt(np.mean(np.square(self.residual_rotation_deg))))
 
-    _KEYS = ("hand", "method", "n_poses", "T_hand_camera", "T_base_target", "rms_translation_mm",
-             "rms_rotation_deg", "residual_translation_mm", "residual_rotation_deg", "warnings")
+    _KEYS = (
+        "hand",
+        "method",
+        "n_poses",
+        "T_hand_camera",
+        "T_base_target",
+        "rms_translation_mm",
+        "rms_rotation_deg",
+        "residual_translation_mm",
+        "residual_rotation_deg",
+        "warnings",
+    )
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -374,6 +404,7 @@ class ModelMetadata:
         Raises:
             ValueError: Naming the section and what is wrong with it.
         """
+
         def section(name: str, parse: Any) -> Any:
             if name not in d:
                 return None
@@ -385,9 +416,15 @@ class ModelMetadata:
         notes = section("notes", lambda v: tuple(str(n) for n in v)) or ()
         if "notes" in d and isinstance(d["notes"], str):
             raise ValueError("bad 'notes' section: expected a list of strings")
-        handeye = section("handeye", lambda v: {
-            str(c): HandEyeRecord.from_json(r) for c, r in v.items() if c != "units"
-        }) or {}
+        handeye = (
+            section(
+                "handeye",
+                lambda v: {
+                    str(c): HandEyeRecord.from_json(r) for c, r in v.items() if c != "units"
+                },
+            )
+            or {}
+        )
         description = section("description", str)
         uncertainty = None
         if "uncertainty" in d:

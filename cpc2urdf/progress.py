@@ -46,7 +46,9 @@ def progress(items: Iterable[T], label: str, total: int | None = None) -> Genera
             sys.stderr.flush()
         raise
     if not quiet and k:
-        sys.stderr.write(f"\r{label}: {k} done in {time.perf_counter() - start:.1f}s" + " " * 30 + "\n")
+        sys.stderr.write(
+            f"\r{label}: {k} done in {time.perf_counter() - start:.1f}s" + " " * 30 + "\n"
+        )
         sys.stderr.flush()
 
 

@@ -45,11 +45,15 @@ def transforms_from_point_pairs(p_a: ArrayLike, p_b: ArrayLike, *, what: str = "
     b = np.asarray(p_b, dtype=float)
     single = a.ndim == 2 and b.ndim == 2
     if a.ndim not in (2, 3) or b.ndim not in (2, 3) or a.shape[-1] != 3 or b.shape[-1] != 3:
-        raise ValueError(f"{what}: points must have shape (K, 3) or (N, K, 3), got {a.shape} and {b.shape}")
+        raise ValueError(
+            f"{what}: points must have shape (K, 3) or (N, K, 3), got {a.shape} and {b.shape}"
+        )
     try:
         a, b = np.broadcast_arrays(a, b)
     except ValueError:
-        raise ValueError(f"{what}: point sets of shapes {a.shape} and {b.shape} do not pair up") from None
+        raise ValueError(
+            f"{what}: point sets of shapes {a.shape} and {b.shape} do not pair up"
+        ) from None
     if single:
         a, b = a[None], b[None]
     w = (np.all(np.isfinite(a), axis=-1) & np.all(np.isfinite(b), axis=-1)).astype(float)  # (N, K)
@@ -97,7 +101,9 @@ def _check_not_collinear(centred: Array, what: str, single: bool, which: str) ->
         )
 
 
-def plate_pose_from_points(layout_plate: ArrayLike, p_world: ArrayLike, *, what: str = "plate") -> Array:
+def plate_pose_from_points(
+    layout_plate: ArrayLike, p_world: ArrayLike, *, what: str = "plate"
+) -> Array:
     """``T_world_plate`` from measured circle centres (sec. 3.3, solved as ``T_world_plate``).
 
     Args:

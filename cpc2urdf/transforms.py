@@ -147,7 +147,14 @@ def rotation_z(angle: float) -> Array:
 def matrix_from_rpy(rpy: ArrayLike) -> Array:
     """URDF convention: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``; ``rpy`` [rad], shape (3,)."""
     r, p, y = (float(v) for v in np.asarray(rpy, dtype=float))
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(r),
+        math.sin(r),
+        math.cos(p),
+        math.sin(p),
+        math.cos(y),
+        math.sin(y),
+    )
     return np.array(
         [
             [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],

@@ -75,7 +75,7 @@ def resolve_package(filename: str, packages: Sequence[Path]) -> str:
     any other file name unchanged."""
     if not filename.startswith(PACKAGE_SCHEME):
         return filename
-    rest = filename[len(PACKAGE_SCHEME):]
+    rest = filename[len(PACKAGE_SCHEME) :]
     for d in packages:
         if (Path(d) / rest).exists():
             return str(Path(d) / rest)
@@ -151,13 +151,23 @@ def load_check_urdf(path: Path, packages: Sequence[Path] = ()) -> Loaded:
     exe = check_urdfdom_executable()
     assert exe is not None, "check_urdf ships with the 'pin' package"
     proc = subprocess.run([exe, str(path)], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0 and "Successfully Parsed XML" in proc.stdout, proc.stdout + proc.stderr
-    said = [ln for ln in proc.stdout.splitlines() if ln.strip().lower().startswith(("error", "warn"))]
+    assert proc.returncode == 0 and "Successfully Parsed XML" in proc.stdout, (
+        proc.stdout + proc.stderr
+    )
+    said = [
+        ln for ln in proc.stdout.splitlines() if ln.strip().lower().startswith(("error", "warn"))
+    ]
     return None, proc.stderr + "\n".join(said), lambda: None
 
 
-def mujoco_model(path: Path, packages: Sequence[Path] = (), *, keep_links: bool = False,
-                 drop_undecodable: bool = False, kinematics_only: bool = False) -> Any:
+def mujoco_model(
+    path: Path,
+    packages: Sequence[Path] = (),
+    *,
+    keep_links: bool = False,
+    drop_undecodable: bool = False,
+    kinematics_only: bool = False,
+) -> Any:
     """``mujoco.MjModel`` of the URDF: ``from_xml_path`` without ``packages`` or options, else
     through ``MjSpec`` with, in memory, the mesh file names resolved (module docstring), and
     ``kinematics_only``: every geom and mesh removed and every body given the same valid inertia
@@ -241,11 +251,15 @@ def load_pybullet(path: Path, packages: Sequence[Path] = ()) -> Loaded:
     def fk(q: dict[str, float]) -> Poses:
         for name, v in q.items():
             pb.resetJointState(body, joint[name], v, physicsClientId=client)
-        base = pose(*pb.getBasePositionAndOrientation(body, physicsClientId=client))  # its inertial frame
+        base = pose(
+            *pb.getBasePositionAndOrientation(body, physicsClientId=client)
+        )  # its inertial frame
         out = {root: base @ np.linalg.inv(T_link_inertial[root])}
         for link, j in child.items():
             st = pb.getLinkState(body, j, computeForwardKinematics=True, physicsClientId=client)
-            out[link] = pose(st[0], st[1]) @ np.linalg.inv(T_link_inertial[link])  # items 0/1: exact
+            out[link] = pose(st[0], st[1]) @ np.linalg.inv(
+                T_link_inertial[link]
+            )  # items 0/1: exact
         return out
 
     return fk, out.text, lambda: pb.disconnect(physicsClientId=client)
@@ -260,8 +274,12 @@ LOADERS: dict[str, Callable[..., Loaded]] = {
 }
 
 
-def fk_disagreement(fk: Callable[[dict[str, float]], Poses], reference: Callable[[dict[str, float]], Poses],
-                    names: Sequence[str], configurations: Sequence[dict[str, float]]) -> tuple[float, float, str]:
+def fk_disagreement(
+    fk: Callable[[dict[str, float]], Poses],
+    reference: Callable[[dict[str, float]], Poses],
+    names: Sequence[str],
+    configurations: Sequence[dict[str, float]],
+) -> tuple[float, float, str]:
     """Largest position [m] and rotation [rad] difference between ``fk`` and ``reference`` over
     the links ``names`` at ``configurations``, and where it is (``link`` at ``q``).
 

@@ -37,10 +37,20 @@ from cpc2urdf.urdf.pinocchio import PinocchioRobot
 from cpc2urdf.validation.crosscheck import yourdfpy_pose
 from cpc2urdf.validation.gaze import Coupling, GazeSolver
 
-HEAD_SHAPES = ("iis_nominal", "iis_calibrated", "tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera")
+HEAD_SHAPES = (
+    "iis_nominal",
+    "iis_calibrated",
+    "tiago",
+    "talos",
+    "icub",
+    "stereo_pan_tilt",
+    "panda_camera",
+)
 ERD = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
 ICUB = Path(sys.prefix) / "share/iCub/robots/iCubGenova04/model.urdf"
-OPTICAL_RPY = "-1.5707963267948966 0 -1.5707963267948966"  # REP-103 optical frame on an x-forward body
+OPTICAL_RPY = (
+    "-1.5707963267948966 0 -1.5707963267948966"  # REP-103 optical frame on an x-forward body
+)
 
 ICUB_EYES = f"""
   <link name="eyes_tilt_link"/>
@@ -206,7 +216,9 @@ def head_case(name: str, tmp: Path) -> HeadCase:
         path = _write(tmp, name, _insert(ICUB, ICUB_EYES))
         cams = ("l_eye_optical", "r_eye_optical")
         coupling = Coupling.version_vergence("l_eye_joint", "r_eye_joint", (-0.5, 0.5), (0.0, 0.9))
-        return HeadCase(name, GazeSolver(PinocchioRobot.from_urdf(path), cams, coupling=coupling), path, cams)
+        return HeadCase(
+            name, GazeSolver(PinocchioRobot.from_urdf(path), cams, coupling=coupling), path, cams
+        )
     if name == "stereo_pan_tilt":
         path = _write(tmp, name, STEREO_PAN_TILT)
         cams = ("left_optical", "right_optical")
@@ -224,8 +236,9 @@ def yourdfpy_axes(case: HeadCase, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray
     two cameras (midpoint, sum of the optical axes)."""
     import yourdfpy
 
-    robot = yourdfpy.URDF.load(str(case.urdf), load_meshes=False, build_collision_scene_graph=False,
-                               build_scene_graph=True)
+    robot = yourdfpy.URDF.load(
+        str(case.urdf), load_meshes=False, build_collision_scene_graph=False, build_scene_graph=True
+    )
     names = case.solver.joint_names
     order = [names.index(j) for j in robot.actuated_joint_names]
     chain = case.solver.chain

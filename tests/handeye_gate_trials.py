@@ -101,14 +101,19 @@ def run(name: str, trials: Iterator[Trial], check_solvers: bool) -> tuple[int, i
                     print(f"  {name} {label} {m}: {e}")
                     continue
                 assert r.consistency is not None and r.consistency.consistent == report.consistent
-    print(f"{name:24s} {count:5d} trials, {refused} refused ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print(
+        f"{name:24s} {count:5d} trials, {refused} refused ({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
     return count, refused
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=20, help="seeds per stage-2 / test-data setting")
-    p.add_argument("--check-solvers", action="store_true", help="also gate every solver (same verdict)")
+    p.add_argument(
+        "--check-solvers", action="store_true", help="also gate every solver (same verdict)"
+    )
     p.add_argument("--sources", nargs="*", help="only these sources (default: all)")
     args = p.parse_args(argv)
     sources: list[tuple[str, Callable[[], Iterator[Trial]]]] = [

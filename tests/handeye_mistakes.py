@@ -23,8 +23,12 @@ from cpc2urdf.transforms import homogeneous, inverse, matrix_from_rpy
 
 Doc = dict[str, Any]
 
-X_TRUE = homogeneous(matrix_from_rpy(np.radians([10.0, -20.0, 30.0])), [0.030, 0.050, 0.120])  # T_hand_camera
-Z_TRUE = homogeneous(matrix_from_rpy(np.radians([5.0, 10.0, 120.0])), [0.800, -0.300, 0.400])  # T_base_target
+X_TRUE = homogeneous(
+    matrix_from_rpy(np.radians([10.0, -20.0, 30.0])), [0.030, 0.050, 0.120]
+)  # T_hand_camera
+Z_TRUE = homogeneous(
+    matrix_from_rpy(np.radians([5.0, 10.0, 120.0])), [0.800, -0.300, 0.400]
+)  # T_base_target
 HAND_NOISE = (math.radians(0.02), 0.0001)  # (angle [rad], position [m]) per axis
 CAMERA_NOISE = (math.radians(0.05), 0.0003)
 OUTLIERS = (3, 8)
@@ -44,8 +48,12 @@ def clean_poses(seed: int = 0, n: int = 12) -> tuple[np.ndarray, np.ndarray]:
     axes = rng.normal(size=(n, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     angles = rng.uniform(math.radians(10.0), math.radians(150.0), n)
-    H = np.array([homogeneous(Rotation.from_rotvec(a * t).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for a, t in zip(axes, angles, strict=True)])
+    H = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(a * t).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a, t in zip(axes, angles, strict=True)
+        ]
+    )
     C = inverse(X_TRUE)[None] @ inverse(H) @ Z_TRUE[None]
     return _perturb(rng, H, *HAND_NOISE), _perturb(rng, C, *CAMERA_NOISE)
 
@@ -53,8 +61,14 @@ def clean_poses(seed: int = 0, n: int = 12) -> tuple[np.ndarray, np.ndarray]:
 def clean_document(seed: int = 0, n: int = 12) -> Doc:
     """The clean pose file (mm, deg, matrices), camera ``camera_left_optical`` on hand ``plate_left``."""
     H, C = clean_poses(seed, n)
-    return handeye_poses_to_json(H, C, labels=[f"config {k}" for k in range(n)], camera="camera_left_optical",
-                                 hand="plate_left", units=Units("mm", "deg"))
+    return handeye_poses_to_json(
+        H,
+        C,
+        labels=[f"config {k}" for k in range(n)],
+        camera="camera_left_optical",
+        hand="plate_left",
+        units=Units("mm", "deg"),
+    )
 
 
 def _map(doc: Doc, key: str, fn: Callable[[np.ndarray], Any]) -> Doc:
@@ -157,8 +171,16 @@ def outliers(doc: Doc) -> Doc:
 
 #: ``(mistake, code the gate names, words the refusal contains)``
 MISTAKES: tuple[tuple[Callable[[Doc], Doc], str, str], ...] = (
-    (hand_inverted, "hand_inverted", "hand poses inverted (T_hand_base given instead of T_base_hand)"),
-    (camera_inverted, "camera_inverted", "camera poses inverted (T_target_camera given instead of T_camera_target)"),
+    (
+        hand_inverted,
+        "hand_inverted",
+        "hand poses inverted (T_hand_base given instead of T_base_hand)",
+    ),
+    (
+        camera_inverted,
+        "camera_inverted",
+        "camera poses inverted (T_target_camera given instead of T_camera_target)",
+    ),
     (both_inverted, "both_inverted", "both pose lists inverted"),
     (hand_transposed, "hand_transposed", "hand rotation blocks transposed"),
     (camera_transposed, "camera_transposed", "camera rotation blocks transposed"),

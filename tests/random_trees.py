@@ -9,7 +9,9 @@ from cpc2urdf.identification.simulation.random_robots import random_model
 from cpc2urdf.model import CPCModel
 
 
-def random_tree(rng: np.random.Generator, n_joints: int | None = None, n_frames: int | None = None) -> CPCModel:
+def random_tree(
+    rng: np.random.Generator, n_joints: int | None = None, n_frames: int | None = None
+) -> CPCModel:
     """A random tree: random types (prismatic after prismatic included), parents (branches from
     any earlier joint or the base), parameters; a plate on every leaf, and ``n_frames`` further
     frames on random links, plates and cameras alternating.
@@ -21,5 +23,12 @@ def random_tree(rng: np.random.Generator, n_joints: int | None = None, n_frames:
     """
     n = int(n_joints or rng.integers(1, 8))
     m = int(n_frames or rng.integers(1, 4))
-    return random_model(rng, n, p_prismatic=0.4, p_branch=1.0, extra_plates=(m + 1) // 2, cameras=m // 2,
-                        name="random_tree")
+    return random_model(
+        rng,
+        n,
+        p_prismatic=0.4,
+        p_branch=1.0,
+        extra_plates=(m + 1) // 2,
+        cameras=m // 2,
+        name="random_tree",
+    )

@@ -20,7 +20,9 @@ from cpc2urdf.identification.simulation.truth import perturbed_model
 from cpc2urdf.model import CPCModel
 
 
-def perturbed(model: CPCModel, rng: np.random.Generator, st: float = 5e-3, sr: float = 0.02) -> CPCModel:
+def perturbed(
+    model: CPCModel, rng: np.random.Generator, st: float = 5e-3, sr: float = 0.02
+) -> CPCModel:
     """Every placement (world_to_base, joints, frames) moved: ``st`` [m] per offset component,
     ``sr`` [rad] about a random axis."""
     return perturbed_model(model, rng, st, sr)
@@ -42,9 +44,15 @@ def random_q(model: CPCModel, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def measure(
-    truth: CPCModel, q: np.ndarray, rng: np.random.Generator, sigma_t: float, sigma_r: float,
+    truth: CPCModel,
+    q: np.ndarray,
+    rng: np.random.Generator,
+    sigma_t: float,
+    sigma_r: float,
     frames: tuple[str, ...] = ("plate_left", "plate_right"),
 ) -> MeasurementSet:
     """Fig. 10 noisy poses of ``frames`` at ``q``."""
     T = truth.fk(q, frames)
-    return MeasurementSet(truth.structure, q, {f: fig10_noise(T[f], sigma_t, sigma_r, rng) for f in frames})
+    return MeasurementSet(
+        truth.structure, q, {f: fig10_noise(T[f], sigma_t, sigma_r, rng) for f in frames}
+    )

@@ -23,7 +23,9 @@ def _heldout(n: int = 30, seed: int = 0) -> tuple[object, MeasurementSet]:
     s = model.structure
     rng = np.random.default_rng(seed)
     q = rng.uniform(s.lower, s.upper, (n, s.n_joints))
-    return model, MeasurementSet.from_arrays(s, q, model.fk(q, ["plate_left", "plate_right"]), robot="iis_head")
+    return model, MeasurementSet.from_arrays(
+        s, q, model.fk(q, ["plate_left", "plate_right"]), robot="iis_head"
+    )
 
 
 def test_exact_model_has_zero_error() -> None:
@@ -38,7 +40,9 @@ def test_known_world_offset_gives_known_table() -> None:
     model, ms = _heldout()
     shift = np.array([1e-3, -2e-3, 0.5e-3])
     T = model.world_to_base.matrix()  # type: ignore[attr-defined]
-    moved = model.with_params(world_to_base=CPCParams.from_matrix(homogeneous(T[:3, :3], T[:3, 3] + shift)))  # type: ignore[attr-defined]
+    moved = model.with_params(
+        world_to_base=CPCParams.from_matrix(homogeneous(T[:3, :3], T[:3, 3] + shift))
+    )  # type: ignore[attr-defined]
     for b in accuracy(moved, ms).values():
         np.testing.assert_allclose(b.mean_abs, np.abs(shift), atol=1e-12)
         np.testing.assert_allclose(b.std_abs, 0.0, atol=1e-12)
@@ -101,7 +105,11 @@ def identified(tmp_path_factory):
     _, measured, heldout = simulate_experiment("iis_head", seed=0, n_heldout=30)
     measured.spec = load_robot("iis_head")
     save_model(identify(measured), d / "model.json")
-    return d, measurements_to_json(measured, robot="iis_head"), measurements_to_json(heldout, robot="iis_head")
+    return (
+        d,
+        measurements_to_json(measured, robot="iis_head"),
+        measurements_to_json(heldout, robot="iis_head"),
+    )
 
 
 def _run(capsys, *args: str) -> tuple[int, str, str]:
@@ -120,13 +128,20 @@ def test_heldout_file_with_a_unit_mistake_is_refused_naming_it(identified, capsy
     code, out, err = _run(capsys, str(d / "model.json"), str(d / "held_mm.json"))
     assert code == 2 and out == "" and err.count("\n") == 1, err
     assert "held_mm.json: held-out errors are" in err and "what the model predicts" in err
-    assert "in the held-out file, lengths look like metres labelled mm" in err and "--accept-inconsistent" in err
-    code, out, err = _run(capsys, str(d / "model.json"), str(d / "held_mm.json"), "--accept-inconsistent")
+    assert (
+        "in the held-out file, lengths look like metres labelled mm" in err
+        and "--accept-inconsistent" in err
+    )
+    code, out, err = _run(
+        capsys, str(d / "model.json"), str(d / "held_mm.json"), "--accept-inconsistent"
+    )
     assert code == 0 and "plate_left (30 held-out records)" in out
     assert "warning: INCONSISTENT" in out and "metres labelled mm" in out
 
 
-def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(identified, tmp_path, capsys) -> None:
+def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(
+    identified, tmp_path, capsys
+) -> None:
     """The issue's case: stage-1 and held-out files both in metres labelled mm; the model (kept with
     --accept-inconsistent) predicts about 1 mm, the held-out errors are 1000x smaller."""
     import stage1_mistakes as sm
@@ -136,7 +151,18 @@ def test_errors_far_below_the_prediction_name_a_shared_unit_mistake(identified, 
     _, measured, held = identified
     write_json(tmp_path / "m.json", sm.metres_as_mm(measured))
     write_json(tmp_path / "h.json", sm.metres_as_mm(held))
-    assert main(["identify", str(tmp_path / "m.json"), "-o", str(tmp_path / "bad.json"), "--accept-inconsistent"]) == 0
+    assert (
+        main(
+            [
+                "identify",
+                str(tmp_path / "m.json"),
+                "-o",
+                str(tmp_path / "bad.json"),
+                "--accept-inconsistent",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     code, out, err = _run(capsys, str(tmp_path / "bad.json"), str(tmp_path / "h.json"))
     assert code == 2 and err.count("\n") == 1, err
@@ -152,8 +178,14 @@ def test_clean_heldout_data_are_consistent_with_the_prediction(identified, capsy
     d, _, held = identified
     write_json(d / "held.json", held)
     assert main(["accuracy", str(d / "model.json"), str(d / "held.json")]) == 0
-    check = prediction_check(load_model(d / "model.json"), measurements_from_json(held, "held.json"))
-    assert check is not None and check.consistent and 0.5 < check.observed_rms / check.predicted_rms < 2.0
+    check = prediction_check(
+        load_model(d / "model.json"), measurements_from_json(held, "held.json")
+    )
+    assert (
+        check is not None
+        and check.consistent
+        and 0.5 < check.observed_rms / check.predicted_rms < 2.0
+    )
 
 
 def test_marker_files_get_a_table_per_marker() -> None:

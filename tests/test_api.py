@@ -30,9 +30,13 @@ def assert_same_geometry(a: cpc2urdf.CPCModel, b: cpc2urdf.CPCModel, tol: float 
     assert a.structure.frame_names == b.structure.frame_names
     np.testing.assert_allclose(a.world_to_base.matrix(), b.world_to_base.matrix(), rtol=0, atol=tol)
     for name in a.structure.joint_names:
-        np.testing.assert_allclose(a.joints[name].matrix(), b.joints[name].matrix(), rtol=0, atol=tol, err_msg=name)
+        np.testing.assert_allclose(
+            a.joints[name].matrix(), b.joints[name].matrix(), rtol=0, atol=tol, err_msg=name
+        )
     for name in a.structure.frame_names:
-        np.testing.assert_allclose(a.frames[name].matrix(), b.frames[name].matrix(), rtol=0, atol=tol, err_msg=name)
+        np.testing.assert_allclose(
+            a.frames[name].matrix(), b.frames[name].matrix(), rtol=0, atol=tol, err_msg=name
+        )
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +85,11 @@ def test_api_defaults_are_the_stages_defaults():
         return inspect.signature(f).parameters[name].default
 
     assert default(cpc2urdf.identify, "method") == DEFAULT_METHOD
-    assert default(cpc2urdf.solve_handeye, "method") == default(cpc2urdf.calibrate_cameras, "method") == DEFAULT_HANDEYE_METHOD
+    assert (
+        default(cpc2urdf.solve_handeye, "method")
+        == default(cpc2urdf.calibrate_cameras, "method")
+        == DEFAULT_HANDEYE_METHOD
+    )
     assert default(cpc2urdf.plan_experiment, "candidates") == DEFAULT_CANDIDATES
     assert default(cpc2urdf.simulate, "M") == sim.DEFAULT_M
     assert default(cpc2urdf.simulate, "heldout") == sim.DEFAULT_HELDOUT
@@ -117,12 +125,25 @@ def test_import_cpc2urdf_is_light_and_lists_the_api():
     import subprocess
     import sys
 
-    code = ("import sys, cpc2urdf; heavy = [m for m in ('pinocchio', 'cv2', 'meshcat', 'numba') if m in sys.modules]; "
-            "print(heavy); print(callable(cpc2urdf.identify))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    code = (
+        "import sys, cpc2urdf; heavy = [m for m in ('pinocchio', 'cv2', 'meshcat', 'numba') if m in sys.modules]; "
+        "print(heavy); print(callable(cpc2urdf.identify))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split("\n")
     assert out[0] == "[]" and out[1] == "True"
-    assert {"identify", "export_urdf", "check_urdf", "calibrate_cameras", "gaze_solver", "write_view"} <= set(cpc2urdf.__all__)
-    assert len(cpc2urdf.__all__) <= 22  # the pipeline's verbs and the model type; result types stay in their subpackages
+    assert {
+        "identify",
+        "export_urdf",
+        "check_urdf",
+        "calibrate_cameras",
+        "gaze_solver",
+        "write_view",
+    } <= set(cpc2urdf.__all__)
+    assert (
+        len(cpc2urdf.__all__) <= 22
+    )  # the pipeline's verbs and the model type; result types stay in their subpackages
 
 
 def test_identify_from_a_file_loads_no_pinocchio_opencv_meshcat_or_numba(measurement_file):
@@ -130,7 +151,11 @@ def test_identify_from_a_file_loads_no_pinocchio_opencv_meshcat_or_numba(measure
     import sys
 
     path = measurement_file
-    code = (f"import sys, cpc2urdf; cpc2urdf.identify({str(path)!r}); "
-            "print([m for m in ('pinocchio', 'cv2', 'meshcat', 'numba') if m in sys.modules])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    code = (
+        f"import sys, cpc2urdf; cpc2urdf.identify({str(path)!r}); "
+        "print([m for m in ('pinocchio', 'cv2', 'meshcat', 'numba') if m in sys.modules])"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"

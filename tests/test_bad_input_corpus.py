@@ -29,7 +29,18 @@ import cpc2urdf
 from cpc2urdf.cli import COMMANDS, main
 from cpc2urdf.files.jsonio import read_json, write_json
 
-PLACEHOLDERS = ("meas", "heldout", "model", "urdf", "spec", "poses", "images", "rig", "joints", "camera")
+PLACEHOLDERS = (
+    "meas",
+    "heldout",
+    "model",
+    "urdf",
+    "spec",
+    "poses",
+    "images",
+    "rig",
+    "joints",
+    "camera",
+)
 IMAGE_SIZE = (64, 48)  # [px] width, height: blank images, nothing to detect
 
 
@@ -55,7 +66,12 @@ def _blank_images(d: Path) -> None:
             cv2.imwrite(str(d / sub / f"{i:04d}.png"), np.zeros(IMAGE_SIZE[::-1], np.uint8))
     q = np.tile((structure.lower + structure.upper) / 2, (4, 1))
     write_joints_csv(d / "joints.csv", structure, [f"{i:04d}" for i in range(4)], q)
-    save_rig(StereoRig(K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-0.6, 0.0, 0.0]), IMAGE_SIZE), d / "rig.yaml")
+    save_rig(
+        StereoRig(
+            K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-0.6, 0.0, 0.0]), IMAGE_SIZE
+        ),
+        d / "rig.yaml",
+    )
     for c in cameras:
         save_camera(K, np.zeros(5), IMAGE_SIZE, d / f"{c}.yaml")
 
@@ -69,7 +85,12 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> Corpus:
 
     root = tmp_path_factory.mktemp("corpus")
     assert _quiet_main(["simulate", "iis_head", "-o", str(root / "sim"), "--heldout", "10"]) == 0
-    assert _quiet_main(["identify", str(root / "sim" / "measurements.json"), "-o", str(root / "model.json")]) == 0
+    assert (
+        _quiet_main(
+            ["identify", str(root / "sim" / "measurements.json"), "-o", str(root / "model.json")]
+        )
+        == 0
+    )
     assert _quiet_main(["export", "iis_head", "-o", str(root / "head.urdf")]) == 0
     spec = spec_path("iis_head")
     assert spec is not None
@@ -105,11 +126,18 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> Corpus:
 
 def _snapshot(folder: Path) -> dict[str, tuple[int, int]]:
     """Every file and folder under ``folder`` (hidden ones too): size and modification time."""
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in folder.rglob("*")
+    }
 
 
 def _fill(text: str, corpus: Corpus, tmp: Path, bad: Path) -> str:
-    text = text.replace("{bad}", str(bad)).replace("{tmp}", str(tmp)).replace("{out}", str(tmp / "out"))
+    text = (
+        text.replace("{bad}", str(bad))
+        .replace("{tmp}", str(tmp))
+        .replace("{out}", str(tmp / "out"))
+    )
     for key in PLACEHOLDERS:
         text = text.replace("{" + key + "}", str(corpus.paths[key]))
     return text
@@ -138,8 +166,13 @@ def test_the_corpus_walks_every_command() -> None:
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
-def test_bad_input_is_refused_in_one_line(case: Case, corpus: Corpus, tmp_path: Path,
-                                          capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bad_input_is_refused_in_one_line(
+    case: Case,
+    corpus: Corpus,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     monkeypatch.chdir(tmp_path)  # a relative default output (demo-out, study_*) would land here
     shared = _snapshot(corpus.paths["model"].parent)
     with _prepared(case, corpus, tmp_path) as (argv, expected):
@@ -154,7 +187,9 @@ def test_bad_input_is_refused_in_one_line(case: Case, corpus: Corpus, tmp_path: 
         assert _prefix(case).match(lines[0]), lines[0]
         assert expected in lines[0], (expected, lines[0])
         assert _snapshot(tmp_path) == before, "the command wrote into the case's folder"
-    assert _snapshot(corpus.paths["model"].parent) == shared, "the command changed the shared inputs"
+    assert _snapshot(corpus.paths["model"].parent) == shared, (
+        "the command changed the shared inputs"
+    )
 
 
 # ---- the real console script: the same exit code and line, no traceback --------------------------
@@ -168,19 +203,28 @@ def _console_script() -> list[str]:
 
 
 @pytest.mark.parametrize("case_id", SCRIPT_CASES)
-def test_the_console_script_refuses_the_same_way(case_id: str, corpus: Corpus, tmp_path: Path) -> None:
+def test_the_console_script_refuses_the_same_way(
+    case_id: str, corpus: Corpus, tmp_path: Path
+) -> None:
     case = next(c for c in CASES if c.id == case_id)
     with _prepared(case, corpus, tmp_path) as (argv, expected):
         before = _snapshot(tmp_path)
         # the checkout this test imports, whatever the folder the script runs in
         root = str(Path(cpc2urdf.__file__).resolve().parent.parent)
-        env = {**os.environ, "CPC2URDF_PROGRESS": "0",
-               "PYTHONPATH": os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])}
-        proc = subprocess.run([*_console_script(), *argv], capture_output=True, text=True, cwd=tmp_path, env=env)
+        env = {
+            **os.environ,
+            "CPC2URDF_PROGRESS": "0",
+            "PYTHONPATH": os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])]),
+        }
+        proc = subprocess.run(
+            [*_console_script(), *argv], capture_output=True, text=True, cwd=tmp_path, env=env
+        )
         assert "Traceback" not in proc.stderr, proc.stderr
         assert proc.returncode == 2, proc.stderr
         lines = proc.stderr.strip().splitlines()
-        assert len(lines) == 1 and _prefix(case).match(lines[0]) and expected in lines[0], proc.stderr
+        assert len(lines) == 1 and _prefix(case).match(lines[0]) and expected in lines[0], (
+            proc.stderr
+        )
         assert _snapshot(tmp_path) == before
 
 
@@ -197,11 +241,17 @@ def _strict_json(text: str) -> object:
 @pytest.mark.parametrize(
     "target, extra",
     [
-        pytest.param(("-1.7e308", "0", "0"), (), id="huge-negative"),  # was "argument --target: expected 3 arguments"
-        pytest.param(("1.7e308", "1.7e308", "0"), ("--json",), id="overflowing-norm-json"),  # wrote Infinity
+        pytest.param(
+            ("-1.7e308", "0", "0"), (), id="huge-negative"
+        ),  # was "argument --target: expected 3 arguments"
+        pytest.param(
+            ("1.7e308", "1.7e308", "0"), ("--json",), id="overflowing-norm-json"
+        ),  # wrote Infinity
     ],
 )
-def test_gaze_extreme_finite_targets(target: tuple[str, ...], extra: tuple[str, ...], capsys: pytest.CaptureFixture[str]) -> None:
+def test_gaze_extreme_finite_targets(
+    target: tuple[str, ...], extra: tuple[str, ...], capsys: pytest.CaptureFixture[str]
+) -> None:
     code = main(["gaze", "iis_head", "--target", *target, *extra])
     out, err = capsys.readouterr()
     assert "Traceback" not in err

@@ -23,10 +23,30 @@ from cpc2urdf.validation.gaze.reference import (
 )
 
 KEYS = (
-    "kin_us", "median_us", "p99_us", "median_kin", "p99_kin", "success", "disparity", "unreachable_median_us",
-    "unreachable_ratio", "reference_median_us", "reference_success", "ratio", "batch_targets_per_s", "aims",
-    "p99_cpu_us", "p99_cpu_kin", "audit_targets", "audit_unfixated", "audit_missed", "after_reference_median_us",
-    "ratio_blocks", "blocks_median_us", "blocks_reference_median_us", "kin_after_reference_us",
+    "kin_us",
+    "median_us",
+    "p99_us",
+    "median_kin",
+    "p99_kin",
+    "success",
+    "disparity",
+    "unreachable_median_us",
+    "unreachable_ratio",
+    "reference_median_us",
+    "reference_success",
+    "ratio",
+    "batch_targets_per_s",
+    "aims",
+    "p99_cpu_us",
+    "p99_cpu_kin",
+    "audit_targets",
+    "audit_unfixated",
+    "audit_missed",
+    "after_reference_median_us",
+    "ratio_blocks",
+    "blocks_median_us",
+    "blocks_reference_median_us",
+    "kin_after_reference_us",
 )
 
 
@@ -37,17 +57,43 @@ def tiago():
 
 def test_bench_runs_tiny(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    argv = ["bench", "gaze", "--targets", "4", "--unreachable", "2", "--reference", "2", "--track-seconds", "0.02",
-            "--heads", "nominal", "tiago", "--audit", "40", "--json", str(out)]
+    argv = [
+        "bench",
+        "gaze",
+        "--targets",
+        "4",
+        "--unreachable",
+        "2",
+        "--reference",
+        "2",
+        "--track-seconds",
+        "0.02",
+        "--heads",
+        "nominal",
+        "tiago",
+        "--audit",
+        "40",
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     res = json.loads(out.read_text())
     assert list(res) == ["nominal", "tiago"]
     for r in res.values():
         for key in KEYS:
             assert key in r
-        assert r["kin_us"] > 0 and r["median_kin"] > 0 and r["ratio"] > 0 and r["batch_targets_per_s"] > 0
-        assert r["ratio"] == pytest.approx(r["reference_median_us"] / r["after_reference_median_us"])
-        assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
+        assert (
+            r["kin_us"] > 0
+            and r["median_kin"] > 0
+            and r["ratio"] > 0
+            and r["batch_targets_per_s"] > 0
+        )
+        assert r["ratio"] == pytest.approx(
+            r["reference_median_us"] / r["after_reference_median_us"]
+        )
+        assert r["ratio_blocks"] == pytest.approx(
+            r["blocks_reference_median_us"] / r["blocks_median_us"]
+        )
         assert r["after_reference_median_us"] > 0 and r["kin_after_reference_us"] > 0
         assert r["success"] + r["disparity"] == 1.0 and r["reference_success"] == 1.0
         assert r["unreachable_fixated"] == 0
@@ -65,8 +111,26 @@ def test_bench_runs_tiny(tmp_path, capsys):
 def test_bench_urdf_head(tmp_path, capsys):
     path, cams = _real_urdf("talos")
     out = tmp_path / "b.json"
-    argv = ["bench", "gaze", "--targets", "3", "--unreachable", "0", "--reference", "1", "--heads", "nominal",
-            "--track-seconds", "0.01", "--urdf", path, "--camera", *cams, "--json", str(out)]
+    argv = [
+        "bench",
+        "gaze",
+        "--targets",
+        "3",
+        "--unreachable",
+        "0",
+        "--reference",
+        "1",
+        "--heads",
+        "nominal",
+        "--track-seconds",
+        "0.01",
+        "--urdf",
+        path,
+        "--camera",
+        *cams,
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     assert list(json.loads(out.read_text())) == ["nominal", "talos_reduced"]
 
@@ -80,7 +144,9 @@ def test_the_audit_finds_fixatable_targets_called_unreachable(tiago):
     axes = SolvedAxes(solver)
     P, _ = generic_reachable_targets(axes, 12, seed=3)
     assert missed_targets(solver, P, np.zeros(12, dtype=bool)).tolist() == list(range(12))
-    assert missed_targets(solver, P, np.ones(12, dtype=bool)).size == 0  # only the unfixated are audited
+    assert (
+        missed_targets(solver, P, np.ones(12, dtype=bool)).size == 0
+    )  # only the unfixated are audited
     behind = generic_unreachable_targets(solver, 12, seed=3)
     assert missed_targets(solver, behind, np.zeros(12, dtype=bool)).size == 0
     A = audit_targets(axes, 200, seed=1)
@@ -88,8 +154,17 @@ def test_the_audit_finds_fixatable_targets_called_unreachable(tiago):
     assert np.abs(A - O[0].mean(axis=0)).max() <= 3.0 and np.ptp(A, axis=0).min() > 5.0
 
 
-@pytest.mark.parametrize("argv", [["--urdf", "x.urdf"], ["--camera", "c"], ["--targets", "0"],
-                                  ["--track-seconds", "0"], ["--heads", "nope"], ["--audit", "-1"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--urdf", "x.urdf"],
+        ["--camera", "c"],
+        ["--targets", "0"],
+        ["--track-seconds", "0"],
+        ["--heads", "nope"],
+        ["--audit", "-1"],
+    ],
+)
 def test_bench_bad_input(tmp_path, capsys, argv):
     out = tmp_path / "b.json"
     assert main(["bench", "gaze", *argv, "--json", str(out)]) == 2
@@ -179,7 +254,9 @@ def test_block_run_alternates_blocks_of_ours_and_the_reference():
             expected += [("scipy", i), ("kin", i)]
     assert calls == expected
     assert r["kin_after_reference_us"] == pytest.approx(1.0)
-    assert r["ratio_blocks"] == pytest.approx(r["blocks_reference_median_us"] / r["blocks_median_us"])
+    assert r["ratio_blocks"] == pytest.approx(
+        r["blocks_reference_median_us"] / r["blocks_median_us"]
+    )
 
 
 class _FakeClock:

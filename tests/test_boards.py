@@ -37,16 +37,27 @@ VIEW = PinholeView(K, D, (640, 480), np.eye(4))
 
 BOARDS: dict[str, dict[str, Any]] = {
     "chessboard": {"kind": "chessboard", "pattern_size": [9, 6], "square_size": 20},
-    "charuco": {"kind": "charuco", "squares": [7, 5], "square_size": 30, "marker_size": 22,
-                "dictionary": "DICT_5X5_100"},
-    "asymmetric_circles": {"kind": "asymmetric_circles", "pattern_size": [4, 11], "spacing": 15,
-                           "circle_radius": 5},
+    "charuco": {
+        "kind": "charuco",
+        "squares": [7, 5],
+        "square_size": 30,
+        "marker_size": 22,
+        "dictionary": "DICT_5X5_100",
+    },
+    "asymmetric_circles": {
+        "kind": "asymmetric_circles",
+        "pattern_size": [4, 11],
+        "spacing": 15,
+        "circle_radius": 5,
+    },
     "circles": {"kind": "circles", "pattern_size": [7, 5], "spacing": 25, "circle_radius": 7},
 }
 
 
 def board(kind: str, **extra: Any) -> Board:
-    return board_from_json({"format": "cpc2urdf/board@1", "units": "mm", **BOARDS[kind], **extra}, f"{kind}.json")
+    return board_from_json(
+        {"format": "cpc2urdf/board@1", "units": "mm", **BOARDS[kind], **extra}, f"{kind}.json"
+    )
 
 
 def _rotvec_error(T_est: np.ndarray, T_true: np.ndarray) -> np.ndarray:
@@ -74,14 +85,28 @@ def test_board_file_round_trip(kind: str, tmp_path: Path) -> None:
         ("chessboard", {"pattern_size": [9]}, "pattern_size must be [cols, rows]"),
         ("chessboard", {"squares": [9, 6]}, "unknown key 'squares' for a chessboard board"),
         ("chessboard", {"units": "inch"}, "units must be one of"),
-        ("charuco", {"marker_size": 35}, "marker_size must be smaller than square_size (30 mm), got 35"),
-        ("charuco", {"dictionary": "DICT_9X9_1"}, "dictionary must be an OpenCV ArUco dictionary name"),
-        ("charuco", {"first_marker_id": 90}, "marker ids 90..106 but DICT_5X5_100 has only 100 markers"),
+        (
+            "charuco",
+            {"marker_size": 35},
+            "marker_size must be smaller than square_size (30 mm), got 35",
+        ),
+        (
+            "charuco",
+            {"dictionary": "DICT_9X9_1"},
+            "dictionary must be an OpenCV ArUco dictionary name",
+        ),
+        (
+            "charuco",
+            {"first_marker_id": 90},
+            "marker ids 90..106 but DICT_5X5_100 has only 100 markers",
+        ),
         ("circles", {"circle_radius": 12}, "circle_radius must be below 0.4 x the distance"),
         ("asymmetric_circles", {"spacing": "15"}, "spacing must be a positive length"),
     ],
 )
-def test_board_file_bad_field_is_one_line(kind: str, change: dict[str, Any], message: str, tmp_path: Path) -> None:
+def test_board_file_bad_field_is_one_line(
+    kind: str, change: dict[str, Any], message: str, tmp_path: Path
+) -> None:
     doc = {"format": "cpc2urdf/board@1", "units": "mm", **BOARDS[kind], **change}
     path = tmp_path / "board.json"
     path.write_text(json.dumps(doc))
@@ -92,7 +117,16 @@ def test_board_file_bad_field_is_one_line(kind: str, change: dict[str, Any], mes
 
 def test_board_file_missing_key_and_wrong_format(tmp_path: Path) -> None:
     path = tmp_path / "board.json"
-    path.write_text(json.dumps({"format": "cpc2urdf/board@1", "kind": "charuco", "squares": [5, 5], "square_size": 0.03}))
+    path.write_text(
+        json.dumps(
+            {
+                "format": "cpc2urdf/board@1",
+                "kind": "charuco",
+                "squares": [5, 5],
+                "square_size": 0.03,
+            }
+        )
+    )
     with pytest.raises(InputFileError, match="missing key 'marker_size'"):
         load_board(path)
     path.write_text(json.dumps({"format": "cpc2urdf/plate@1", "kind": "chessboard"}))
@@ -110,7 +144,9 @@ def test_board_frame_follows_opencv_points() -> None:
     np.testing.assert_allclose(ours[:, 1] - ours[0, 1], -(cv[:, 1] - cv[0, 1]), atol=1e-7)
     np.testing.assert_allclose(ours.mean(axis=0)[:2], 0.0, atol=1e-12)
     asym = board("asymmetric_circles").object_points()
-    assert np.linalg.norm(asym[1] - asym[0]) == pytest.approx(0.030)  # (2 j + i % 2) spacing along a row
+    assert np.linalg.norm(asym[1] - asym[0]) == pytest.approx(
+        0.030
+    )  # (2 j + i % 2) spacing along a row
 
 
 # ---- poses from rendered images vs the pixel noise -------------------------------------------------
@@ -147,22 +183,33 @@ def test_rendered_board_poses_within_the_pixel_noise(kind: str) -> None:
             if np.linalg.norm(_rotvec_error(flipped, T)) < np.linalg.norm(_rotvec_error(Te, T)):
                 Te = flipped
         truth = VIEW.project(b.object_points() @ T[:3, :3].T + T[:3, 3])
-        uv = r.uv if not b.pose_ambiguity else r.uv[np.argmin(((r.uv[:, None] - truth[None]) ** 2).sum(-1), axis=0)]
+        uv = (
+            r.uv
+            if not b.pose_ambiguity
+            else r.uv[np.argmin(((r.uv[:, None] - truth[None]) ** 2).sum(-1), axis=0)]
+        )
         residuals.append(uv - truth[r.ids] if not b.pose_ambiguity else uv - truth)
         errors.append((T, np.concatenate([_rotvec_error(Te, T), Te[:3, 3] - T[:3, 3]]), r.ids))
     res = np.concatenate(residuals)
     sigma = float(np.sqrt(np.mean(res**2)))
     assert sigma < 0.05, sigma  # the detectors' sub-pixel noise on these images [px]
-    assert np.abs(res.mean(axis=0)).max() < 0.005  # [px] mean error vector: no systematic offset left
+    assert (
+        np.abs(res.mean(axis=0)).max() < 0.005
+    )  # [px] mean error vector: no systematic offset left
     # Mahalanobis distance of each 6-D pose error under the predicted covariance: mean 6 when the
     # pose is as good as the pixel noise allows (chi-square, 6 dof per view).
-    m = [e @ np.linalg.solve(pnp_pose_covariance(K, D, T, b.object_points()[ids], sigma), e) for T, e, ids in errors]
+    m = [
+        e @ np.linalg.solve(pnp_pose_covariance(K, D, T, b.object_points()[ids], sigma), e)
+        for T, e, ids in errors
+    ]
     # Under the prediction, sum(m) is chi-square with 6 x 4 = 24 dof: mean(m) / 6 < its 99.9 % quantile
     # / 24 = 2.13. Circle grids: their ~0.009 px centre errors are spatially correlated (PnP does not
     # average them out as for independent noise), so their poses' variance is the prediction's times
     # the factor measured over 16 views in docs/images.md (Mahalanobis / 6: 1.49 asymmetric, 3.79
     # symmetric); the same chi-square margin on top: 3.18 and 8.08 (these 4 views: 2.28 and 5.98).
-    inflation = {"chessboard": 1.0, "charuco": 1.0, "asymmetric_circles": 1.49, "circles": 3.79}[kind]
+    inflation = {"chessboard": 1.0, "charuco": 1.0, "asymmetric_circles": 1.49, "circles": 3.79}[
+        kind
+    ]
     dof = 6 * len(errors)
     bound = inflation * chi2.ppf(0.999, dof) / dof
     assert np.mean(m) / 6 < bound, (kind, sigma, np.array(m) / 6)
@@ -185,7 +232,9 @@ def test_ambiguous_missing_and_partial_boards() -> None:
     blank = np.full((480, 640), 60, np.uint8)
     for kind in BOARDS:
         r = detect_board(blank, board(kind), image_name="blank.png")
-        assert isinstance(r, PlateNotFoundError) and str(r).startswith(f"blank.png: {kind}.json: board not found")
+        assert isinstance(r, PlateNotFoundError) and str(r).startswith(
+            f"blank.png: {kind}.json: board not found"
+        )
     sym = board("circles")
     T = homogeneous(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 0.5])
     r = board_pose(render_board_view(VIEW, [(sym, T)]), K, D, sym, image_name="sym.png")
@@ -198,7 +247,9 @@ def test_ambiguous_missing_and_partial_boards() -> None:
     # a ChArUco board with other marker ids is not this board
     other = board("charuco", first_marker_id=40)
     T = homogeneous(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 0.45])
-    r = detect_board(render_board_view(VIEW, [(ch, T)], blur_sigma=0.7), other, image_name="ids.png")
+    r = detect_board(
+        render_board_view(VIEW, [(ch, T)], blur_sigma=0.7), other, image_name="ids.png"
+    )
     assert isinstance(r, PlateNotFoundError) and "ids 40..56" in str(r), r
 
 
@@ -215,8 +266,14 @@ def test_rendered_chessboard_is_its_area_coverage() -> None:
     view = PinholeView(Kf, np.zeros(5), (640, 480), np.eye(4))
     x0, x1, y0, y1 = b.outline
     # square edges at u = 220.8125 + 20 k px, v = 167.4375 + 20 k px: cutting pixels, on the sub-sample grid
-    T = homogeneous(np.diag([1.0, -1.0, -1.0]), [(220.8125 - 319.5) * z / f - (x0 + b.margin),
-                                                 (167.4375 - 239.5) * z / f + (y1 - b.margin), z])
+    T = homogeneous(
+        np.diag([1.0, -1.0, -1.0]),
+        [
+            (220.8125 - 319.5) * z / f - (x0 + b.margin),
+            (167.4375 - 239.5) * z / f + (y1 - b.margin),
+            z,
+        ],
+    )
     img = render_board_view(view, [(b, T)], supersample=16).astype(float)
     # the black squares in image coordinates: square (a, b) of OpenCV's grid, X right, Y down
     s = b.square_size * f / z
@@ -230,12 +287,18 @@ def test_rendered_chessboard_is_its_area_coverage() -> None:
         for c in range(rows + 1):
             if (a + c) % 2:
                 continue
-            ox = np.clip(np.minimum(u + 0.5, cx + (a + 1) * s) - np.maximum(u - 0.5, cx + a * s), 0, None)
-            oy = np.clip(np.minimum(v + 0.5, cy + (c + 1) * s) - np.maximum(v - 0.5, cy + c * s), 0, None)
+            ox = np.clip(
+                np.minimum(u + 0.5, cx + (a + 1) * s) - np.maximum(u - 0.5, cx + a * s), 0, None
+            )
+            oy = np.clip(
+                np.minimum(v + 0.5, cy + (c + 1) * s) - np.maximum(v - 0.5, cy + c * s), 0, None
+            )
             black += ox * oy
     ex0, ex1 = 319.5 + (T[0, 3] + x0) * f / z, 319.5 + (T[0, 3] + x1) * f / z
     ey0, ey1 = 239.5 + (T[1, 3] - y1) * f / z, 239.5 + (T[1, 3] - y0) * f / z
-    inner = (u > ex0 + 1) & (u < ex1 - 1) & (v > ey0 + 1) & (v < ey1 - 1)  # away from the board's outline
+    inner = (
+        (u > ex0 + 1) & (u < ex1 - 1) & (v > ey0 + 1) & (v < ey1 - 1)
+    )  # away from the board's outline
     expected = 255 * (WHITE_LEVEL + (BLACK_LEVEL - WHITE_LEVEL) * black)
     err = np.abs(img - expected)[np.broadcast_to(inner, img.shape)]
     assert err.max() < 0.5 + 1e-6, err.max()  # 8-bit rounding only

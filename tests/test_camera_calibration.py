@@ -22,10 +22,23 @@ from cpc2urdf.identification.vision.rig_file import load_camera, load_rig, save_
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.transforms import inverse
 
-CHARUCO = {"format": "cpc2urdf/board@1", "kind": "charuco", "squares": [7, 5], "square_size": 30, "marker_size": 22,
-           "dictionary": "DICT_5X5_100", "units": "mm"}
+CHARUCO = {
+    "format": "cpc2urdf/board@1",
+    "kind": "charuco",
+    "squares": [7, 5],
+    "square_size": 30,
+    "marker_size": 22,
+    "dictionary": "DICT_5X5_100",
+    "units": "mm",
+}
 CAMERA = CameraIntrinsics(fx=500.0, fy=500.0, cx=319.5, cy=239.5, dist=(-0.1, 0.05, 0.0, 0.0, 0.0))
-RIG = StereoRig.verged(baseline=0.3, distance=1.0, focal_px=800.0, image_size=(640, 512), distortion=(-0.05, 0.02, 0, 0, 0))
+RIG = StereoRig.verged(
+    baseline=0.3,
+    distance=1.0,
+    focal_px=800.0,
+    image_size=(640, 512),
+    distortion=(-0.05, 0.02, 0, 0, 0),
+)
 RIG_BOARD = {**CHARUCO, "square_size": 45, "marker_size": 33}
 
 
@@ -33,7 +46,9 @@ RIG_BOARD = {**CHARUCO, "square_size": 45, "marker_size": 33}
 def camera_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.ndarray]:
     root = tmp_path_factory.mktemp("cam")
     board = save_board(board_from_json(CHARUCO, "charuco.json"), root / "board.json")
-    T = render_board_calibration(root / "views", board_from_json(CHARUCO, "charuco.json"), camera=CAMERA, n_views=8, seed=0)
+    T = render_board_calibration(
+        root / "views", board_from_json(CHARUCO, "charuco.json"), camera=CAMERA, n_views=8, seed=0
+    )
     return root / "views", board, T
 
 
@@ -46,7 +61,9 @@ def rig_views(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.
     return root / "views", board, T
 
 
-def _corner_sigma(folder: Path, board_file: Path, view: PinholeView, T_world_board: np.ndarray) -> float:
+def _corner_sigma(
+    folder: Path, board_file: Path, view: PinholeView, T_world_board: np.ndarray
+) -> float:
     """RMS error per coordinate of the detected corners vs their true projections [px]."""
     from cpc2urdf.identification.vision.boards.board_file import load_board
 
@@ -61,8 +78,9 @@ def _corner_sigma(folder: Path, board_file: Path, view: PinholeView, T_world_boa
     return float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
 
 
-def test_calibrate_camera_recovers_the_intrinsics(camera_views: tuple[Path, Path, np.ndarray], tmp_path: Path,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_calibrate_camera_recovers_the_intrinsics(
+    camera_views: tuple[Path, Path, np.ndarray], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     folder, board, _ = camera_views
     out = tmp_path / "camera.yaml"
     assert main(["calibrate", "camera", str(folder), "--board", str(board), "-o", str(out)]) == 0
@@ -75,21 +93,35 @@ def test_calibrate_camera_recovers_the_intrinsics(camera_views: tuple[Path, Path
     from cpc2urdf.identification.vision.camera_calibration import calibrate_camera_images
 
     cal = calibrate_camera_images(folder, load_board(board))
-    err = np.array([K[0, 0] - CAMERA.fx, K[1, 1] - CAMERA.fy, K[0, 2] - CAMERA.cx, K[1, 2] - CAMERA.cy,
-                    D[0] - CAMERA.dist[0], D[1] - CAMERA.dist[1], D[2], D[3]])
+    err = np.array(
+        [
+            K[0, 0] - CAMERA.fx,
+            K[1, 1] - CAMERA.fy,
+            K[0, 2] - CAMERA.cx,
+            K[1, 2] - CAMERA.cy,
+            D[0] - CAMERA.dist[0],
+            D[1] - CAMERA.dist[1],
+            D[2],
+            D[3],
+        ]
+    )
     assert np.all(np.abs(err) < 3.0 * cal.std_intrinsics[:8]), (err, cal.std_intrinsics[:8])
     assert cal.rms < 0.1 and not cal.outliers
 
 
-def _mc_rig_spread(T_world_board: np.ndarray, board_file: Path, sigma: float, draws: int = 12) -> tuple[float, float]:
+def _mc_rig_spread(
+    T_world_board: np.ndarray, board_file: Path, sigma: float, draws: int = 12
+) -> tuple[float, float]:
     """Monte Carlo on exact corners: std of the baseline error [m] and of the rotation error [rad]
     of the same calibration pipeline with Gaussian pixel noise ``sigma`` on the true projections."""
     from cpc2urdf.identification.vision.boards.board_file import load_board
 
     b = load_board(board_file)
     P = b.object_points()
-    views = [PinholeView(K, Dd, RIG.image_size, inverse(RIG.T_world_camera(w)))
-             for w, K, Dd in (("left", RIG.K1, RIG.D1), ("right", RIG.K2, RIG.D2))]
+    views = [
+        PinholeView(K, Dd, RIG.image_size, inverse(RIG.T_world_camera(w)))
+        for w, K, Dd in (("left", RIG.K1, RIG.D1), ("right", RIG.K2, RIG.D2))
+    ]
     rng = np.random.default_rng(7)
     dt, dr = [], []
     for _ in range(draws):
@@ -98,22 +130,44 @@ def _mc_rig_spread(T_world_board: np.ndarray, board_file: Path, sigma: float, dr
             pw = P @ T[:3, :3].T + T[:3, 3]
             obj.append(P.astype(np.float32).reshape(-1, 1, 3))
             for k, v in enumerate(views):
-                pts[k].append((v.project(pw) + rng.normal(0, sigma, (len(P), 2))).astype(np.float32).reshape(-1, 1, 2))
-        mono = [cv2.calibrateCamera(obj, p, RIG.image_size, np.eye(3), np.zeros(5), flags=cv2.CALIB_FIX_K3)[1:3] for p in pts]
-        r = cv2.stereoCalibrate(obj, pts[0], pts[1], mono[0][0], mono[0][1], mono[1][0], mono[1][1], RIG.image_size,
-                                flags=cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3)
+                pts[k].append(
+                    (v.project(pw) + rng.normal(0, sigma, (len(P), 2)))
+                    .astype(np.float32)
+                    .reshape(-1, 1, 2)
+                )
+        mono = [
+            cv2.calibrateCamera(
+                obj, p, RIG.image_size, np.eye(3), np.zeros(5), flags=cv2.CALIB_FIX_K3
+            )[1:3]
+            for p in pts
+        ]
+        r = cv2.stereoCalibrate(
+            obj,
+            pts[0],
+            pts[1],
+            mono[0][0],
+            mono[0][1],
+            mono[1][0],
+            mono[1][1],
+            RIG.image_size,
+            flags=cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3,
+        )
         dt.append(np.asarray(r[6]).ravel() - RIG.T)
         dr.append(Rotation.from_matrix(np.asarray(r[5]) @ RIG.R.T).as_rotvec())
     return float(np.sqrt(np.mean(np.square(dt)))), float(np.sqrt(np.mean(np.square(dr))))
 
 
-def test_calibrate_rig_recovers_the_rig_and_round_trips(rig_views: tuple[Path, Path, np.ndarray], tmp_path: Path) -> None:
+def test_calibrate_rig_recovers_the_rig_and_round_trips(
+    rig_views: tuple[Path, Path, np.ndarray], tmp_path: Path
+) -> None:
     folder, board, T = rig_views
     out = tmp_path / "rig.yaml"
     assert main(["calibrate", "rig", str(folder), "--board", str(board), "-o", str(out)]) == 0
     rig = load_rig(out)  # the reader measure uses
     assert rig.image_size == RIG.image_size
-    sigma = _corner_sigma(folder / "left", board, PinholeView(RIG.K1, RIG.D1, RIG.image_size, np.eye(4)), T)
+    sigma = _corner_sigma(
+        folder / "left", board, PinholeView(RIG.K1, RIG.D1, RIG.image_size, np.eye(4)), T
+    )
     sd_t, sd_r = _mc_rig_spread(T, board, sigma)
     err_t = np.abs(rig.T - RIG.T)
     err_r = np.abs(Rotation.from_matrix(rig.R @ RIG.R.T).as_rotvec())
@@ -132,8 +186,9 @@ def _no_output(out: Path, capsys: pytest.CaptureFixture[str]) -> str:
     return err
 
 
-def test_bad_input_one_line_exit_2_nothing_written(camera_views: tuple[Path, Path, np.ndarray], tmp_path: Path,
-                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_input_one_line_exit_2_nothing_written(
+    camera_views: tuple[Path, Path, np.ndarray], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     folder, board, _ = camera_views
     out = tmp_path / "camera.yaml"
     bad = tmp_path / "bad"
@@ -145,13 +200,30 @@ def test_bad_input_one_line_exit_2_nothing_written(camera_views: tuple[Path, Pat
     assert main(["calibrate", "camera", str(bad), "--board", str(board), "-o", str(out)]) == 2
     assert "0009.png: charuco.json: board not found" in _no_output(out, capsys)
     # ... skipped with --on-error skip, and listed
-    assert main(["calibrate", "camera", str(bad), "--board", str(board), "-o", str(out), "--on-error", "skip"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "camera",
+                str(bad),
+                "--board",
+                str(board),
+                "-o",
+                str(out),
+                "--on-error",
+                "skip",
+            ]
+        )
+        == 0
+    )
     assert "skipped:" in capsys.readouterr().err
     out.unlink()
     # images of different sizes
     cv2.imwrite(str(bad / "0009.png"), np.full((240, 320), 90, np.uint8))
     assert main(["calibrate", "camera", str(bad), "--board", str(board), "-o", str(out)]) == 2
-    assert "0009.png: image is 320 x 240 px, the first image is 640 x 480 px" in _no_output(out, capsys)
+    assert "0009.png: image is 320 x 240 px, the first image is 640 x 480 px" in _no_output(
+        out, capsys
+    )
     # a board file with a wrong field
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({**CHARUCO, "marker_size": 40}))
@@ -163,11 +235,22 @@ def test_bad_input_one_line_exit_2_nothing_written(camera_views: tuple[Path, Pat
     for f in sorted(folder.glob("*.png"))[:2]:
         (few / f.name).write_bytes(f.read_bytes())
     assert main(["calibrate", "camera", str(few), "--board", str(board), "-o", str(out)]) == 2
-    assert "the board was found in 2 views; camera calibration needs at least 3" in _no_output(out, capsys)
+    assert "the board was found in 2 views; camera calibration needs at least 3" in _no_output(
+        out, capsys
+    )
     # a symmetric circle grid cannot match the two cameras' points
     sym = tmp_path / "sym.json"
-    sym.write_text(json.dumps({"format": "cpc2urdf/board@1", "kind": "circles", "pattern_size": [7, 5], "spacing": 0.025,
-                               "circle_radius": 0.007}))
+    sym.write_text(
+        json.dumps(
+            {
+                "format": "cpc2urdf/board@1",
+                "kind": "circles",
+                "pattern_size": [7, 5],
+                "spacing": 0.025,
+                "circle_radius": 0.007,
+            }
+        )
+    )
     assert main(["calibrate", "rig", str(folder), "--board", str(sym), "-o", str(out)]) == 2
     assert "looks the same rotated by 180 deg" in _no_output(out, capsys)
     # a rig folder with a view in only one camera

@@ -21,7 +21,9 @@ def run(argv, capsys):
 def test_export_then_check_passes(tmp_path, capsys):
     code, out, _ = run(["export", "iis_head", "-o", str(tmp_path / "h.urdf")], capsys)
     assert code == 0 and "6 joints" in out
-    code, out, _ = run(["check", str(tmp_path / "h.urdf"), "--model", "iis_head", "-n", "20"], capsys)
+    code, out, _ = run(
+        ["check", str(tmp_path / "h.urdf"), "--model", "iis_head", "-n", "20"], capsys
+    )
     assert code == 0
     assert "pinocchio  OK" in out and "yourdfpy   OK" in out and "urdfdom    OK" in out
 
@@ -33,7 +35,9 @@ def test_check_reports_a_tampered_urdf_with_exit_1(tmp_path, capsys):
     tampered = text.replace('xyz="0.05 ', 'xyz="0.050001 ', 1)
     assert tampered != text
     (tmp_path / "t.urdf").write_text(tampered)
-    code, out, _ = run(["check", str(tmp_path / "t.urdf"), "--model", "iis_head", "-n", "10", "--json"], capsys)
+    code, out, _ = run(
+        ["check", str(tmp_path / "t.urdf"), "--model", "iis_head", "-n", "10", "--json"], capsys
+    )
     assert code == 1
     report = json.loads(out)
     by = {p["parser"]: p for p in report["parsers"]}
@@ -46,19 +50,30 @@ def test_check_names_missing_frames(tmp_path, capsys):
     from cpc2urdf.urdf.document import write_urdf
 
     write_urdf(m, tmp_path / "nocam.urdf")
-    code, out, _ = run(["check", str(tmp_path / "nocam.urdf"), "--model", "iis_head", "-n", "3"], capsys)
+    code, out, _ = run(
+        ["check", str(tmp_path / "nocam.urdf"), "--model", "iis_head", "-n", "3"], capsys
+    )
     assert code == 1 and "frame 'camera_left_optical' missing" in out
 
 
 @pytest.mark.parametrize(
     "argv, expected",
     [
-        (["export", "no_such_robot", "-o", "{tmp}/x.urdf"], "no_such_robot: no such file, and not a shipped robot name"),
-        (["export", "iis_head", "-o", "{tmp}/missing/x.urdf"], "folder {tmp}/missing does not exist"),
+        (
+            ["export", "no_such_robot", "-o", "{tmp}/x.urdf"],
+            "no_such_robot: no such file, and not a shipped robot name",
+        ),
+        (
+            ["export", "iis_head", "-o", "{tmp}/missing/x.urdf"],
+            "folder {tmp}/missing does not exist",
+        ),
         (["export", "{tmp}/bad.json", "-o", "{tmp}/x.urdf"], "bad.json: not valid JSON"),
         (["export", "{tmp}/cycle.json", "-o", "{tmp}/x.urdf"], "do not connect to 'base'"),
         (["check", "{tmp}/none.urdf", "--model", "iis_head"], "none.urdf: no such file"),
-        (["check", "{tmp}/x.urdf", "--model", "iis_head", "-n", "0"], "--configurations must be at least 1"),
+        (
+            ["check", "{tmp}/x.urdf", "--model", "iis_head", "-n", "0"],
+            "--configurations must be at least 1",
+        ),
         (["export", "iis_head"], "the following arguments are required: -o/--output"),
     ],
 )
@@ -76,12 +91,18 @@ def test_bad_input_one_line_exit_2_no_partial_file(tmp_path, capsys, argv, expec
 
 
 def test_console_script_and_module_entry_point(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "cpc2urdf", "export", "nope", "-o", str(tmp_path / "x")], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "cpc2urdf", "export", "nope", "-o", str(tmp_path / "x")],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
 
 
 def test_bench_fk_small(capsys):
-    code, out, _ = run(["bench", "fk", "--configurations", "200", "--repeat", "1", "--json"], capsys)
+    code, out, _ = run(
+        ["bench", "fk", "--configurations", "200", "--repeat", "1", "--json"], capsys
+    )
     r = json.loads(out)
     assert code == 0 and r["max_abs_difference"] < 1e-12 and r["cpc_vectorised_per_s"] > 0
 
@@ -90,8 +111,15 @@ def test_bench_fk_small(capsys):
 def test_demo_runs(demo_run):
     d, code, out = demo_run
     assert code == 0, out
-    for name in ("nominal.urdf", "stage1_model.json", "model.json", "head.urdf", "view.html", "reach.png",
-                 "reach.html"):
+    for name in (
+        "nominal.urdf",
+        "stage1_model.json",
+        "model.json",
+        "head.urdf",
+        "view.html",
+        "reach.png",
+        "reach.html",
+    ):
         assert (d / name).is_file(), name
     assert out.count("result: all parsers agree with the CPC model") == 3
     assert "predicted rms" in out and "policy cyclopean:" in out
@@ -106,11 +134,16 @@ def test_demo_from_images_runs(tmp_path, capsys):
     assert code == 0, out
     d = tmp_path / "demo"
     assert len(list((d / "images" / "left").glob("*.png"))) == 55
-    assert (d / "measurements.json").is_file() and (d / "handeye" / "handeye_camera_left_optical.json").is_file()
+    assert (d / "measurements.json").is_file() and (
+        d / "handeye" / "handeye_camera_left_optical.json"
+    ).is_file()
     assert out.count("result: all parsers agree with the CPC model") == 3
 
 
-@pytest.mark.parametrize("group", [["study", "fig11"], ["study", "crb"], ["study", "stage2"], ["bench", "fk"], ["bench", "gaze"]])
+@pytest.mark.parametrize(
+    "group",
+    [["study", "fig11"], ["study", "crb"], ["study", "stage2"], ["bench", "fk"], ["bench", "gaze"]],
+)
 def test_study_and_bench_options_return_exit_codes(group, capsys):
     # main() returns (never raises SystemExit) for a study's or benchmark's own parser too
     code, _, err = run([*group, "--bogus"], capsys)
@@ -129,23 +162,60 @@ def test_study_and_bench_options_return_exit_codes(group, capsys):
         (["view", "{u}", "--html", "{d}/v.html", "--screenshot", "{u}"], "--screenshot", "robot"),
         (["reach", "{m}", "-o", "{d}/r.png", "--json", "{m}"], "--json", "robot"),
         (["reach", "{m}", "-o", "{d}/r.png", "--html", "{d}/./model.json"], "--html", "robot"),
-        (["simulate", "{d}/truth.json", "-o", "{d}"], "-o (its truth.json)", "robot"),  # replaced its robot
-        (["plan", "iis_head", "--n", "5", "--task-region", "{d}/task.csv", "-o", "{d}/task.json"],
-         "-o (its .csv)", "task-region"),  # wrote its plan's CSV over the task configurations
-        (["measure", "{d}", "--rig", "{d}/rig.yaml", "-o", "{d}/joints.csv"], "-o",
-         "joints (default IMAGES_DIR/joints.csv)"),  # the readings it reads without being named
-        (["bench", "gaze", "--urdf", "{u}", "--camera", "camera_left_optical", "--json", "{u}"], "--json", "urdf"),
-        (["measure", "{d}", "--rig", "{r}", "--board", "plate_left={c}", "-o", "{c}"], "-o", "board"),  # NAME=FILE
+        (
+            ["simulate", "{d}/truth.json", "-o", "{d}"],
+            "-o (its truth.json)",
+            "robot",
+        ),  # replaced its robot
+        (
+            [
+                "plan",
+                "iis_head",
+                "--n",
+                "5",
+                "--task-region",
+                "{d}/task.csv",
+                "-o",
+                "{d}/task.json",
+            ],
+            "-o (its .csv)",
+            "task-region",
+        ),  # wrote its plan's CSV over the task configurations
+        (
+            ["measure", "{d}", "--rig", "{d}/rig.yaml", "-o", "{d}/joints.csv"],
+            "-o",
+            "joints (default IMAGES_DIR/joints.csv)",
+        ),  # the readings it reads without being named
+        (
+            ["bench", "gaze", "--urdf", "{u}", "--camera", "camera_left_optical", "--json", "{u}"],
+            "--json",
+            "urdf",
+        ),
+        (
+            ["measure", "{d}", "--rig", "{r}", "--board", "plate_left={c}", "-o", "{c}"],
+            "-o",
+            "board",
+        ),  # NAME=FILE
     ],
 )
 def test_no_command_writes_over_a_file_it_reads(demo_run, tmp_path, capsys, argv, option, read):
     """An output naming an input file is refused before anything runs, and the input is intact."""
     d, _, _ = demo_run
-    files = {"m": tmp_path / "model.json", "ms": tmp_path / "measurements.json", "u": tmp_path / "head.urdf",
-             "t": tmp_path / "truth.json", "c": tmp_path / "task.csv", "j": tmp_path / "joints.csv",
-             "r": tmp_path / "rig.yaml"}
-    for key, source in (("m", d / "model.json"), ("ms", d / "sim" / "measurements.json"), ("u", d / "head.urdf"),
-                        ("t", d / "sim" / "truth.json")):
+    files = {
+        "m": tmp_path / "model.json",
+        "ms": tmp_path / "measurements.json",
+        "u": tmp_path / "head.urdf",
+        "t": tmp_path / "truth.json",
+        "c": tmp_path / "task.csv",
+        "j": tmp_path / "joints.csv",
+        "r": tmp_path / "rig.yaml",
+    }
+    for key, source in (
+        ("m", d / "model.json"),
+        ("ms", d / "sim" / "measurements.json"),
+        ("u", d / "head.urdf"),
+        ("t", d / "sim" / "truth.json"),
+    ):
         shutil.copy(source, files[key])
     for key in ("c", "j", "r"):
         files[key].write_text("stands for a user's file\n")
@@ -153,7 +223,9 @@ def test_no_command_writes_over_a_file_it_reads(demo_run, tmp_path, capsys, argv
     args = [a.format(d=tmp_path, **{k: str(v) for k, v in files.items()}) for a in argv]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"{option} " in err[0] and f"the same file as the input {read}" in err[0], err
+    assert (
+        len(err) == 1 and f"{option} " in err[0] and f"the same file as the input {read}" in err[0]
+    ), err
     assert {p: p.read_bytes() for p in files.values()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in files.values())
 
@@ -170,9 +242,25 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"the file the input model ({model_file}) refers to" in err[0], err
     assert urdf.read_bytes() == before
-    assert main(["view", "iis_head", "--html", str(tmp_path / "v.html"), "--screenshot", str(tmp_path / "./v.html")]) == 2
+    assert (
+        main(
+            [
+                "view",
+                "iis_head",
+                "--html",
+                str(tmp_path / "v.html"),
+                "--screenshot",
+                str(tmp_path / "./v.html"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
-    assert "--screenshot" in err and "the same file as --html" in err and not (tmp_path / "v.html").exists()
+    assert (
+        "--screenshot" in err
+        and "the same file as --html" in err
+        and not (tmp_path / "v.html").exists()
+    )
     # handeye may update its model in place, not write over the URDF the model names
     poses = tmp_path / "poses.json"
     poses.write_text("{}")
@@ -204,12 +292,16 @@ def test_an_output_over_a_file_an_input_names_or_another_output_is_refused(tmp_p
     plain = save_model(load_model("iis_head"), tmp_path / "plain.report.json")
     assert main(["export", str(plain), "-o", str(tmp_path / "plain.urdf")]) == 0
     capsys.readouterr()
-    assert main(["export", str(model_file), "-o", str(tmp_path)]) == 2  # a folder: one line (a traceback before)
+    assert (
+        main(["export", str(model_file), "-o", str(tmp_path)]) == 2
+    )  # a folder: one line (a traceback before)
     assert "is a folder" in capsys.readouterr().err
     assert urdf.read_bytes() == before
     out = tmp_path / "calibrated.urdf"
     out.write_text("an old export\n")
-    assert main(["export", str(model_file), "-o", str(out)]) == 0  # overwriting an output nothing reads
+    assert (
+        main(["export", str(model_file), "-o", str(out)]) == 0
+    )  # overwriting an output nothing reads
     assert out.read_text().startswith("<?xml")
 
 
@@ -222,7 +314,9 @@ def test_a_bare_robot_name_is_the_shipped_robot_not_a_file_beside(demo_run, tmp_
     folder.mkdir()
     shutil.copy(d / "sim" / "measurements.json", folder / "measurements.json")
     (folder / "iis_head").write_text("an earlier output\n")
-    assert main(["identify", str(folder / "measurements.json"), "-o", str(folder / "iis_head")]) == 0
+    assert (
+        main(["identify", str(folder / "measurements.json"), "-o", str(folder / "iis_head")]) == 0
+    )
     capsys.readouterr()
     assert load_model(folder / "iis_head").structure.joint_names[0] == "table_x"
 
@@ -233,6 +327,18 @@ def test_handeye_may_update_its_model_in_place(demo_run, tmp_path, capsys):
     d, _, _ = demo_run
     model = tmp_path / "stage1.json"
     shutil.copy(d / "stage1_model.json", model)
-    assert main(["handeye", str(d / "handeye_camera_left_optical.json"), "--model", str(model), "-o", str(model)]) == 0
+    assert (
+        main(
+            [
+                "handeye",
+                str(d / "handeye_camera_left_optical.json"),
+                "--model",
+                str(model),
+                "-o",
+                str(model),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     assert "camera_left_optical" in [f.name for f in load_model(model).structure.frames]

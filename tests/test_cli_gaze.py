@@ -38,7 +38,10 @@ def test_urdf_file_and_policies(tmp_path, capsys):
         assert main(["gaze", str(path), "--target", *AHEAD, "--policy", policy]) == 0, policy
         assert "fixated" in capsys.readouterr().out
     q = ["0.5", "0.25", "1.6", "0.03", "0.7", "0.86"]
-    assert main(["gaze", str(path), "--target", *AHEAD, "--policy", "min-motion", "--q-current", *q]) == 0
+    assert (
+        main(["gaze", str(path), "--target", *AHEAD, "--policy", "min-motion", "--q-current", *q])
+        == 0
+    )
     capsys.readouterr()
 
 
@@ -50,7 +53,16 @@ def test_q_current_by_name(capsys):
     solver = gaze_solver("iis_head")
     q = solver.home.copy()
     q[solver.robot.joint_index("pan")] = 1.2
-    argv = ["gaze", "iis_head", "--target", *AHEAD, "--policy", "eyes-only", "--json", "--q-current"]
+    argv = [
+        "gaze",
+        "iis_head",
+        "--target",
+        *AHEAD,
+        "--policy",
+        "eyes-only",
+        "--json",
+        "--q-current",
+    ]
     assert main([*argv, "pan=1.2"]) in (0, 1)
     by_name = json.loads(capsys.readouterr().out)
     assert main([*argv, *map(repr, q.tolist())]) in (0, 1)
@@ -74,7 +86,21 @@ def test_unreachable_exit_1(capsys):
         ["gaze", "iis_head", "--target", "1", "nan", "3"],
         ["gaze", "iis_head", "--target", "1", "2"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--q-current", "1", "2"],
-        ["gaze", "iis_head", "--target", "1", "2", "3", "--q-current", "0", "0", "9", "0", "0", "0"],
+        [
+            "gaze",
+            "iis_head",
+            "--target",
+            "1",
+            "2",
+            "3",
+            "--q-current",
+            "0",
+            "0",
+            "9",
+            "0",
+            "0",
+            "0",
+        ],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--policy", "nope"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--cameras", "camera_left_optical", "nope"],
         ["gaze", "iis_head", "--target", "1", "2", "3", "--focal-px", "0"],
@@ -119,13 +145,26 @@ def test_negative_and_huge_targets_parse(capsys):
 
 
 def test_one_camera_and_joints(capsys):
-    argv = ["gaze", "iis_head", "--target", *AHEAD, "--camera", "camera_left_optical", "--joints", "pan", "tilt", "vergence_left"]
+    argv = [
+        "gaze",
+        "iis_head",
+        "--target",
+        *AHEAD,
+        "--camera",
+        "camera_left_optical",
+        "--joints",
+        "pan",
+        "tilt",
+        "vergence_left",
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "fixated" in out.splitlines()[0] and "pointing error:" in out
     assert main([*argv[:-3], "nope"]) == 2
     assert "nope" in capsys.readouterr().err
-    assert main([*argv, "--min-distance", "0"]) == 0  # no minimum viewing distance: same answer ahead
+    assert (
+        main([*argv, "--min-distance", "0"]) == 0
+    )  # no minimum viewing distance: same answer ahead
     assert capsys.readouterr().out == out
 
 
@@ -135,7 +174,10 @@ def test_report_of_the_head_alone(capsys):
     assert main(["gaze", "iis_head", "--report"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("gaze head (camera_left_optical, camera_right_optical): binocular")
-    assert "the two eyes' axes can meet exactly: 200 of 200 targets 0.4-3 m ahead fixated" in out[1] and len(out) == 2
+    assert (
+        "the two eyes' axes can meet exactly: 200 of 200 targets 0.4-3 m ahead fixated" in out[1]
+        and len(out) == 2
+    )
     assert main(["gaze", "iis_head", "--report", "--json"]) == 0
     head = json.loads(capsys.readouterr().out)["head"]
     assert head["kind"] == "binocular" and head["exact"] is True
@@ -162,11 +204,22 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     assert 1e-4 < head["disparity"]["median_rad"] <= head["disparity"]["max_rad"] < 0.05
     assert main(["gaze", str(path), "--report"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0].endswith("moving pan, tilt, vergence_left, vergence_right")  # what the solver moves: not the table
-    assert "meet only on a curve (vertical disparity): with the head facing the target (cyclopean policy)" in out[1]
-    assert "over 200 of 200 targets 0.4-3 m ahead (200 answered with status disparity, 0 within the tolerance)" in out[1]
+    assert out[0].endswith(
+        "moving pan, tilt, vergence_left, vergence_right"
+    )  # what the solver moves: not the table
+    assert (
+        "meet only on a curve (vertical disparity): with the head facing the target (cyclopean policy)"
+        in out[1]
+    )
+    assert (
+        "over 200 of 200 targets 0.4-3 m ahead (200 answered with status disparity, 0 within the tolerance)"
+        in out[1]
+    )
     # the head can still fixate exactly, turned away from the target: said, and checked on the CPC model's FK
-    assert "fixation alone (policy min-motion) fixates" in out[2] and "from the facing posture" in out[2]
+    assert (
+        "fixation alone (policy min-motion) fixates" in out[2]
+        and "from the facing posture" in out[2]
+    )
     assert main(["gaze", str(path), "--report", "--json"]) == 0
     alone = json.loads(capsys.readouterr().out)["head"]["fixation_alone"]
     assert alone["fixated"] >= 150 and alone["turn_median_rad"] > math.radians(5.0)
@@ -178,12 +231,30 @@ def test_report_of_a_calibrated_head_names_its_disparity(tmp_path, capsys):
     assert main(["gaze", str(path), "--report", "--tolerance", "0.01"]) == 0
     assert "(0 answered with status disparity, 200 within the tolerance)" in capsys.readouterr().out
     # the same joints named: the compiled solver alone, no min-motion of its own to compare with
-    assert main(["gaze", str(path), "--report", "--json", "--joints", "pan", "tilt", "vergence_left", "vergence_right"]) == 0
+    assert (
+        main(
+            [
+                "gaze",
+                str(path),
+                "--report",
+                "--json",
+                "--joints",
+                "pan",
+                "tilt",
+                "vergence_left",
+                "vergence_right",
+            ]
+        )
+        == 0
+    )
     assert "fixation_alone" not in json.loads(capsys.readouterr().out)["head"]
     # the eyes alone point at none of the targets ahead: no claim about exactness
     assert main(["gaze", str(path), "--report", "--joints", "vergence_left", "vergence_right"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[1] == "  none of 200 targets 0.4-3 m ahead is pointed at with the moving joints (no_solution 200)"
+    assert (
+        out[1]
+        == "  none of 200 targets 0.4-3 m ahead is pointed at with the moving joints (no_solution 200)"
+    )
 
 
 def test_text_output_lists_the_head_joints(capsys):
@@ -195,7 +266,11 @@ def test_text_output_lists_the_head_joints(capsys):
     argv = ["gaze", urdf, "--camera", "xtion_rgb_optical_frame", "--target", "2", "0.3", "1.0"]
     assert main(argv) == 0
     out = capsys.readouterr().out
-    listed = [line.split()[0] for line in out.splitlines() if line.startswith("  ") and not line.startswith("  (")]
+    listed = [
+        line.split()[0]
+        for line in out.splitlines()
+        if line.startswith("  ") and not line.startswith("  (")
+    ]
     assert set(listed) == {"torso_lift_joint", "head_1_joint", "head_2_joint"}, out
     assert "(45 other joints, off the cameras' paths" in out
     assert main([*argv, "--json"]) == 0
@@ -210,7 +285,10 @@ def test_a_misspelt_camera_on_a_whole_robot_names_the_closest_frames(capsys):
     assert main(["gaze", urdf, "--camera", "xtion_rgb_optical", "--target", "2", "0.3", "1.0"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and len(err) < 600, err
-    assert "unknown frame 'xtion_rgb_optical'; closest known frames: " in err and "xtion_rgb_optical_frame" in err
+    assert (
+        "unknown frame 'xtion_rgb_optical'; closest known frames: " in err
+        and "xtion_rgb_optical_frame" in err
+    )
     assert "(of 156)" in err
 
 

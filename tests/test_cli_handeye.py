@@ -28,7 +28,9 @@ def truth_and_file(tmp_path: Path) -> tuple[np.ndarray, np.ndarray, Path]:
     rng = np.random.default_rng(0)
     X, Z, H, C = make_data(rng, 6)
     path = tmp_path / "poses.json"
-    save_handeye_poses(path, H, C, units=Units("mm", "deg"), camera="camera_left_optical", hand="plate_left")
+    save_handeye_poses(
+        path, H, C, units=Units("mm", "deg"), camera="camera_left_optical", hand="plate_left"
+    )
     return X, Z, path
 
 
@@ -39,7 +41,10 @@ def test_registered() -> None:
 def test_file_round_trip_in_mm(truth_and_file: tuple[np.ndarray, np.ndarray, Path]) -> None:
     X, Z, path = truth_and_file
     doc = json.loads(path.read_text())
-    assert doc["format"] == HANDEYE_POSES_FORMAT and doc["units"] == {"length": "mm", "angle": "deg"}
+    assert doc["format"] == HANDEYE_POSES_FORMAT and doc["units"] == {
+        "length": "mm",
+        "angle": "deg",
+    }
     data = load_handeye_poses(path)
     assert np.abs(data.T_base_hand @ X @ data.T_camera_target - Z).max() < EXACT
     assert data.camera == "camera_left_optical" and data.labels[0] == "pose 0"
@@ -50,21 +55,34 @@ def test_quaternion_records(tmp_path: Path) -> None:
     _, _, H, C = make_data(rng, 3)
     from scipy.spatial.transform import Rotation
 
-    recs = [{"T_base_hand": {"xyz": (H[k, :3, 3] * 1e3).tolist(),
-                             "quat_xyzw": Rotation.from_matrix(H[k, :3, :3]).as_quat().tolist()},
-             "T_camera_target": {"matrix": C[k].tolist()}} for k in range(3)]
+    recs = [
+        {
+            "T_base_hand": {
+                "xyz": (H[k, :3, 3] * 1e3).tolist(),
+                "quat_xyzw": Rotation.from_matrix(H[k, :3, :3]).as_quat().tolist(),
+            },
+            "T_camera_target": {"matrix": C[k].tolist()},
+        }
+        for k in range(3)
+    ]
     doc = {"format": HANDEYE_POSES_FORMAT, "units": {"length": "mm"}, "records": recs}
     # matrix translations are in file units (mm) too
     for k in range(3):
         doc["records"][k]["T_camera_target"]["matrix"] = [
-            [*C[k, i, :3].tolist(), C[k, i, 3] * 1e3] for i in range(3)] + [[0, 0, 0, 1]]
+            [*C[k, i, :3].tolist(), C[k, i, 3] * 1e3] for i in range(3)
+        ] + [[0, 0, 0, 1]]
     p = tmp_path / "q.json"
     p.write_text(json.dumps(doc))
     data = load_handeye_poses(p)
-    assert np.abs(data.T_base_hand - H).max() < 1e-12 and np.abs(data.T_camera_target - C).max() < 1e-12
+    assert (
+        np.abs(data.T_base_hand - H).max() < 1e-12
+        and np.abs(data.T_camera_target - C).max() < 1e-12
+    )
 
 
-def test_cli_single_method_text(truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_single_method_text(
+    truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     X, _, path = truth_and_file
     assert main(["handeye", str(path), "--method", "tsai"]) == 0
     out = capsys.readouterr().out
@@ -73,7 +91,9 @@ def test_cli_single_method_text(truth_and_file: tuple[np.ndarray, np.ndarray, Pa
     assert out.count("pose ") >= 6 and "RMS" in out
 
 
-def test_cli_json(truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_json(
+    truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     X, Z, path = truth_and_file
     assert main(["handeye", str(path), "--method", "dual_quaternion", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -82,7 +102,9 @@ def test_cli_json(truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: p
     assert len(doc["residual_rotation_deg"]) == 6 and max(doc["residual_translation_mm"]) < 1e-6
 
 
-def test_cli_all_side_by_side(truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_all_side_by_side(
+    truth_and_file: tuple[np.ndarray, np.ndarray, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     X, _, path = truth_and_file
     assert main(["handeye", str(path), "--method", "all", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -139,12 +161,20 @@ def test_file_errors_name_the_field() -> None:
     from cpc2urdf.identification.handeye.pose_file import handeye_poses_from_json
 
     with pytest.raises(InputFileError, match=r"records\[0\] lacks 'T_camera_target'"):
-        handeye_poses_from_json({"format": HANDEYE_POSES_FORMAT, "records": [{"T_base_hand": {"matrix": np.eye(4).tolist()}}]}, "f.json")
+        handeye_poses_from_json(
+            {
+                "format": HANDEYE_POSES_FORMAT,
+                "records": [{"T_base_hand": {"matrix": np.eye(4).tolist()}}],
+            },
+            "f.json",
+        )
     with pytest.raises(InputFileError, match="non-empty list"):
         handeye_poses_from_json({"format": HANDEYE_POSES_FORMAT, "records": []}, "f.json")
 
 
-def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_writes_camera_frame_into_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from cpc2urdf.files.model_file import save_model
     from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.identification.handeye import stage2 as s2
@@ -155,23 +185,47 @@ def test_cli_writes_camera_frame_into_model(tmp_path: Path, capsys: pytest.Captu
     r = s2.run_stage2(truth, truth, n_poses=5, pixel_noise=0.0, seed=1)
     poses = s2.write_pose_files(r, tmp_path)["camera_right_optical"]
     out = tmp_path / "calibrated.json"
-    assert main(["handeye", str(poses), "--method", "park_martin", "--model", str(identified), "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "handeye",
+                str(poses),
+                "--method",
+                "park_martin",
+                "--model",
+                str(identified),
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "wrote" in capsys.readouterr().out
     cal = load_model(out)
     assert cal.structure.frame("camera_right_optical").kind == "camera"
-    assert np.abs(cal.frames["camera_right_optical"].matrix() - truth.frames["camera_right_optical"].matrix()).max() < 1e-8
+    assert (
+        np.abs(
+            cal.frames["camera_right_optical"].matrix()
+            - truth.frames["camera_right_optical"].matrix()
+        ).max()
+        < 1e-8
+    )
     assert cal.metadata.handeye["camera_right_optical"].method == "park_martin"
 
     bad = tmp_path / "bad_out.json"
-    for argv in (["--model", str(identified)],  # no -o
-                 ["--model", str(identified), "-o", str(bad), "--method", "all"],
-                 ["--model", str(identified), "-o", str(bad), "--hand", "nope"],
-                 ["--model", str(identified), "-o", str(bad), "--camera", "plate_left"]):
+    for argv in (
+        ["--model", str(identified)],  # no -o
+        ["--model", str(identified), "-o", str(bad), "--method", "all"],
+        ["--model", str(identified), "-o", str(bad), "--hand", "nope"],
+        ["--model", str(identified), "-o", str(bad), "--camera", "plate_left"],
+    ):
         _run_bad(["handeye", str(poses), *argv], capsys)
         assert not bad.exists()
 
 
-def test_cli_all_reports_a_refusing_solver(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_all_reports_a_refusing_solver(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     import math
 
     from scipy.spatial.transform import Rotation

@@ -26,11 +26,23 @@ def _spec_doc(model: CPCModel) -> dict[str, Any]:
     joints = []
     for j in model.structure.joints:
         scale = 1e3 if j.type == "prismatic" else 180 / np.pi
-        joints.append({"name": j.name, "type": j.type, "parent": j.parent,
-                       "lower": j.lower * scale, "upper": j.upper * scale})
+        joints.append(
+            {
+                "name": j.name,
+                "type": j.type,
+                "parent": j.parent,
+                "lower": j.lower * scale,
+                "upper": j.upper * scale,
+            }
+        )
     frames = [{"name": f.name, "parent": f.parent, "kind": f.kind} for f in model.structure.frames]
-    return {"format": "cpc2urdf/robot@1", "name": "my_arm", "units": {"length": "mm", "angle": "deg"},
-            "joints": joints, "frames": frames}
+    return {
+        "format": "cpc2urdf/robot@1",
+        "name": "my_arm",
+        "units": {"length": "mm", "angle": "deg"},
+        "joints": joints,
+        "frames": frames,
+    }
 
 
 @pytest.fixture()
@@ -54,9 +66,16 @@ def user_robot(tmp_path: Path) -> tuple[CPCModel, Path, dict[str, Any]]:
 def test_user_robot_identifies_end_to_end(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
     truth, tmp, _ = user_robot
     out = tmp / "model.json"
-    assert main(["identify", str(tmp / "measurements.json"), "-o", str(out), "--method", "closed-form"]) == 0
+    assert (
+        main(
+            ["identify", str(tmp / "measurements.json"), "-o", str(out), "--method", "closed-form"]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
-    assert "closed-form identification of 'my_arm'" in text and "dropped" in text  # camera: no nominal
+    assert (
+        "closed-form identification of 'my_arm'" in text and "dropped" in text
+    )  # camera: no nominal
     model = load_model(out)
     plates = [f.name for f in truth.structure.frames if f.kind == "plate"]
     assert model.structure.frame_names == tuple(plates)
@@ -95,13 +114,18 @@ def _break(doc: dict[str, Any], how: str) -> dict[str, Any]:
     return d
 
 
-@pytest.mark.parametrize("how,message", [
-    ("never_moved", "joint 'j0' has fewer than two distinct readings"),
-    ("no_q0", "no reference configuration q0"),
-    ("several", "moved several joints away from the reference configuration"),
-    ("no_poses", "moves no measured frame (no pose of plate0"),
-])
-def test_degenerate_data_is_named_with_exit_code_2(user_robot, capsys, how: str, message: str) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize(
+    "how,message",
+    [
+        ("never_moved", "joint 'j0' has fewer than two distinct readings"),
+        ("no_q0", "no reference configuration q0"),
+        ("several", "moved several joints away from the reference configuration"),
+        ("no_poses", "moves no measured frame (no pose of plate0"),
+    ],
+)
+def test_degenerate_data_is_named_with_exit_code_2(
+    user_robot, capsys, how: str, message: str
+) -> None:  # type: ignore[no-untyped-def]
     _, tmp, doc = user_robot
     write_json(tmp / "bad.json", _break(doc, how))
     out = tmp / "bad_model.json"
@@ -133,7 +157,9 @@ def test_default_method_is_refined_and_exact_on_noise_free_data(user_robot, caps
 
 
 @pytest.mark.slow
-def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(
+    user_robot, capsys
+) -> None:  # type: ignore[no-untyped-def]
     """A spec without geometry, noise-free data without a noise statement: the refits still tell a
     swapped pair of plates (which the closed form cannot even fit as read), transposed rotations,
     radians labelled degrees and an off-by-one pairing (the fix loses q0: refitted from the fit as
@@ -144,7 +170,10 @@ def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(user_r
     plates = [f.name for f in truth.structure.frames if f.kind == "plate"]
     assert any(j.type == "prismatic" for j in truth.structure.joints)
     cases = [
-        (sm.plates_swapped(doc, plates[0], plates[1]), f"the poses of {plates[0]} and {plates[1]} look swapped"),
+        (
+            sm.plates_swapped(doc, plates[0], plates[1]),
+            f"the poses of {plates[0]} and {plates[1]} look swapped",
+        ),
         (sm.metres_as_mm(doc), "lengths look like metres labelled mm"),
         (sm.rotations_transposed(doc), "the rotation blocks look transposed"),
         (sm.radians_as_degrees(doc), "revolute readings look like radians labelled deg"),
@@ -166,7 +195,23 @@ def test_user_robot_mistakes_are_named_without_noise_statement_or_nominal(user_r
 def marker_sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``simulate iis_head --markers 3`` (M = 5, 10 held-out configurations)."""
     out = tmp_path_factory.mktemp("markers") / "sim"
-    assert main(["simulate", "iis_head", "-o", str(out), "--markers", "3", "--M", "5", "--heldout", "10"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "iis_head",
+                "-o",
+                str(out),
+                "--markers",
+                "3",
+                "--M",
+                "5",
+                "--heldout",
+                "10",
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -177,13 +222,16 @@ def _heldout_marker_rms(model: CPCModel, held: MeasurementSet) -> float:
     pos = marker_positions(model)
     assert set(pos) == set(held.markers)
     T = model.fk(held.q, sorted({f for f, _ in pos.values()}))
-    d = [np.linalg.norm(T[f][:, :3, :3] @ p + T[f][:, :3, 3] - held.marker_points[m], axis=1)
-         for m, (f, p) in pos.items()]
+    d = [
+        np.linalg.norm(T[f][:, :3, :3] @ p + T[f][:, :3, 3] - held.marker_points[m], axis=1)
+        for m, (f, p) in pos.items()
+    ]
     return float(np.sqrt(np.mean(np.square(np.concatenate(d)))))
 
 
-def test_simulated_marker_data_identify_and_predict_the_heldout_points(marker_sim: Path, tmp_path: Path,
-                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_simulated_marker_data_identify_and_predict_the_heldout_points(
+    marker_sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``simulate --markers 3`` writes position-only files (@2; the held-out one with the true points);
     ``identify`` starts from the circle-point closed form, prints no rotation column, and predicts
     the held-out points better than one measurement's noise (the fit averages 31 records)."""
@@ -201,7 +249,9 @@ def test_simulated_marker_data_identify_and_predict_the_heldout_points(marker_si
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith(f"wrote {out}: refined identification of 'iis_head' from 31 records")
     assert lines[1] == "  start: circle-point"
-    assert sum("fit residual rms" in x for x in lines) == 6 and not any("deg rms" in x for x in lines)
+    assert sum("fit residual rms" in x for x in lines) == 6 and not any(
+        "deg rms" in x for x in lines
+    )
     model, truth = load_model(out), load_model(marker_sim / "truth.json")
     held = load_measurements(marker_sim / "heldout.json")
     nominal = load_model("iis_head").with_params(world_to_base=truth.world_to_base)
@@ -209,7 +259,8 @@ def test_simulated_marker_data_identify_and_predict_the_heldout_points(marker_si
     # The truth's markers, placed on the nominal robot, miss by the geometric error (~mm): the fit
     # did learn the robot.
     assert _heldout_marker_rms(model, held) < 0.1 * _heldout_marker_rms(
-        nominal.with_params(metadata=model.metadata), held)
+        nominal.with_params(metadata=model.metadata), held
+    )
 
 
 def test_pose_data_print_the_start_and_the_rotation_column(user_robot, capsys) -> None:  # type: ignore[no-untyped-def]
@@ -232,13 +283,20 @@ def _as_csv(ms: MeasurementSet, path: Path) -> Path:
         for i, label in enumerate(ms.labels):
             for m, Y in ms.marker_points.items():
                 if np.all(np.isfinite(Y[i])):
-                    w.writerow([label, m, *(repr(float(v) * 1e3) for v in Y[i]),
-                                *(repr(float(v) * k) for v, k in zip(ms.q[i], scale, strict=True))])
+                    w.writerow(
+                        [
+                            label,
+                            m,
+                            *(repr(float(v) * 1e3) for v in Y[i]),
+                            *(repr(float(v) * k) for v, k in zip(ms.q[i], scale, strict=True)),
+                        ]
+                    )
     return path
 
 
-def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim: Path, tmp_path: Path,
-                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(
+    marker_sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``identify tracker.csv --robot iis_head --marker NAME=LINK ...``: the same points as the
     measurement file give the same model (the CSV does not state the noise: a-posteriori scale, same
     estimate)."""
@@ -248,11 +306,29 @@ def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim
     ms = load_measurements(marker_sim / "measurements.json")
     csv_path = _as_csv(ms, tmp_path / "tracker.csv")
     links = [f"--marker={m}={mk.frame}" for m, mk in ms.markers.items()]
-    assert main(["identify", str(marker_sim / "measurements.json"), "-o", str(tmp_path / "a.json")]) == 0
-    assert main(["identify", str(csv_path), "-o", str(tmp_path / "b.json"), "--robot", "iis_head", *links]) == 0
+    assert (
+        main(["identify", str(marker_sim / "measurements.json"), "-o", str(tmp_path / "a.json")])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "identify",
+                str(csv_path),
+                "-o",
+                str(tmp_path / "b.json"),
+                "--robot",
+                "iis_head",
+                *links,
+            ]
+        )
+        == 0
+    )
     assert "start: circle-point" in capsys.readouterr().out
     a, b = load_model(tmp_path / "a.json"), load_model(tmp_path / "b.json")
-    Q = np.random.default_rng(5).uniform(a.structure.lower, a.structure.upper, (20, a.structure.n_joints))
+    Q = np.random.default_rng(5).uniform(
+        a.structure.lower, a.structure.upper, (20, a.structure.n_joints)
+    )
     Ta, Tb = a.fk(Q), b.fk(Q)
     for f in Ta:
         assert np.max(np.abs(Ta[f] - Tb[f])) < 1e-6
@@ -260,22 +336,53 @@ def test_tracker_csv_route_gives_the_model_of_the_same_data_as_a_file(marker_sim
     assert all(np.max(np.abs(pa[m][1] - pb[m][1])) < 1e-6 for m in pa)
 
 
-@pytest.mark.parametrize(("extra", "words"), [
-    ((), "a tracker CSV export needs --robot"),
-    (("--robot", "iis_head"), "a tracker CSV export needs --marker NAME=LINK"),
-    (("--robot", "iis_head", "--marker", "plate_left_m0"), "--marker 'plate_left_m0': expected NAME=LINK"),
-    (("--robot", "iis_head", "--marker", "a=plate_left", "--marker", "a=plate_right"), "--marker 'a' is given twice"),
-    (("--robot", "iis_head", "--marker", "plate_left_m0=elbow", *(f"--marker=plate_{s}_m{k}=plate_{s}"
-      for s in ("left", "right") for k in range(3) if (s, k) != ("left", 0))), "unknown frame 'elbow'"),
-    (("--robot", "iis_head", "--marker", "plate_left_m0=plate_left"), "marker 'plate_left_m1' has no link"),
-    (("--robot", "iis_head", "--units-length", "inch"), "invalid choice: 'inch'"),
-])
-def test_tracker_csv_route_refuses_bad_input_in_one_line(marker_sim: Path, tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str],
-                                                          extra: tuple[str, ...], words: str) -> None:
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        ((), "a tracker CSV export needs --robot"),
+        (("--robot", "iis_head"), "a tracker CSV export needs --marker NAME=LINK"),
+        (
+            ("--robot", "iis_head", "--marker", "plate_left_m0"),
+            "--marker 'plate_left_m0': expected NAME=LINK",
+        ),
+        (
+            ("--robot", "iis_head", "--marker", "a=plate_left", "--marker", "a=plate_right"),
+            "--marker 'a' is given twice",
+        ),
+        (
+            (
+                "--robot",
+                "iis_head",
+                "--marker",
+                "plate_left_m0=elbow",
+                *(
+                    f"--marker=plate_{s}_m{k}=plate_{s}"
+                    for s in ("left", "right")
+                    for k in range(3)
+                    if (s, k) != ("left", 0)
+                ),
+            ),
+            "unknown frame 'elbow'",
+        ),
+        (
+            ("--robot", "iis_head", "--marker", "plate_left_m0=plate_left"),
+            "marker 'plate_left_m1' has no link",
+        ),
+        (("--robot", "iis_head", "--units-length", "inch"), "invalid choice: 'inch'"),
+    ],
+)
+def test_tracker_csv_route_refuses_bad_input_in_one_line(
+    marker_sim: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    extra: tuple[str, ...],
+    words: str,
+) -> None:
     from cpc2urdf.files.measurements import load_measurements
 
-    csv_path = _as_csv(load_measurements(marker_sim / "measurements.json"), tmp_path / "tracker.csv")
+    csv_path = _as_csv(
+        load_measurements(marker_sim / "measurements.json"), tmp_path / "tracker.csv"
+    )
     out = tmp_path / "m.json"
     assert main(["identify", str(csv_path), "-o", str(out), *extra]) == 2
     err = capsys.readouterr().err
@@ -283,9 +390,22 @@ def test_tracker_csv_route_refuses_bad_input_in_one_line(marker_sim: Path, tmp_p
     assert not out.exists()
 
 
-def test_csv_options_on_a_measurement_file_are_refused(marker_sim: Path, tmp_path: Path,
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_csv_options_on_a_measurement_file_are_refused(
+    marker_sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "m.json"
-    assert main(["identify", str(marker_sim / "measurements.json"), "-o", str(out), "--marker", "a=plate_left"]) == 2
+    assert (
+        main(
+            [
+                "identify",
+                str(marker_sim / "measurements.json"),
+                "-o",
+                str(out),
+                "--marker",
+                "a=plate_left",
+            ]
+        )
+        == 2
+    )
     assert "--marker applies to a tracker CSV export (.csv)" in capsys.readouterr().err
     assert not out.exists()

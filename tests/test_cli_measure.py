@@ -34,7 +34,10 @@ def blank(tmp_path: Path) -> Path:
             cv2.imwrite(str(d / sub / f"{i:04d}.png"), np.zeros(SIZE[::-1], np.uint8))
     q = np.tile((structure.lower + structure.upper) / 2, (4, 1))
     write_joints_csv(d / "joints.csv", structure, [f"{i:04d}" for i in range(4)], q)
-    save_rig(StereoRig(K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-0.6, 0.0, 0.0]), SIZE), d / "rig.yaml")
+    save_rig(
+        StereoRig(K, np.zeros(5), K, np.zeros(5), np.eye(3), np.array([-0.6, 0.0, 0.0]), SIZE),
+        d / "rig.yaml",
+    )
     for c in CAMERAS:
         save_camera(K, np.zeros(5), SIZE, d / f"{c}.yaml")
     return d
@@ -44,8 +47,12 @@ def _one_line(capsys: pytest.CaptureFixture[str], expected: str) -> None:
     cap = capsys.readouterr()
     assert cap.out == "", cap.out
     err = cap.err.splitlines()
-    assert len(err) == 1 and err[0].startswith("cpc2urdf measure: error: ") and expected in err[0], cap.err
-    assert "measure:" not in err[0].removeprefix("cpc2urdf measure: error: ")  # no progress line mixed in
+    assert (
+        len(err) == 1 and err[0].startswith("cpc2urdf measure: error: ") and expected in err[0]
+    ), cap.err
+    assert "measure:" not in err[0].removeprefix(
+        "cpc2urdf measure: error: "
+    )  # no progress line mixed in
 
 
 @pytest.mark.parametrize(
@@ -56,11 +63,18 @@ def _one_line(capsys: pytest.CaptureFixture[str], expected: str) -> None:
         (["--on-error", "skip-record"], "no plate could be measured in any of the 4 records"),
     ],
 )
-def test_stage1_refusal_is_the_only_line(blank: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
-                                          extra: list[str], expected: str) -> None:
+def test_stage1_refusal_is_the_only_line(
+    blank: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    extra: list[str],
+    expected: str,
+) -> None:
     monkeypatch.setenv("CPC2URDF_PROGRESS", "1")
     out = blank.parent / "m.json"
-    assert main(["measure", str(blank), "--rig", str(blank / "rig.yaml"), "-o", str(out), *extra]) == 2
+    assert (
+        main(["measure", str(blank), "--rig", str(blank / "rig.yaml"), "-o", str(out), *extra]) == 2
+    )
     _one_line(capsys, expected)
     assert not out.exists()
 
@@ -72,34 +86,64 @@ def test_stage1_refusal_is_the_only_line(blank: Path, capsys: pytest.CaptureFixt
         (".", "{tmp}: is a folder, expected a file path"),
     ],
 )
-def test_stage1_output_is_checked_before_measuring(blank: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
-                                                   output: str, expected: str) -> None:
+def test_stage1_output_is_checked_before_measuring(
+    blank: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    output: str,
+    expected: str,
+) -> None:
     monkeypatch.setenv("CPC2URDF_PROGRESS", "1")
     tmp = blank.parent
-    assert main(["measure", str(blank), "--rig", str(blank / "rig.yaml"), "-o", str(tmp / output)]) == 2
+    assert (
+        main(["measure", str(blank), "--rig", str(blank / "rig.yaml"), "-o", str(tmp / output)])
+        == 2
+    )
     _one_line(capsys, expected.replace("{tmp}", str(tmp)))
 
 
-def test_stage2_refusal_is_the_only_line(blank: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_stage2_refusal_is_the_only_line(
+    blank: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("CPC2URDF_PROGRESS", "1")
     out = blank.parent / "poses"
     assert main(["measure", str(blank), "--stage2", "--model", "iis_head", "-o", str(out)]) == 2
-    _one_line(capsys, "camera camera_left_optical saw the target in 0 records; hand-eye calibration needs at least 3")
+    _one_line(
+        capsys,
+        "camera camera_left_optical saw the target in 0 records; hand-eye calibration needs at least 3",
+    )
     assert not out.exists()
 
 
 @pytest.mark.parametrize(
     "args, expected",
     [
-        (["--camera", "zoom_cam={images}/camera_left_optical.yaml"], "no hand frame known for camera 'zoom_cam'"),
+        (
+            ["--camera", "zoom_cam={images}/camera_left_optical.yaml"],
+            "no hand frame known for camera 'zoom_cam'",
+        ),
         (["-o", "{tmp}/missing/poses"], "parent folder {tmp}/missing does not exist"),
     ],
 )
-def test_stage2_arguments_are_checked_before_measuring(blank: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
-                                                       args: list[str], expected: str) -> None:
+def test_stage2_arguments_are_checked_before_measuring(
+    blank: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    args: list[str],
+    expected: str,
+) -> None:
     monkeypatch.setenv("CPC2URDF_PROGRESS", "1")
     tmp = blank.parent
-    argv = ["measure", str(blank), "--stage2", "--model", "iis_head", "-o", str(tmp / "poses"), *args]
+    argv = [
+        "measure",
+        str(blank),
+        "--stage2",
+        "--model",
+        "iis_head",
+        "-o",
+        str(tmp / "poses"),
+        *args,
+    ]
     assert main([a.replace("{images}", str(blank)).replace("{tmp}", str(tmp)) for a in argv]) == 2
     _one_line(capsys, expected.replace("{tmp}", str(tmp)))
     assert not (tmp / "poses").exists()

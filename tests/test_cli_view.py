@@ -90,7 +90,21 @@ def test_html_with_a_target_on_a_rigid_pair_and_on_one_camera(
     assert "fixated" in out and "pointing error left_optical" in out
     assert one.stat().st_size > 100_000
     # --cameras takes exactly two, before the robot as well
-    assert main(["view", "--cameras", "left_optical", "right_optical", str(urdf), *target, "--html", str(pair)]) == 0
+    assert (
+        main(
+            [
+                "view",
+                "--cameras",
+                "left_optical",
+                "right_optical",
+                str(urdf),
+                *target,
+                "--html",
+                str(pair),
+            ]
+        )
+        == 0
+    )
     assert "pointing error cyclopean axis" in capsys.readouterr().out
 
 
@@ -98,7 +112,10 @@ def test_html_with_a_target_on_a_rigid_pair_and_on_one_camera(
     ("args", "message"),
     [
         (["missing.json"], "missing.json"),
-        (["iis_head", "--camera", "a", "b", "c"], "--camera takes one or two optical frames, got 3"),
+        (
+            ["iis_head", "--camera", "a", "b", "c"],
+            "--camera takes one or two optical frames, got 3",
+        ),
         (["missing.urdf"], "missing.urdf: no such file"),
         (["iis_head", "--target", "1", "2", "x"], "must be numbers, got 'x'"),
         (["iis_head", "--target", "1", "2"], "expected 3 arguments"),
@@ -296,16 +313,24 @@ def test_serves_the_reachable_region(tmp_path: Path) -> None:
     has no legend), and the region in the served scene (green points in the browser's picture)."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "cpc2urdf", "view", "iis_head", "--reach", "--no-sweep"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
     )
     try:
         url, lines = _served_url(proc, 90.0)
         text = "".join(lines)
         assert url is not None, text
         assert "reachable region: 14800 targets (shell grid):" in text and "fixated (green)" in text
-        assert "reachable region: moving pan, tilt, vergence_left, vergence_right; held where shown" in text
+        assert (
+            "reachable region: moving pan, tilt, vergence_left, vergence_right; held where shown"
+            in text
+        )
         require_chromium()
-        img = matplotlib.image.imread(str(screenshot_html(url, tmp_path / "live.png", size=SIZE, budget_ms=3000)))
+        img = matplotlib.image.imread(
+            str(screenshot_html(url, tmp_path / "live.png", size=SIZE, budget_ms=3000))
+        )
         green = (img[..., 1] > img[..., 0] + 0.2) & (img[..., 1] > img[..., 2] + 0.1)
         assert green.mean() > 0.02, f"region green on {green.mean():.2%} of the served picture"
         proc.send_signal(signal.SIGINT)

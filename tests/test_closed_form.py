@@ -18,7 +18,9 @@ from cpc2urdf.tolerances import FK_AGREEMENT_TOL
 from cpc2urdf.transforms import homogeneous
 
 
-def perturbed(model: CPCModel, rng: np.random.Generator, sigma_t: float, sigma_r: float) -> CPCModel:
+def perturbed(
+    model: CPCModel, rng: np.random.Generator, sigma_t: float, sigma_r: float
+) -> CPCModel:
     """A "true" robot: every placement (world->base, joints, frames) moved and turned at random."""
 
     def move(p: CPCParams) -> CPCParams:
@@ -42,7 +44,9 @@ def measure(model: CPCModel, q: np.ndarray, frames: list[str]) -> MeasurementSet
     return MeasurementSet.from_arrays(model.structure, q, model.fk(q, frames))
 
 
-def assert_same_fk(truth: CPCModel, model: CPCModel, frames: list[str], rng: np.random.Generator) -> None:
+def assert_same_fk(
+    truth: CPCModel, model: CPCModel, frames: list[str], rng: np.random.Generator
+) -> None:
     s = truth.structure
     Q = rng.uniform(s.lower, s.upper, (200, s.n_joints))
     A, B = truth.fk(Q, frames), model.fk(Q, frames)
@@ -65,8 +69,12 @@ def assert_same_axes(truth: CPCModel, model: CPCModel, rng: np.random.Generator)
             assert np.max(np.linalg.norm(off, axis=1)) < 1e-9, j.name
 
 
-@pytest.mark.parametrize("seed,sigma_t,sigma_deg", [(0, 1e-3, 0.5), (1, 0.05, 10.0), (2, 0.2, 40.0)])
-def test_iis_head_exact_whatever_the_deviation_from_nominal(seed: int, sigma_t: float, sigma_deg: float) -> None:
+@pytest.mark.parametrize(
+    "seed,sigma_t,sigma_deg", [(0, 1e-3, 0.5), (1, 0.05, 10.0), (2, 0.2, 40.0)]
+)
+def test_iis_head_exact_whatever_the_deviation_from_nominal(
+    seed: int, sigma_t: float, sigma_deg: float
+) -> None:
     rng = np.random.default_rng(seed)
     nominal = load_robot("iis_head").nominal_model()
     truth = perturbed(nominal, rng, sigma_t, np.radians(sigma_deg))
@@ -77,7 +85,10 @@ def test_iis_head_exact_whatever_the_deviation_from_nominal(seed: int, sigma_t: 
     assert_same_axes(truth, model, rng)
     assert set(details.beta["tilt"]) == {"vergence_right"}  # eq. (45): one beta on the shared tilt
     # Unmeasured cameras keep their nominal placement relative to the plate on their link.
-    for cam, plate in (("camera_left_optical", "plate_left"), ("camera_right_optical", "plate_right")):
+    for cam, plate in (
+        ("camera_left_optical", "plate_left"),
+        ("camera_right_optical", "plate_right"),
+    ):
         rel_nominal = np.linalg.inv(nominal.frames[plate].matrix()) @ nominal.frames[cam].matrix()
         rel_model = np.linalg.inv(model.frames[plate].matrix()) @ model.frames[cam].matrix()
         np.testing.assert_allclose(rel_model, rel_nominal, atol=1e-12)
@@ -103,7 +114,9 @@ def test_random_trees_exact() -> None:
         types = {j.name: j.type for j in s.joints}
         seen["serial"] += all(j.parent in ("base", f"j{i - 1}") for i, j in enumerate(s.joints))
         seen["branched"] += len(plates(truth)) > 1
-        seen["pp"] += any(j.type == "prismatic" and types.get(j.parent) == "prismatic" for j in s.joints)
+        seen["pp"] += any(
+            j.type == "prismatic" and types.get(j.parent) == "prismatic" for j in s.joints
+        )
         seen["bz<0"] += any(truth.joints[j].b[2] < 0 for j in s.joint_names)
         seen["root_revolute" if s.joints[0].type == "revolute" else "root_prismatic"] += 1
         ms = measure(truth, protocol_q(truth, int(rng.integers(2, 5)), rng), plates(truth))
@@ -122,7 +135,9 @@ def test_plate_on_the_base_and_several_root_joints() -> None:
         truth = random_model(rng, 4, p_branch=0.7)
         truth = truth.with_frame(Frame("plate_base", "base", "plate"), random_params(rng))
         q = protocol_q(truth, 3, rng)
-        poses = {f: np.broadcast_to(T, (len(q), 4, 4)) for f, T in truth.fk(q, plates(truth)).items()}
+        poses = {
+            f: np.broadcast_to(T, (len(q), 4, 4)) for f, T in truth.fk(q, plates(truth)).items()
+        }
         model, _ = identify_closed_form(MeasurementSet.from_arrays(truth.structure, q, poses))
         assert_same_fk(truth, model, [f for f in plates(truth) if f != "plate_base"], rng)
         # (model.fk returns one (4, 4) pose for a frame on the base whatever the number of q)
@@ -153,7 +168,11 @@ def test_parameter_count_is_the_rank_of_the_identification_jacobian() -> None:
 
     def fk_with(key: tuple[str, str], twist: np.ndarray) -> np.ndarray:
         kind, name = key
-        p = nominal.world_to_base if kind == "w" else (nominal.joints[name] if kind == "j" else nominal.frames[name])
+        p = (
+            nominal.world_to_base
+            if kind == "w"
+            else (nominal.joints[name] if kind == "j" else nominal.frames[name])
+        )
         T = p.matrix() @ homogeneous(Rotation.from_rotvec(twist[3:]).as_matrix(), twist[:3])
         new = CPCParams.from_matrix(T)
         m = nominal.with_params(
@@ -162,20 +181,34 @@ def test_parameter_count_is_the_rank_of_the_identification_jacobian() -> None:
             frames={name: new} if kind == "f" else None,
         )
         T = m.fk(q, frames)
-        return np.concatenate([np.concatenate([T[f][:, :3, 3], 0.1 * T[f][:, :3, :3].reshape(len(q), -1)], axis=1).ravel() for f in frames])
+        return np.concatenate(
+            [
+                np.concatenate(
+                    [T[f][:, :3, 3], 0.1 * T[f][:, :3, :3].reshape(len(q), -1)], axis=1
+                ).ravel()
+                for f in frames
+            ]
+        )
 
     h = 1e-6
-    J = np.stack([(fk_with(k, h * e) - fk_with(k, -h * e)) / (2 * h) for k in keys for e in np.eye(6)], axis=1)
+    J = np.stack(
+        [(fk_with(k, h * e) - fk_with(k, -h * e)) / (2 * h) for k in keys for e in np.eye(6)],
+        axis=1,
+    )
     S = np.linalg.svd(J, compute_uv=False)
     assert int(np.sum(S > 1e-6 * S[0])) == 32
 
 
-def fig10_noise(T: np.ndarray, sigma_t: float, sigma_r: float, rng: np.random.Generator) -> np.ndarray:
+def fig10_noise(
+    T: np.ndarray, sigma_t: float, sigma_r: float, rng: np.random.Generator
+) -> np.ndarray:
     out = T.copy()
     out[:, :3, 3] += rng.normal(0, sigma_t, (len(T), 3))
     axis = rng.normal(size=(len(T), 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    out[:, :3, :3] = Rotation.from_rotvec(axis * rng.normal(0, sigma_r, (len(T), 1))).as_matrix() @ T[:, :3, :3]
+    out[:, :3, :3] = (
+        Rotation.from_rotvec(axis * rng.normal(0, sigma_r, (len(T), 1))).as_matrix() @ T[:, :3, :3]
+    )
     return out
 
 
@@ -210,7 +243,10 @@ def test_paper_eq15_model_has_one_tilt_frame_per_branch_and_is_exact_too() -> No
     for f, m in models.items():
         assert_same_fk(truth, m, [f], rng)
     left, right = models["plate_left"], models["plate_right"]
-    gap = {j: np.abs(left.joints[j].to_vector() - right.joints[j].to_vector()).max() for j in truth.structure.joint_names}
+    gap = {
+        j: np.abs(left.joints[j].to_vector() - right.joints[j].to_vector()).max()
+        for j in truth.structure.joint_names
+    }
     assert all(gap[j] == 0.0 for j in gap if j != "tilt")
     assert gap["tilt"] < 1e-9  # on exact data the two branches' tilt lines coincide
 
@@ -221,7 +257,12 @@ def test_property_random_trees_any_seed() -> None:
     from hypothesis import strategies as st
 
     @settings(max_examples=25, deadline=None, derandomize=True)
-    @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 7), serial=st.booleans(), M=st.integers(2, 4))
+    @given(
+        seed=st.integers(0, 2**32 - 1),
+        n=st.integers(1, 7),
+        serial=st.booleans(),
+        M=st.integers(2, 4),
+    )
     def check(seed: int, n: int, serial: bool, M: int) -> None:
         rng = np.random.default_rng(seed)
         truth = random_model(rng, n, serial=serial, p_prismatic=0.5)

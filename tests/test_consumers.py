@@ -75,7 +75,9 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[CPCMod
     out: dict[str, tuple[CPCModel, Path]] = {}
     with captured_output():  # export's own summary lines
         assert main(["export", "iis_head", "-o", str(d / "nominal.urdf")]) == 0
-        assert main(["export", "iis_head", "-o", str(d / "nominal_rig.urdf"), "--mount", "rig"]) == 0
+        assert (
+            main(["export", "iis_head", "-o", str(d / "nominal_rig.urdf"), "--mount", "rig"]) == 0
+        )
         model_file = _calibrated(d)
         assert main(["export", str(model_file), "-o", str(d / "calibrated.urdf")]) == 0
     out["nominal"] = (load_model("iis_head"), d / "nominal.urdf")
@@ -97,7 +99,9 @@ def quiet(caplog: pytest.LogCaptureFixture) -> Iterator[Callable[[], str]]:
     caplog.set_level(logging.INFO)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        yield lambda: "\n".join([str(w.message) for w in caught] + [r.getMessage() for r in caplog.records])
+        yield lambda: "\n".join(
+            [str(w.message) for w in caught] + [r.getMessage() for r in caplog.records]
+        )
 
 
 def _configurations(model: CPCModel) -> list[dict[str, float]]:
@@ -113,8 +117,12 @@ def _configurations(model: CPCModel) -> list[dict[str, float]]:
 @pytest.mark.parametrize("consumer", CONSUMERS)
 @pytest.mark.parametrize("case", CASES)
 def test_loads_silently_and_agrees_on_every_link(
-    exported: dict[str, tuple[CPCModel, Path]], case: str, consumer: str, quiet: Callable[[], str],
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    exported: dict[str, tuple[CPCModel, Path]],
+    case: str,
+    consumer: str,
+    quiet: Callable[[], str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     model, path = exported[case]
     monkeypatch.chdir(tmp_path)  # MuJoCo would write MUJOCO_LOG.TXT here on a warning
@@ -127,13 +135,17 @@ def test_loads_silently_and_agrees_on_every_link(
             return
         reference, _, _ = load_pinocchio(path, geometry=False)
         dp, dr, where = fk_disagreement(fk, reference, links(path), _configurations(model))
-        assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, f"{consumer} {case}: {dp:.2e} m, {dr:.2e} rad, {where}"
+        assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, (
+            f"{consumer} {case}: {dp:.2e} m, {dr:.2e} rad, {where}"
+        )
     finally:
         close()
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_cpc2urdf_check_passes_and_matches_to_1e_12(exported: dict[str, tuple[CPCModel, Path]], case: str) -> None:
+def test_cpc2urdf_check_passes_and_matches_to_1e_12(
+    exported: dict[str, tuple[CPCModel, Path]], case: str
+) -> None:
     model, path = exported[case]
     report = cross_check(model, path, n=8, seed=1)
     assert report.ok, report.format()
@@ -165,7 +177,9 @@ def test_dynamics_are_usable(exported: dict[str, tuple[CPCModel, Path]], case: s
         I = inertial.find("inertia")
         assert I is not None and mass > 0
         assert [I.get(k) for k in ("ixy", "ixz", "iyz")] == ["0", "0", "0"]  # principal axes
-        assert is_physical([float(I.get(k, "nan")) for k in ("ixx", "iyy", "izz")]), link.get("name")
+        assert is_physical([float(I.get(k, "nan")) for k in ("ixx", "iyy", "izz")]), link.get(
+            "name"
+        )
     pm = pin.buildModelFromUrdf(str(path))
     pd = pm.createData()
     q = pin.neutral(pm)
@@ -185,7 +199,9 @@ def test_dynamics_are_usable(exported: dict[str, tuple[CPCModel, Path]], case: s
         pb.setGravity(0, 0, -9.81, physicsClientId=client)
         for _ in range(24):
             pb.stepSimulation(physicsClientId=client)
-        states = pb.getJointStates(body, list(range(pb.getNumJoints(body, physicsClientId=client))), physicsClientId=client)
+        states = pb.getJointStates(
+            body, list(range(pb.getNumJoints(body, physicsClientId=client))), physicsClientId=client
+        )
         assert np.all(np.isfinite([s[0] for s in states]))
     finally:
         pb.disconnect(physicsClientId=client)
@@ -206,17 +222,26 @@ def test_world_is_gravity_aligned_where_the_spec_says_which_way_is_up(
     mujoco.mj_kinematics(m, d)
     pan = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "pan")
     assert np.max(np.abs(d.xaxis[pan] - [0.0, 0.0, 1.0])) < CONSUMER_TOL
-    assert np.all(d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base")] == 0.0)  # the base origin is world's
+    assert np.all(
+        d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base")] == 0.0
+    )  # the base origin is world's
     rig, rig_path = exported["nominal_rig"]
     mr = mujoco.MjModel.from_xml_path(str(rig_path))
     dr = mujoco.MjData(mr)
     mujoco.mj_kinematics(mr, dr)
-    axis = rig.joint_axes_world(np.zeros(rig.structure.n_joints))[1][0, rig.structure.joint_index("pan")]
-    assert np.max(np.abs(dr.xaxis[mujoco.mj_name2id(mr, mujoco.mjtObj.mjOBJ_JOINT, "pan")] - axis)) < CONSUMER_TOL
+    axis = rig.joint_axes_world(np.zeros(rig.structure.n_joints))[1][
+        0, rig.structure.joint_index("pan")
+    ]
+    assert (
+        np.max(np.abs(dr.xaxis[mujoco.mj_name2id(mr, mujoco.mjtObj.mjOBJ_JOINT, "pan")] - axis))
+        < CONSUMER_TOL
+    )
     assert abs(axis[2]) < 1e-12  # the nominal model's world has the head on its side
 
 
-def test_export_names_where_the_physical_properties_came_from(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_export_names_where_the_physical_properties_came_from(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A calibrated model file finds its robot's density and up through its provenance."""
     robot = load_robot("iis_head")
     assert robot.physical.density == 2700.0 and robot.physical.up_joint == "pan"

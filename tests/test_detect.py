@@ -35,16 +35,26 @@ from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import plate_design, robot_plate_designs, target_design
 from cpc2urdf.transforms import rotation_error
 
-RIG = StereoRig.verged()  # the paper's rig: 600 mm baseline, verged at 1.5 m, 1280 x 1024, f = 1600 px
+RIG = (
+    StereoRig.verged()
+)  # the paper's rig: 600 mm baseline, verged at 1.5 m, 1280 x 1024, f = 1600 px
 DESIGNS = robot_plate_designs(load_robot("iis_head").structure.frames)
-VIEWS = [PinholeView(RIG.K1, RIG.D1, RIG.image_size, np.linalg.inv(RIG.T_world_camera(w))) for w in ("left", "right")]
+VIEWS = [
+    PinholeView(RIG.K1, RIG.D1, RIG.image_size, np.linalg.inv(RIG.T_world_camera(w)))
+    for w in ("left", "right")
+]
 FIX = np.array([0.0, 0.0, 1.5])  # where the rig's optical axes meet (~)
 
 
 RIG_MIDDLE = (RIG.T_world_camera("left")[:3, 3] + RIG.T_world_camera("right")[:3, 3]) / 2
 
 
-def _facing(rng: np.random.Generator, centre: np.ndarray, max_tilt_deg: float = 45.0, spin_deg: float | None = None) -> np.ndarray:
+def _facing(
+    rng: np.random.Generator,
+    centre: np.ndarray,
+    max_tilt_deg: float = 45.0,
+    spin_deg: float | None = None,
+) -> np.ndarray:
     """A plate pose at ``centre`` whose printed (+z) face looks at the rig's middle, then tilted
     by up to ``max_tilt_deg`` (each camera sees it up to ~11 deg more obliquely) and spun."""
     spin = rng.uniform(0, 360) if spin_deg is None else spin_deg
@@ -54,8 +64,12 @@ def _facing(rng: np.random.Generator, centre: np.ndarray, max_tilt_deg: float = 
     x = np.cross([0.0, 1.0, 0.0], z)
     x /= np.linalg.norm(x)
     R_face = np.column_stack([x, np.cross(z, x), z])
-    R = (Rotation.from_matrix(R_face) * Rotation.from_euler("z", rng.uniform(0, 360), degrees=True)
-         * Rotation.from_euler("x", tilt, degrees=True) * Rotation.from_euler("z", spin, degrees=True))
+    R = (
+        Rotation.from_matrix(R_face)
+        * Rotation.from_euler("z", rng.uniform(0, 360), degrees=True)
+        * Rotation.from_euler("x", tilt, degrees=True)
+        * Rotation.from_euler("z", spin, degrees=True)
+    )
     T = np.eye(4)
     T[:3, :3] = R.as_matrix()
     T[:3, 3] = centre
@@ -63,8 +77,10 @@ def _facing(rng: np.random.Generator, centre: np.ndarray, max_tilt_deg: float = 
 
 
 def _scene(rng: np.random.Generator, **kw: object) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    Ts = [_facing(rng, FIX + [-0.07, rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)], **kw),  # type: ignore[arg-type]
-          _facing(rng, FIX + [0.07, rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)], **kw)]  # type: ignore[arg-type]
+    Ts = [
+        _facing(rng, FIX + [-0.07, rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)], **kw),  # type: ignore[arg-type]
+        _facing(rng, FIX + [0.07, rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1)], **kw),
+    ]  # type: ignore[arg-type]
     plates = list(zip(DESIGNS, Ts, strict=True))
     imgs = [render_view(v, plates, blur_sigma=0.7, noise_sigma=2.0, rng=rng) for v in VIEWS]
     return imgs, Ts
@@ -125,7 +141,14 @@ def test_circles_and_plates_identified_under_rotation(spin: float) -> None:
 
 def test_bias_correction_removes_the_ellipse_offset() -> None:
     # Noise-free, strongly tilted plate with large circles: the offset is clearly visible.
-    d = plate_design("plate_left", DESIGNS[0].layout, marker_index=1, radius=0.009, marker_radius=0.011, margin=0.02)
+    d = plate_design(
+        "plate_left",
+        DESIGNS[0].layout,
+        marker_index=1,
+        radius=0.009,
+        marker_radius=0.011,
+        margin=0.02,
+    )
     rng = np.random.default_rng(3)
     T = _facing(rng, FIX, max_tilt_deg=0.0)
     T[:3, :3] = T[:3, :3] @ Rotation.from_euler("x", 55, degrees=True).as_matrix()
@@ -150,7 +173,11 @@ def test_missing_plate_half_outside_blank_and_symmetric() -> None:
     res = detect_plates(img, RIG.K1, RIG.D1, DESIGNS, image_name="left/0007.png")
     assert not isinstance(res["plate_left"], Exception)
     err = res["plate_right"]
-    assert isinstance(err, PlateNotFoundError) and "left/0007.png" in str(err) and "plate_right" in str(err)
+    assert (
+        isinstance(err, PlateNotFoundError)
+        and "left/0007.png" in str(err)
+        and "plate_right" in str(err)
+    )
     # Half outside the frame: where the image border cuts the plate.
     uv_target = np.array([3.0, 500.0])  # the plate centre near the left border
     ray = np.linalg.solve(RIG.K1, [*undistort_to_pixels(uv_target, RIG.K1, RIG.D1)[0], 1.0])
@@ -160,7 +187,10 @@ def test_missing_plate_half_outside_blank_and_symmetric() -> None:
     assert isinstance(err, PlateNotFoundError)
     assert "partly outside" in err.reason or "border" in err.reason
     # A blank image (lens cap on) and a uniform grey one.
-    for blank in (np.zeros((1024, 1280), np.uint8), np.clip(rng.normal(128, 2, (1024, 1280)), 0, 255).astype(np.uint8)):
+    for blank in (
+        np.zeros((1024, 1280), np.uint8),
+        np.clip(rng.normal(128, 2, (1024, 1280)), 0, 255).astype(np.uint8),
+    ):
         err = detect_plates(blank, RIG.K1, RIG.D1, DESIGNS, image_name="blank.png")["plate_left"]
         assert isinstance(err, PlateNotFoundError) and "blank image" in err.reason
     # A plate without a marker is 4-fold symmetric: refused as ambiguous, not guessed.

@@ -24,6 +24,7 @@ TABLE_3 = {
 
 def independent_dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     """A = Rot_z(theta) Trans_z(d) Trans_x(a) Rot_x(alpha), built from scipy rotations."""
+
     def rot(axis: str, ang: float) -> np.ndarray:
         T = np.eye(4)
         T[:3, :3] = Rotation.from_euler(axis, ang).as_matrix()
@@ -54,9 +55,18 @@ def test_nominal_iis_head_is_table_3_dh_chain():
     fk = model.fk(Q)
     for k, q in enumerate(Q):
         qd = dict(zip(s.joint_names, q, strict=False))
-        trunk = A("table_x", qd["table_x"]) @ A("table_y", qd["table_y"]) @ A("pan", qd["pan"]) @ A("tilt", qd["tilt"])
-        np.testing.assert_allclose(fk["plate_left"][k], trunk @ A("vergence_left", qd["vergence_left"]), atol=1e-12)
-        np.testing.assert_allclose(fk["plate_right"][k], trunk @ A("vergence_right", qd["vergence_right"]), atol=1e-12)
+        trunk = (
+            A("table_x", qd["table_x"])
+            @ A("table_y", qd["table_y"])
+            @ A("pan", qd["pan"])
+            @ A("tilt", qd["tilt"])
+        )
+        np.testing.assert_allclose(
+            fk["plate_left"][k], trunk @ A("vergence_left", qd["vergence_left"]), atol=1e-12
+        )
+        np.testing.assert_allclose(
+            fk["plate_right"][k], trunk @ A("vergence_right", qd["vergence_right"]), atol=1e-12
+        )
 
 
 def test_iis_head_limits_are_table_2():
@@ -71,14 +81,20 @@ def test_iis_head_limits_are_table_2():
 
 
 def _dh_chain_model(rows, types) -> CPCModel:
-    joints = [Joint(f"j{i}", t, BASE if i == 0 else f"j{i - 1}", -3, 3) for i, t in enumerate(types)]
+    joints = [
+        Joint(f"j{i}", t, BASE if i == 0 else f"j{i - 1}", -3, 3) for i, t in enumerate(types)
+    ]
     s = RobotStructure("dh", joints, [Frame("tool", f"j{len(rows) - 1}")])
     params = {"j0": cpc_from_dh(0, 0, 0, 0)}
     for i in range(1, len(rows)):
         th, d, a, al = rows[i - 1]
-        params[f"j{i}"] = cpc_from_dh(0 if types[i - 1] == "revolute" else th, 0 if types[i - 1] == "prismatic" else d, a, al)
+        params[f"j{i}"] = cpc_from_dh(
+            0 if types[i - 1] == "revolute" else th, 0 if types[i - 1] == "prismatic" else d, a, al
+        )
     th, d, a, al = rows[-1]
-    tool = cpc_from_dh(0 if types[-1] == "revolute" else th, 0 if types[-1] == "prismatic" else d, a, al)
+    tool = cpc_from_dh(
+        0 if types[-1] == "revolute" else th, 0 if types[-1] == "prismatic" else d, a, al
+    )
     return CPCModel(s, cpc_from_dh(0, 0, 0, 0), params, {"tool": tool})
 
 
@@ -88,13 +104,22 @@ def test_cpc_from_dh_exact_for_random_chains_including_parallel_axes(seed):
     n = int(rng.integers(2, 7))
     types = [str(rng.choice(["revolute", "prismatic"])) for _ in range(n)]
     # alpha in {0 (parallel), pi (anti-parallel), +-pi/2, random}
-    alphas = rng.choice([0.0, math.pi, -math.pi, math.pi / 2, -math.pi / 2, 1e-9, rng.uniform(-3, 3)], size=n)
-    rows = [(rng.uniform(-3, 3), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), float(al)) for al in alphas]
+    alphas = rng.choice(
+        [0.0, math.pi, -math.pi, math.pi / 2, -math.pi / 2, 1e-9, rng.uniform(-3, 3)], size=n
+    )
+    rows = [
+        (rng.uniform(-3, 3), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), float(al))
+        for al in alphas
+    ]
     model = _dh_chain_model(rows, types)
     for q in rng.uniform(-3, 3, size=(20, n)):
         T = np.eye(4)
         for i, (th, d, a, al) in enumerate(rows):
-            T = T @ (independent_dh(q[i], d, a, al) if types[i] == "revolute" else independent_dh(th, q[i], a, al))
+            T = T @ (
+                independent_dh(q[i], d, a, al)
+                if types[i] == "revolute"
+                else independent_dh(th, q[i], a, al)
+            )
         np.testing.assert_allclose(model.fk_frame("tool", q), T, atol=1e-12)
 
 

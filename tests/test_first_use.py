@@ -22,10 +22,18 @@ from cpc2urdf.validation.gaze import kernels
 from cpc2urdf.validation.gaze.kernels import _cache, _progress, buffers
 
 KERNEL_DIR = Path(kernels.__file__).parent
-COMPILED_APART = ("kernel", "kernel_without_refcounts", "internal_kernel", "hot_kernel", "view_kernel")
+COMPILED_APART = (
+    "kernel",
+    "kernel_without_refcounts",
+    "internal_kernel",
+    "hot_kernel",
+    "view_kernel",
+)
 
 
-@pytest.mark.parametrize("sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)])
+@pytest.mark.parametrize(
+    "sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)]
+)
 def test_python_carves_the_workspace_as_the_kernels_do(sizes):
     """``workspace()`` and ``scratch()`` carve in Python (nothing to compile); the solve carves the
     same buffers in numba: every field the same view."""
@@ -52,7 +60,9 @@ def _calls_with_another_signature() -> list[str]:
         for node in tree.body:
             if isinstance(node, ast.FunctionDef):
                 functions[node.name] = node
-                if any(isinstance(d, ast.Name) and d.id in COMPILED_APART for d in node.decorator_list):
+                if any(
+                    isinstance(d, ast.Name) and d.id in COMPILED_APART for d in node.decorator_list
+                ):
                     apart.add(node.name)
     found = []
     for tree in trees:
@@ -60,7 +70,11 @@ def _calls_with_another_signature() -> list[str]:
             if not fn.decorator_list:
                 continue  # Python calls a kernel with its ints typed int64, never a literal
             for call in ast.walk(fn):
-                if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in apart):
+                if not (
+                    isinstance(call, ast.Call)
+                    and isinstance(call.func, ast.Name)
+                    and call.func.id in apart
+                ):
                     continue
                 where = f"{fn.name} -> {call.func.id} (line {call.lineno})"
                 n_params = len(functions[call.func.id].args.args)
@@ -95,7 +109,9 @@ def test_the_cache_is_keyed_on_every_module_of_the_package():
     found = [x for x in found if x is not None]
     assert found and all(x.get_source_stamp() == stamp for x in found)
     assert all(stamp.hex()[:12] in x.get_disambiguator() for x in found)
-    assert all(c.from_function(len, __file__) is None for c in ours)  # another file: numba's own locators
+    assert all(
+        c.from_function(len, __file__) is None for c in ours
+    )  # another file: numba's own locators
 
 
 def test_a_line_says_the_kernels_compile(monkeypatch):
@@ -125,13 +141,18 @@ def test_a_line_says_the_kernels_compile(monkeypatch):
 @pytest.mark.slow
 def test_first_use_script_times_a_command():
     """``python -m cpc2urdf.studies.first_use --commands check`` runs (the cheapest command)."""
-    done = subprocess.run([sys.executable, "-m", "cpc2urdf.studies.first_use", "--commands", "check"],
-                          capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "cpc2urdf.studies.first_use", "--commands", "check"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "check" in done.stdout and "first" in done.stdout
 
 
 # ---- the first use: the kernels as Python until the compiled ones are cached (kernels.interpreted) ----
+
 
 @pytest.mark.parametrize("head", ["iis_head"])
 def test_python_kernels_answer_as_the_compiled_ones_bit_for_bit(head):
@@ -141,7 +162,9 @@ def test_python_kernels_answer_as_the_compiled_ones_bit_for_bit(head):
     from cpc2urdf.validation.gaze.kernels import interpreted
 
     solver = solver_for(head)
-    targets = np.array([[-0.6, -0.6, 0.7], [-0.5, -0.55, 0.8], [0.3, 2.0, -1.0], [-0.6, -0.6, 0.7001]])
+    targets = np.array(
+        [[-0.6, -0.6, 0.7], [-0.5, -0.55, 0.8], [0.3, 2.0, -1.0], [-0.6, -0.6, 0.7001]]
+    )
     compiled = [solver.solve(t).q for t in targets]
     compiled_many = solver.solve_many(targets).q
     compiled_mm = solver.solve(targets[1], solver.home, "min-motion").q
@@ -167,9 +190,30 @@ def test_first_cli_gaze_solves_in_python_and_compiles_nothing(tmp_path):
 
     from cpc2urdf.validation.gaze import solver_for
 
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "CPC2URDF_GAZE_FIRST_USE": "python"}
-    out = subprocess.run([sys.executable, "-m", "cpc2urdf", "gaze", "iis_head", "--target", "-0.6", "-0.6", "0.7",
-                          "--json"], capture_output=True, text=True, env=env, timeout=120, check=True)
+    env = {
+        **os.environ,
+        "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+        "CPC2URDF_GAZE_FIRST_USE": "python",
+    }
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cpc2urdf",
+            "gaze",
+            "iis_head",
+            "--target",
+            "-0.6",
+            "-0.6",
+            "0.7",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=True,
+    )
     import json
 
     q = list(json.loads(out.stdout)["joints"].values())  # repr of floats: exact

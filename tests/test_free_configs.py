@@ -44,13 +44,20 @@ def test_study_writes_its_table_json_and_plot(tmp_path, capsys):
     assert main(["--seeds", "2", "--M", "9", "--heldout", "20", "--out", str(tmp_path)]) == 0
     doc = json.loads((tmp_path / "free_configs.json").read_text())
     s = doc["summary"]
-    assert s["poses/protocol"]["starts"] == ["closed-form"] and s["poses/random"]["starts"] == ["nominal"]
-    assert s["points/protocol"]["starts"] == ["circle-point"] and s["points/random"]["starts"] == ["nominal"]
+    assert s["poses/protocol"]["starts"] == ["closed-form"] and s["poses/random"]["starts"] == [
+        "nominal"
+    ]
+    assert s["points/protocol"]["starts"] == ["circle-point"] and s["points/random"]["starts"] == [
+        "nominal"
+    ]
     for t in doc["trials"]:
         for k in ("poses/protocol", "poses/random", "points/protocol", "points/random"):
             assert 0 < t[k]["heldout_rms_m"] < 5e-3
         for data in ("poses", "points"):
-            assert t[f"{data}/random"]["heldout_rms_m"] < t[f"{data}/protocol"]["heldout_rms_m"], (t["seed"], data)
+            assert t[f"{data}/random"]["heldout_rms_m"] < t[f"{data}/protocol"]["heldout_rms_m"], (
+                t["seed"],
+                data,
+            )
     assert s["poses/ratio"]["random_better"] == s["points/ratio"]["random_better"] == 2
     assert (tmp_path / "free_configs.png").stat().st_size > 10_000
     assert "random / protocol held-out RMS" in (tmp_path / "free_configs.md").read_text()

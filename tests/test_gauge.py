@@ -25,7 +25,9 @@ def test_a_gauge_move_changes_no_frame_and_moves_each_link_by_its_own_g(seed):
     model = random_model(rng, 6, p_prismatic=0.4, extra_plates=1, cameras=1)
     g = rng.normal(0.0, 0.3, gauge_size(model))
     moved = apply_gauge(model, g)
-    q = rng.uniform(model.structure.lower, model.structure.upper, size=(5, model.structure.n_joints))
+    q = rng.uniform(
+        model.structure.lower, model.structure.upper, size=(5, model.structure.n_joints)
+    )
     a, b = model.fk(q), moved.fk(q)
     for f in a:
         np.testing.assert_allclose(b[f], a[f], rtol=0, atol=EXACT, err_msg=f)
@@ -33,7 +35,9 @@ def test_a_gauge_move_changes_no_frame_and_moves_each_link_by_its_own_g(seed):
     _, link_a = model.link_poses(q)
     _, link_b = moved.link_poses(q)
     for i, name in enumerate(model.structure.joint_names):
-        np.testing.assert_allclose(link_b[:, i], link_a[:, i] @ G[name], rtol=0, atol=EXACT, err_msg=name)
+        np.testing.assert_allclose(
+            link_b[:, i], link_a[:, i] @ G[name], rtol=0, atol=EXACT, err_msg=name
+        )
 
 
 def test_alignment_undoes_a_scrambled_gauge_exactly():
@@ -66,7 +70,10 @@ def test_identified_links_sit_on_the_true_parts(seed):
     _, L_truth = truth.link_poses(q)
     _, L_nominal = nominal.link_poses(q)
     nominal_in_world = np.einsum(
-        "ij,nkjl->nkil", truth.world_to_base.matrix() @ np.linalg.inv(nominal.world_to_base.matrix()), L_nominal)
+        "ij,nkjl->nkil",
+        truth.world_to_base.matrix() @ np.linalg.inv(nominal.world_to_base.matrix()),
+        L_nominal,
+    )
 
     def dist(X, Y):
         return np.linalg.norm(X[..., :3, 3] - Y[..., :3, 3], axis=-1).max(axis=0)

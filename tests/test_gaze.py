@@ -113,8 +113,10 @@ def test_unreachable_targets_all_reported(head):
         for e, cam in enumerate(CAMERAS):
             pc = T[cam][:3, :3].T @ (p - T[cam][:3, 3])
             miss = math.hypot(pc[0], pc[1]) if pc[2] >= 0 else float(np.linalg.norm(pc))
-            assert abs(s.miss_distance[e] - miss) < 1e-9 and abs(s.pointing_error[e] - math.atan2(
-                math.hypot(pc[0], pc[1]), pc[2])) < 1e-9, (name, p, cam)
+            assert (
+                abs(s.miss_distance[e] - miss) < 1e-9
+                and abs(s.pointing_error[e] - math.atan2(math.hypot(pc[0], pc[1]), pc[2])) < 1e-9
+            ), (name, p, cam)
     # with the head still, targets inside the cameras' orbit about the vergence axis
     q = solver.solve(AHEAD).q
     for p in too_close_targets(model, q, 100, seed=3):
@@ -241,10 +243,20 @@ def test_every_form_of_a_target_gets_the_same_answer(solver):
     grid[:, 1] = [-0.6, -0.6, 0.7]
     ro = np.array([-0.6, -0.6, 0.7])
     ro.flags.writeable = False
-    for form in ([-0.6, -0.6, 0.7], (-0.6, -0.6, 0.7), np.array([-0.6, -0.6, 0.7], dtype=">f8"), ro, grid[:, 1],
-                 np.array([-0.6, -0.6, 0.7])[None][0]):
+    for form in (
+        [-0.6, -0.6, 0.7],
+        (-0.6, -0.6, 0.7),
+        np.array([-0.6, -0.6, 0.7], dtype=">f8"),
+        ro,
+        grid[:, 1],
+        np.array([-0.6, -0.6, 0.7])[None][0],
+    ):
         sol = solver.solve(form)
-        assert np.array_equal(sol.q, ref.q) and sol.status == ref.status and np.array_equal(sol.target, ref.target)
+        assert (
+            np.array_equal(sol.q, ref.q)
+            and sol.status == ref.status
+            and np.array_equal(sol.target, ref.target)
+        )
     assert solver.solve(np.array([0, 0, 1], dtype=np.int64)).target.tolist() == [0.0, 0.0, 1.0]
     p = np.array([-0.6, -0.6, 0.7])
     sol = solver.solve(p)
@@ -253,7 +265,11 @@ def test_every_form_of_a_target_gets_the_same_answer(solver):
     q = sol.q.copy()
     other = solver.solve(np.array([0.3, -0.9, 0.6]))  # each answer its own array
     assert np.array_equal(sol.q, q) and not np.array_equal(other.q, q)
-    for bad in (np.array([np.nan, 0.0, 1.0]), np.array([0.0, -np.inf, 1.0]), np.array([0.0, 0.0, np.inf])):
+    for bad in (
+        np.array([np.nan, 0.0, 1.0]),
+        np.array([0.0, -np.inf, 1.0]),
+        np.array([0.0, 0.0, np.inf]),
+    ):
         with pytest.raises(ConfigurationError, match=r"target must be finite, got \["):
             solver.solve(bad)
 
@@ -337,10 +353,14 @@ def test_the_compiled_solve_releases_every_array():
     import subprocess
 
     env = dict(os.environ, NUMBA_NRT_STATS="1")
-    done = subprocess.run([sys.executable, "-c", _LEAK_CHECK], env=env, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-c", _LEAK_CHECK], env=env, capture_output=True, text=True, timeout=600
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     before, after = done.stdout.strip().splitlines()[-1].split(") (")
-    assert before + ")" == "(" + after, f"live numba allocations (arrays, meminfos) grew: {done.stdout.strip()}"
+    assert before + ")" == "(" + after, (
+        f"live numba allocations (arrays, meminfos) grew: {done.stdout.strip()}"
+    )
 
 
 def _kernel_calls_with_another_signature() -> list[str]:
@@ -364,20 +384,30 @@ def _kernel_calls_with_another_signature() -> list[str]:
             else:
                 pairs = [(target, node.value)]
             constants |= {
-                n.id for n, v in pairs
+                n.id
+                for n, v in pairs
                 if isinstance(n, ast.Name) and isinstance(v, ast.Constant) and type(v.value) is int
             }
     functions = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+
     def decorated(fn: ast.FunctionDef, kinds: tuple[str, ...]) -> bool:
         return any(isinstance(d, ast.Name) and d.id in kinds for d in fn.decorator_list)
 
-    compiled = {name for name, fn in functions.items() if decorated(fn, ("kernel", "kernel_without_refcounts"))}
+    compiled = {
+        name
+        for name, fn in functions.items()
+        if decorated(fn, ("kernel", "kernel_without_refcounts"))
+    }
     found = []
     for name, fn in functions.items():
         if not decorated(fn, ("kernel", "kernel_without_refcounts", "inline_kernel")):
             continue  # Python calls a kernel with its ints typed int64, never a literal
         for call in ast.walk(fn):
-            if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id in compiled):
+            if not (
+                isinstance(call, ast.Call)
+                and isinstance(call.func, ast.Name)
+                and call.func.id in compiled
+            ):
                 continue
             n_params = len(functions[call.func.id].args.args)
             where = f"{name} -> {call.func.id} (line {call.lineno})"
@@ -429,7 +459,11 @@ def test_a_target_written_by_another_thread_during_solve(solver):
                 assert "target must be finite" in str(e)
                 continue
             answered += 1
-            assert np.array_equal(sol.target, A) and np.array_equal(sol.q, ref.q) and sol.status == ref.status
+            assert (
+                np.array_equal(sol.target, A)
+                and np.array_equal(sol.q, ref.q)
+                and sol.status == ref.status
+            )
     finally:
         stop.set()
         thread.join()
@@ -461,10 +495,21 @@ def test_target_on_camera_centre_is_not_fixated(nominal, solver):
 # pointing into the corner pan = 0, tilt at its limit (joint_limits, 0.27 / 0.42 deg); 2 of
 # 40,000 heads.reachable_targets (seeds 10-19, indices 3072 of seed 11, 3054 of seed 18)
 CORNER_TARGETS = (
-    ([-0.3156096808719948, 0.1461449846005398, 0.21604715033419486],
-     [0.5, 0.25, 0.24914717090413305, 1.0205095036362168, 0.00520147806113107, 0.47137090259605297]),
-    ([-0.3473969614746056, 0.13481412892199035, 0.23582311840347847],
-     [0.5, 0.25, 0.13994656096534083, 1.01630261109377, 0.0372579384869882, 0.635520248693666]),
+    (
+        [-0.3156096808719948, 0.1461449846005398, 0.21604715033419486],
+        [
+            0.5,
+            0.25,
+            0.24914717090413305,
+            1.0205095036362168,
+            0.00520147806113107,
+            0.47137090259605297,
+        ],
+    ),
+    (
+        [-0.3473969614746056, 0.13481412892199035, 0.23582311840347847],
+        [0.5, 0.25, 0.13994656096534083, 1.01630261109377, 0.0372579384869882, 0.635520248693666],
+    ),
 )
 
 
@@ -473,7 +518,9 @@ def test_cyclopean_fixates_targets_reachable_only_near_a_corner_of_the_limits(no
     misses and fixation point are those of the returned readings."""
     P = np.array([p for p, _ in CORNER_TARGETS])
     for p, q_ref in CORNER_TARGETS:
-        assert np.all(model_pointing_errors(nominal, np.array(q_ref), np.array(p)) < GAZE_POINTING_TOL)
+        assert np.all(
+            model_pointing_errors(nominal, np.array(q_ref), np.array(p)) < GAZE_POINTING_TOL
+        )
     batch = solver.solve_many(P)
     assert batch.reachable.all(), batch.counts()
     for i, p in enumerate(P):
@@ -484,16 +531,24 @@ def test_cyclopean_fixates_targets_reachable_only_near_a_corner_of_the_limits(no
         assert np.all(model_pointing_errors(nominal, sol.q, p) < GAZE_POINTING_TOL)
         assert sol.miss_distance.max() < 1e-9 and np.linalg.norm(sol.fixation_point - p) < 1e-9
 
+
 def test_issue_14_targets_are_answered():
     """The targets of issue 14 (and one of each exception class the fuzz found before the fix)
     get an answer; these are out of reach of the cyclopean policy (multi-start least squares
     finds no better residual than ~0.04 and ~0.07), and say so."""
     solver = solver_for("iis_head")
-    for p in ([-0.43113785, -0.00847718, 0.49782345], [-0.5193035806142361, 0.2288544102489361, 0.740739145620153]):
+    for p in (
+        [-0.43113785, -0.00847718, 0.49782345],
+        [-0.5193035806142361, 0.2288544102489361, 0.740739145620153],
+    ):
         with np.errstate(over="raise", invalid="raise", divide="raise"):
             sol = solver.solve(p)
         assert not sol.reachable and sol.status in ("too_close", "joint_limits")
-        assert np.all(np.isfinite(sol.q)) and np.all(sol.q >= solver.lower) and np.all(sol.q <= solver.upper)
+        assert (
+            np.all(np.isfinite(sol.q))
+            and np.all(sol.q >= solver.lower)
+            and np.all(sol.q <= solver.upper)
+        )
         assert sol.pointing_error.max() > 0.08
 
 
@@ -514,13 +569,18 @@ def test_astronomically_far_targets(solver):
         with np.errstate(over="raise", invalid="raise", divide="raise"):
             for policy in POLICIES:
                 sol = solver.solve(p, None, policy)
-                assert np.all(np.isfinite(sol.q)) and np.all(np.isfinite(sol.pointing_error)), (p, policy)
+                assert np.all(np.isfinite(sol.q)) and np.all(np.isfinite(sol.pointing_error)), (
+                    p,
+                    policy,
+                )
                 assert sol.reachable == (sol.status == "fixated")
     assert not solver.solve(centre - 1e300 * ahead).reachable
     # beyond the largest float (|p_cam| > 1.8e308) the angles still come from the direction
     huge = np.array([-1.7e308, -1.7e308, 1.7e308])
     a, b = solver.solve(huge, None, "eyes-only"), solver.solve(huge * 1e-8, None, "eyes-only")
-    assert np.array_equal(a.q, b.q) and np.allclose(a.pointing_error, b.pointing_error, rtol=0, atol=1e-12)
+    assert np.array_equal(a.q, b.q) and np.allclose(
+        a.pointing_error, b.pointing_error, rtol=0, atol=1e-12
+    )
 
 
 def test_one_robot_resolver_and_one_pinocchio_model(tmp_path):
@@ -532,11 +592,12 @@ def test_one_robot_resolver_and_one_pinocchio_model(tmp_path):
     solver = GazeSolver(robot)
     assert solver.model is robot.model and solver.data is not None
     assert solver_for(str(path)).solve(AHEAD).reachable
-    assert solver.solve(AHEAD).q.tolist() == GazeSolver.from_model(load_model("iis_head")).solve(AHEAD).q.tolist()
+    assert (
+        solver.solve(AHEAD).q.tolist()
+        == GazeSolver.from_model(load_model("iis_head")).solve(AHEAD).q.tolist()
+    )
     # Pinocchio's getFrameId returns nframes for an unknown name; the robot checks names itself
     with pytest.raises(UnknownNameError, match="unknown frame 'nope'"):
         robot.frame_id("nope")
     with pytest.raises(UnknownNameError, match="unknown joint 'neck'"):
         robot.joint_index("neck")
-
-

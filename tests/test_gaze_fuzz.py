@@ -84,7 +84,13 @@ class Cases:
 
     def chunks(self, k: int) -> Iterator[Cases]:
         for idx in np.array_split(np.arange(len(self)), k):
-            yield Cases(self.p[idx], self.policy[idx], self.q_current[idx], self.use_start[idx], self.kind[idx])
+            yield Cases(
+                self.p[idx],
+                self.policy[idx],
+                self.q_current[idx],
+                self.use_start[idx],
+                self.kind[idx],
+            )
 
 
 def _model(name: str) -> CPCModel:
@@ -117,7 +123,9 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
     left, right = solver.camera_poses(solver.home)
     centre = 0.5 * (left[:3, 3] + right[:3, 3])
     P = [centre + rng.uniform(-CUBE_HALF, CUBE_HALF, (n_cube, 3))]
-    pol = [np.where(np.arange(n_cube) % 2 == 0, 0, 1 + (np.arange(n_cube) // 2) % (len(POLICIES) - 1))]
+    pol = [
+        np.where(np.arange(n_cube) % 2 == 0, 0, 1 + (np.arange(n_cube) // 2) % (len(POLICIES) - 1))
+    ]
     Qc = [np.tile(none, (n_cube, 1))]
     qc_rows = solver.lower + (solver.upper - solver.lower) * rng.random((n_cube, n))
     pol_needs_q = np.isin(pol[0], [POLICIES.index("min-motion"), POLICIES.index("eyes-only")])
@@ -125,7 +133,9 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
     start = [np.zeros(n_cube, dtype=bool)]
     kinds = [np.full(n_cube, "cube")]
     ch = solver.chain  # each eye's first joint: the first on one camera's path only
-    eye_joint_ids = [int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) + 1 for c in (0, 1)]
+    eye_joint_ids = [
+        int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) + 1 for c in (0, 1)
+    ]
     for j, q in enumerate(_configurations(solver, rng, n_configs)):
         pin.forwardKinematics(model, data, q)
         eyes = [data.oMi[i].translation.copy() for i in eye_joint_ids]
@@ -138,13 +148,28 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
         pts: list[tuple[str, np.ndarray]] = []
         for k in range(2):
             pts.append(("camera centre", o[k]))
-            pts += [("near a camera centre", o[k] + r * _unit(rng, 1)[0]) for r in (1e-15, 1e-12, 1e-9, 1e-6, 1e-3)]
-            pts += [("eye rotation centre", eyes[k]), ("near an eye rotation centre", eyes[k] + 1e-9 * _unit(rng, 1)[0])]
-            pts += [("optical axis", o[k] + t * z[k]) for t in (-1.0, -1e-3, 1e-9, 1e-3, 0.05, 0.5, 3.0, 1e3)]
+            pts += [
+                ("near a camera centre", o[k] + r * _unit(rng, 1)[0])
+                for r in (1e-15, 1e-12, 1e-9, 1e-6, 1e-3)
+            ]
+            pts += [
+                ("eye rotation centre", eyes[k]),
+                ("near an eye rotation centre", eyes[k] + 1e-9 * _unit(rng, 1)[0]),
+            ]
+            pts += [
+                ("optical axis", o[k] + t * z[k])
+                for t in (-1.0, -1e-3, 1e-9, 1e-3, 0.05, 0.5, 3.0, 1e3)
+            ]
         pts.append(("eye rotation centre", 0.5 * (eyes[0] + eyes[1])))
         pts += [("behind the head", c - t * d) for t in (0.01, 0.3, 1.0, 10.0)]
-        pts += [("1e-9..1e6 m from the head", c + r * u) for r, u in zip(np.geomspace(1e-9, 1e6, 16), _unit(rng, 16), strict=True)]
-        pts += [("astronomically far", c + r * u) for r, u in zip(np.geomspace(1e7, 1e300, 4), _unit(rng, 4), strict=True)]
+        pts += [
+            ("1e-9..1e6 m from the head", c + r * u)
+            for r, u in zip(np.geomspace(1e-9, 1e6, 16), _unit(rng, 16), strict=True)
+        ]
+        pts += [
+            ("astronomically far", c + r * u)
+            for r, u in zip(np.geomspace(1e7, 1e300, 4), _unit(rng, 4), strict=True)
+        ]
         w = o[0] - o[1]
         a, b, cc = z[0] @ z[0], z[0] @ z[1], z[1] @ z[1]
         den = a * cc - b * b
@@ -159,10 +184,18 @@ def make_cases(solver: GazeSolver, n_cube: int, n_configs: int, seed: int = SEED
         pol.append((np.arange(m) + j) % len(POLICIES))
         Qc.append(np.tile(q, (m, 1)))
         start.append((np.arange(m) + j) % 2 == 1)
-    return Cases(np.vstack(P), np.concatenate(pol), np.vstack(Qc), np.concatenate(start), np.concatenate(kinds))
+    return Cases(
+        np.vstack(P),
+        np.concatenate(pol),
+        np.vstack(Qc),
+        np.concatenate(start),
+        np.concatenate(kinds),
+    )
 
 
-def solve_cases(solver: GazeSolver, cases: Cases) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+def solve_cases(
+    solver: GazeSolver, cases: Cases
+) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
     """Solve every case under strict floating-point checks.
 
     Returns ``(failures, Q, errors, solved)``: one line per contract violation, the readings
@@ -194,7 +227,9 @@ def solve_cases(solver: GazeSolver, cases: Cases) -> tuple[list[str], np.ndarray
     return failures, Q, E, solved
 
 
-def _contract(solver: GazeSolver, sol: GazeSolution, qc: np.ndarray | None, policy: str, cap: int) -> str:
+def _contract(
+    solver: GazeSolver, sol: GazeSolution, qc: np.ndarray | None, policy: str, cap: int
+) -> str:
     """What is wrong with one answer, or ''."""
     q = sol.q
     if not isinstance(sol, GazeSolution) or q.shape != (solver.n,):
@@ -237,13 +272,17 @@ def _fk_errors(model: CPCModel, Q: np.ndarray, P: np.ndarray) -> tuple[np.ndarra
 _WORKER: dict[str, GazeSolver] = {}
 
 
-def _solve_chunk(name: str, model: CPCModel, cases: Cases) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+def _solve_chunk(
+    name: str, model: CPCModel, cases: Cases
+) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
     if name not in _WORKER:  # one solver per head and worker process
         _WORKER[name] = GazeSolver.from_model(model)
     return solve_cases(_WORKER[name], cases)
 
 
-def fuzz(name: str, model: CPCModel, n_cube: int, n_configs: int) -> tuple[Cases, list[str], np.ndarray, np.ndarray, np.ndarray]:
+def fuzz(
+    name: str, model: CPCModel, n_cube: int, n_configs: int
+) -> tuple[Cases, list[str], np.ndarray, np.ndarray, np.ndarray]:
     """Make and solve the cases of head ``name`` (``model``); over the machine's cores when large."""
     solver = GazeSolver.from_model(model)
     cases = make_cases(solver, n_cube, n_configs)
@@ -267,7 +306,10 @@ def test_every_finite_target_gets_an_answer(name):
     model = _model(name)
     cases, failures, Q, E, solved = fuzz(name, model, n_cube, n_configs)
     assert len(cases) >= n_cube + 50 * n_configs  # every class is there
-    assert not failures, f"{name}: {len(failures)} of {len(cases)} targets break the contract, e.g.\n" + "\n".join(failures[:10])
+    assert not failures, (
+        f"{name}: {len(failures)} of {len(cases)} targets break the contract, e.g.\n"
+        + "\n".join(failures[:10])
+    )
     assert solved.all()
     # The reported pointing errors (Pinocchio on the URDF) agree with the CPC model's own FK.
     near = np.abs(cases.p).max(axis=1) < FK_MAX_DISTANCE
@@ -290,11 +332,13 @@ def test_tracking_through_camera_centres_and_far_away():
     left, right = solver.camera_poses(solver.home)
     o0, o1 = left[:3, 3], right[:3, 3]
     t = np.linspace(0.0, 1.0, 61)[:, None]
-    P = np.vstack([
-        o0 + (t - 0.5) * np.array([0.0, 0.0, 0.2]),
-        o0 + t * (o1 - o0),
-        o1 + np.geomspace(1e-9, 1e6, len(t))[:, None] * left[:3, 2],
-    ])
+    P = np.vstack(
+        [
+            o0 + (t - 0.5) * np.array([0.0, 0.0, 0.2]),
+            o0 + t * (o1 - o0),
+            o1 + np.geomspace(1e-9, 1e6, len(t))[:, None] * left[:3, 2],
+        ]
+    )
     P[len(t) // 2] = o0  # exactly on the centre
     vmax = np.array([0.1, 0.1, 1.0, 1.0, 2.0, 2.0])
     dt = 1e-2
@@ -305,7 +349,9 @@ def test_tracking_through_camera_centres_and_far_away():
                 tr = solver.track(P, dt, vmax, q_current=solver.home, policy=policy)
                 assert np.all(np.isfinite(tr.q)) and np.all(np.isfinite(tr.q_goal))
                 assert np.all(tr.q >= solver.lower) and np.all(tr.q <= solver.upper)
-                assert np.all(np.isfinite(tr.pointing_error)) and np.all(tr.pointing_error <= math.pi)
+                assert np.all(np.isfinite(tr.pointing_error)) and np.all(
+                    tr.pointing_error <= math.pi
+                )
                 v = np.abs(np.diff(np.vstack([solver.home, tr.q]), axis=0)) / dt
                 assert np.all(v <= vmax * (1 + 1e-12)), policy
 
@@ -316,14 +362,18 @@ SHAPE_FAST_CUBE = 300  # cube targets per head shape by default
 SHAPE_FAST_CONFIGS = 4  # configurations whose special targets are solved, by default
 
 
-def _shape_cases(solver: GazeSolver, rng: np.random.Generator, n_cube: int, n_configs: int) -> list[tuple[np.ndarray | None, np.ndarray]]:
+def _shape_cases(
+    solver: GazeSolver, rng: np.random.Generator, n_cube: int, n_configs: int
+) -> list[tuple[np.ndarray | None, np.ndarray]]:
     """``[(q_current or None, targets (k, 3))]``: cube targets from the middle of the limits, then
     per configuration its special targets (camera centres and near them, on and behind each
     optical axis, 1e-9..1e6 m and astronomically far)."""
     comp, chain = solver.compiled, solver.chain
     R, o = comp._fk(comp.home_u)
     centre = o[: len(solver.cameras)].mean(axis=0)
-    out: list[tuple[np.ndarray | None, np.ndarray]] = [(None, centre + rng.uniform(-CUBE_HALF, CUBE_HALF, (n_cube, 3)))]
+    out: list[tuple[np.ndarray | None, np.ndarray]] = [
+        (None, centre + rng.uniform(-CUBE_HALF, CUBE_HALF, (n_cube, 3)))
+    ]
     lo, hi = chain.lower, chain.upper
     for k in range(n_configs):
         u = comp.home_u if k == 0 else lo + (hi - lo) * rng.random(chain.m)
@@ -338,14 +388,21 @@ def _shape_cases(solver: GazeSolver, rng: np.random.Generator, n_cube: int, n_co
             pts.append(o[c])
             pts += [o[c] + r * _unit(rng, 1)[0] for r in (1e-15, 1e-12, 1e-9, 1e-6, 1e-3)]
             pts += [o[c] + t * R[c][:, 2] for t in (-1.0, -1e-3, 1e-9, 1e-3, 0.05, 0.5, 3.0, 1e3)]
-        pts += [o[0] + r * v for r, v in zip(np.geomspace(1e-9, 1e6, 16), _unit(rng, 16), strict=True)]
-        pts += [o[0] + r * v for r, v in zip(np.geomspace(1e7, 1e300, 4), _unit(rng, 4), strict=True)]
+        pts += [
+            o[0] + r * v for r, v in zip(np.geomspace(1e-9, 1e6, 16), _unit(rng, 16), strict=True)
+        ]
+        pts += [
+            o[0] + r * v for r, v in zip(np.geomspace(1e7, 1e300, 4), _unit(rng, 4), strict=True)
+        ]
         pts += [np.array([1.7e308, -1.7e308, 0.0])]
         out.append((q, np.array(pts)))
     return out
 
 
-@pytest.mark.parametrize("shape", ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal", "iis_calibrated"])
+@pytest.mark.parametrize(
+    "shape",
+    ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal", "iis_calibrated"],
+)
 def test_every_head_shape_answers_every_finite_target(shape, tmp_path):
     """The compiled solver's contract on every head shape: an answer for every finite target,
     finite and inside the limits, joints it may not move where they were, statuses consistent
@@ -356,7 +413,9 @@ def test_every_head_shape_answers_every_finite_target(shape, tmp_path):
 
     solver = head_case(shape, tmp_path).solver
     n = os.environ.get("CPC2URDF_GAZE_FUZZ_TARGETS")
-    n_cube, n_configs = (SHAPE_FAST_CUBE, SHAPE_FAST_CONFIGS) if n is None else (int(n), FULL_CONFIGS // 4)
+    n_cube, n_configs = (
+        (SHAPE_FAST_CUBE, SHAPE_FAST_CONFIGS) if n is None else (int(n), FULL_CONFIGS // 4)
+    )
     rng = np.random.default_rng(SEED)
     chain = solver.chain
     data = solver.robot.model.createData()
@@ -374,7 +433,11 @@ def test_every_head_shape_answers_every_finite_target(shape, tmp_path):
         ref = solver.home if qc is None else qc
         still = np.abs(chain.robot_A).sum(axis=1) == 0
         assert np.all(b.q[:, still] == ref[still]), shape
-        assert np.all(np.isfinite(b.pointing_error)) and np.all(b.pointing_error >= 0) and np.all(b.pointing_error <= math.pi)
+        assert (
+            np.all(np.isfinite(b.pointing_error))
+            and np.all(b.pointing_error >= 0)
+            and np.all(b.pointing_error <= math.pi)
+        )
         assert np.array_equal(b.reachable, b.pointing_error.max(axis=1) <= b.tolerance)
         assert np.array_equal(b.reachable, b.status == 0)
         # the reported errors against Pinocchio's FK of the answers
@@ -391,11 +454,18 @@ def test_every_head_shape_answers_every_finite_target(shape, tmp_path):
                 d = P[i] - o
                 if np.abs(d).max() < FK_MAX_DISTANCE and np.linalg.norm(d) > 1e-3:
                     e = math.atan2(np.linalg.norm(np.cross(z, d)), z @ d)
-                    assert abs(e - b.pointing_error[i, s]) < FK_TOL, (shape, P[i].tolist(), e, b.pointing_error[i, s])
+                    assert abs(e - b.pointing_error[i, s]) < FK_TOL, (
+                        shape,
+                        P[i].tolist(),
+                        e,
+                        b.pointing_error[i, s],
+                    )
     assert total >= n_cube + 35 * n_configs  # every class is there
 
 
-@pytest.mark.parametrize("shape", ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal"])
+@pytest.mark.parametrize(
+    "shape", ["tiago", "talos", "icub", "stereo_pan_tilt", "panda_camera", "iis_nominal"]
+)
 def test_every_head_shape_exact_on_reachable_targets(shape, tmp_path):
     """Fixatable targets (sampled in-limit readings, tests/gaze_heads.py): every one fixated
     inside the limits, exact to GAZE_POINTING_TOL on yourdfpy's FK. 100 per head by default;
@@ -411,4 +481,6 @@ def test_every_head_shape_exact_on_reachable_targets(shape, tmp_path):
     O, Z = yourdfpy_axes(case, b.q)
     err = pointing_errors(O, Z, P)
     assert err.max() < GAZE_POINTING_TOL, (shape, float(err.max()))
-    print(f"{shape}: {n} targets, worst {err.max():.3g} rad on yourdfpy, median iterations {np.median(b.iterations):.0f}")
+    print(
+        f"{shape}: {n} targets, worst {err.max():.3g} rad on yourdfpy, median iterations {np.median(b.iterations):.0f}"
+    )

@@ -82,11 +82,13 @@ def _jacobian_against_differences(comp, chain, u, p, ws):
     tol = 1e-7 * max(1.0, np.abs(J).max())
     assert np.abs(J.T @ J - Jfd.T @ Jfd).max() < tol * max(1.0, np.abs(J).max())
     for c in range(len(r) // 3):
-        uc = r[3 * c:3 * c + 3] + [0.0, 0.0, 1.0]
+        uc = r[3 * c : 3 * c + 3] + [0.0, 0.0, 1.0]
         T = np.reshape(kernels._tangent(*uc), (2, 3)).T
         assert np.abs(T.T @ T - np.eye(2)).max() < 1e-15 and np.abs(uc @ T).max() < 1e-15
-        assert np.abs(J[2 * c:2 * c + 2] - T.T @ Jfd[3 * c:3 * c + 3]).max() < tol
-        assert np.allclose(kernels._tangent_residual(r, c), T.T @ r[3 * c:3 * c + 3], rtol=0, atol=1e-15)
+        assert np.abs(J[2 * c : 2 * c + 2] - T.T @ Jfd[3 * c : 3 * c + 3]).max() < tol
+        assert np.allclose(
+            kernels._tangent_residual(r, c), T.T @ r[3 * c : 3 * c + 3], rtol=0, atol=1e-15
+        )
     return r
 
 
@@ -100,7 +102,9 @@ def test_tangent_basis_on_the_whole_sphere():
     rng = np.random.default_rng(0)
     U = rng.normal(size=(2000, 3))
     U /= np.linalg.norm(U, axis=1)[:, None]
-    U = np.vstack([U, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0, -0.8], [0, 0.8, -0.6]]])
+    U = np.vstack(
+        [U, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0, -0.8], [0, 0.8, -0.6]]]
+    )
     # u_z = -1/2 - 2^-53: u_z + 1 - 1 rounds to -1/2, so the side must be read from u_z - 1 (the
     # residual's double) in both places (a TIAGo target there had its gradient's sign flipped)
     uz = np.nextafter(-0.5, -1.0)
@@ -190,7 +194,9 @@ def test_reachable_targets_exact_on_independent_fk(case):
         assert set(names) <= {"disparity", "joint_limits"}
         assert names.count("disparity") > 0.95 * N_TARGETS
         return
-    assert batch.reachable.all(), f"{case.name}: {dict(zip(*np.unique(names, return_counts=True), strict=True))}"
+    assert batch.reachable.all(), (
+        f"{case.name}: {dict(zip(*np.unique(names, return_counts=True), strict=True))}"
+    )
     assert batch.pointing_error.max() < GAZE_POINTING_TOL
     pick = np.random.default_rng(0).choice(N_TARGETS, N_YOURDFPY, replace=False)
     O, Z = yourdfpy_axes(case, batch.q[pick])
@@ -243,7 +249,6 @@ def test_threaded_batch_answers_each_target_as_one_solve(case):
         assert out[0] == moved.status[i] and np.array_equal(out[2 : 2 + comp.n], moved.q[i])
 
 
-
 def _solve_in_new_thread(comp, p, qc):
     """``comp.solve_point(p, qc)`` from a thread of its own: a workspace never used before."""
     box = []
@@ -277,17 +282,30 @@ def test_single_solves_share_a_workspace_but_nothing_of_one_answer(case):
     lo, hi = case.solver.lower, case.solver.upper
     finite = np.isfinite(lo) & np.isfinite(hi)
     rng = np.random.default_rng(12)
-    readings = [None] + [np.where(finite, np.where(finite, lo, 0.0) + rng.uniform(0.2, 0.8, lo.shape)
-                                  * np.where(finite, hi - lo, 0.0), 0.0) for _ in range(2)]
+    readings = [None] + [
+        np.where(
+            finite,
+            np.where(finite, lo, 0.0)
+            + rng.uniform(0.2, 0.8, lo.shape) * np.where(finite, hi - lo, 0.0),
+            0.0,
+        )
+        for _ in range(2)
+    ]
     reused = np.zeros((len(T), 2), dtype=bool)
     for k, p in enumerate(T):
         qc = readings[k % 3]  # other readings than the last target's: scored afresh
-        for j, q in enumerate((p, T[(k + 5) % len(T)])):  # then another target from the same readings
+        for j, q in enumerate(
+            (p, T[(k + 5) % len(T)])
+        ):  # then another target from the same readings
             key = _reference_key(comp)
             out = comp.solve_point(q, qc)
-            reused[k, j] = np.array_equal(key, _reference_key(comp))  # the key kept: the scores were reused
+            reused[k, j] = np.array_equal(
+                key, _reference_key(comp)
+            )  # the key kept: the scores were reused
             assert np.array_equal(out, _solve_in_new_thread(comp, q, qc), equal_nan=True), (k, j)
-    assert reused[:, 1].all() and not reused[1:, 0].any()  # (the first solve's depends on the test before)
+    assert (
+        reused[:, 1].all() and not reused[1:, 0].any()
+    )  # (the first solve's depends on the test before)
     was = _nrt_python.memsys_stats_enabled()
     _nrt_python.memsys_enable_stats()
     try:
@@ -340,7 +358,10 @@ def test_threads_solving_on_one_solver_do_not_share_a_workspace(case):
     for w in workers:
         w.join()
     for k in (0, 1):
-        assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(alone * 5, answers[k], strict=True)), k
+        assert all(
+            np.array_equal(a, b, equal_nan=True) for a, b in zip(alone * 5, answers[k], strict=True)
+        ), k
+
 
 def test_unreachable_targets_answered_in_limits(case):
     """Targets behind and far off: every one answered with in-limit readings, never fixated
@@ -350,13 +371,21 @@ def test_unreachable_targets_answered_in_limits(case):
     R, o = solver.compiled._fk(solver.compiled.home_u)
     c = o[solver.chain.solve_cameras].mean(axis=0)
     d = rng.normal(size=(100, 3))
-    P = np.vstack([c + rng.uniform(0.2, 20, (100, 1)) * d / np.linalg.norm(d, axis=1, keepdims=True),
-                   c + np.array([[0, 0, 1e6], [0, 0, -1e6], [1e300, 0, 0], [-1.7e308, 0, 0]])])
+    P = np.vstack(
+        [
+            c + rng.uniform(0.2, 20, (100, 1)) * d / np.linalg.norm(d, axis=1, keepdims=True),
+            c + np.array([[0, 0, 1e6], [0, 0, -1e6], [1e300, 0, 0], [-1.7e308, 0, 0]]),
+        ]
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
             batch = solver.solve_many(P)
-    assert np.all(np.isfinite(batch.q)) and np.all(batch.q >= solver.lower) and np.all(batch.q <= solver.upper)
+    assert (
+        np.all(np.isfinite(batch.q))
+        and np.all(batch.q >= solver.lower)
+        and np.all(batch.q <= solver.upper)
+    )
     assert np.all(np.isfinite(batch.pointing_error)) and np.all(batch.pointing_error <= math.pi)
     assert np.array_equal(batch.reachable, batch.pointing_error.max(axis=1) <= batch.tolerance)
     assert set(np.unique(batch.status)) <= set(range(len(BATCH_STATUSES)))
@@ -374,8 +403,13 @@ def test_names_and_couplings_are_checked(tmp_path):
     with pytest.raises(ConfigurationError, match="one or two"):
         GazeSolver(robot, ("camera_left_optical", "camera_right_optical", "camera_left_optical"))
     with pytest.raises(SpecError, match="vergence_left"):
-        GazeSolver(robot, ("camera_left_optical", "camera_right_optical"),
-                   coupling=Coupling.version_vergence("vergence_left", "vergence_right", (-3.0, 3.0), (0.0, 0.5)))
+        GazeSolver(
+            robot,
+            ("camera_left_optical", "camera_right_optical"),
+            coupling=Coupling.version_vergence(
+                "vergence_left", "vergence_right", (-3.0, 3.0), (0.0, 0.5)
+            ),
+        )
     with pytest.raises(ConfigurationError, match="rigid"):
         GazeSolver(robot, ("camera_left_optical",), rigid="nope")
     # a joint that moves no camera
@@ -405,7 +439,9 @@ def test_rigid_pair_master_eye(tmp_path):
         assert b.reachable[0]
         R, o = s.compiled._fk(s.chain.u_from_q(b.q[0]))
         d = p - o[k]
-        assert math.atan2(np.linalg.norm(np.cross(R[k][:, 2], d)), R[k][:, 2] @ d) < GAZE_POINTING_TOL
+        assert (
+            math.atan2(np.linalg.norm(np.cross(R[k][:, 2], d)), R[k][:, 2] @ d) < GAZE_POINTING_TOL
+        )
 
 
 def _facing(solver, d):
@@ -426,15 +462,27 @@ def _faces_ahead(cal, nominal, label):
     for d in (0.8, 1.5, 3.0):
         p = _facing(cal, d)
         a, n = cal.solve(p), nominal.solve(_facing(nominal, d))
-        assert a.status in ("disparity", "fixated") and not a.at_limit, (label, d, a.status, a.at_limit)
-        assert np.degrees(np.abs(a.q[2:4] - n.q[2:4])).max() < 3.0, (label, d, np.degrees(a.q[2:4]), np.degrees(n.q[2:4]))
+        assert a.status in ("disparity", "fixated") and not a.at_limit, (
+            label,
+            d,
+            a.status,
+            a.at_limit,
+        )
+        assert np.degrees(np.abs(a.q[2:4] - n.q[2:4])).max() < 3.0, (
+            label,
+            d,
+            np.degrees(a.q[2:4]),
+            np.degrees(n.q[2:4]),
+        )
 
         def res(e, q=a.q, p=p):
             qq = q.copy()
             qq[4:] = e
             return cal.pointing_errors(qq, p)
 
-        best = least_squares(res, a.q[4:], bounds=(cal.lower[4:], cal.upper[4:]), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = least_squares(
+            res, a.q[4:], bounds=(cal.lower[4:], cal.upper[4:]), xtol=1e-15, ftol=1e-15, gtol=1e-15
+        )
         qb = a.q.copy()
         qb[4:] = best.x
         best_rms = math.sqrt(float(np.sum(res(best.x) ** 2)) / 2)
@@ -473,7 +521,9 @@ def test_tolerance_from_the_cameras_focal_length():
     residual) calls its answers fixated, a fine one (below) names the disparity; the readings
     are the same either way."""
     assert pointing_tolerance() == GAZE_POINTING_TOL
-    assert pointing_tolerance(focal_px=500.0) == pytest.approx(math.atan(GAZE_PIXEL_FRACTION / 500.0))
+    assert pointing_tolerance(focal_px=500.0) == pytest.approx(
+        math.atan(GAZE_PIXEL_FRACTION / 500.0)
+    )
     assert pointing_tolerance(2e-3) == 2e-3
     with pytest.raises(ConfigurationError, match="not both"):
         pointing_tolerance(1e-3, 500.0)
@@ -485,7 +535,9 @@ def test_tolerance_from_the_cameras_focal_length():
     b0 = exact.solve_many(P)
     assert set(b0.status_of(i) for i in range(3)) == {"disparity"}
     worst = float(b0.pointing_error.max())
-    coarse = solver_for(model, focal_px=0.5 * GAZE_PIXEL_FRACTION / worst)  # tolerance ~2x the residual
+    coarse = solver_for(
+        model, focal_px=0.5 * GAZE_PIXEL_FRACTION / worst
+    )  # tolerance ~2x the residual
     fine = solver_for(model, focal_px=2.0 * GAZE_PIXEL_FRACTION / float(b0.pointing_error.min()))
     assert coarse.tolerance > worst > fine.tolerance
     b1, b2 = coarse.solve_many(P), fine.solve_many(P)
@@ -507,7 +559,9 @@ def _kkt_tolerance(comp):
 
 def _seeded_twin(comp):
     """``comp``'s head with the seeded table of starts alone (``policy_table=False``)."""
-    return CompiledGaze(comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False)
+    return CompiledGaze(
+        comp.chain, comp.tolerance, comp.version_row, comp.min_distance, policy_table=False
+    )
 
 
 def _policy_kkt(case, Q, P, margin, d_margin=1e-4):
@@ -539,8 +593,10 @@ def _policy_kkt(case, Q, P, margin, d_margin=1e-4):
             A = np.hstack([A, (grad / comp.sw)[:, None]])
         sol, *_ = np.linalg.lstsq(A, g, rcond=1e-10)
         res.append(float(np.abs(g - A @ sol).max()))
-        mu = sol[Jx.shape[0]:Jx.shape[0] + len(held)]
-        wrong = np.concatenate([-mu[at_lo[held]], mu[at_hi[held]], [-sol[-1] if near else 0.0, 0.0]])
+        mu = sol[Jx.shape[0] : Jx.shape[0] + len(held)]
+        wrong = np.concatenate(
+            [-mu[at_lo[held]], mu[at_hi[held]], [-sol[-1] if near else 0.0, 0.0]]
+        )
         close.append(near)
         sign.append(float(wrong.max()))
         free = ~(at_lo | at_hi)
@@ -567,7 +623,9 @@ def test_answers_are_the_policys_constrained_minimum(case):
     iteration cap are fixated but may stop short (a camera on an arm: 3 of 8,000); they are
     counted, not checked."""
     comp = case.solver._fast
-    assert comp.version_row is None and not comp.disparity_head  # the policy is the distance from home
+    assert (
+        comp.version_row is None and not comp.disparity_head
+    )  # the policy is the distance from home
     tol = _kkt_tolerance(comp)
     margin = KKT_MARGIN
     nulls = 0
@@ -576,14 +634,19 @@ def test_answers_are_the_policys_constrained_minimum(case):
         batch = case.solver.solve_many(P)
         assert batch.reachable.all()
         converged = batch.iterations < BATCH_MAX_ITERATIONS
-        assert converged.mean() > 0.95, f"{case.name}: {np.sum(~converged)} answers at the iteration cap"
+        assert converged.mean() > 0.95, (
+            f"{case.name}: {np.sum(~converged)} answers at the iteration cap"
+        )
         res, sign, null, _ = _policy_kkt(case, batch.q[converged], P[converged], margin)
         nulls += int(null.sum())
         worst = int(np.argmax(res))
         assert res[worst] < tol, (
             f"{case.name} seed {seed}: target {worst} not stationary: policy gradient {res[worst]:.3g} "
-            f"off the pointing task's rows and the bounds (tolerance {tol:.1g})")
-        assert sign.max() < tol, f"{case.name} seed {seed}: a bound holds an unknown the policy would pull off it ({sign.max():.3g})"
+            f"off the pointing task's rows and the bounds (tolerance {tol:.1g})"
+        )
+        assert sign.max() < tol, (
+            f"{case.name} seed {seed}: a bound holds an unknown the policy would pull off it ({sign.max():.3g})"
+        )
     assert nulls > 0, f"{case.name}: no null space at any answer: the check chose nothing"
 
 
@@ -595,14 +658,18 @@ def test_the_table_holds_the_policys_answers(case):
     least as near home, on average, as from the seeded samples (``policy_table=False``)."""
     comp = case.solver._fast
     pointed = np.isfinite(comp.table_targets[:, 0])
-    assert pointed.sum() > 0.9 * TABLE_SIZE, f"{case.name}: {pointed.sum()} of {TABLE_SIZE} entries pointed"
+    assert pointed.sum() > 0.9 * TABLE_SIZE, (
+        f"{case.name}: {pointed.sum()} of {TABLE_SIZE} entries pointed"
+    )
     Q = comp.chain.q_from_u(comp.table_u[pointed])
     T = comp.table_targets[pointed]
     err = np.array([comp.pointing_errors(q, p).max() for q, p in zip(Q, T, strict=True)])
     assert err.max() < GAZE_POINTING_TOL
     res, sign, _, _ = _policy_kkt(case, Q, T, KKT_MARGIN)
     tol = _kkt_tolerance(comp)
-    assert res.max() < tol and sign.max() < tol, f"{case.name}: an entry off the policy's minimum ({res.max():.3g})"
+    assert res.max() < tol and sign.max() < tol, (
+        f"{case.name}: an entry off the policy's minimum ({res.max():.3g})"
+    )
     seeded = _seeded_twin(comp)
     assert np.isnan(seeded.table_targets).all()
     P, _ = case.reachable_targets(N_TARGETS, seed=5)
@@ -618,7 +685,9 @@ def test_the_table_holds_the_policys_answers(case):
     assert ours.iterations.mean() <= before.iterations.mean() + 0.05, case.name
     if case.name in ("icub", "panda_camera"):
         assert ours.iterations.mean() < 0.9 * before.iterations.mean(), case.name
-    assert cost(ours) <= cost(before) * (1.0 + 1e-6), f"{case.name}: {cost(ours):.6g} > {cost(before):.6g}"
+    assert cost(ours) <= cost(before) * (1.0 + 1e-6), (
+        f"{case.name}: {cost(ours):.6g} > {cost(before):.6g}"
+    )
 
 
 @pytest.mark.parametrize("case", ["icub"], indirect=True)
@@ -632,17 +701,34 @@ def test_a_policy_walk_held_by_three_bounds_reaches_the_minimum(case):
     comp = case.solver._fast
     chain = comp.chain
     p = np.array([-0.15585062, -0.05782934, -0.89161996])
-    u0 = np.array([0.46364674, 0.52356878, 0.30536354, -0.15838363, -0.34906585, -0.38192409, -0.6, -0.09531952,
-                   0.06069253])
-    assert chain.upper[1] - u0[1] == pytest.approx(3e-5, abs=1e-8)  # torso roll just short of its bound
+    u0 = np.array(
+        [
+            0.46364674,
+            0.52356878,
+            0.30536354,
+            -0.15838363,
+            -0.34906585,
+            -0.38192409,
+            -0.6,
+            -0.09531952,
+            0.06069253,
+        ]
+    )
+    assert chain.upper[1] - u0[1] == pytest.approx(
+        3e-5, abs=1e-8
+    )  # torso roll just short of its bound
     out = comp.solve_point(p, None, q_start=chain.q_from_u(u0))
     q = out[2 : 2 + comp.n]
     assert out[0] == kernels.S_FIXATED
     u = chain.u_from_q(q)
-    assert np.sum(np.minimum(u - chain.lower, chain.upper - u) < 1e-6) == 3  # the case the test is about
+    assert (
+        np.sum(np.minimum(u - chain.lower, chain.upper - u) < 1e-6) == 3
+    )  # the case the test is about
     res, sign, _, _ = _policy_kkt(case, q[None], p[None], KKT_MARGIN)
     tol = _kkt_tolerance(comp)
-    assert res[0] < tol and sign[0] < tol, f"policy gradient {res[0]:.3g} off the minimum (tolerance {tol:.1g})"
+    assert res[0] < tol and sign[0] < tol, (
+        f"policy gradient {res[0]:.3g} off the minimum (tolerance {tol:.1g})"
+    )
 
 
 def test_the_table_is_the_policys_own_answers_on_every_shape(case):
@@ -652,15 +738,21 @@ def test_the_table_is_the_policys_own_answers_on_every_shape(case):
     it stays there, within the policy phase's stopping step)."""
     comp = case.solver._fast
     pointed = np.flatnonzero(np.isfinite(comp.table_targets[:, 0]))
-    assert len(pointed) > 0.95 * TABLE_SIZE, f"{case.name}: {len(pointed)} of {TABLE_SIZE} entries pointed"
+    assert len(pointed) > 0.95 * TABLE_SIZE, (
+        f"{case.name}: {len(pointed)} of {TABLE_SIZE} entries pointed"
+    )
     assert np.array_equal(kernels._unpack(comp.F, comp.I)[5], comp.table_u.T)
     # the null cut near fixation (kernels.BINOCULAR_NULL) where the 4th direction is structural
     assert comp.structural_null == (case.name in ("iis_nominal", "icub")), case.name
-    assert kernels._unpack(comp.F, comp.I)[0][13][3] == (kernels.BINOCULAR_NULL if comp.structural_null else 0.0)
+    assert kernels._unpack(comp.F, comp.I)[0][13][3] == (
+        kernels.BINOCULAR_NULL if comp.structural_null else 0.0
+    )
     for g in pointed[:: max(1, len(pointed) // 40)]:
         q = comp.chain.q_from_u(comp.table_u[g])
         out = comp.solve_point(comp.table_targets[g], None, q_start=q)
-        assert out[0] in (kernels.S_FIXATED, kernels.S_DISPARITY), f"{case.name}: entry {g} status {out[0]}"
+        assert out[0] in (kernels.S_FIXATED, kernels.S_DISPARITY), (
+            f"{case.name}: entry {g} status {out[0]}"
+        )
         moved = np.abs(out[2 : 2 + comp.n] - q).max()
         assert moved < KKT_MARGIN, f"{case.name}: entry {g} moved {moved:.3g}"
 
@@ -671,8 +763,10 @@ def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
     pool's workers at once, each waited on the pool it occupied (the review's run: stuck)."""
     comp = case.solver._fast
     pool = _pool(2)
-    builds = [pool.submit(CompiledGaze, comp.chain, comp.tolerance, comp.version_row, comp.min_distance)
-              for _ in range(2)]
+    builds = [
+        pool.submit(CompiledGaze, comp.chain, comp.tolerance, comp.version_row, comp.min_distance)
+        for _ in range(2)
+    ]
     tables = [build.result(timeout=120).table_u for build in builds]
     assert np.array_equal(tables[0], comp.table_u) and np.array_equal(tables[1], comp.table_u)
 
@@ -680,19 +774,30 @@ def test_a_solver_built_on_the_batch_pool_does_not_wait_on_it(case):
 def _roll_tilt_eyes(tmp_path):
     """A solver for two eyes each on its own roll (about the head's forward axis, x) and tilt,
     no neck, 0.12 m apart: at home both look along their roll axes (a gimbal singularity)."""
-    def joint(name, parent, child, xyz, axis, lo, hi):
-        return (f'<joint name="{name}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
-                f'<parent link="{parent}"/><child link="{child}"/>'
-                f'<limit lower="{lo}" upper="{hi}" effort="1" velocity="2"/></joint>\n')
 
-    text = ('<?xml version="1.0"?>\n<robot name="roll_tilt_eyes"><link name="world"/><link name="head"/>\n'
-            '<joint name="fix" type="fixed"><origin xyz="0 0 1.3"/><parent link="world"/><child link="head"/></joint>\n')
+    def joint(name, parent, child, xyz, axis, lo, hi):
+        return (
+            f'<joint name="{name}" type="revolute"><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
+            f'<parent link="{parent}"/><child link="{child}"/>'
+            f'<limit lower="{lo}" upper="{hi}" effort="1" velocity="2"/></joint>\n'
+        )
+
+    text = (
+        '<?xml version="1.0"?>\n<robot name="roll_tilt_eyes"><link name="world"/><link name="head"/>\n'
+        '<joint name="fix" type="fixed"><origin xyz="0 0 1.3"/><parent link="world"/><child link="head"/></joint>\n'
+    )
     for eye, y in (("l", 0.06), ("r", -0.06)):
         text += f'<link name="{eye}_roll_link"/><link name="{eye}_tilt_link"/><link name="{eye}_optical"/>'
-        text += joint(f"{eye}_roll", "head", f"{eye}_roll_link", f"0.05 {y} 0.0", "1 0 0", -3.1, 3.1)
-        text += joint(f"{eye}_tilt", f"{eye}_roll_link", f"{eye}_tilt_link", "0 0 0", "0 1 0", -0.5, 0.5)
-        text += (f'<joint name="{eye}_opt" type="fixed"><origin xyz="0 0 0" rpy="{OPTICAL_RPY}"/>'
-                 f'<parent link="{eye}_tilt_link"/><child link="{eye}_optical"/></joint>\n')
+        text += joint(
+            f"{eye}_roll", "head", f"{eye}_roll_link", f"0.05 {y} 0.0", "1 0 0", -3.1, 3.1
+        )
+        text += joint(
+            f"{eye}_tilt", f"{eye}_roll_link", f"{eye}_tilt_link", "0 0 0", "0 1 0", -0.5, 0.5
+        )
+        text += (
+            f'<joint name="{eye}_opt" type="fixed"><origin xyz="0 0 0" rpy="{OPTICAL_RPY}"/>'
+            f'<parent link="{eye}_tilt_link"/><child link="{eye}_optical"/></joint>\n'
+        )
     urdf = tmp_path / "roll_tilt_eyes.urdf"
     urdf.write_text(text + "</robot>\n")
     return GazeSolver(urdf, ("l_optical", "r_optical"))
@@ -718,7 +823,9 @@ def test_the_null_cut_near_fixation_only_where_the_4th_direction_is_structural(t
     assert comp.chain.kind == "binocular" and not comp.disparity_head
     assert not comp.structural_null and comp.ch[13][3] == 0.0
     batch = solver.solve_many(_ahead(400, 50.0, 500.0, 1))
-    assert batch.reachable.all(), f"{np.sum(~batch.reachable)} of 400 not fixated (worst {batch.pointing_error.max():.3g} rad)"
+    assert batch.reachable.all(), (
+        f"{np.sum(~batch.reachable)} of 400 not fixated (worst {batch.pointing_error.max():.3g} rad)"
+    )
 
 
 def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
@@ -730,13 +837,16 @@ def test_eyes_without_a_neck_get_a_table_spread_over_the_eyes(tmp_path):
     table kept the seeded one."""
     solver = _roll_tilt_eyes(tmp_path)
     comp = solver._fast
-    assert comp.chain.eye.all() and np.ptp(comp.table_u, axis=0).min() > 0.5  # only eyes, every one spread
+    assert (
+        comp.chain.eye.all() and np.ptp(comp.table_u, axis=0).min() > 0.5
+    )  # only eyes, every one spread
     assert np.isfinite(comp.table_targets[:, 0]).mean() > 0.9  # the policy's answers
     for near, far in ((50.0, 500.0), (500.0, 5000.0)):
         batch = solver.solve_many(_ahead(400, near, far, 2))
         assert batch.reachable.all(), (
             f"{near:g}-{far:g} m: {np.sum(~batch.reachable)} of 400 not fixated "
-            f"(worst {batch.pointing_error.max():.3g} rad)")
+            f"(worst {batch.pointing_error.max():.3g} rad)"
+        )
 
 
 def test_the_last_start_leaves_the_first_ones_cluster():
@@ -744,8 +854,9 @@ def test_the_last_start_leaves_the_first_ones_cluster():
     start before it by DISTINCT_START in some scaled unknown (the best-facing entries are often
     one cluster, all in one basin); with no such entry, the best one not yet chosen. The others
     go by score alone."""
-    table_u = np.array([[0.0, 0.05, 0.1, 1.0, 0.2, 0.0],
-                        [0.0, 0.0, 0.1, 0.0, 0.2, 0.0]])  # (m, G): one column per entry
+    table_u = np.array(
+        [[0.0, 0.05, 0.1, 1.0, 0.2, 0.0], [0.0, 0.0, 0.1, 0.0, 0.2, 0.0]]
+    )  # (m, G): one column per entry
 
     far_ref = np.array([2.0, 2.0])  # u_ref: away from every entry
 
@@ -755,12 +866,20 @@ def test_the_last_start_leaves_the_first_ones_cluster():
         ws[27][0] = int(np.argmax(scores))  # best_starts' own pick
         out = np.empty(2)
         for j in range(1, n_table):
-            kernels.further_start(np.int64(j), np.int64(n_table), u_ref, np.ones(2), table_u, ws[26], ws[27], out)
-            assert np.array_equal(out, u_ref if ws[27][j] == table_u.shape[1] else table_u[:, ws[27][j]])
+            kernels.further_start(
+                np.int64(j), np.int64(n_table), u_ref, np.ones(2), table_u, ws[26], ws[27], out
+            )
+            assert np.array_equal(
+                out, u_ref if ws[27][j] == table_u.shape[1] else table_u[:, ws[27][j]]
+            )
         return list(ws[27][:n_table])
 
     scores = np.array([0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.0])
-    assert picks(scores, 3) == [0, 1, 3]  # 2 is within 0.25 of 0 (and of 1): 3 is the first that is not
+    assert picks(scores, 3) == [
+        0,
+        1,
+        3,
+    ]  # 2 is within 0.25 of 0 (and of 1): 3 is the first that is not
     assert picks(scores, 2) == [0, 3]
     assert picks(scores, 4) == [0, 1, 2, 3]  # only the last start is held apart
     far = scores.copy()
@@ -768,7 +887,11 @@ def test_the_last_start_leaves_the_first_ones_cluster():
     assert picks(far, 3) == [0, 1, 6]  # u_ref (index G) is a start like any other
     clustered = table_u.copy()
     clustered[0, 3] = 0.1
-    assert picks(scores, 3, clustered, np.array([0.05, 0.05])) == [0, 1, 2]  # none stands apart: by score
+    assert picks(scores, 3, clustered, np.array([0.05, 0.05])) == [
+        0,
+        1,
+        2,
+    ]  # none stands apart: by score
 
 
 @pytest.mark.parametrize("case", ["iis_nominal"], indirect=True)
@@ -786,8 +909,12 @@ def test_a_workspace_scores_a_new_reference_posture_afresh(case):
     assert held.size  # the table's joints: held at q_current
     moved = chain.b.copy()
     moved[held] += 0.2  # the table elsewhere
-    postures = [(comp.home_u, chain.b), (comp.home_u, moved),  # the same u_ref, other held joints
-                (rng.uniform(chain.lower, chain.upper), chain.b), (rng.uniform(chain.lower, chain.upper), chain.b)]
+    postures = [
+        (comp.home_u, chain.b),
+        (comp.home_u, moved),  # the same u_ref, other held joints
+        (rng.uniform(chain.lower, chain.upper), chain.b),
+        (rng.uniform(chain.lower, chain.upper), chain.b),
+    ]
     used = kernels._workspace(K, C, S, m, U.shape[1], 4)
     last = None
     for k, (u_ref, b) in enumerate(postures):
@@ -795,7 +922,9 @@ def test_a_workspace_scores_a_new_reference_posture_afresh(case):
         fresh = kernels._workspace(K, C, S, m, U.shape[1], 4)
         kernels.best_starts(comp.ch, p, b, u_ref, comp.sw, U, O, Z, np.empty(m), fresh)
         assert np.array_equal(used[26], fresh[26]) and used[27][0] == fresh[27][0], k
-        assert last is None or not np.array_equal(fresh[26], last), k  # each posture scores differently
+        assert last is None or not np.array_equal(fresh[26], last), (
+            k
+        )  # each posture scores differently
         last = fresh[26].copy()
 
 
@@ -830,7 +959,10 @@ def _distance_gradient(comp, p, u):
     for v in range(len(u)):
         e = np.zeros(len(u))
         e[v] = h
-        grad[v] = (8.0 * (dist(u + e)[near] - dist(u - e)[near]) - (dist(u + 2 * e)[near] - dist(u - 2 * e)[near])) / (12 * h)
+        grad[v] = (
+            8.0 * (dist(u + e)[near] - dist(u - e)[near])
+            - (dist(u + 2 * e)[near] - dist(u - 2 * e)[near])
+        ) / (12 * h)
     return float(d[near]), grad
 
 
@@ -859,14 +991,18 @@ def _svd_step(comp, p, u0, ws, version=None):
     U, s, Vt = np.linalg.svd(ws[8] / comp.sw)
     lam = s**2
     null_rel = comp.null_rel
-    if rr <= kernels.NEAR_FIXATION:  # two eyes with a structural null direction: kernels.BINOCULAR_NULL
+    if (
+        rr <= kernels.NEAR_FIXATION
+    ):  # two eyes with a structural null direction: kernels.BINOCULAR_NULL
         null_rel = max(comp.ch[13][3], null_rel)
     cut = null_rel * lam[0]
     if np.any((lam > 0.1 * cut) & (lam < 10 * cut)):
         return None
     k = int(np.sum(lam > cut))
     V = Vt[:k].T
-    r_t = np.concatenate([kernels._tangent_residual(ws[7], c) for c in range(len(ws[7]) // 3)])  # J's rows' basis
+    r_t = np.concatenate(
+        [kernels._tangent_residual(ws[7], c) for c in range(len(ws[7]) // 3)]
+    )  # J's rows' basis
     dx = -V @ (s[:k] * (U[:, :k].T @ r_t) / (lam[:k] + kernels.DAMPING * rr))
     z = comp.sw * (u0 - comp.home_u)
     null_z = z - V @ (V.T @ z)
@@ -886,8 +1022,14 @@ def _svd_step(comp, p, u0, ws, version=None):
         short = d_min - (d + null_a @ dx)  # the null move's own approach (null_a . dx_range = 0)
         scale = min(1.0, kernels.MAX_STEP / np.abs(dx / comp.sw).max())  # the step's cap
         if version is not None and null_c @ null_c > kernels.DISTANCE_REACH * (cx @ cx):
-            null_a = null_a - (null_a @ null_c) / (null_c @ null_c) * null_c  # the version task outranks it
-        if d + scale * (a @ dx) < d_min and short > 0.0 and null_a @ null_a > kernels.DISTANCE_REACH * (a @ a):
+            null_a = (
+                null_a - (null_a @ null_c) / (null_c @ null_c) * null_c
+            )  # the version task outranks it
+        if (
+            d + scale * (a @ dx) < d_min
+            and short > 0.0
+            and null_a @ null_a > kernels.DISTANCE_REACH * (a @ a)
+        ):
             dx += short / (null_a @ null_a) * null_a
             held = True
     return dx / comp.sw, lam[k - 1] / lam[0], held
@@ -899,8 +1041,21 @@ def _one_iteration_off(comp, p, u0, reference, ws, ch=None):
     where the step was clipped at a bound or refused (its direction is then not the step's)."""
     chain = comp.chain
     u = u0.copy()
-    kernels._iterate(comp.ch if ch is None else ch, p, chain.b.copy(), u, comp.home_u, chain.lower, chain.upper,
-                     comp.sw, kernels.SECONDARY_GAIN, comp.null_rel, 1, ws, -1.0)
+    kernels._iterate(
+        comp.ch if ch is None else ch,
+        p,
+        chain.b.copy(),
+        u,
+        comp.home_u,
+        chain.lower,
+        chain.upper,
+        comp.sw,
+        kernels.SECONDARY_GAIN,
+        comp.null_rel,
+        1,
+        ws,
+        -1.0,
+    )
     move = u - u0
     if not (np.all(u > chain.lower) and np.all(u < chain.upper) and np.any(move)):
         return None
@@ -939,10 +1094,14 @@ def test_one_iteration_takes_the_task_priority_step_of_an_svd(case):
     (seen: 1e-12 or less, both forms)."""
     compared, worst = _first_steps_against_the_svd(case, 11)
     assert compared >= 30, f"{case.name}: only {compared} postures compared"
-    assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    assert worst < 1e-10, (
+        f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    )
 
 
-@pytest.mark.parametrize("case", ["iis_nominal", "iis_calibrated", "stereo_pan_tilt"], indirect=True)
+@pytest.mark.parametrize(
+    "case", ["iis_nominal", "iis_calibrated", "stereo_pan_tilt"], indirect=True
+)
 def test_one_iteration_in_the_column_form(case):
     """:func:`test_one_iteration_takes_the_task_priority_step_of_an_svd` for the heads whose free
     unknowns are no more than the Jacobian's rows (the eigen-decomposition of ``J^T J``, its
@@ -954,7 +1113,9 @@ def test_one_iteration_in_the_column_form(case):
     version = None if comp.version_row is None else (comp.version_row, VERSION_WEIGHT)
     compared, worst = _first_steps_against_the_svd(case, 13, version)
     assert compared >= 30, f"{case.name}: only {compared} postures compared"
-    assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    assert worst < 1e-10, (
+        f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    )
 
 
 @pytest.mark.parametrize("case", POLICY_HEADS, indirect=True)
@@ -981,7 +1142,9 @@ def test_the_step_stays_accurate_where_the_pointing_jacobian_loses_rank(case):
     for p, q in zip(P[batch.reachable], batch.q[batch.reachable], strict=True):
         answer = chain.u_from_q(q)
         for sigma in (1e-2, 1e-3, 1e-4):
-            u0 = np.clip(answer + rng.normal(0.0, sigma, chain.m), chain.lower + 1e-3, chain.upper - 1e-3)
+            u0 = np.clip(
+                answer + rng.normal(0.0, sigma, chain.m), chain.lower + 1e-3, chain.upper - 1e-3
+            )
             step = _svd_step(comp, p, u0, ws)
             off = None if step is None else _one_iteration_off(comp, p, u0, step[0], ws)
             if off is not None:
@@ -989,9 +1152,13 @@ def test_the_step_stays_accurate_where_the_pointing_jacobian_loses_rank(case):
                 worst = max(worst, off * math.sqrt(step[1]))
                 weakest = min(weakest, step[1])
     assert compared >= 200, f"{case.name}: only {compared} postures compared"
-    assert worst < 1e-8, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max / s"
+    assert worst < 1e-8, (
+        f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max / s"
+    )
     if case.name == "icub":
-        assert weakest < 1e-9, f"iCub: no weak direction near the cut (weakest kept s^2 / s_max^2 {weakest:.1g})"
+        assert weakest < 1e-9, (
+            f"iCub: no weak direction near the cut (weakest kept s^2 / s_max^2 {weakest:.1g})"
+        )
 
 
 @pytest.mark.parametrize("case", POLICY_HEADS, indirect=True)
@@ -1028,8 +1195,12 @@ def test_the_minimum_viewing_distance_holds_the_step_as_the_svd_does(case):
             off0 = _one_iteration_off(comp, p, u0, step[0], ws, unheld)
             without = min(without, np.inf if off0 is None else off0)
     assert compared >= 30 and held >= 5, f"{case.name}: {compared} postures compared, {held} held"
-    assert worst < 1e-10, f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
-    assert without > 1e-3, f"{case.name}: the step without the hold is as near the held one ({without:.2g})"
+    assert worst < 1e-10, (
+        f"{case.name}: the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
+    )
+    assert without > 1e-3, (
+        f"{case.name}: the step without the hold is as near the held one ({without:.2g})"
+    )
 
 
 @pytest.mark.parametrize("case", ["panda_camera"], indirect=True)
@@ -1054,15 +1225,21 @@ def test_a_camera_on_an_arm_is_kept_at_the_minimum_viewing_distance(case):
     assert batch.reachable.all()
     O, _ = case.axes(batch.q)
     dist = np.linalg.norm(P[:, None] - O, axis=2).min(axis=1)
-    assert dist.min() > comp.min_distance * (1 - 1e-5), f"target {int(np.argmin(dist))}: {dist.min():.6g} m"
+    assert dist.min() > comp.min_distance * (1 - 1e-5), (
+        f"target {int(np.argmin(dist))}: {dist.min():.6g} m"
+    )
     converged = batch.iterations < BATCH_MAX_ITERATIONS
     tol = _kkt_tolerance(comp)
     # held answers end within a few 1e-6 m of min_distance (the polish moves them): a 1e-4 m margin
     res, sign, _, close = _policy_kkt(case, batch.q[converged], P[converged], KKT_MARGIN, 1e-4)
     assert close.sum() >= 5, f"only {close.sum()} answers at the minimum viewing distance"
     worst = int(np.argmax(res))
-    assert res[worst] < tol, f"answer {worst} (held: {close[worst]}) is not stationary: {res[worst]:.3g}"
-    assert sign.max() < tol, f"the distance or a bound holds an answer the policy would pull off it ({sign.max():.3g})"
+    assert res[worst] < tol, (
+        f"answer {worst} (held: {close[worst]}) is not stationary: {res[worst]:.3g}"
+    )
+    assert sign.max() < tol, (
+        f"the distance or a bound holds an answer the policy would pull off it ({sign.max():.3g})"
+    )
 
 
 @pytest.mark.parametrize("case", ["icub"], indirect=True)
@@ -1091,13 +1268,22 @@ def test_the_zero_version_task_takes_the_svds_step_in_the_rows_form(case):
             compared += 1
             worst = max(worst, off * step[1])
             plain = _svd_step(comp, p, u0, ws)[0]
-            moved = max(moved, float(np.abs(step[0] / np.linalg.norm(step[0]) - plain / np.linalg.norm(plain)).max()))
+            moved = max(
+                moved,
+                float(
+                    np.abs(step[0] / np.linalg.norm(step[0]) - plain / np.linalg.norm(plain)).max()
+                ),
+            )
     assert compared >= 30, f"only {compared} postures compared"
-    assert moved > 1e-2, f"the version task changed no step (by {moved:.2g}): the check chose nothing"
+    assert moved > 1e-2, (
+        f"the version task changed no step (by {moved:.2g}): the check chose nothing"
+    )
     assert worst < 1e-10, f"the step's direction is off the SVD's by {worst:.2g} x s_max^2 / s^2"
 
 
-@pytest.mark.parametrize("sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)])
+@pytest.mark.parametrize(
+    "sizes", [(8, 2, 2, 6, 256, 4), (5, 1, 1, 4, 256, 4), (12, 3, 1, 9, 7, 1), (3, 2, 2, 2, 0, 0)]
+)
 def test_workspace_views_tile_their_buffers(sizes):
     """The solve's workspace (kernels._workspace) is views carved from one float buffer by a
     size written out by hand: every float view in its place, none overlapping another, the
@@ -1105,16 +1291,27 @@ def test_workspace_views_tile_their_buffers(sizes):
     K, C, S, m, G, n_top = sizes
     ws = kernels._workspace(*sizes)
     assert len(ws) == 47
-    spans = sorted((a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64)
+    spans = sorted(
+        (a.__array_interface__["data"][0], a.nbytes) for a in ws if a.dtype == np.float64
+    )
     for (start, size), (following, _) in zip(spans, spans[1:], strict=False):
         assert start + size == following  # adjacent: no overlap, no gap
-    buffer = ws[0].base  # numba's MemInfo of the float buffer: its address and, as a buffer, its size
+    buffer = ws[
+        0
+    ].base  # numba's MemInfo of the float buffer: its address and, as a buffer, its size
     assert spans[0][0] == buffer.data
     assert spans[-1][0] + spans[-1][1] - buffer.data == memoryview(buffer).nbytes  # used to its end
-    assert ws[0].shape == (K, 3, 3) and ws[3].shape == (C, 3, 3) and ws[8].shape == (2 * S, m) and ws[7].shape == (3 * S,)
+    assert (
+        ws[0].shape == (K, 3, 3)
+        and ws[3].shape == (C, 3, 3)
+        and ws[8].shape == (2 * S, m)
+        and ws[7].shape == (3 * S,)
+    )
     assert ws[26].shape == (G + 1,) and ws[32].shape == (n_top, m) and ws[27].dtype == np.int64
     assert np.array_equal(ws[21], np.zeros(3)) and np.array_equal(ws[40], np.ones(m))
-    assert np.isnan(ws[43]).all() and ws[43].shape == (m + K,) and ws[45].shape == (G,)  # no u_ref cached yet
+    assert (
+        np.isnan(ws[43]).all() and ws[43].shape == (m + K,) and ws[45].shape == (G,)
+    )  # no u_ref cached yet
     assert ws[46].shape == (4,)  # the chain's task scalars without the zero-version task
 
 
@@ -1145,7 +1342,9 @@ def test_two_eyes_on_a_long_shared_chain_get_the_compiled_solver(tmp_path):
             d = p - data.oMf[f].translation
             axis = data.oMf[f].rotation[:, 2]
             assert math.atan2(np.linalg.norm(np.cross(axis, d)), axis @ d) < 1e-9
-    eyes = solver.solve(p, sol.q, "eyes-only")  # the eyes alone, from the last answer: the rest stays
+    eyes = solver.solve(
+        p, sol.q, "eyes-only"
+    )  # the eyes alone, from the last answer: the rest stays
     moved = np.flatnonzero(eyes.q != sol.q)
     assert set(moved.tolist()) <= set(solver.free_joints("eyes-only").tolist())
 
@@ -1158,8 +1357,13 @@ def test_continuous_joints_off_the_head_are_read_and_on_it_refused(tmp_path):
 
     solver = GazeSolver(ERD / "tiago_description/robots/tiago.urdf", ("xtion_rgb_optical_frame",))
     assert solver.kind == "look-at" and solver.solve([2.0, 0.3, 1.0]).status == "fixated"
-    text = STEREO_PAN_TILT.replace('<joint name="pan" type="revolute">', '<joint name="pan" type="continuous">')
-    text = text.replace('<limit lower="-2.5" upper="2.5" effort="1" velocity="2"/>', '<limit effort="1" velocity="2"/>')
+    text = STEREO_PAN_TILT.replace(
+        '<joint name="pan" type="revolute">', '<joint name="pan" type="continuous">'
+    )
+    text = text.replace(
+        '<limit lower="-2.5" upper="2.5" effort="1" velocity="2"/>',
+        '<limit effort="1" velocity="2"/>',
+    )
     path = tmp_path / "continuous_pan.urdf"
     path.write_text(text)
     with pytest.raises(SpecError, match=r"\['pan'\] need finite <limit lower/upper>"):
@@ -1174,5 +1378,8 @@ def test_swapped_limits_on_a_head_are_named(tmp_path):
 
     path = tmp_path / "swapped.urdf"
     path.write_text(STEREO_PAN_TILT.replace('lower="-0.9" upper="1.2"', 'lower="1.2" upper="-0.9"'))
-    with pytest.raises(SpecError, match=r"swapped.urdf: joint 'tilt': limit lower 1.2 is above upper -0.9 \(PyBullet"):
+    with pytest.raises(
+        SpecError,
+        match=r"swapped.urdf: joint 'tilt': limit lower 1.2 is above upper -0.9 \(PyBullet",
+    ):
         GazeSolver(path, ("left_optical", "right_optical"))

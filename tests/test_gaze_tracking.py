@@ -83,7 +83,9 @@ def test_minimum_jerk_profile_function():
     assert f[0] == 0.0 and f[-1] == 1.0
     assert df[0] == df[-1] == ddf[0] == ddf[-1] == 0.0
     h = s[1] - s[0]
-    assert np.max(np.abs(np.gradient(f, h)[1:-1] - df[1:-1])) < 1e-8  # derivatives by finite differences
+    assert (
+        np.max(np.abs(np.gradient(f, h)[1:-1] - df[1:-1])) < 1e-8
+    )  # derivatives by finite differences
     assert np.max(np.abs(np.gradient(df, h)[1:-1] - ddf[1:-1])) < 1e-7
     np.testing.assert_allclose(df, df[::-1], atol=1e-12)  # a symmetric bell
     assert np.all(np.diff(df[: s.size // 2 + 1]) >= 0) and np.all(np.diff(df[s.size // 2 :]) <= 0)
@@ -93,7 +95,9 @@ def test_minimum_jerk_profile_function():
 
 
 @pytest.mark.parametrize(
-    "head, max_acceleration", [("nominal", None), ("calibrated", None), ("nominal", 40.0)], indirect=["head"]
+    "head, max_acceleration",
+    [("nominal", None), ("calibrated", None), ("nominal", 40.0)],
+    indirect=["head"],
 )
 def test_saccade_is_minimum_jerk_and_locks_on(head, max_acceleration):
     """Static target A, then B: one saccade, min-jerk, within the limits, ending exactly at the answer."""
@@ -115,7 +119,10 @@ def test_saccade_is_minimum_jerk_and_locks_on(head, max_acceleration):
     # the duration rule: the fewest samples within the velocity (and acceleration) limits
     T = max(rule.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * np.abs(delta) / vmax)))
     if max_acceleration is not None:
-        T = max(T, math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * np.abs(delta) / max_acceleration))))
+        T = max(
+            T,
+            math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * np.abs(delta) / max_acceleration))),
+        )
     assert N == math.ceil(T / DT - 1e-9)
     # ends exactly at the solver's answer for the target at its onset
     assert np.array_equal(tr.q[sac[-1]], goal)
@@ -134,7 +141,9 @@ def test_saccade_is_minimum_jerk_and_locks_on(head, max_acceleration):
     np.testing.assert_allclose(v, v[::-1], atol=1e-9 * np.max(np.abs(v)))
     v_all = np.abs(np.diff(np.vstack([q0, tr.q]), axis=0)) / DT
     assert np.all(v_all <= vmax * (1 + 1e-12))
-    if max_acceleration is None:  # the shortest such saccade: the limiting joint nearly at its speed limit
+    if (
+        max_acceleration is None
+    ):  # the shortest such saccade: the limiting joint nearly at its speed limit
         assert np.max(np.abs(v) / vmax) > 0.98
     else:
         a = np.abs(np.diff(seg, n=2, axis=0)) / DT**2
@@ -222,8 +231,13 @@ def test_a_saccade_whose_target_moves_on_hands_over_to_pursuit(head, turn):
     A, B = _two_targets(model)
     C = B + 0.5 * (B - A) if turn == "on" else A - 0.5 * (B - A)
     hold, jump = 20, 120
-    P = np.vstack([np.repeat(A[None], hold, axis=0), np.repeat(B[None], jump - hold, axis=0),
-                   np.repeat(C[None], 1500, axis=0)])
+    P = np.vstack(
+        [
+            np.repeat(A[None], hold, axis=0),
+            np.repeat(B[None], jump - hold, axis=0),
+            np.repeat(C[None], 1500, axis=0),
+        ]
+    )
     rule = SaccadeRule()
     interval = round(rule.reaim_interval / DT)
     q0 = solver.solve(A).q
@@ -252,9 +266,21 @@ def test_no_saccade_towards_a_target_the_head_cannot_point_at(head):
     behind = np.array([0.0, 2.0, 0.7])
     assert solver.solve(behind).status not in SACCADE_STATUSES
     away = 20 + 1500
-    P = np.vstack([np.repeat(A[None], 20, axis=0), np.repeat(behind[None], away - 20, axis=0),
-                   np.repeat(A[None], 800, axis=0)])
-    tr = track(solver, P, DT, FAST * solver.velocity_limit, q_current=solver.solve(A).q, saccades=SaccadeRule())
+    P = np.vstack(
+        [
+            np.repeat(A[None], 20, axis=0),
+            np.repeat(behind[None], away - 20, axis=0),
+            np.repeat(A[None], 800, axis=0),
+        ]
+    )
+    tr = track(
+        solver,
+        P,
+        DT,
+        FAST * solver.velocity_limit,
+        q_current=solver.solve(A).q,
+        saccades=SaccadeRule(),
+    )
     assert not tr.saccade[:away].any() and not tr.reachable[20:away].any()
     assert tr.locked[away - 1]  # at rest on the best answer behind
     assert tr.saccade[away] and tr.locked[-1]
@@ -278,7 +304,9 @@ def test_a_head_pursuing_at_speed_starts_no_saccade(head):
     pursuit = track(solver, P, DT, vmax, q_current=q0)
     assert not with_saccades.saccade.any()
     np.testing.assert_array_equal(with_saccades.q, pursuit.q)
-    assert np.median(pursuit.pointing_error.max(axis=1)) > SaccadeRule().threshold  # it does run away
+    assert (
+        np.median(pursuit.pointing_error.max(axis=1)) > SaccadeRule().threshold
+    )  # it does run away
 
 
 MIMIC_HEAD = """<?xml version="1.0"?>
@@ -320,12 +348,18 @@ def test_pursuit_keeps_a_mimic_relation(mimic_head):
     assert [sorted(g.tolist()) for g in solver.motion_groups] == [sorted([it, i2])]
     a, b = np.array([2.0, 0.0, 1.3]), np.array([0.8, 1.2, 0.7])
     qa = solver.solve(a).q
-    P = np.vstack([np.repeat(a[None], 10, axis=0), np.repeat(b[None], 1200, axis=0)])  # tilt: 0.28 rad to go
-    vmax = {"tilt": 0.3}  # the driver slower than its follower's share: the pair moves at the driver's pace
+    P = np.vstack(
+        [np.repeat(a[None], 10, axis=0), np.repeat(b[None], 1200, axis=0)]
+    )  # tilt: 0.28 rad to go
+    vmax = {
+        "tilt": 0.3
+    }  # the driver slower than its follower's share: the pair moves at the driver's pace
     tr = solver.track(P, DT, vmax, q_current=qa)
     assert np.abs(tr.q[:, i2] - 0.5 * tr.q[:, it]).max() < 1e-12
     step = np.abs(np.diff(np.vstack([qa, tr.q]), axis=0))
-    assert np.all(step[:, it] <= 0.3 * DT * (1 + 1e-12)) and np.all(step[:, i2] <= 2.0 * DT * (1 + 1e-12))
+    assert np.all(step[:, it] <= 0.3 * DT * (1 + 1e-12)) and np.all(
+        step[:, i2] <= 2.0 * DT * (1 + 1e-12)
+    )
     assert np.isclose(step[:, ip], 2.0 * DT).any()  # pan alone at its own limit
     assert tr.locked[-1] and tr.reachable[-1]
 
@@ -344,17 +378,29 @@ def test_speed_limits_named_joint_by_joint(mimic_head):
     v = GazeTracker(solver, DT).max_velocity  # URDF limits; the gripper's 0 is not moved
     assert v[names.index("lift")] == 0.1 and v[names.index("gripper_joint")] == 0.0
     v = speed_limits(solver, {"pan": 0.5}, moved)
-    assert v[names.index("pan")] == 0.5 and v[names.index("tilt")] == 2.0 and v[names.index("lift")] == 0.1
-    with pytest.raises(ConfigurationError, match="rad/s on revolute joints and m/s on prismatic ones .lift"):
+    assert (
+        v[names.index("pan")] == 0.5
+        and v[names.index("tilt")] == 2.0
+        and v[names.index("lift")] == 0.1
+    )
+    with pytest.raises(
+        ConfigurationError, match="rad/s on revolute joints and m/s on prismatic ones .lift"
+    ):
         GazeTracker(solver, DT, 1.0)
     with pytest.raises(ConfigurationError, match="unknown joint 'nope'"):
         GazeTracker(solver, DT, {"nope": 1.0})
     zero = np.ones(len(names))
     zero[names.index("lift")] = 0.0
-    with pytest.raises(ConfigurationError, match=r"joint .lift. moves the cameras .* \(from max_velocity\)"):
+    with pytest.raises(
+        ConfigurationError, match=r"joint .lift. moves the cameras .* \(from max_velocity\)"
+    ):
         GazeTracker(solver, DT, zero)
     no_lift_speed = path.with_name("no_lift_speed.urdf")
-    no_lift_speed.write_text(MIMIC_HEAD.replace('upper="0.3" effort="1" velocity="0.1"', 'upper="0.3" effort="1" velocity="0"'))
+    no_lift_speed.write_text(
+        MIMIC_HEAD.replace(
+            'upper="0.3" effort="1" velocity="0.1"', 'upper="0.3" effort="1" velocity="0"'
+        )
+    )
     with pytest.raises(ConfigurationError, match="joint 'lift' .* URDF <limit velocity>"):
         GazeTracker(solver_for(no_lift_speed, ["cam_optical"]), DT)
     # one kind of joint: a scalar is every moved joint's limit
@@ -399,7 +445,9 @@ def test_tracking_on_one_camera_and_rigid_pair_heads(other_head):
     P_reach, _ = other_head.reachable_targets(2, seed=7)
     t = np.linspace(0.0, 1.0, 400)[:, None]
     moving = P_reach[1] + 0.02 * np.hstack([np.sin(3 * t), np.cos(2 * t) - 1.0, 0.0 * t])
-    P = np.vstack([np.repeat(P_reach[:1], 100, axis=0), moving, np.repeat(moving[-1:], 600, axis=0)])
+    P = np.vstack(
+        [np.repeat(P_reach[:1], 100, axis=0), moving, np.repeat(moving[-1:], 600, axis=0)]
+    )
     vmax = FAST * solver.velocity_limit
     tr = solver.track(P, DT, vmax, q_current=solver.home, saccades=SaccadeRule())
     assert tr.q.shape == (len(P), solver.n) and tr.joint_names == solver.joint_names
@@ -419,7 +467,9 @@ def test_camera_poses_of_any_head_match_yourdfpy(other_head):
     import yourdfpy
 
     solver = other_head.solver
-    robot = yourdfpy.URDF.load(str(other_head.urdf), load_meshes=False, build_collision_scene_graph=False)
+    robot = yourdfpy.URDF.load(
+        str(other_head.urdf), load_meshes=False, build_collision_scene_graph=False
+    )
     order = [solver.joint_names.index(j) for j in robot.actuated_joint_names]
     rng = np.random.default_rng(2)
     lo, hi = solver.lower, solver.upper

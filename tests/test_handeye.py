@@ -50,7 +50,9 @@ def make_data(rng: np.random.Generator, n: int = 8) -> tuple[np.ndarray, ...]:
 def add_noise(rng: np.random.Generator, T: np.ndarray, sr: float, st: float) -> np.ndarray:
     out = T.copy()
     for k in range(len(T)):
-        d = homogeneous(Rotation.from_rotvec(rng.normal(0, sr, 3)).as_matrix(), rng.normal(0, st, 3))
+        d = homogeneous(
+            Rotation.from_rotvec(rng.normal(0, sr, 3)).as_matrix(), rng.normal(0, st, 3)
+        )
         out[k] = T[k] @ d
     return out
 
@@ -78,12 +80,17 @@ def test_relative_motions_satisfy_ax_xb() -> None:
 # OpenCV: calibrateHandEye(R_gripper2base, t_gripper2base, R_target2cam, t_target2cam) returns
 # cam2gripper. "gripper2base" maps gripper coordinates to base ones: our T_base_hand;
 # "target2cam" is T_camera_target; "cam2gripper" is T_hand_camera = X.
-OPENCV = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park_martin": cv2.CALIB_HAND_EYE_PARK,
-          "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
+OPENCV = {
+    "tsai": cv2.CALIB_HAND_EYE_TSAI,
+    "park_martin": cv2.CALIB_HAND_EYE_PARK,
+    "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
+}
 
 
 def opencv_hand_eye(H: np.ndarray, C: np.ndarray, method: str) -> np.ndarray:
-    R, t = cv2.calibrateHandEye(H[:, :3, :3], H[:, :3, 3], C[:, :3, :3], C[:, :3, 3], method=OPENCV[method])
+    R, t = cv2.calibrateHandEye(
+        H[:, :3, :3], H[:, :3, 3], C[:, :3, :3], C[:, :3, 3], method=OPENCV[method]
+    )
     return homogeneous(R, t.ravel())
 
 
@@ -135,8 +142,12 @@ def test_parallel_axes_only() -> None:
     rng = np.random.default_rng(0)
     X, Z, _, _ = make_data(rng)
     axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
-    H = np.array([homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for a in np.linspace(-1.0, 1.0, 6)])
+    H = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a in np.linspace(-1.0, 1.0, 6)
+        ]
+    )
     C = inverse(X)[None] @ inverse(H) @ Z[None]
     rms, axes = rotation_spread(H)
     assert abs(abs(axes[:, 0] @ axis) - 1.0) < 1e-9 and rms[1] < 1e-6
@@ -148,8 +159,14 @@ def test_parallel_axes_only() -> None:
 def test_tiny_rotations() -> None:
     rng = np.random.default_rng(0)
     X, Z, _, _ = make_data(rng)
-    H = np.array([homogeneous(Rotation.from_rotvec(rng.normal(0, 1e-4, 3)).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for _ in range(6)])
+    H = np.array(
+        [
+            homogeneous(
+                Rotation.from_rotvec(rng.normal(0, 1e-4, 3)).as_matrix(), rng.uniform(-0.5, 0.5, 3)
+            )
+            for _ in range(6)
+        ]
+    )
     C = inverse(X)[None] @ inverse(H) @ Z[None]
     with pytest.raises(DegenerateDataError, match="tiny rotations"):
         calibrate_hand_eye(H, C)
@@ -159,8 +176,12 @@ def test_weak_rotation_warns() -> None:
     rng = np.random.default_rng(0)
     X, Z, _, _ = make_data(rng)
     # big rotations about z, and 1 deg about x: determined, but weakly
-    H = np.array([homogeneous(Rotation.from_euler("zx", [a, b]).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for a, b in zip(np.linspace(-1, 1, 6), np.radians([0, 1, 0, -1, 0, 1]), strict=True)])
+    H = np.array(
+        [
+            homogeneous(Rotation.from_euler("zx", [a, b]).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a, b in zip(np.linspace(-1, 1, 6), np.radians([0, 1, 0, -1, 0, 1]), strict=True)
+        ]
+    )
     C = inverse(X)[None] @ inverse(H) @ Z[None]
     r = calibrate_hand_eye(H, C)
     assert np.abs(r.X - X).max() < 1e-8
@@ -224,10 +245,16 @@ def test_opencv_answers_where_we_refuse() -> None:
     rng = np.random.default_rng(0)
     X, Z, H, C = make_data(rng, 8)
     axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
-    Hp = np.array([homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                   for a in np.linspace(-1.0, 1.0, 6)])
-    cases = [(Hp, inverse(X)[None] @ inverse(Hp) @ Z[None], "parallel axes"),
-             (H, inverse(C), "inconsistent directions")]
+    Hp = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a in np.linspace(-1.0, 1.0, 6)
+        ]
+    )
+    cases = [
+        (Hp, inverse(X)[None] @ inverse(Hp) @ Z[None], "parallel axes"),
+        (H, inverse(C), "inconsistent directions"),
+    ]
     for Hc, Cc, reason in cases:
         try:
             X_cv = opencv_hand_eye(Hc, Cc, "tsai")
@@ -255,7 +282,9 @@ def test_every_solver_takes_1000_poses_in_seconds_and_little_memory() -> None:
         assert r.residual_translation.max() < EXACT and r.residual_rotation.max() < EXACT, method
     elapsed = time.perf_counter() - start
     assert elapsed < 15.0  # ~2 s on a shared 2-core machine; all pairs took minutes
-    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 1_000_000  # under 1 GiB more
+    assert (
+        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 1_000_000
+    )  # under 1 GiB more
 
 
 def test_motion_pairs_all_up_to_31_poses_then_15_per_pose() -> None:
@@ -276,8 +305,12 @@ def test_many_poses_degenerate_still_refused() -> None:
     rng = np.random.default_rng(0)
     X, Z, _, _ = make_data(rng)
     axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
-    H = np.array([homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for a in rng.uniform(-1.5, 1.5, 500)])
+    H = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a in rng.uniform(-1.5, 1.5, 500)
+        ]
+    )
     C = inverse(X)[None] @ inverse(H) @ Z[None]
     for method in ALL_METHODS:
         with pytest.raises(DegenerateDataError, match="parallel axes"):
@@ -298,6 +331,11 @@ def test_many_noisy_poses_as_accurate_as_all_pairs() -> None:
             A, B = relative_motions(Hn, Cn, pairs)
             for solve in (solve_tsai, solve_park_martin, solve_daniilidis):
                 Xe = solve(A, B)
-                err[kind].append((float(rotation_error(Xe[:3, :3], X[:3, :3])), float(np.linalg.norm(Xe[:3, 3] - X[:3, 3]))))
+                err[kind].append(
+                    (
+                        float(rotation_error(Xe[:3, :3], X[:3, :3])),
+                        float(np.linalg.norm(Xe[:3, 3] - X[:3, 3])),
+                    )
+                )
     ours, every = np.mean(err["ours"], axis=0), np.mean(err["all"], axis=0)
     assert np.all(ours < 1.15 * every), (ours, every)

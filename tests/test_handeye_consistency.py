@@ -42,10 +42,14 @@ from cpc2urdf.transforms import homogeneous, inverse
 NOISE = PoseNoise(0.0001, math.radians(0.02), 0.0003, math.radians(0.05))  # as handeye_mistakes
 
 
-def _perturbed(rng: np.random.Generator, T: np.ndarray, angle: float, position: float) -> np.ndarray:
+def _perturbed(
+    rng: np.random.Generator, T: np.ndarray, angle: float, position: float
+) -> np.ndarray:
     """The noise model of noise.py: ``R' = Exp(dr) R``, ``p' = p + dp``."""
     out = T.copy()
-    out[:, :3, :3] = Rotation.from_rotvec(rng.normal(0.0, angle, (len(T), 3))).as_matrix() @ T[:, :3, :3]
+    out[:, :3, :3] = (
+        Rotation.from_rotvec(rng.normal(0.0, angle, (len(T), 3))).as_matrix() @ T[:, :3, :3]
+    )
     out[:, :3, 3] += rng.normal(0.0, position, (len(T), 3))
     return out
 
@@ -60,8 +64,12 @@ def test_residual_covariance_matches_monte_carlo() -> None:
     noise = PoseNoise(0.0003, math.radians(0.05), 0.0008, math.radians(0.1))
     e = []
     for _ in range(4000):
-        e_t, e_r = residual_vectors(_perturbed(rng, H, noise.hand_angle, noise.hand_position),
-                                    _perturbed(rng, C, noise.camera_angle, noise.camera_position), X_TRUE, Z_TRUE)
+        e_t, e_r = residual_vectors(
+            _perturbed(rng, H, noise.hand_angle, noise.hand_position),
+            _perturbed(rng, C, noise.camera_angle, noise.camera_position),
+            X_TRUE,
+            Z_TRUE,
+        )
         e.append(np.concatenate([e_t, e_r], axis=-1))
     S = residual_covariance(noise, H, C, X_TRUE, Z_TRUE)
     for k in range(3):
@@ -89,10 +97,15 @@ def test_fast_rotation_helpers_match_scipy() -> None:
     assert np.abs(rotvec_from_matrix(r.as_matrix()) - r.as_rotvec()).max() < 1e-9
     tiny = Rotation.from_rotvec(np.random.default_rng(0).normal(0, 1e-9, (50, 3)))
     assert np.abs(rotvec_from_matrix(tiny.as_matrix()) - tiny.as_rotvec()).max() < 1e-20
-    near_pi = Rotation.from_rotvec(np.array([[0.0, 0.0, math.pi - 1e-5], [0.6, 0.0, 0.8]]) * [[1.0], [math.pi - 2e-3]])
+    near_pi = Rotation.from_rotvec(
+        np.array([[0.0, 0.0, math.pi - 1e-5], [0.6, 0.0, 0.8]]) * [[1.0], [math.pi - 2e-3]]
+    )
     assert np.abs(rotvec_from_matrix(near_pi.as_matrix()) - near_pi.as_rotvec()).max() < 1e-9
     for v in ([0.3, -1.2, 2.0], [1e-10, 0.0, 0.0]):
-        assert np.abs(matrix_from_rotvec(np.array(v)) - Rotation.from_rotvec(v).as_matrix()).max() < 1e-15
+        assert (
+            np.abs(matrix_from_rotvec(np.array(v)) - Rotation.from_rotvec(v).as_matrix()).max()
+            < 1e-15
+        )
 
 
 # ---- the pose file's noise section ---------------------------------------------------------------
@@ -106,23 +119,45 @@ def test_noise_section_round_trip_in_file_units(tmp_path: Path) -> None:
     assert doc["noise"]["T_base_hand"]["angle"] == pytest.approx(0.02)
     back = load_handeye_poses(path).noise
     assert back is not None
-    assert np.allclose([back.hand_position, back.hand_angle, back.camera_position, back.camera_angle],
-                       [NOISE.hand_position, NOISE.hand_angle, NOISE.camera_position, NOISE.camera_angle])
+    assert np.allclose(
+        [back.hand_position, back.hand_angle, back.camera_position, back.camera_angle],
+        [NOISE.hand_position, NOISE.hand_angle, NOISE.camera_position, NOISE.camera_angle],
+    )
     del doc["noise"]  # a file without the section (every file before it existed) still reads
     assert handeye_poses_from_json(doc).noise is None
 
 
-@pytest.mark.parametrize(("noise", "message"), [
-    ({"T_base_hand": {"position": 0.1, "angle": 0.01}}, r"noise must have exactly the keys"),
-    ({"T_base_hand": {"position": 0.1}, "T_camera_target": {"position": 0.1, "angle": 0.1}},
-     r"noise.T_base_hand must be \{'position': std, 'angle': std\}"),
-    ({"T_base_hand": {"position": -1, "angle": 0.01}, "T_camera_target": {"position": 0.1, "angle": 0.1}},
-     r"noise.T_base_hand.position must be >= 0"),
-    ({"T_base_hand": {"position": "x", "angle": 0.01}, "T_camera_target": {"position": 0.1, "angle": 0.1}},
-     r"noise.T_base_hand.position must be a number"),
-    ({"T_base_hand": {"position": 0, "angle": 0}, "T_camera_target": {"position": 0, "angle": 0.1}},
-     r"noise: the position and the angle noise must each be > 0"),
-])
+@pytest.mark.parametrize(
+    ("noise", "message"),
+    [
+        ({"T_base_hand": {"position": 0.1, "angle": 0.01}}, r"noise must have exactly the keys"),
+        (
+            {"T_base_hand": {"position": 0.1}, "T_camera_target": {"position": 0.1, "angle": 0.1}},
+            r"noise.T_base_hand must be \{'position': std, 'angle': std\}",
+        ),
+        (
+            {
+                "T_base_hand": {"position": -1, "angle": 0.01},
+                "T_camera_target": {"position": 0.1, "angle": 0.1},
+            },
+            r"noise.T_base_hand.position must be >= 0",
+        ),
+        (
+            {
+                "T_base_hand": {"position": "x", "angle": 0.01},
+                "T_camera_target": {"position": 0.1, "angle": 0.1},
+            },
+            r"noise.T_base_hand.position must be a number",
+        ),
+        (
+            {
+                "T_base_hand": {"position": 0, "angle": 0},
+                "T_camera_target": {"position": 0, "angle": 0.1},
+            },
+            r"noise: the position and the angle noise must each be > 0",
+        ),
+    ],
+)
 def test_bad_noise_section_names_the_field(noise: object, message: str) -> None:
     doc = {**clean_document(0, 4), "noise": noise}
     with pytest.raises(InputFileError, match=r"f\.json: " + message):
@@ -146,7 +181,9 @@ def test_clean_stage2_simulation_passes() -> None:
     truth = s2.perturb_cameras(load_model("iis_head"), np.random.default_rng(1))
     identified = truth.without_frames(["camera"])
     for seed, (n, px) in enumerate([(5, 0.1), (10, 0.5), (20, 0.2), (20, 0.0)]):
-        r = s2.run_stage2(identified, truth, n_poses=n, pixel_noise=px, seed=seed, method="park_martin")
+        r = s2.run_stage2(
+            identified, truth, n_poses=n, pixel_noise=px, seed=seed, method="park_martin"
+        )
         for camera, res in r.results.items():
             assert res.consistency is not None and res.consistency.consistent, (seed, camera)
             details = r.model.metadata.handeye[camera].details
@@ -171,7 +208,8 @@ def test_each_tested_mistake_is_undone_by_its_fix(m: mk.Mistake) -> None:
     # Apply the inverse of every fix to clean poses: the gate names exactly that mistake.
     H, C = clean_poses(4, 10)
     broken = {
-        "hand_inverted": lambda: (inverse(H), C), "camera_inverted": lambda: (H, inverse(C)),
+        "hand_inverted": lambda: (inverse(H), C),
+        "camera_inverted": lambda: (H, inverse(C)),
         "both_inverted": lambda: (inverse(H), inverse(C)),
         "hand_transposed": lambda: (mk._transpose_rotations(H), C),
         "camera_transposed": lambda: (H, mk._transpose_rotations(C)),
@@ -196,14 +234,20 @@ def test_each_tested_mistake_is_undone_by_its_fix(m: mk.Mistake) -> None:
 def _wxyz_as_xyzw(T: np.ndarray) -> np.ndarray:
     out = T.copy()
     q = Rotation.from_matrix(T[:, :3, :3]).as_quat()  # x, y, z, w
-    out[:, :3, :3] = Rotation.from_quat(np.roll(q, 1, axis=-1)).as_matrix()  # read w, x, y, z as x, y, z, w
+    out[:, :3, :3] = Rotation.from_quat(
+        np.roll(q, 1, axis=-1)
+    ).as_matrix()  # read w, x, y, z as x, y, z, w
     return out
 
 
 def test_quaternion_order_is_recoverable_from_the_rotation() -> None:
     R = Rotation.random(50, random_state=5)
-    wrong = Rotation.from_quat(np.roll(R.as_quat(), 1, axis=-1) * np.where(np.arange(50) % 2, 1, -1)[:, None])
-    assert np.abs(mk.rotation_from_wxyz_read_as_xyzw(wrong.as_matrix()) - R.as_matrix()).max() < 1e-12
+    wrong = Rotation.from_quat(
+        np.roll(R.as_quat(), 1, axis=-1) * np.where(np.arange(50) % 2, 1, -1)[:, None]
+    )
+    assert (
+        np.abs(mk.rotation_from_wxyz_read_as_xyzw(wrong.as_matrix()) - R.as_matrix()).max() < 1e-12
+    )
 
 
 def test_stage2_mistakes_are_named() -> None:
@@ -214,9 +258,12 @@ def test_stage2_mistakes_are_named() -> None:
     obs = s2.simulate_observations(truth, q, T_base_target, rng, pixel_noise=0.2)
     C = obs.T_camera_target["camera_left_optical"]
     H = s2.hand_poses(truth, "camera_left_optical", q)
-    for code, (Hm, Cm) in {"both_inverted": (inverse(H), inverse(C)), "camera_inverted": (H, inverse(C)),
-                           "hand_lengths_small": (mk._scale_lengths(H, 1e-3), C),
-                           "paired_previous": (H, np.roll(C, 1, axis=0))}.items():
+    for code, (Hm, Cm) in {
+        "both_inverted": (inverse(H), inverse(C)),
+        "camera_inverted": (H, inverse(C)),
+        "hand_lengths_small": (mk._scale_lengths(H, 1e-3), C),
+        "paired_previous": (H, np.roll(C, 1, axis=0)),
+    }.items():
         assert check_consistency(Hm, Cm).code == code
 
 
@@ -229,10 +276,20 @@ def test_outliers_are_named_by_their_labels() -> None:
 
 def test_stated_noise_far_from_the_residuals() -> None:
     H, C = clean_poses(6, 10)
-    small = PoseNoise(NOISE.hand_position / 10, NOISE.hand_angle / 10, NOISE.camera_position / 10, NOISE.camera_angle / 10)
+    small = PoseNoise(
+        NOISE.hand_position / 10,
+        NOISE.hand_angle / 10,
+        NOISE.camera_position / 10,
+        NOISE.camera_angle / 10,
+    )
     r = check_consistency(H, C, noise=small)
     assert r.code == "noise_exceeded" and r.noise_ratio > 5 and "the stated noise" in r.cause
-    large = PoseNoise(NOISE.hand_position * 10, NOISE.hand_angle * 10, NOISE.camera_position * 10, NOISE.camera_angle * 10)
+    large = PoseNoise(
+        NOISE.hand_position * 10,
+        NOISE.hand_angle * 10,
+        NOISE.camera_position * 10,
+        NOISE.camera_angle * 10,
+    )
     r = check_consistency(H, C, noise=large)
     assert r.code == "below_noise" and r.noise_ratio < 0.2
     assert check_consistency(H, C, noise=NOISE).consistent
@@ -241,8 +298,12 @@ def test_stated_noise_far_from_the_residuals() -> None:
 def test_residuals_no_setup_gives_are_refused() -> None:
     H, C = clean_poses(7, 10)
     rng = np.random.default_rng(7)
-    C = np.array([homogeneous(Rotation.random(random_state=int(s)).as_matrix(), T[:3, 3])
-                  for s, T in zip(rng.integers(0, 10**6, len(C)), C, strict=True)])  # random rotations
+    C = np.array(
+        [
+            homogeneous(Rotation.random(random_state=int(s)).as_matrix(), T[:3, 3])
+            for s, T in zip(rng.integers(0, 10**6, len(C)), C, strict=True)
+        ]
+    )  # random rotations
     r = check_consistency(H, C)
     assert r.code == "implausible" and "no tested mistake explains them" in r.evidence
 
@@ -250,8 +311,12 @@ def test_residuals_no_setup_gives_are_refused() -> None:
 def test_degenerate_data_is_refused_before_the_gate() -> None:
     H, C = clean_poses(0, 6)
     axis = np.array([0.0, 0.0, 1.0])
-    Hp = np.array([homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), T[:3, 3])
-                   for a, T in zip(np.linspace(-1, 1, 6), H, strict=True)])
+    Hp = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(axis * a).as_matrix(), T[:3, 3])
+            for a, T in zip(np.linspace(-1, 1, 6), H, strict=True)
+        ]
+    )
     Cp = inverse(X_TRUE)[None] @ inverse(Hp) @ Z_TRUE[None]
     with pytest.raises(DegenerateDataError, match="parallel axes") as e:
         calibrate(Hp, inverse(Cp), "kronecker", gate=True)
@@ -265,7 +330,10 @@ def test_accepted_inconsistent_data_carries_the_diagnosis() -> None:
     assert e.value.report.code == "camera_inverted"
     r = calibrate(H, inverse(C), "tsai", gate=Gate(accept_inconsistent=True))
     assert r.consistency is not None and r.consistency.code == "camera_inverted"
-    assert any(w.startswith("inconsistent data accepted: inconsistent directions: camera poses") for w in r.warnings)
+    assert any(
+        w.startswith("inconsistent data accepted: inconsistent directions: camera poses")
+        for w in r.warnings
+    )
     assert r.to_json()["consistency"]["code"] == "camera_inverted"
 
 
@@ -273,7 +341,10 @@ def test_pose_file_errors_name_the_file(tmp_path: Path) -> None:
     doc = MISTAKES[0][0](clean_document(0))
     path = tmp_path / "hand.json"
     path.write_text(json.dumps(doc))
-    with pytest.raises(InconsistentPosesError, match=r"^.*hand\.json: inconsistent data: inconsistent directions: hand"):
+    with pytest.raises(
+        InconsistentPosesError,
+        match=r"^.*hand\.json: inconsistent data: inconsistent directions: hand",
+    ):
         calibrate_poses(load_handeye_poses(path), "kronecker")
 
 
@@ -297,11 +368,16 @@ def test_cli_refuses_each_mistake_and_accepts_on_request(
     assert main([*argv, "--accept-inconsistent"]) == 0
     assert "warning: inconsistent data accepted: " in capsys.readouterr().out
     record = load_model(out).metadata.handeye["camera_left_optical"]
-    assert record.details["consistency"]["code"] == code and not record.details["consistency"]["consistent"]
+    assert (
+        record.details["consistency"]["code"] == code
+        and not record.details["consistency"]["consistent"]
+    )
     assert any(words in w for w in record.warnings)
 
 
-def test_cli_clean_file_passes_and_method_all_refuses_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_clean_file_passes_and_method_all_refuses_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     poses = tmp_path / "poses.json"
     poses.write_text(json.dumps(clean_document(1)))
     assert main(["handeye", str(poses), "--method", "all", "--json"]) == 0

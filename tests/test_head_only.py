@@ -35,9 +35,11 @@ NOISE_T, NOISE_R = 0.5e-3, np.radians(0.1)  # [m], [rad] measurement noise per c
 
 
 def _fixed(name: str, parent: str, xyz: str, rpy: str) -> str:
-    return (f'  <link name="{name}"/>\n  <joint name="{name}_joint" type="fixed">\n'
-            f'    <parent link="{parent}"/>\n    <child link="{name}"/>\n'
-            f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n  </joint>\n')
+    return (
+        f'  <link name="{name}"/>\n  <joint name="{name}_joint" type="fixed">\n'
+        f'    <parent link="{parent}"/>\n    <child link="{name}"/>\n'
+        f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n  </joint>\n'
+    )
 
 
 @dataclass(frozen=True)
@@ -60,13 +62,21 @@ class Head:
 
 
 HEADS = {
-    "icub": Head(ICUB_SHARE / "iCub/robots/iCubGenova04/model.urdf", "head", "eye_camera",
-                 ("neck_pitch", "neck_roll", "neck_yaw"),
-                 _fixed("head_plate", "head", "0.1 0.05 0.12", "0.1 0.2 0.3")
-                 + _fixed("eye_camera", "head", "-0.034 0.11 0.06", "0 0 0")),
-    "talos": Head(SHARE / "example-robot-data/robots/talos_data/robots/talos_full_v2.urdf", "head_2_link",
-                  "rgbd_optical_frame", ("head_1", "head_2"),
-                  _fixed("head_plate", "head_2_link", "0.1 0.05 0.12", "0.1 0.2 0.3")),
+    "icub": Head(
+        ICUB_SHARE / "iCub/robots/iCubGenova04/model.urdf",
+        "head",
+        "eye_camera",
+        ("neck_pitch", "neck_roll", "neck_yaw"),
+        _fixed("head_plate", "head", "0.1 0.05 0.12", "0.1 0.2 0.3")
+        + _fixed("eye_camera", "head", "-0.034 0.11 0.06", "0 0 0"),
+    ),
+    "talos": Head(
+        SHARE / "example-robot-data/robots/talos_data/robots/talos_full_v2.urdf",
+        "head_2_link",
+        "rgbd_optical_frame",
+        ("head_1", "head_2"),
+        _fixed("head_plate", "head_2_link", "0.1 0.05 0.12", "0.1 0.2 0.3"),
+    ),
 }
 
 
@@ -90,8 +100,13 @@ def _experiment(urdf: Path, head: Head, seed: int) -> tuple[CPCModel, CPCModel, 
     robot = load_urdf_robot(urdf, ["head_plate", head.camera])
     nominal = robot.nominal_model()
     rng = np.random.default_rng(seed)
-    joints = {j: CPCParams.from_matrix(nominal.joints[j].matrix() @ perturbation(np.concatenate(
-        [rng.normal(0, ERROR_T, 3), rng.normal(0, ERROR_R, 3)]))) for j in nominal.structure.joint_names}
+    joints = {
+        j: CPCParams.from_matrix(
+            nominal.joints[j].matrix()
+            @ perturbation(np.concatenate([rng.normal(0, ERROR_T, 3), rng.normal(0, ERROR_R, 3)]))
+        )
+        for j in nominal.structure.joint_names
+    }
     truth = nominal.with_params(joints=joints)
     s = nominal.structure
     q = np.zeros((RECORDS, s.n_joints))
@@ -100,7 +115,9 @@ def _experiment(urdf: Path, head: Head, seed: int) -> tuple[CPCModel, CPCModel, 
         q[:, k] = rng.uniform(s.joints[k].lower, s.joints[k].upper, RECORDS)
     T = truth.fk(q, ["head_plate"])["head_plate"].copy()
     T[:, :3, 3] += rng.normal(0, NOISE_T, (RECORDS, 3))
-    T[:, :3, :3] = np.stack([perturbation(np.r_[0, 0, 0, rng.normal(0, NOISE_R, 3)])[:3, :3] @ R for R in T[:, :3, :3]])
+    T[:, :3, :3] = np.stack(
+        [perturbation(np.r_[0, 0, 0, rng.normal(0, NOISE_R, 3)])[:3, :3] @ R for R in T[:, :3, :3]]
+    )
     ms = MeasurementSet.from_arrays(s, q, {"head_plate": T})
     ms.spec = robot
     return nominal, truth, ms
@@ -123,8 +140,12 @@ def test_head_only_data_calibrate_the_neck_and_keep_the_rest(name: str, tmp_path
         assert model.metadata.provenance.details["calibrated_joints"] == list(head.neck)
         written = api.export_urdf(model, tmp_path / f"calibrated_{seed}.urdf")
         before, after = read_urdf_tree(urdf), read_urdf_tree(written)
-        changed = {j for j in before.joints if (before.joints[j].xyz, before.joints[j].rpy)
-                   != (after.joints[j].xyz, after.joints[j].rpy)}
+        changed = {
+            j
+            for j in before.joints
+            if (before.joints[j].xyz, before.joints[j].rpy)
+            != (after.joints[j].xyz, after.joints[j].rpy)
+        }
         assert changed <= calibrated | {"head_plate_joint"}
         F0, F1 = before.fk(), after.fk()
         for link in before.links:

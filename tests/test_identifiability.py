@@ -32,7 +32,9 @@ def test_triangular_factor_has_the_singular_values_of_its_matrix():
     A[:, 7] = A[:, 2] - 2.0 * A[:, 5]  # exactly rank-deficient
     R = triangular_factor(A)
     np.testing.assert_allclose(R.T @ R, A.T @ A, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.svd(R, compute_uv=False), np.linalg.svd(A, compute_uv=False), atol=1e-13)
+    np.testing.assert_allclose(
+        np.linalg.svd(R, compute_uv=False), np.linalg.svd(A, compute_uv=False), atol=1e-13
+    )
 
 
 def test_protocol_data_determine_all_32(head):
@@ -91,7 +93,9 @@ def test_report_on_a_hand_made_jacobian():
     J = rng.normal(size=(30, 4))
     J[:, 3] = 0.0  # this parameter does nothing
     with pytest.warns(IdentifiabilityWarning, match=r"c\.x"):
-        rep = analyze_jacobian(J, ["a.x", "a.y", "b.x", "c.x"], reasons={"c": "frame 'c' has no measured pose"})
+        rep = analyze_jacobian(
+            J, ["a.x", "a.y", "b.x", "c.x"], reasons={"c": "frame 'c' has no measured pose"}
+        )
     assert rep.rank == 3 and rep.undetermined == ["c.x"] and np.isinf(rep.condition_number)
     assert "frame 'c' has no measured pose" in rep.warnings[0]
     J[:, 3] = J[:, 0] + 1e-7 * rng.normal(size=30)  # nearly collinear: determined only in principle

@@ -80,7 +80,9 @@ def imports_of(module: str, source: str, is_package: bool, modules: set[str]) ->
                 anchor = anchor[: len(anchor) - (node.level - 1)]
                 base = ".".join([*anchor, base] if base else anchor)
             # `from pkg import sub` imports the submodule when one exists, else a name of pkg.
-            names = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            names = [
+                f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names
+            ]
         else:
             continue
         for name in names:
@@ -169,20 +171,35 @@ def test_no_import_cycles() -> None:
     ("module", "source", "expected"),
     [
         # an upward import hidden inside a function of a core module
-        ("cpc2urdf.model", "def f():\n    from cpc2urdf.validation.crosscheck import cross_check\n",
-         "cpc2urdf.model (core) imports cpc2urdf.validation.crosscheck (validation)"),
+        (
+            "cpc2urdf.model",
+            "def f():\n    from cpc2urdf.validation.crosscheck import cross_check\n",
+            "cpc2urdf.model (core) imports cpc2urdf.validation.crosscheck (validation)",
+        ),
         # vision must not reach into hand-eye (the renderer once imported stage 2 for its target)
-        ("cpc2urdf.identification.vision.render",
-         "def f():\n    from cpc2urdf.identification.handeye import stage2\n",
-         "cpc2urdf.identification.vision.render (vision) imports cpc2urdf.identification.handeye.stage2 (handeye)"),
+        (
+            "cpc2urdf.identification.vision.render",
+            "def f():\n    from cpc2urdf.identification.handeye import stage2\n",
+            "cpc2urdf.identification.vision.render (vision) imports cpc2urdf.identification.handeye.stage2 (handeye)",
+        ),
         # a study used by the library
-        ("cpc2urdf.identification.kinematics.refine", "import cpc2urdf.studies.crb\n",
-         "cpc2urdf.identification.kinematics.refine (kinematics) imports cpc2urdf.studies.crb (studies)"),
+        (
+            "cpc2urdf.identification.kinematics.refine",
+            "import cpc2urdf.studies.crb\n",
+            "cpc2urdf.identification.kinematics.refine (kinematics) imports cpc2urdf.studies.crb (studies)",
+        ),
         # the package's api names from below the api
-        ("cpc2urdf.urdf.document", "from cpc2urdf import identify\n", "cpc2urdf.urdf.document (core) imports cpc2urdf (api)"),
+        (
+            "cpc2urdf.urdf.document",
+            "from cpc2urdf import identify\n",
+            "cpc2urdf.urdf.document (core) imports cpc2urdf (api)",
+        ),
         # a relative import is resolved too
-        ("cpc2urdf.identification.kinematics.protocol", "from ..simulation import design\n",
-         "cpc2urdf.identification.kinematics.protocol (kinematics) imports cpc2urdf.identification.simulation"),
+        (
+            "cpc2urdf.identification.kinematics.protocol",
+            "from ..simulation import design\n",
+            "cpc2urdf.identification.kinematics.protocol (kinematics) imports cpc2urdf.identification.simulation",
+        ),
     ],
 )
 def test_planted_upward_import_is_caught(module: str, source: str, expected: str) -> None:
@@ -191,9 +208,19 @@ def test_planted_upward_import_is_caught(module: str, source: str, expected: str
 
 
 def test_planted_cycle_is_caught() -> None:
-    graph = import_graph([
-        ("cpc2urdf.identification.kinematics.refine",
-         "def f():\n    from cpc2urdf.identification.kinematics.methods import identify\n", False),
-    ])
-    graph["cpc2urdf.identification.kinematics.methods"] = {"cpc2urdf.identification.kinematics.refine"}
-    assert ["cpc2urdf.identification.kinematics.methods", "cpc2urdf.identification.kinematics.refine"] in cycles(graph)
+    graph = import_graph(
+        [
+            (
+                "cpc2urdf.identification.kinematics.refine",
+                "def f():\n    from cpc2urdf.identification.kinematics.methods import identify\n",
+                False,
+            ),
+        ]
+    )
+    graph["cpc2urdf.identification.kinematics.methods"] = {
+        "cpc2urdf.identification.kinematics.refine"
+    }
+    assert [
+        "cpc2urdf.identification.kinematics.methods",
+        "cpc2urdf.identification.kinematics.refine",
+    ] in cycles(graph)

@@ -31,7 +31,10 @@ def test_real_data_pass_and_a_noise_five_times_too_small_is_unmodelled_error(nam
     assert details["consistency"]["consistent"]
     shown = details["noise_residuals"]
     stated = Noise(shown["position_m"] / 5, shown["rotation_rad"] / 5)
-    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s position residuals are (4|5)\.\dx"):
+    with pytest.raises(
+        InconsistentDataError,
+        match=r"unmodelled error: the fit.s position residuals are (4|5)\.\dx",
+    ):
         identify_map(ms, nominal, loads=loads, noise=stated)
     kept = identify_map(ms, nominal, loads=loads, noise=stated, accept_inconsistent=True)
     assert any("INCONSISTENT DATA" in n for n in kept.metadata.notes)
@@ -50,9 +53,13 @@ def test_planted_gross_outliers_are_named_exactly(name: str) -> None:
             poses[i, :3, 3] += d
     with pytest.raises(InconsistentDataError) as e:
         identify_map(ms, nominal, loads=loads)
-    assert str(e.value).endswith("the fit made without them: " + ", ".join(f"record {i}" for i in PLANTED))
+    assert str(e.value).endswith(
+        "the fit made without them: " + ", ".join(f"record {i}" for i in PLANTED)
+    )
     kept = identify_map(ms, nominal, loads=loads, accept_inconsistent=True)  # fitted without them
-    assert kept.metadata.provenance.details["consistency"]["outlier_records"] == [f"record {i}" for i in PLANTED]
+    assert kept.metadata.provenance.details["consistency"]["outlier_records"] == [
+        f"record {i}" for i in PLANTED
+    ]
 
 
 def test_joints_the_data_cannot_vouch_for_are_kept_at_the_urdf() -> None:
@@ -66,7 +73,10 @@ def test_joints_the_data_cannot_vouch_for_are_kept_at_the_urdf() -> None:
     ms, nominal, loads = _set("TALOS")
     loose = Tolerances(translation_m=0.1, rotation_rad=math.radians(30))
     model = identify_map(ms, nominal, loads=loads, tolerances=loose, level="geometry")
-    assert any(n.startswith("kept at the URDF's values: arm_left_5_joint, arm_left_6_joint") for n in model.metadata.notes)
+    assert any(
+        n.startswith("kept at the URDF's values: arm_left_5_joint, arm_left_6_joint")
+        for n in model.metadata.notes
+    )
     for j in ("arm_left_5", "arm_left_6"):
         assert np.array_equal(model.joints[j].matrix(), nominal.joints[j].matrix())
     default = identify_map(ms, nominal, loads=loads)  # the default prior needs no such rescue
@@ -84,7 +94,11 @@ def test_what_the_data_cannot_see_is_named_and_held_by_the_urdf() -> None:
     cal = calibrate(ms, nominal, loads=loads)
     share = cal.fit.data_share
     assert share["torso_1"] < 1e-6
-    assert max(share["arm_left_5"], share["arm_left_6"], share["arm_left_7"]) < 0.25 < share["arm_left_2"]
+    assert (
+        max(share["arm_left_5"], share["arm_left_6"], share["arm_left_7"])
+        < 0.25
+        < share["arm_left_2"]
+    )
     note = next(n for n in cal.notes if n.startswith("the data barely determine"))
     assert "torso_1" in note and "arm_left_5" in note and "arm_left_2" not in note
 
@@ -97,14 +111,18 @@ def test_accepted_outliers_are_left_out_of_every_fit() -> None:
         ms.marker_points["m1"][i] += [GROSS, 0.0, 0.0]
     cal = calibrate(ms, nominal, loads=loads, accept_inconsistent=True)
     assert cal.gate.outliers == PLANTED
-    assert len(cal.fit.loo_points) == ms.n_records - len(PLANTED)  # the fit kept saw the others only
+    assert len(cal.fit.loo_points) == ms.n_records - len(
+        PLANTED
+    )  # the fit kept saw the others only
     assert cal.fit.noise.position_m < 1e-3  # not inflated by 50 mm errors
 
 
 def test_a_stated_orientation_noise_too_small_is_named() -> None:
     ms, nominal, loads = _set("UR10")
     shown = identify_map(ms, nominal, loads=loads).metadata.provenance.details["noise_residuals"]
-    with pytest.raises(InconsistentDataError, match=r"unmodelled error: the fit.s orientation residuals are"):
+    with pytest.raises(
+        InconsistentDataError, match=r"unmodelled error: the fit.s orientation residuals are"
+    ):
         identify_map(ms, nominal, noise=Noise(shown["position_m"], shown["rotation_rad"] / 5))
 
 
@@ -114,6 +132,9 @@ def test_a_joint_read_from_the_horizontal_is_named() -> None:
     ms, nominal, _ = _set("UR10")
     s = ms.structure
     ms.q[:, s.joint_index("elbow")] += ms.q[:, s.joint_index("shoulder_lift")]
-    with pytest.raises(InconsistentDataError, match=r"joint 'elbow_joint' seems read relative to joint "
-                       r"'shoulder_lift_joint' \(the reading is elbow_joint \+ shoulder_lift_joint.*fall from .* mm to 1\.9\d mm"):
+    with pytest.raises(
+        InconsistentDataError,
+        match=r"joint 'elbow_joint' seems read relative to joint "
+        r"'shoulder_lift_joint' \(the reading is elbow_joint \+ shoulder_lift_joint.*fall from .* mm to 1\.9\d mm",
+    ):
         identify_map(ms, nominal)

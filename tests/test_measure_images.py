@@ -45,7 +45,9 @@ def experiment(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Rendered
 
 
 @pytest.fixture(scope="module")
-def measured(experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def measured(
+    experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
     folder, _ = experiment
     out = tmp_path_factory.mktemp("out") / "measurements.json"
     assert main(["measure", str(folder), "--rig", str(folder / "rig.yaml"), "-o", str(out)]) == 0
@@ -56,14 +58,20 @@ def test_rendered_folder_layout(experiment: tuple[Path, RenderedExperiment]) -> 
     folder, exp = experiment
     n = exp.measured.n_records
     assert n == 6 * 3 + 1
-    assert len(list((folder / "left").glob("*.png"))) == n == len(list((folder / "right").glob("*.png")))
+    assert (
+        len(list((folder / "left").glob("*.png")))
+        == n
+        == len(list((folder / "right").glob("*.png")))
+    )
     table = read_joints_csv(folder / "joints.csv", STRUCTURE)
     np.testing.assert_allclose(table.q, exp.measured.q, atol=1e-12)
     assert (folder / "rig.yaml").read_text().startswith("%YAML")
     assert sum(exp.hidden) == 0  # every circle visible in both cameras
 
 
-def test_measured_poses_match_the_truth(experiment: tuple[Path, RenderedExperiment], measured: Path) -> None:
+def test_measured_poses_match_the_truth(
+    experiment: tuple[Path, RenderedExperiment], measured: Path
+) -> None:
     folder, exp = experiment
     ms = load_measurements(measured)
     exact = load_measurements(folder / "exact.json")
@@ -87,10 +95,16 @@ def test_identification_from_images_matches_exact_poses_with_the_same_noise(
     rig = exp.rig
     designs = robot_plate_designs(STRUCTURE.frames)
     # The detector's pixel error, measured against the truth on these very images.
-    views = [PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w))) for w in ("left", "right")]
+    views = [
+        PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w)))
+        for w in ("left", "right")
+    ]
     errs = []
     for i in range(0, ms.n_records, 3):
-        img = [cv2.imread(str(folder / s / f"{i:04d}.png"), cv2.IMREAD_GRAYSCALE) for s in ("left", "right")]
+        img = [
+            cv2.imread(str(folder / s / f"{i:04d}.png"), cv2.IMREAD_GRAYSCALE)
+            for s in ("left", "right")
+        ]
         from cpc2urdf.identification.vision.plate_poses import stereo_plate_poses
 
         res = stereo_plate_poses(img[0], img[1], rig, designs)
@@ -108,7 +122,10 @@ def test_identification_from_images_matches_exact_poses_with_the_same_noise(
     reference = []
     for seed in range(5):
         rng = np.random.default_rng(seed)
-        poses = {d.name: stereo_noise(exact.poses[d.name], d.layout, rig, sigma_px, rng)[0] for d in designs}
+        poses = {
+            d.name: stereo_noise(exact.poses[d.name], d.layout, rig, sigma_px, rng)[0]
+            for d in designs
+        }
         reference.append(score(MeasurementSet(STRUCTURE, exact.q, poses, labels=exact.labels)))
     # As accurate as exact poses with the detector's noise (within the spread of 5 noise draws).
     assert from_images < 2.0 * float(np.median(reference)) + 2e-6, (from_images, reference)
@@ -127,7 +144,9 @@ def _small_copy(folder: Path, dst: Path, n: int = 3) -> Path:
     return dst
 
 
-def test_broken_images_skip_or_stop(experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_broken_images_skip_or_stop(
+    experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     folder, exp = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=4)
     (d / "right" / "0001.png").write_bytes(b"\x89PNG\r\n\x1a\nthis is not an image")  # corrupt
@@ -136,8 +155,12 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, RenderedExperiment],
     rig = exp.rig
     view = PinholeView(rig.K1, rig.D1, rig.image_size)
     designs = robot_plate_designs(STRUCTURE.frames)
-    only_left = render_view(view, [(designs[0], exp.measured.poses["plate_left"][0])], noise_sigma=2.0,
-                            rng=np.random.default_rng(0))
+    only_left = render_view(
+        view,
+        [(designs[0], exp.measured.poses["plate_left"][0])],
+        noise_sigma=2.0,
+        rng=np.random.default_rng(0),
+    )
     cv2.imwrite(str(d / "left" / "0000.png"), only_left)  # plate_right missing
     out = tmp_path / "m.json"
     args = ["measure", str(d), "--rig", str(d / "rig.yaml"), "-o", str(out)]
@@ -148,12 +171,21 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, RenderedExperiment],
     assert main(args) == 0  # skip (default)
     cap = capsys.readouterr()
     assert "skipped" in cap.out
-    for needle in ("left/0000.png: plate_right", "right/0001.png", "not a readable image",
-                   "left/0002.*", "no image file", "left/0003.png", "blank image"):
+    for needle in (
+        "left/0000.png: plate_right",
+        "right/0001.png",
+        "not a readable image",
+        "left/0002.*",
+        "no image file",
+        "left/0003.png",
+        "blank image",
+    ):
         assert needle in cap.err, needle
     ms = load_measurements(out)
     assert ms.labels == [exp.measured.labels[0]]  # only record 0 left ...
-    assert ms.has_pose("plate_left").all() and not ms.has_pose("plate_right").any()  # ... with one plate
+    assert (
+        ms.has_pose("plate_left").all() and not ms.has_pose("plate_right").any()
+    )  # ... with one plate
     assert len(ms.metadata["provenance"]["skipped"]) == 5  # the blank image: both plates
     # skip-record: record 0 lost plate_right, so it goes too -> nothing left.
     assert main(args + ["--on-error", "skip-record"]) == 2
@@ -167,21 +199,32 @@ def test_broken_images_skip_or_stop(experiment: tuple[Path, RenderedExperiment],
     assert not out.exists()
 
 
-def test_bad_rig_joints_and_folders(experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_rig_joints_and_folders(
+    experiment: tuple[Path, RenderedExperiment], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     folder, _ = experiment
     d = _small_copy(folder, tmp_path / "imgs", n=2)
     out = tmp_path / "m.json"
 
     def run(*extra: str, rig: Path | None = None) -> str:
-        assert main(["measure", str(d), "--rig", str(rig or d / "rig.yaml"), "-o", str(out), *extra]) == 2
+        assert (
+            main(["measure", str(d), "--rig", str(rig or d / "rig.yaml"), "-o", str(out), *extra])
+            == 2
+        )
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1, err
         assert not out.exists()
         return err[0]
 
     bad_rig = tmp_path / "rig.yaml"
-    bad_rig.write_text("\n".join(ln for ln in (d / "rig.yaml").read_text().splitlines() if not ln.startswith("D2")
-                                  and "rows: 1" not in ln) + "\n")
+    bad_rig.write_text(
+        "\n".join(
+            ln
+            for ln in (d / "rig.yaml").read_text().splitlines()
+            if not ln.startswith("D2") and "rows: 1" not in ln
+        )
+        + "\n"
+    )
     text = (d / "rig.yaml").read_text()
     bad_rig.write_text(text.replace("T: !!opencv-matrix", "T_typo: !!opencv-matrix"))
     assert "missing key T" in run(rig=bad_rig)
@@ -191,12 +234,18 @@ def test_bad_rig_joints_and_folders(experiment: tuple[Path, RenderedExperiment],
     assert "1280 x 1024 px" in msg and "640 x 512" in msg
     (d / "joints.csv").write_text("record,table_x[mm],pan[deg]\n0000,1,2\n")
     assert "missing joint column 'table_y'" in run()
-    (d / "joints.csv").write_text("record,table_x[deg],table_y,pan,tilt,vergence_left,vergence_right\n0000,1,2,3,4,5,6\n")
+    (d / "joints.csv").write_text(
+        "record,table_x[deg],table_y,pan,tilt,vergence_left,vergence_right\n0000,1,2,3,4,5,6\n"
+    )
     assert "unit [deg] does not fit a prismatic joint" in run()
-    (d / "joints.csv").write_text("record,table_x,table_y,pan,tilt,vergence_left,vergence_right,zoom\n")
+    (d / "joints.csv").write_text(
+        "record,table_x,table_y,pan,tilt,vergence_left,vergence_right,zoom\n"
+    )
     assert "unknown joint column 'zoom'" in run()
     # table_x, table_y inside their limits (read before pan): only pan is wrong
-    (d / "joints.csv").write_text("record,table_x,table_y,pan,tilt,vergence_left,vergence_right\n0000,0.1,0.2,x,4,5,6\n")
+    (d / "joints.csv").write_text(
+        "record,table_x,table_y,pan,tilt,vergence_left,vergence_right\n0000,0.1,0.2,x,4,5,6\n"
+    )
     assert "row 2 (record 0000): pan must be a number" in run()
     shutil.rmtree(d / "right")
     assert "missing sub-folder right/" in run()
@@ -217,21 +266,43 @@ def test_joints_csv_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def head(experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def head(
+    experiment: tuple[Path, RenderedExperiment], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
     folder, _ = experiment
     out = tmp_path_factory.mktemp("head") / "head"
     render_head_experiment(out, load_model(folder / "truth.json"), n_poses=5, seed=3)
     return out
 
 
-def test_stage2_from_head_camera_images(experiment: tuple[Path, RenderedExperiment], head: Path, tmp_path: Path) -> None:
+def test_stage2_from_head_camera_images(
+    experiment: tuple[Path, RenderedExperiment], head: Path, tmp_path: Path
+) -> None:
     folder, exp = experiment
     truth = load_model(folder / "truth.json")
     out = tmp_path / "poses"
-    assert main(["measure", str(head), "--stage2", "--model", str(folder / "truth.json"), "-o", str(out)]) == 0
-    T_base_target = np.array(__import__("json").loads((head / "target_truth.json").read_text())["T_base_target"])
+    assert (
+        main(
+            [
+                "measure",
+                str(head),
+                "--stage2",
+                "--model",
+                str(folder / "truth.json"),
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    T_base_target = np.array(
+        __import__("json").loads((head / "target_truth.json").read_text())["T_base_target"]
+    )
     q = read_joints_csv(head / "joints.csv", truth.structure).q
-    for cam, hand in (("camera_left_optical", "plate_left"), ("camera_right_optical", "plate_right")):
+    for cam, hand in (
+        ("camera_left_optical", "plate_left"),
+        ("camera_right_optical", "plate_right"),
+    ):
         poses = load_handeye_poses(out / f"handeye_{cam}.json")
         T_base_cam = inverse(truth.T_world_base())[None] @ truth.fk_frame(cam, q)
         truth_C = inverse(T_base_cam) @ T_base_target
@@ -243,7 +314,9 @@ def test_stage2_from_head_camera_images(experiment: tuple[Path, RenderedExperime
         np.testing.assert_allclose(poses.T_base_hand, T_bh, atol=1e-9)
 
 
-def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, RenderedExperiment], head: Path) -> None:
+def test_stage2_images_put_the_cameras_into_the_model(
+    experiment: tuple[Path, RenderedExperiment], head: Path
+) -> None:
     from cpc2urdf.identification.handeye.head_images import stage2_observations
     from cpc2urdf.identification.handeye.stage2 import calibrate_cameras, camera_errors
     from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
@@ -251,14 +324,21 @@ def test_stage2_images_put_the_cameras_into_the_model(experiment: tuple[Path, Re
 
     folder, _ = experiment
     truth = load_model(folder / "truth.json")
-    cams = {c: HeadCamera(*load_camera(head / f"{c}.yaml")) for c in ("camera_left_optical", "camera_right_optical")}
+    cams = {
+        c: HeadCamera(*load_camera(head / f"{c}.yaml"))
+        for c in ("camera_left_optical", "camera_right_optical")
+    }
     res = measure_head_images(head, cams, truth.structure)
-    model, results = calibrate_cameras(truth.without_frames(["camera"]), stage2_observations(res, cams), "tsai")
+    model, results = calibrate_cameras(
+        truth.without_frames(["camera"]), stage2_observations(res, cams), "tsai"
+    )
     for c, (dt, dr) in camera_errors(model, truth, list(cams)).items():
         assert dt < 0.5e-3 and np.degrees(dr) < 0.05, (c, dt, np.degrees(dr))
 
 
-def test_colour_16_bit_and_tiff_images_read_like_grey(experiment: tuple[Path, RenderedExperiment], tmp_path: Path) -> None:
+def test_colour_16_bit_and_tiff_images_read_like_grey(
+    experiment: tuple[Path, RenderedExperiment], tmp_path: Path
+) -> None:
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
 
     folder, exp = experiment

@@ -41,7 +41,9 @@ def test_link_transform_is_eq_5():
         else:
             Q[2, 3] = q[i]
         np.testing.assert_allclose(link[0, i], axis[0, i] @ Q, atol=1e-14)
-        parent = m.T_world_base() if j.parent == BASE else link[0, m.structure.joint_index(j.parent)]
+        parent = (
+            m.T_world_base() if j.parent == BASE else link[0, m.structure.joint_index(j.parent)]
+        )
         np.testing.assert_allclose(axis[0, i], parent @ m.joints[j.name].matrix(), atol=1e-14)
 
 
@@ -79,7 +81,9 @@ def test_structure_errors_are_named():
     with pytest.raises(SpecError, match="lower limit 2"):
         RobotStructure("r", [J("a", "revolute", BASE, 2.0, 1.0)], [])
     with pytest.raises(SpecError, match="do not connect"):
-        RobotStructure("r", [J("a", "revolute", BASE), J("b", "revolute", "c"), J("c", "revolute", "b")], [])
+        RobotStructure(
+            "r", [J("a", "revolute", BASE), J("b", "revolute", "c"), J("c", "revolute", "b")], []
+        )
     with pytest.raises(SpecError, match="revolute or prismatic"):
         RobotStructure("r", [J("a", "continuous", BASE)], [])
     with pytest.raises(SpecError, match="used twice"):
@@ -112,7 +116,12 @@ def test_model_requires_geometry_for_every_name():
 
 def test_frames_on_the_base_have_the_batch_shape():
     s = RobotStructure("r", [Joint("a", "revolute")], [Frame("fixed", BASE), Frame("tip", "a")])
-    m = CPCModel(s, CPCParams(l=(1.0, 0, 0)), {"a": CPCParams()}, {"fixed": CPCParams(l=(0, 2.0, 0)), "tip": CPCParams()})
+    m = CPCModel(
+        s,
+        CPCParams(l=(1.0, 0, 0)),
+        {"a": CPCParams()},
+        {"fixed": CPCParams(l=(0, 2.0, 0)), "tip": CPCParams()},
+    )
     one = m.fk(np.array([0.3]))["fixed"]
     many = m.fk(np.zeros((4, 1)))["fixed"]
     assert one.shape == (4, 4) and many.shape == (4, 4, 4)

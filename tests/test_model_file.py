@@ -28,10 +28,15 @@ def test_model_round_trip_is_exact(tmp_path):
     rng = np.random.default_rng(0)
     for k in range(10):
         m = random_tree(rng)
-        m = m.with_params(metadata=ModelMetadata(provenance=Provenance(method="test", details={"k": k})))
+        m = m.with_params(
+            metadata=ModelMetadata(provenance=Provenance(method="test", details={"k": k}))
+        )
         save_model(m, tmp_path / "m.json")
         m2 = load_model(tmp_path / "m.json")
-        assert m2.metadata == m.metadata and m2.metadata.provenance.to_json() == {"method": "test", "k": k}
+        assert m2.metadata == m.metadata and m2.metadata.provenance.to_json() == {
+            "method": "test",
+            "k": k,
+        }
         Q = rng.uniform(m.structure.lower, m.structure.upper, size=(5, m.structure.n_joints))
         a, b = m.fk(Q), m2.fk(Q)
         for f in a:
@@ -72,6 +77,7 @@ def _mutations():
             for key in path[:-1]:
                 obj = obj[key]
             obj[path[-1]] = value
+
         return f
 
     def delete(path):
@@ -80,22 +86,38 @@ def _mutations():
             for key in path[:-1]:
                 obj = obj[key]
             del obj[path[-1]]
+
         return f
 
     return {
         "format": (set_(["format"], "cpc2urdf/model@9"), "format is 'cpc2urdf/model@9'"),
         "parent": (set_(["joints", 2, "parent"], "nope"), "joint 'pan': parent 'nope'"),
         "lower>upper": (set_(["joints", 3, "lower"], 3.0), "joint 'tilt': lower limit 3.0 > upper"),
-        "nan-like": (set_(["joints", 3, "cpc", "beta"], "NaN"), "joint 'tilt'.cpc.beta must be a number"),
-        "b not unit": (set_(["frames", 0, "cpc", "b"], [0, 0, 2]), "frame 'plate_left'.cpc.b must be a unit vector"),
-        "type": (set_(["joints", 0, "type"], "continuous"), "joint 'table_x'.type must be 'revolute' or 'prismatic'"),
+        "nan-like": (
+            set_(["joints", 3, "cpc", "beta"], "NaN"),
+            "joint 'tilt'.cpc.beta must be a number",
+        ),
+        "b not unit": (
+            set_(["frames", 0, "cpc", "b"], [0, 0, 2]),
+            "frame 'plate_left'.cpc.b must be a unit vector",
+        ),
+        "type": (
+            set_(["joints", 0, "type"], "continuous"),
+            "joint 'table_x'.type must be 'revolute' or 'prismatic'",
+        ),
         "no limits": (delete(["joints", 1, "lower"]), "joint 'table_y' lacks 'lower'"),
-        "frame parent": (set_(["frames", 1, "parent"], "elbow"), "frame 'plate_right': parent 'elbow'"),
+        "frame parent": (
+            set_(["frames", 1, "parent"], "elbow"),
+            "frame 'plate_right': parent 'elbow'",
+        ),
         "cycle": (set_(["joints", 2, "parent"], "tilt"), "do not connect to 'base'"),
         "units": (set_(["units"], {"length": "inch"}), "units.length must be one of"),
         "unknown key": (set_(["colour"], "red"), "unknown keys ['colour']"),
         "cpc missing": (delete(["joints", 4, "cpc"]), "joint 'vergence_left' lacks 'cpc'"),
-        "l short": (set_(["joints", 4, "cpc", "l"], [0, 0]), "joint 'vergence_left'.cpc.l must be a list of 3 numbers"),
+        "l short": (
+            set_(["joints", 4, "cpc", "l"], [0, 0]),
+            "joint 'vergence_left'.cpc.l must be a list of 3 numbers",
+        ),
         "dup": (set_(["frames", 1, "name"], "plate_left"), "name 'plate_left' is used twice"),
     }
 

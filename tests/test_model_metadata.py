@@ -28,13 +28,18 @@ def test_identified_model_file_round_trips_every_section(demo_run, tmp_path):
     model = model_from_json(doc, "model.json")
     meta = model.metadata
     assert meta.provenance is not None and meta.provenance.method == "refined"
-    assert meta.residuals is not None and set(meta.residuals.per_frame) == {"plate_left", "plate_right"}
+    assert meta.residuals is not None and set(meta.residuals.per_frame) == {
+        "plate_left",
+        "plate_right",
+    }
     assert meta.uncertainty is not None and meta.uncertainty.matrix.shape == (32, 32)
     assert set(meta.handeye) == {"camera_left_optical", "camera_right_optical"}
     # writing it back gives the same document, section for section
     again = model_to_json(model)
     for key in ("provenance", "residuals", "uncertainty", "handeye", "notes"):
-        assert json.dumps(again.get(key), sort_keys=True) == json.dumps(doc.get(key), sort_keys=True), key
+        assert json.dumps(again.get(key), sort_keys=True) == json.dumps(
+            doc.get(key), sort_keys=True
+        ), key
     path = save_model(model, tmp_path / "again.json")
     assert model_to_json(load_model(path)) == again
 
@@ -44,10 +49,15 @@ def test_sections_are_typed():
         {"plate": FrameResiduals(3, 1e-3, 2e-3, 1e-2, 2e-2)},
         (RecordResiduals("q0", {"plate": (1e-3, 1e-2)}),),
     )
-    he = HandEyeRecord("plate", "kronecker", np.eye(4), np.eye(4), np.array([3.0, 4.0]), np.array([0.0, 0.0]))
+    he = HandEyeRecord(
+        "plate", "kronecker", np.eye(4), np.eye(4), np.array([3.0, 4.0]), np.array([0.0, 0.0])
+    )
     meta = ModelMetadata(
-        description="d", provenance=Provenance("refined", "m.json", "iis_head", {"k": 1}), residuals=res,
-        handeye={"cam": he}, notes=("a",),
+        description="d",
+        provenance=Provenance("refined", "m.json", "iis_head", {"k": 1}),
+        residuals=res,
+        handeye={"cam": he},
+        notes=("a",),
     )
     back = ModelMetadata.from_json(json.loads(json.dumps(meta.to_json())))
     assert back.provenance == meta.provenance and back.residuals == res and back.notes == ("a",)

@@ -27,8 +27,14 @@ def test_fd_level_c_and_python_output_is_captured(capfd: pytest.CaptureFixture[s
     print("after")
     cap = capfd.readouterr()
     assert cap.out == "before\nafter\n" and cap.err == ""
-    for text in ("Error:   from C++ on fd 2", "raw fd 1", "buffered C stdout", "python stdout", "python stderr",
-                 "Using different parsing approach."):
+    for text in (
+        "Error:   from C++ on fd 2",
+        "raw fd 1",
+        "buffered C stdout",
+        "python stdout",
+        "python stderr",
+        "Using different parsing approach.",
+    ):
         assert text in out.text
     assert out.error_lines() == ["Error:   from C++ on fd 2"]
 

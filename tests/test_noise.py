@@ -73,7 +73,9 @@ def test_stereo_noise_has_the_covariance_of_the_propagated_pixel_noise() -> None
     sigma = 0.3
     T = _face_on_plate()
     p_true = LAYOUT @ T[:3, :3].T + T[:3, 3]
-    T_meas, p = stereo_noise(np.broadcast_to(T, (4000, 4, 4)), LAYOUT, rig, sigma, np.random.default_rng(0))
+    T_meas, p = stereo_noise(
+        np.broadcast_to(T, (4000, 4, 4)), LAYOUT, rig, sigma, np.random.default_rng(0)
+    )
     uv1, uv2 = rig.project(p_true[4])
     x0 = np.concatenate([uv1, uv2])
     J = np.empty((3, 4))

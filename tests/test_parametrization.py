@@ -25,7 +25,13 @@ def test_iis_head_has_32_named_parameters(head):
     assert p.n_params == 32
     assert p.counts() == {"revolute": 16, "prismatic": 4, "frame": 12, "total": 32}
     assert p.names[:2] == ("table_x.b_x", "table_x.b_y")
-    for name in ("tilt.b_x", "tilt.l_y", "vergence_right.l_x", "plate_left.l_z", "plate_right.beta"):
+    for name in (
+        "tilt.b_x",
+        "tilt.l_y",
+        "vergence_right.l_x",
+        "plate_left.l_z",
+        "plate_right.beta",
+    ):
         assert name in p.names
     assert "tilt.l_z" not in p.names and "table_y.l_x" not in p.names  # gauge, not parameters
     assert p.units[p.index("plate_left.l_z")] == "m" and p.units[p.index("tilt.b_x")] == "rad"
@@ -52,7 +58,9 @@ def _same_geometry(p: Parametrization, m1, m2, q) -> None:
         i = s.joint_index(j)
         np.testing.assert_allclose(da[:, i], db[:, i], atol=FK_AGREEMENT_TOL)
         if s.joint(j).type == "revolute":  # the line itself, not just its direction
-            np.testing.assert_allclose(np.cross(pa[:, i] - pb[:, i], db[:, i]), 0.0, atol=FK_AGREEMENT_TOL)
+            np.testing.assert_allclose(
+                np.cross(pa[:, i] - pb[:, i], db[:, i]), 0.0, atol=FK_AGREEMENT_TOL
+            )
 
 
 def test_vector_from_model_aligns_any_gauge_iis_head(head):
@@ -90,7 +98,11 @@ def _fd_pose_jacobian(p: Parametrization, x, q, eps=1e-6):
         col = {}
         for f in p.frames:
             dp = (Tp[f][:, :3, 3] - Tm[f][:, :3, 3]) / (2 * eps)
-            W = (Tp[f][:, :3, :3] - Tm[f][:, :3, :3]) / (2 * eps) @ np.swapaxes(T0[f][:, :3, :3], 1, 2)
+            W = (
+                (Tp[f][:, :3, :3] - Tm[f][:, :3, :3])
+                / (2 * eps)
+                @ np.swapaxes(T0[f][:, :3, :3], 1, 2)
+            )
             col[f] = np.concatenate([dp, np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], 1)], 1)
         cols.append(col)
     return {f: np.stack([c[f] for c in cols], axis=2) for f in p.frames}

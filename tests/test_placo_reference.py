@@ -52,7 +52,10 @@ def test_kinematic_urdf_drops_geometry_and_keeps_the_kinematics(tiago_head):
         np.testing.assert_array_equal(da.oMf[fa].homogeneous, db.oMf[fb].homogeneous)
 
 
-@pytest.mark.parametrize(("shape", "why"), [("icub", "couples, offsets or bounds"), ("stereo_pan_tilt", "cyclopean axis")])
+@pytest.mark.parametrize(
+    ("shape", "why"),
+    [("icub", "couples, offsets or bounds"), ("stereo_pan_tilt", "cyclopean axis")],
+)
 def test_heads_placo_cannot_state_are_named(shape, why, tmp_path):
     case = head_case(shape, tmp_path)
     reason = placo_reference(case.solver)
@@ -82,19 +85,46 @@ def test_without_placo_the_bench_says_so(monkeypatch):
 
 
 def test_the_table_shows_placo_or_why_not():
-    row = {"kind": "look-at", "kin_us": 5.0, "median_kin": 1.6, "p99_kin": 2.0, "p99_cpu_kin": 2.0, "unreachable_ratio": 1.5,
-           "success": 1.0, "disparity": 0.0, "iterations_median": 4.0, "ratio": 60.0, "batch_targets_per_s": 4e5,
-           "batch_path": "solve_many"}
-    ran = {**row, "placo": "ran", "placo_ratio": 9.5, "placo_success": 0.1, "placo_within_floor": 0.96,
-           "placo_over_1e-4": 0.02, "placo_error_median_rad": 5e-9, "placo_steps_median": 10.0, "placo_median_us": 140.0,
-           "placo_core_median_us": 50.0, "placo_core_ratio": 3.4}
+    row = {
+        "kind": "look-at",
+        "kin_us": 5.0,
+        "median_kin": 1.6,
+        "p99_kin": 2.0,
+        "p99_cpu_kin": 2.0,
+        "unreachable_ratio": 1.5,
+        "success": 1.0,
+        "disparity": 0.0,
+        "iterations_median": 4.0,
+        "ratio": 60.0,
+        "batch_targets_per_s": 4e5,
+        "batch_path": "solve_many",
+    }
+    ran = {
+        **row,
+        "placo": "ran",
+        "placo_ratio": 9.5,
+        "placo_success": 0.1,
+        "placo_within_floor": 0.96,
+        "placo_over_1e-4": 0.02,
+        "placo_error_median_rad": 5e-9,
+        "placo_steps_median": 10.0,
+        "placo_median_us": 140.0,
+        "placo_core_median_us": 50.0,
+        "placo_core_ratio": 3.4,
+    }
     table = format_table({"a": ran, "b": {**row, "placo": NOT_INSTALLED}})
     lines = table.splitlines()
     header = lines[0].split()
     k = header.index("scipy")
-    assert header[k + 1 : k + 3] == ["vs", "placo"]  # the column after "vs scipy": a row's 11th cell
+    assert header[k + 1 : k + 3] == [
+        "vs",
+        "placo",
+    ]  # the column after "vs scipy": a row's 11th cell
     assert lines[2].split()[10] == "9.5x" and lines[3].split()[10] == "n/a"
-    assert "placo on a: within 1e-9 rad on 10.0% of the targets, within its floor (3e-08 rad) on 96.0%" in table
+    assert (
+        "placo on a: within 1e-9 rad on 10.0% of the targets, within its floor (3e-08 rad) on 96.0%"
+        in table
+    )
     assert "of which 50 us in placo's own calls (3.4x ours)" in table
     assert f"vs placo n/a: {NOT_INSTALLED}" in table
 

@@ -24,12 +24,16 @@ def _set(name: str) -> tuple[MeasurementSet, np.ndarray | None]:
     return ms, gravity_loads(ms)
 
 
-@pytest.mark.parametrize(("name", "level"), [("TALOS", "compliance"), ("UR10", "geometry"),
-                                             ("TIAGo, markers 1-3", "offsets")])
+@pytest.mark.parametrize(
+    ("name", "level"),
+    [("TALOS", "compliance"), ("UR10", "geometry"), ("TIAGo, markers 1-3", "offsets")],
+)
 def test_jacobian_matches_finite_differences(name: str, level: str) -> None:
     ms, loads = _set(name)
     nominal = ms.spec.nominal_model()
-    problem = MapProblem(nominal, ms, level, pf.default_joints(ms), pf.Tolerances(), pf.Noise(), loads)
+    problem = MapProblem(
+        nominal, ms, level, pf.default_joints(ms), pf.Tolerances(), pf.Noise(), loads
+    )
     x = start_point(problem) + np.random.default_rng(0).normal(0, 1e-3, len(problem.names))
     _, J = problem.evaluate(x)
     assert J is not None
@@ -37,25 +41,41 @@ def test_jacobian_matches_finite_differences(name: str, level: str) -> None:
     for i in range(len(x)):
         dx = np.zeros_like(x)
         dx[i] = FD_STEP
-        fd[:, i] = (problem.evaluate(x + dx, False)[0] - problem.evaluate(x - dx, False)[0]) / (2 * FD_STEP)
+        fd[:, i] = (problem.evaluate(x + dx, False)[0] - problem.evaluate(x - dx, False)[0]) / (
+            2 * FD_STEP
+        )
     assert np.abs(J - fd).max() < FD_TOL * np.abs(fd).max()
 
 
-def _simulated(name: str, level: str, seed: int) -> tuple[MeasurementSet, MeasurementSet, pf.MapFit]:
+def _simulated(
+    name: str, level: str, seed: int
+) -> tuple[MeasurementSet, MeasurementSet, pf.MapFit]:
     """A truth perturbed from the URDF at ``level`` (3 mm / 0.3 deg), its noise-free markers at the
     real set's readings (training) and at random readings within the limits (held out)."""
     ms, loads = _set(name)
     nominal = ms.spec.nominal_model()
     rng = np.random.default_rng(seed)
     truth = pf.fit_map(nominal, ms, level, loads=loads)  # a plausible truth: the real data's fit
-    joints = {j: CPCParams.from_matrix(truth.model.joints[j].matrix() @ pf.perturbation(
-        np.concatenate([rng.normal(0, 3e-3, 3), rng.normal(0, np.radians(0.3), 3)]))) for j in truth.joints}
+    joints = {
+        j: CPCParams.from_matrix(
+            truth.model.joints[j].matrix()
+            @ pf.perturbation(
+                np.concatenate([rng.normal(0, 3e-3, 3), rng.normal(0, np.radians(0.3), 3)])
+            )
+        )
+        for j in truth.joints
+    }
     model = truth.model.with_params(joints=joints)
     s = ms.structure
     lo, hi = np.array([j.lower for j in s.joints]), np.array([j.upper for j in s.joints])
     span = np.ptp(ms.q, axis=0)
     out = []
-    for q in (ms.q, rng.uniform(np.maximum(lo, ms.q.min(0) - span), np.minimum(hi, ms.q.max(0) + span), (40, s.n_joints))):
+    for q in (
+        ms.q,
+        rng.uniform(
+            np.maximum(lo, ms.q.min(0) - span), np.minimum(hi, ms.q.max(0) + span), (40, s.n_joints)
+        ),
+    ):
         points = {}
         for m, p in truth.markers.items():
             T = model.fk(q, [ms.markers[m].frame])[ms.markers[m].frame]
@@ -80,7 +100,9 @@ def test_joints_the_data_do_not_move_keep_the_urdf() -> None:
     held = ms.structure.joint_names[0]
     q = ms.q.copy()
     q[:, 0] = 0.1
-    still = MeasurementSet.from_arrays(ms.structure, q, {}, markers=ms.markers, marker_points=ms.marker_points)
+    still = MeasurementSet.from_arrays(
+        ms.structure, q, {}, markers=ms.markers, marker_points=ms.marker_points
+    )
     assert held not in pf.default_joints(still)
     fit = pf.fit_map(nominal, still, "geometry")
     assert np.array_equal(fit.model.joints[held].matrix(), nominal.joints[held].matrix())
@@ -93,7 +115,9 @@ def real_rows() -> dict[str, dict]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [s.name for s in SETS])
-def test_real_data_held_out_beat_the_urdf_and_figaroh(real_rows: dict[str, dict], name: str) -> None:
+def test_real_data_held_out_beat_the_urdf_and_figaroh(
+    real_rows: dict[str, dict], name: str
+) -> None:
     """The data's 5-fold split: ``--method map`` at or below the URDF's and FIGAROH's held-out RMS
     (the data README's figures, 2 decimals), its left-out prediction within 0.8-1.25x."""
     r = real_rows[name]
@@ -122,7 +146,6 @@ def test_real_data_full_range_stays_near_the_urdf(real_rows: dict[str, dict], na
     assert r["divergence_mm"]["p95"] <= r["figaroh_p95_mm"]
 
 
-
 def test_points_on_a_line_are_fitted_not_refused() -> None:
     """Only TIAGo's torso lift moves: the marker's points span a line, and the measuring frame's
     turn about it is free (kept at the start's); the fit is made, at the noise (0.2 mm)."""
@@ -132,8 +155,14 @@ def test_points_on_a_line_are_fitted_not_refused() -> None:
     q[:, 0] = np.linspace(0.0, 0.35, 20)
     truth = pf.fit_map(nominal, ms, "geometry")
     T = truth.model.fk(q, ["wrist_ft_tool"])["wrist_ft_tool"]
-    y = T[:, :3, :3] @ truth.markers["m1"] + T[:, :3, 3] + np.random.default_rng(0).normal(0, 2e-4, (20, 3))
-    line = MeasurementSet.from_arrays(ms.structure, q, {}, markers=ms.markers, marker_points={"m1": y})
+    y = (
+        T[:, :3, :3] @ truth.markers["m1"]
+        + T[:, :3, 3]
+        + np.random.default_rng(0).normal(0, 2e-4, (20, 3))
+    )
+    line = MeasurementSet.from_arrays(
+        ms.structure, q, {}, markers=ms.markers, marker_points={"m1": y}
+    )
     fit = pf.fit_map(nominal, line, "geometry")
     assert fit.joints == ("torso_lift",)
     assert fit.rms_m < 2e-4 * np.sqrt(3)

@@ -34,7 +34,9 @@ def test_finds_q0_and_sweeps_in_any_record_order() -> None:
 def test_repeated_reference_records_are_all_used() -> None:
     ms, q = _data()
     q2 = np.vstack([q, q[:1], q[:1]])
-    ms2 = MeasurementSet.from_arrays(ms.structure, q2, {f: np.concatenate([T, T[:1], T[:1]]) for f, T in ms.poses.items()})
+    ms2 = MeasurementSet.from_arrays(
+        ms.structure, q2, {f: np.concatenate([T, T[:1], T[:1]]) for f, T in ms.poses.items()}
+    )
     assert recognise_protocol(ms2).reference == (0, len(q), len(q) + 1)
 
 
@@ -47,7 +49,9 @@ def test_reference_found_when_a_sweep_revisits_a_value_more_often_than_q0() -> N
 def test_joint_never_moved_is_named() -> None:
     ms, q = _data()
     keep = [i for i in range(len(q)) if i == 0 or not (4 <= i < 7)]  # drop joint j1's sweep
-    with pytest.raises(DegenerateDataError, match=r"joint 'j1' has fewer than two distinct readings"):
+    with pytest.raises(
+        DegenerateDataError, match=r"joint 'j1' has fewer than two distinct readings"
+    ):
         recognise_protocol(ms.subset(keep))
 
 
@@ -61,7 +65,9 @@ def test_record_moving_several_joints_is_named() -> None:
     ms, q = _data()
     q2 = q.copy()
     q2[5, 0] = q2[1, 0]  # record 5 (joint j1's sweep) also moves j0
-    bad = MeasurementSet.from_arrays(ms.structure, q2, ms.poses, labels=[f"r{i}" for i in range(len(q))])
+    bad = MeasurementSet.from_arrays(
+        ms.structure, q2, ms.poses, labels=[f"r{i}" for i in range(len(q))]
+    )
     with pytest.raises(DegenerateDataError, match=r"r5 \(record 5\) moved several joints .*j0, j1"):
         recognise_protocol(bad)
 
@@ -108,5 +114,7 @@ def test_readings_off_by_a_count_still_count_as_q0() -> None:
     ms2 = MeasurementSet.from_arrays(ms.structure, jittered, ms.poses)
     p = recognise_protocol(ms2)
     assert [len(p.sweeps[n]) for n in ms.structure.joint_names] == [3, 3, 3]
-    with pytest.raises(DegenerateDataError, match="moved several joints|no reference configuration"):
+    with pytest.raises(
+        DegenerateDataError, match="moved several joints|no reference configuration"
+    ):
         recognise_protocol(ms2, tol=1e-9)  # exact equality: the jitter breaks the protocol

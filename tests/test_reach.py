@@ -72,12 +72,19 @@ def test_head_frame_and_grids(head):
     np.testing.assert_allclose(d, np.broadcast_to(g.axes[0][:, None, None], g.shape), atol=1e-12)
     az = np.arctan2(ph[:, 1], ph[:, 0]).reshape(g.shape)
     np.testing.assert_allclose(az, np.broadcast_to(g.axes[1][None, :, None], g.shape), atol=1e-12)
-    assert g.axes[1][0] == pytest.approx(-reach.SHELL_AZIMUTH) and g.axes[2][-1] == pytest.approx(reach.SHELL_ELEVATION)
+    assert g.axes[1][0] == pytest.approx(-reach.SHELL_AZIMUTH) and g.axes[2][-1] == pytest.approx(
+        reach.SHELL_ELEVATION
+    )
     b = box_grid(frame, 0.5, 2.0, (2, 3, 3))
     pb = b.points_head.reshape(2, 3, 3, 3)
     assert pb[..., 0].min() == pytest.approx(0.5) and pb[..., 0].max() == pytest.approx(2.0)
     assert pb[..., 1].max() == pytest.approx(2.0) and pb[..., 2].max() == pytest.approx(1.0)
-    for bad in ((0.0, 1.0, (3, 3, 3)), (2.0, 1.0, (3, 3, 3)), (0.5, math.inf, (3, 3, 3)), (0.5, 1.0, (1, 3, 3))):
+    for bad in (
+        (0.0, 1.0, (3, 3, 3)),
+        (2.0, 1.0, (3, 3, 3)),
+        (0.5, math.inf, (3, 3, 3)),
+        (0.5, 1.0, (1, 3, 3)),
+    ):
         with pytest.raises(ConfigurationError):
             shell_grid(frame, *bad)
     with pytest.raises(ConfigurationError, match="grid"):
@@ -90,7 +97,10 @@ def test_region_statuses_are_true(region):
     categories follow the statuses."""
     model, solver, r = region
     n = r.points.shape[0]
-    assert r.status.shape == r.category.shape == r.error.shape == (n,) and r.q.shape == (n, solver.n)
+    assert r.status.shape == r.category.shape == r.error.shape == (n,) and r.q.shape == (
+        n,
+        solver.n,
+    )
     assert [REGION_CATEGORIES[c] for c in r.category] == [category_of_status(s) for s in r.status]
     assert np.all(r.q >= solver.lower) and np.all(r.q <= solver.upper)
     counts = r.counts()
@@ -99,7 +109,9 @@ def test_region_statuses_are_true(region):
     limits = r.category == REGION_CATEGORIES.index("joint_limits")
     err = model_pointing_errors(model, r.q, r.points)
     assert np.all(err[fixated] < GAZE_POINTING_TOL)
-    np.testing.assert_allclose(np.max(err, axis=1)[~fixated], r.error[~fixated], rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(
+        np.max(err, axis=1)[~fixated], r.error[~fixated], rtol=1e-6, atol=1e-12
+    )
     assert np.all(r.error[~fixated] > GAZE_POINTING_TOL)
     if eyes_coplanar(model):  # the nominal head fixates exactly wherever its limits allow
         assert counts["fixated"] >= n // 4 and counts["disparity"] == 0
@@ -110,18 +122,27 @@ def test_region_statuses_are_true(region):
         return
     # a generic solver (scipy least_squares) from several starts does not fixate those the limits stop
     free = solver.free_joints("cyclopean")
-    held_table = GazeSolver(solver.robot, solver.cameras, GazeOptions(joints=[solver.joint_names[i] for i in free]))
+    held_table = GazeSolver(
+        solver.robot, solver.cameras, GazeOptions(joints=[solver.joint_names[i] for i in free])
+    )
     ref = generic_reference_solver(SolvedAxes(held_table))
     rng = np.random.default_rng(0)
     stopped = np.flatnonzero(limits)
     assert stopped.size
     for i in rng.choice(stopped, size=min(5, stopped.size), replace=False):
-        starts = [solver.home, r.q[i], *(solver.lower + (solver.upper - solver.lower) * rng.random((3, solver.n)))]
+        starts = [
+            solver.home,
+            r.q[i],
+            *(solver.lower + (solver.upper - solver.lower) * rng.random((3, solver.n))),
+        ]
         best = math.inf
         for q0 in starts:
             q = solver.home.copy()
             q[free] = q0[free]  # the table stays, as in the solver
-            best = min(best, float(np.max(model_pointing_errors(model, ref(r.points[i], q)[0], r.points[i]))))
+            best = min(
+                best,
+                float(np.max(model_pointing_errors(model, ref(r.points[i], q)[0], r.points[i]))),
+            )
         assert best > GAZE_POINTING_TOL
     # colours for the 3D view, one per point, by category
     c = r.colours()
@@ -157,8 +178,26 @@ def test_draw_region(tmp_path):
 
 def test_cli_reach_writes_png_and_json(tmp_path, capsys):
     png, js = tmp_path / "r.png", tmp_path / "r.json"
-    assert main(["reach", "iis_head", "--samples", "2", "5", "3", "--range", "0.4", "2", "-o", str(png),
-                 "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "reach",
+                "iis_head",
+                "--samples",
+                "2",
+                "5",
+                "3",
+                "--range",
+                "0.4",
+                "2",
+                "-o",
+                str(png),
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert str(png) in out and "30 targets" in out
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -189,11 +228,23 @@ def test_cli_reach_writes_png_and_json(tmp_path, capsys):
         (["iis_head", "--joints", "pan", "neck", "-o", "{d}/r.png"], "unknown joint 'neck'"),
         (["iis_head", "--tolerance", "0", "-o", "{d}/r.png"], "pointing tolerance"),
         (["iis_head", "--focal-px", "nan", "-o", "{d}/r.png"], "focal length"),
-        (["iis_head", "--tolerance", "1e-3", "--focal-px", "500", "-o", "{d}/r.png"], "not allowed with"),
+        (
+            ["iis_head", "--tolerance", "1e-3", "--focal-px", "500", "-o", "{d}/r.png"],
+            "not allowed with",
+        ),
         (["iis_head", "--min-distance", "-1", "-o", "{d}/r.png"], "min_distance"),
-        (["iis_head", "--range", "1", "1e7", "-o", "{d}/r.png"], "range must lie within 0.001..1000 m"),
-        (["iis_head", "--range", "1e-9", "1e-8", "-o", "{d}/r.png"], "range must lie within 0.001..1000 m"),
-        (["iis_head", "--samples", "1000", "1000", "1000", "-o", "{d}/r.png"], "1000000000 targets; at most 1000000"),
+        (
+            ["iis_head", "--range", "1", "1e7", "-o", "{d}/r.png"],
+            "range must lie within 0.001..1000 m",
+        ),
+        (
+            ["iis_head", "--range", "1e-9", "1e-8", "-o", "{d}/r.png"],
+            "range must lie within 0.001..1000 m",
+        ),
+        (
+            ["iis_head", "--samples", "1000", "1000", "1000", "-o", "{d}/r.png"],
+            "1000000000 targets; at most 1000000",
+        ),
         (["iis_head", "-o", "{d}/r.png", "--json", "{d}/r.png"], "the same file as -o"),
     ],
 )
@@ -213,9 +264,16 @@ def test_slices_are_named_where_they_lie_and_large_grids_solve_in_chunks(monkeyp
     grid = make_grid(solver, "shell", 0.4, 2.0, (3, 8, 6))
     level, where = reach._slice_mask(grid, 2)
     assert where == "elevation -12 deg" and level.sum() == 3 * 8
-    assert np.allclose(np.degrees(np.arcsin(grid.points_head[level, 2] / np.linalg.norm(grid.points_head[level], axis=1))), -12.0)
+    assert np.allclose(
+        np.degrees(
+            np.arcsin(grid.points_head[level, 2] / np.linalg.norm(grid.points_head[level], axis=1))
+        ),
+        -12.0,
+    )
     assert reach._slice_mask(make_grid(solver, "box", 0.4, 2.0, (3, 5, 4)), 1)[1] == "left 0 m"
-    box = make_grid(solver, "box", 0.1, 2.9, (2, 19, 19))  # linspace's middle value is -2.2e-16, not 0
+    box = make_grid(
+        solver, "box", 0.1, 2.9, (2, 19, 19)
+    )  # linspace's middle value is -2.2e-16, not 0
     assert reach._slice_mask(box, 1)[1] == "left 0 m" and reach._slice_mask(box, 2)[1] == "up 0 m"
     whole = reachable_region(solver, grid)
     monkeypatch.setattr(reach, "PROGRESS_CHUNK", 50)
@@ -236,8 +294,9 @@ def _urdf_fk(path, joint_names, q, frame):
     import yourdfpy
     from scipy.spatial.transform import Rotation
 
-    robot = yourdfpy.URDF.load(str(path), load_meshes=False, build_scene_graph=False,
-                               build_collision_scene_graph=False)
+    robot = yourdfpy.URDF.load(
+        str(path), load_meshes=False, build_scene_graph=False, build_collision_scene_graph=False
+    )
     by_child = {j.child: j for j in robot.robot.joints}
     T = np.eye(4)
     link = frame
@@ -245,7 +304,9 @@ def _urdf_fk(path, joint_names, q, frame):
         j = by_child[link]
         M = np.eye(4)
         if j.type in ("revolute", "continuous"):
-            M[:3, :3] = Rotation.from_rotvec(np.asarray(j.axis, dtype=float) * q[joint_names.index(j.name)]).as_matrix()
+            M[:3, :3] = Rotation.from_rotvec(
+                np.asarray(j.axis, dtype=float) * q[joint_names.index(j.name)]
+            ).as_matrix()
         elif j.type == "prismatic":
             M[:3, 3] = np.asarray(j.axis, dtype=float) * q[joint_names.index(j.name)]
         T = (j.origin if j.origin is not None else np.eye(4)) @ M @ T
@@ -266,9 +327,15 @@ def test_region_on_a_real_head(tmp_path):
     n = r.points.shape[0]
     names = list(solver.joint_names)
     limited = np.isfinite(solver.lower) & np.isfinite(solver.upper)
-    home = np.where(limited, 0.5 * (np.where(limited, solver.lower, 0.0) + np.where(limited, solver.upper, 0.0)), 0.0)
+    home = np.where(
+        limited,
+        0.5 * (np.where(limited, solver.lower, 0.0) + np.where(limited, solver.upper, 0.0)),
+        0.0,
+    )
     T = _urdf_fk(case.urdf, names, home, cam)
-    np.testing.assert_allclose(grid.frame.origin, T[:3, 3], atol=1e-9)  # one camera: the frame sits on it
+    np.testing.assert_allclose(
+        grid.frame.origin, T[:3, 3], atol=1e-9
+    )  # one camera: the frame sits on it
     np.testing.assert_allclose(grid.frame.R_world_head[:, 0], T[:3, 2], atol=1e-9)
     fixated = r.category == REGION_CATEGORIES.index("fixated")
     assert 0 < fixated.sum() < n and set(r.status.tolist()) <= {"fixated", "joint_limits"}
@@ -304,7 +371,21 @@ def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
 
     def counts(*options):
         js = tmp_path / "r.json"
-        assert main(["reach", str(model), *grid, *options, "-o", str(tmp_path / "r.png"), "--json", str(js)]) == 0
+        assert (
+            main(
+                [
+                    "reach",
+                    str(model),
+                    *grid,
+                    *options,
+                    "-o",
+                    str(tmp_path / "r.png"),
+                    "--json",
+                    str(js),
+                ]
+            )
+            == 0
+        )
         capsys.readouterr()
         return json.loads(js.read_text())["counts"]
 
@@ -313,7 +394,10 @@ def test_cli_reach_takes_the_solver_options_of_gaze(tmp_path, capsys):
     assert loose.get("fixated", 0) > 0
     doc = json.loads((tmp_path / "r.json").read_text())  # the last run's options are recorded
     assert doc["tolerance_rad"] == pytest.approx(math.atan(0.1 / 200))
-    assert doc["moving"] == ["pan", "tilt", "vergence_left", "vergence_right"] and doc["min_distance_m"] == 0.1
+    assert (
+        doc["moving"] == ["pan", "tilt", "vergence_left", "vergence_right"]
+        and doc["min_distance_m"] == 0.1
+    )
     assert counts("--tolerance", "1.0")["fixated"] > 0
     eyes = counts("--focal-px", "200", "--joints", "vergence_left", "vergence_right")
     assert eyes.get("fixated", 0) < loose["fixated"]

@@ -93,9 +93,11 @@ SEEDS = (0, 1)
 
 def _fixed_link(name: str, parent: str, xyz: str, rpy: str) -> str:
     """A link fixed to ``parent``, as a user adds a target (docs/urdf.md)."""
-    return (f'  <link name="{name}"/>\n  <joint name="{name}_joint" type="fixed">\n'
-            f'    <parent link="{parent}"/>\n    <child link="{name}"/>\n'
-            f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n  </joint>\n')
+    return (
+        f'  <link name="{name}"/>\n  <joint name="{name}_joint" type="fixed">\n'
+        f'    <parent link="{parent}"/>\n    <child link="{name}"/>\n'
+        f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n  </joint>\n'
+    )
 
 
 def _with_links(source: Path, target: Path, added: str) -> Path:
@@ -125,14 +127,22 @@ class RealRobot:
 
 
 ROBOTS = {
-    "tiago": RealRobot(SHARE / "example-robot-data/robots/tiago_description/robots/tiago.urdf", ("calib_plate",),
-                       _fixed_link("calib_plate", "head_2_link", "0.1 0.05 0.02", "0.1 0.2 0.3")),
-    "talos": RealRobot(SHARE / "example-robot-data/robots/talos_data/robots/talos_reduced.urdf",
-                       ("rgbd_rgb_optical_frame",)),
+    "tiago": RealRobot(
+        SHARE / "example-robot-data/robots/tiago_description/robots/tiago.urdf",
+        ("calib_plate",),
+        _fixed_link("calib_plate", "head_2_link", "0.1 0.05 0.02", "0.1 0.2 0.3"),
+    ),
+    "talos": RealRobot(
+        SHARE / "example-robot-data/robots/talos_data/robots/talos_reduced.urdf",
+        ("rgbd_rgb_optical_frame",),
+    ),
     # Two camera links on iCub's head link, 68 mm apart (a guess at the eyes; their pose is what is identified).
-    "icub": RealRobot(ICUB_SHARE / "iCub/robots/iCubGenova04/model.urdf", ("l_eye_camera", "r_eye_camera"),
-                      _fixed_link("l_eye_camera", "head", "-0.034 0.11 0.06", "0 0 0")
-                      + _fixed_link("r_eye_camera", "head", "0.034 0.11 0.06", "0 0 0")),
+    "icub": RealRobot(
+        ICUB_SHARE / "iCub/robots/iCubGenova04/model.urdf",
+        ("l_eye_camera", "r_eye_camera"),
+        _fixed_link("l_eye_camera", "head", "-0.034 0.11 0.06", "0 0 0")
+        + _fixed_link("r_eye_camera", "head", "0.034 0.11 0.06", "0 0 0"),
+    ),
 }
 
 
@@ -161,8 +171,9 @@ def calibrate(name: str, folder: Path, seed: int, *, noise: str = "fig10") -> Ru
     """Simulate, identify (default pipeline, consistency gate) and write back ``ROBOTS[name]``."""
     urdf = ROBOTS[name].write(package_folder(folder, PACKAGES), name)
     robot = load_urdf_robot(urdf, ROBOTS[name].measured)
-    exp = simulate_experiment(robot, seed=seed, M=M, noise=noise, sigma_t=SIGMA_T, sigma_r=SIGMA_R,
-                              n_heldout=N_HELDOUT)
+    exp = simulate_experiment(
+        robot, seed=seed, M=M, noise=noise, sigma_t=SIGMA_T, sigma_r=SIGMA_R, n_heldout=N_HELDOUT
+    )
     model = api.identify(exp.measured)
     written = api.export_urdf(model, folder / f"{name}_calibrated.urdf")
     return Run(urdf, robot, exp, model, written, writeback_plan(model))
@@ -195,12 +206,21 @@ def heldout_error(run: Run) -> tuple[float, float]:
     measured = [run.plan.source.urdf_link(f) for f in frames]
     T = _links_in_world(run.written, run, run.model.T_world_base(), measured)
     held = run.experiment.heldout
-    d = np.stack([np.linalg.norm(T[:, k, :3, 3] - held.poses[f][:, :3, 3], axis=1) for k, f in enumerate(frames)])
+    d = np.stack(
+        [
+            np.linalg.norm(T[:, k, :3, 3] - held.poses[f][:, :3, 3], axis=1)
+            for k, f in enumerate(frames)
+        ]
+    )
     std = predicted_position_std(run.model, held.q, frames)
-    return float(np.sqrt(np.mean(d**2))), float(np.sqrt(np.mean(np.concatenate([std[f] ** 2 for f in frames]))))
+    return float(np.sqrt(np.mean(d**2))), float(
+        np.sqrt(np.mean(np.concatenate([std[f] ** 2 for f in frames])))
+    )
 
 
-def heldout_ratio_bounds(run: Run, alpha: float = HELDOUT_ALPHA, draws: int = 2_000_000) -> tuple[float, float, float]:
+def heldout_ratio_bounds(
+    run: Run, alpha: float = HELDOUT_ALPHA, draws: int = 2_000_000
+) -> tuple[float, float, float]:
     """``(lower, upper, nu)``: the central ``1 - alpha`` interval of observed / predicted held-out RMS
     (:func:`heldout_error`) under the model's covariance, and its effective degrees of freedom.
 
@@ -210,11 +230,18 @@ def heldout_ratio_bounds(run: Run, alpha: float = HELDOUT_ALPHA, draws: int = 2_
     cov = covariance_of_model(run.model)
     chart = Parametrization(run.model, cov.frames)
     _, D = chart.pose_jacobian(np.zeros(chart.n_params), run.experiment.heldout.q)
-    G = np.concatenate([D[f][:, :3, :].reshape(-1, chart.n_params) for f in run.model.structure.frame_names])
+    G = np.concatenate(
+        [D[f][:, :3, :].reshape(-1, chart.n_params) for f in run.model.structure.frame_names]
+    )
     mu = np.linalg.eigvalsh(G @ cov.matrix @ G.T)
     mu = mu[mu > mu.max() * 1e-12]
     rng = np.random.default_rng(0)
-    squared = np.concatenate([rng.standard_normal((CHUNK, len(mu))) ** 2 @ mu for _ in range(draws // CHUNK)]) / mu.sum()
+    squared = (
+        np.concatenate(
+            [rng.standard_normal((CHUNK, len(mu))) ** 2 @ mu for _ in range(draws // CHUNK)]
+        )
+        / mu.sum()
+    )
     lower, upper = np.sqrt(np.quantile(squared, [alpha / 2, 1 - alpha / 2]))
     return float(lower), float(upper), float(mu.sum() ** 2 / (mu**2).sum())
 
@@ -258,21 +285,27 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str, int], Run]:
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("name", ROBOTS)
-def test_heldout_measured_links_within_the_predicted_error(runs: Callable[[str, int], Run], name: str,
-                                                           seed: int) -> None:
+def test_heldout_measured_links_within_the_predicted_error(
+    runs: Callable[[str, int], Run], name: str, seed: int
+) -> None:
     run = runs(name, seed)
-    assert run.model.metadata.uncertainty is not None and run.model.metadata.uncertainty.scale == "known"
+    assert (
+        run.model.metadata.uncertainty is not None
+        and run.model.metadata.uncertainty.scale == "known"
+    )
     observed, predicted = heldout_error(run)
     lower, upper, nu = heldout_ratio_bounds(run)
     assert lower * predicted <= observed <= upper * predicted, (
         f"{name} seed {seed}: observed {observed * 1e3:.3f} mm, predicted {predicted * 1e3:.3f} mm "
-        f"(ratio {observed / predicted:.2f}, outside [{lower:.2f}, {upper:.2f}], nu {nu:.1f})")
+        f"(ratio {observed / predicted:.2f}, outside [{lower:.2f}, {upper:.2f}], nu {nu:.1f})"
+    )
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("name", ROBOTS)
-def test_every_link_stays_on_its_part(runs: Callable[[str, int], Run], name: str, seed: int,
-                                      tmp_path: Path) -> None:
+def test_every_link_stays_on_its_part(
+    runs: Callable[[str, int], Run], name: str, seed: int, tmp_path: Path
+) -> None:
     names, ident, at_base, anchored = link_errors(runs(name, seed), tmp_path)
     assert at_base.max() > 1e-3  # the truth is millimetres from the drawing
     # Per link, against the larger of its two true errors: a root-fixed link is 0 from the truth at the
@@ -283,27 +316,36 @@ def test_every_link_stays_on_its_part(runs: Callable[[str, int], Run], name: str
     worst = int(np.argmax(ratio))
     assert ratio.max() <= LINK_FACTOR, (
         f"{name} seed {seed}: link {names[worst]} {ident[worst] * 1e3:.2f} mm from the true part; its true error is "
-        f"{at_base[worst] * 1e3:.2f} mm at the true base, {anchored[worst] * 1e3:.2f} mm anchored on the measured link")
+        f"{at_base[worst] * 1e3:.2f} mm at the true base, {anchored[worst] * 1e3:.2f} mm anchored on the measured link"
+    )
 
 
 def _xml(path: Path) -> ET.Element:
-    return ET.parse(path, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))).getroot()
+    return ET.parse(
+        path, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    ).getroot()
 
 
 def _same_xml(a: ET.Element, b: ET.Element, skip: tuple[str, ...] = ()) -> bool:
     """Tag, attributes, text and children equal (children tagged ``skip`` left out)."""
     ka = [c for c in a if c.tag not in skip]
     kb = [c for c in b if c.tag not in skip]
-    return ((a.tag, a.attrib, (a.text or "").strip(), (a.tail or "").strip())
-            == (b.tag, b.attrib, (b.text or "").strip(), (b.tail or "").strip())
-            and len(ka) == len(kb) and all(_same_xml(x, y) for x, y in zip(ka, kb, strict=True)))
+    return (
+        (a.tag, a.attrib, (a.text or "").strip(), (a.tail or "").strip())
+        == (b.tag, b.attrib, (b.text or "").strip(), (b.tail or "").strip())
+        and len(ka) == len(kb)
+        and all(_same_xml(x, y) for x, y in zip(ka, kb, strict=True))
+    )
 
 
 def _same_parsed(a: Any, b: Any, skip: tuple[str, ...] = ()) -> bool:
     """yourdfpy's parsed elements equal field by field (arrays exactly)."""
     if dataclasses.is_dataclass(a) and dataclasses.is_dataclass(b):
         return type(a) is type(b) and all(
-            _same_parsed(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a) if f.name not in skip)
+            _same_parsed(getattr(a, f.name), getattr(b, f.name))
+            for f in dataclasses.fields(a)
+            if f.name not in skip
+        )
     if isinstance(a, list | tuple) and isinstance(b, list | tuple):
         return len(a) == len(b) and all(_same_parsed(x, y) for x, y in zip(a, b, strict=True))
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
@@ -317,8 +359,12 @@ def test_only_the_calibrated_joints_change(runs: Callable[[str, int], Run], name
 
     run = runs(name, SEEDS[0])
     calibrated = {c.joint.name for c in run.plan.changes}
-    moving = {j for j in run.plan.source.kinematics if run.plan.source.kinematics[j]["type"] != "fixed"}
-    assert moving <= calibrated and set(run.robot.measured) <= {c.joint.child for c in run.plan.changes}
+    moving = {
+        j for j in run.plan.source.kinematics if run.plan.source.kinematics[j]["type"] != "fixed"
+    }
+    assert moving <= calibrated and set(run.robot.measured) <= {
+        c.joint.child for c in run.plan.changes
+    }
     before, after = _xml(run.urdf), _xml(run.written)
     assert len(before) == len(after)
     changed = set()
@@ -326,25 +372,35 @@ def test_only_the_calibrated_joints_change(runs: Callable[[str, int], Run], name
         if _same_xml(x, y):
             continue
         assert x.tag == "joint" and x.get("name") in calibrated, f"{x.tag} {x.get('name')} changed"
-        assert _same_xml(x, y, skip=("origin", "axis")), f"joint {x.get('name')}: more than origin/axis changed"
+        assert _same_xml(x, y, skip=("origin", "axis")), (
+            f"joint {x.get('name')}: more than origin/axis changed"
+        )
         changed.add(x.get("name"))
     assert changed == calibrated  # noisy data move every calibrated origin
-    kw: dict[str, Any] = dict(load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False)
+    kw: dict[str, Any] = dict(
+        load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False
+    )
     a, b = yourdfpy.URDF.load(str(run.urdf), **kw), yourdfpy.URDF.load(str(run.written), **kw)
     assert list(a.link_map) == list(b.link_map) and list(a.joint_map) == list(b.joint_map)
-    assert all(_same_parsed(a.link_map[n], b.link_map[n]) for n in a.link_map)  # inertials, visuals, collisions
+    assert all(
+        _same_parsed(a.link_map[n], b.link_map[n]) for n in a.link_map
+    )  # inertials, visuals, collisions
     for n in a.joint_map:
         skip = ("origin", "axis") if n in calibrated else ()
         assert _same_parsed(a.joint_map[n], b.joint_map[n], skip), n
     assert _same_parsed(a.robot.materials, b.robot.materials)
-    assert sum(not np.array_equal(a.joint_map[n].origin, b.joint_map[n].origin) for n in calibrated) == len(calibrated)
+    assert sum(
+        not np.array_equal(a.joint_map[n].origin, b.joint_map[n].origin) for n in calibrated
+    ) == len(calibrated)
 
 
 @pytest.mark.parametrize("name", ROBOTS)
 def test_noise_free_data_give_the_measured_links_exactly(name: str, tmp_path: Path) -> None:
     run = calibrate(name, tmp_path, seed=5, noise="none")
     frames = list(run.model.structure.frame_names)
-    T = _links_in_world(run.written, run, run.model.T_world_base(), [run.plan.source.urdf_link(f) for f in frames])
+    T = _links_in_world(
+        run.written, run, run.model.T_world_base(), [run.plan.source.urdf_link(f) for f in frames]
+    )
     held = run.experiment.heldout
     for k, f in enumerate(frames):
         assert np.abs(T[:, k] - held.poses[f]).max() < EXACT, f
@@ -361,9 +417,16 @@ def test_noise_free_data_give_the_measured_links_exactly(name: str, tmp_path: Pa
 # eigenvalues"), for the original and the written file alike. The last mode compares MuJoCo's
 # kinematic tree alone (geoms dropped, one valid inertia for every body, in memory): every link of
 # every robot, TIAGo's included.
-MODES: dict[str, list[tuple[bool, dict[str, bool]]]] = {"mujoco": [
-    (False, {}), (True, {}), (True, {"keep_links": True}), (True, {"drop_undecodable": True}),
-    (True, {"keep_links": True, "drop_undecodable": True}), (True, {"keep_links": True, "kinematics_only": True})]}
+MODES: dict[str, list[tuple[bool, dict[str, bool]]]] = {
+    "mujoco": [
+        (False, {}),
+        (True, {}),
+        (True, {"keep_links": True}),
+        (True, {"drop_undecodable": True}),
+        (True, {"keep_links": True, "drop_undecodable": True}),
+        (True, {"keep_links": True, "kinematics_only": True}),
+    ]
+}
 
 
 def _load(consumer: str, path: Path, packages: bool, **kw: bool) -> tuple[Any, str]:
@@ -379,9 +442,13 @@ def _load(consumer: str, path: Path, packages: bool, **kw: bool) -> tuple[Any, s
 
 @pytest.mark.parametrize("consumer", CONSUMERS)
 @pytest.mark.parametrize("name", ROBOTS)
-def test_written_urdf_loads_as_the_original_and_agrees(runs: Callable[[str, int], Run], name: str,
-                                                       consumer: str, tmp_path: Path,
-                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_written_urdf_loads_as_the_original_and_agrees(
+    runs: Callable[[str, int], Run],
+    name: str,
+    consumer: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """The written file loads exactly as the user's (same output, same success or the same error);
     where it loads, every link it has agrees with Pinocchio's FK of the written file to 1e-12."""
     run = runs(name, SEEDS[0])
@@ -390,8 +457,10 @@ def test_written_urdf_loads_as_the_original_and_agrees(runs: Callable[[str, int]
     for packages, kw in MODES.get(consumer, [(True, {})]):
         original, said_original = _load(consumer, run.urdf, packages, **kw)
         written, said_written = _load(consumer, run.written, packages, **kw)
-        assert said_written == said_original, f"{consumer} {kw}: written file says\n{said_written[:800]}\n" \
-                                              f"the original says\n{said_original[:800]}"
+        assert said_written == said_original, (
+            f"{consumer} {kw}: written file says\n{said_written[:800]}\n"
+            f"the original says\n{said_original[:800]}"
+        )
         if isinstance(original, Exception):
             assert isinstance(written, Exception)
             continue
@@ -401,7 +470,13 @@ def test_written_urdf_loads_as_the_original_and_agrees(runs: Callable[[str, int]
                 compared += 1
                 continue
             s = run.model.structure
-            Q = np.vstack([s.lower, s.upper, np.random.default_rng(7).uniform(s.lower, s.upper, (8, s.n_joints))])
+            Q = np.vstack(
+                [
+                    s.lower,
+                    s.upper,
+                    np.random.default_rng(7).uniform(s.lower, s.upper, (8, s.n_joints)),
+                ]
+            )
             configurations = [_readings(run, q) for q in Q]
             refused = _refusal(original[0], configurations[0])
             if refused is not None:  # PyBullet on iCub (> 128 links): no poses from either file
@@ -409,16 +484,22 @@ def test_written_urdf_loads_as_the_original_and_agrees(runs: Callable[[str, int]
                 continue
             reference, _, _ = load_pinocchio(run.written, geometry=False)
             names = links(run.written)
-            if consumer == "mujoco" and not kw.get("keep_links"):  # fusestatic: links on fixed joints merge
+            if consumer == "mujoco" and not kw.get(
+                "keep_links"
+            ):  # fusestatic: links on fixed joints merge
                 names = [n for n in names if n in fk(configurations[0])]
                 assert {c.joint.child for c in run.plan.changes if c.role == "joint"} <= set(names)
             dp, dr, where = fk_disagreement(fk, reference, names, configurations)
-            assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, f"{consumer} {name}: {dp:.2e} m, {dr:.2e} rad, {where}"
+            assert dp < CONSUMER_TOL and dr < CONSUMER_TOL, (
+                f"{consumer} {name}: {dp:.2e} m, {dr:.2e} rad, {where}"
+            )
             compared += 1
         finally:
             close()
             original[2]()
-    assert compared or (consumer, name) == ("pybullet", "icub"), "no way to load it compared anything"
+    assert compared or (consumer, name) == ("pybullet", "icub"), (
+        "no way to load it compared anything"
+    )
 
 
 def _refusal(fk: Callable[[dict[str, float]], Any], q: dict[str, float]) -> str | None:
@@ -455,8 +536,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, help="also write every per-link number here")
     args = p.parse_args(argv)
     dump: dict[str, Any] = {}
-    print("robot  seed  held-out RMS obs / pred [mm]  ratio [bounds] nu | worst link: identified / true error [mm] | "
-          "max identified / max true error: nominal at the true base, anchored on the measured link")
+    print(
+        "robot  seed  held-out RMS obs / pred [mm]  ratio [bounds] nu | worst link: identified / true error [mm] | "
+        "max identified / max true error: nominal at the true base, anchored on the measured link"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.robot or list(ROBOTS):
             ratios, link_ratios, anchored_ratios, per_link, outside = [], [], [], [], 0
@@ -466,26 +549,40 @@ def main(argv: list[str] | None = None) -> int:
                 obs, pred = heldout_error(run)
                 lower, upper, nu = heldout_ratio_bounds(run)
                 names, ident, true_error, anchored = link_errors(run, folder)
-                dump.setdefault(name, []).append({"seed": seed, "observed": obs, "predicted": pred, "lower": lower,
-                                                  "upper": upper, "nu": nu, "links": names,
-                                                  "identified": ident.tolist(), "true": true_error.tolist(),
-                                                  "anchored": anchored.tolist()})
+                dump.setdefault(name, []).append(
+                    {
+                        "seed": seed,
+                        "observed": obs,
+                        "predicted": pred,
+                        "lower": lower,
+                        "upper": upper,
+                        "nu": nu,
+                        "links": names,
+                        "identified": ident.tolist(),
+                        "true": true_error.tolist(),
+                        "anchored": anchored.tolist(),
+                    }
+                )
                 w = int(np.argmax(ident / np.maximum(true_error, 1e-15)))
                 ratios.append(obs / pred)
                 outside += not lower <= obs / pred <= upper
                 per_link.append(ident / np.maximum(true_error, anchored))
                 link_ratios.append(ident.max() / true_error.max())
                 anchored_ratios.append(ident.max() / anchored.max())
-                print(f"{name:6s} {seed:4d}  {obs * 1e3:6.3f} / {pred * 1e3:6.3f}  {obs / pred:5.2f} "
-                      f"[{lower:.2f}, {upper:.2f}] nu {nu:4.1f} | "
-                      f"{names[w]} {ident[w] * 1e3:.2f} / {true_error[w] * 1e3:.2f} | "
-                      f"{link_ratios[-1]:5.2f} {anchored_ratios[-1]:5.2f}")
+                print(
+                    f"{name:6s} {seed:4d}  {obs * 1e3:6.3f} / {pred * 1e3:6.3f}  {obs / pred:5.2f} "
+                    f"[{lower:.2f}, {upper:.2f}] nu {nu:4.1f} | "
+                    f"{names[w]} {ident[w] * 1e3:.2f} / {true_error[w] * 1e3:.2f} | "
+                    f"{link_ratios[-1]:5.2f} {anchored_ratios[-1]:5.2f}"
+                )
                 shutil.rmtree(folder)
-            print(f"{name}: held-out ratio mean {np.mean(ratios):.2f} max {np.max(ratios):.2f} "
-                  f"(RMS of ratios {np.sqrt(np.mean(np.square(ratios))):.2f}); max identified / max true error: "
-                  f"at the true base max {np.max(link_ratios):.2f}, anchored max {np.max(anchored_ratios):.2f}; "
-                  f"{outside} held-out ratio(s) outside the bounds; per link, identified / the larger true error: "
-                  f"max {np.max(per_link):.2f}")
+            print(
+                f"{name}: held-out ratio mean {np.mean(ratios):.2f} max {np.max(ratios):.2f} "
+                f"(RMS of ratios {np.sqrt(np.mean(np.square(ratios))):.2f}); max identified / max true error: "
+                f"at the true base max {np.max(link_ratios):.2f}, anchored max {np.max(anchored_ratios):.2f}; "
+                f"{outside} held-out ratio(s) outside the bounds; per link, identified / the larger true error: "
+                f"max {np.max(per_link):.2f}"
+            )
             if args.json:
                 args.json.write_text(json.dumps(dump))
     return 0

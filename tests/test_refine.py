@@ -37,11 +37,19 @@ def test_residual_jacobian_matches_finite_differences(head):
     q = protocol_q(truth, 4)
     ms = measure(truth, q, rng, SIGMA_T, SIGMA_R)
     chart = Parametrization(perturbed(truth, rng, 2e-3, 0.01), PLATES)
-    prob = IdentificationProblem(chart, q, ms.poses, {f: ms.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
+    prob = IdentificationProblem(
+        chart, q, ms.poses, {f: ms.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R
+    )
     x = rng.normal(0.0, 0.01, chart.n_params)
     J = prob.jacobian(x)
     eps = 1e-7
-    Jn = np.stack([(prob.residuals(x + eps * e) - prob.residuals(x - eps * e)) / (2 * eps) for e in np.eye(len(x))], 1)
+    Jn = np.stack(
+        [
+            (prob.residuals(x + eps * e) - prob.residuals(x - eps * e)) / (2 * eps)
+            for e in np.eye(len(x))
+        ],
+        1,
+    )
     assert J.shape == (6 * 2 * len(q), 32)
     np.testing.assert_allclose(J, Jn, atol=1e-6 * np.abs(J).max())
 
@@ -56,7 +64,9 @@ def test_noise_free_data_recovered_exactly(head, design):
     assert res.success and res.identifiability.rank == 32
     qh = random_q(truth, 50, rng)
     for f in PLATES:
-        np.testing.assert_allclose(res.model.fk(qh, [f])[f], truth.fk(qh, [f])[f], atol=FK_AGREEMENT_TOL)
+        np.testing.assert_allclose(
+            res.model.fk(qh, [f])[f], truth.fk(qh, [f])[f], atol=FK_AGREEMENT_TOL
+        )
 
 
 def test_far_start_converges_by_recentring_the_chart(head):
@@ -76,7 +86,10 @@ def test_missing_poses_are_skipped(head):
     ms.poses["plate_left"][::3] = np.nan  # not seen in every third record
     res = refine(perturbed(truth, rng, 2e-3, 0.01), ms, SIGMA_T, SIGMA_R)
     assert res.n_poses == 2 * 25 - 9
-    assert np.isnan(res.residuals["plate_left"][0]).all() and np.isfinite(res.residuals["plate_right"][0]).all()
+    assert (
+        np.isnan(res.residuals["plate_left"][0]).all()
+        and np.isfinite(res.residuals["plate_right"][0]).all()
+    )
     qh = random_q(truth, 20, rng)
     assert heldout_error(res.model, truth, qh) < 1e-10
 
@@ -122,7 +135,9 @@ def _corrupt(ms: MeasurementSet, rng, fraction=0.05):
         w = rng.normal(size=3)
         w /= np.linalg.norm(w)
         poses[f][k, :3, 3] += 10e-3 * u
-        poses[f][k, :3, :3] = Rotation.from_rotvec(np.radians(5.0) * w).as_matrix() @ poses[f][k, :3, :3]
+        poses[f][k, :3, :3] = (
+            Rotation.from_rotvec(np.radians(5.0) * w).as_matrix() @ poses[f][k, :3, :3]
+        )
         hit.append((int(k), f))
     return MeasurementSet(ms.structure, ms.q, poses), hit
 
@@ -151,7 +166,13 @@ def test_robust_mode_flags_a_wrong_joint_reading(head):
     ms = measure(truth, q, rng, SIGMA_T, SIGMA_R)
     q_bad = q.copy()
     q_bad[20, head.structure.joint_index("pan")] += np.radians(5.0)  # transducer glitch
-    res = refine(perturbed(truth, rng, 1e-3, 0.003), MeasurementSet(ms.structure, q_bad, ms.poses), SIGMA_T, SIGMA_R, robust=True)
+    res = refine(
+        perturbed(truth, rng, 1e-3, 0.003),
+        MeasurementSet(ms.structure, q_bad, ms.poses),
+        SIGMA_T,
+        SIGMA_R,
+        robust=True,
+    )
     assert res.outlier_records == [20]
     assert {o.frame for o in res.outliers} == set(PLATES)  # both branches: a shared joint's reading
     assert "record 20" in res.summary()
@@ -177,7 +198,11 @@ def test_a_fit_the_model_cannot_explain_stops_when_it_stalls(head):
     rng = np.random.default_rng(8)
     truth = perturbed(head, rng)
     ms = measure(truth, protocol_q(truth, 5), rng, SIGMA_T, SIGMA_R)
-    swapped = MeasurementSet(ms.structure, ms.q, {"plate_left": ms.poses["plate_right"], "plate_right": ms.poses["plate_left"]})
+    swapped = MeasurementSet(
+        ms.structure,
+        ms.q,
+        {"plate_left": ms.poses["plate_right"], "plate_right": ms.poses["plate_left"]},
+    )
     res = refine(perturbed(truth, rng, 1e-3, 0.003), swapped, SIGMA_T, SIGMA_R, warn=False)
     assert not res.success and "lowered the cost by less than" in res.message
     assert res.iterations < 200 and res.iterations % STALL_NFEV == 0
@@ -205,7 +230,10 @@ def test_identify_cli_method_refined(tmp_path):
 
     truth, measured, heldout = simulate_experiment("iis_head", seed=3, M=5, n_heldout=20)
     path = save_measurements(measured, tmp_path / "m.json", robot="iis_head")
-    assert main(["identify", str(path), "-o", str(tmp_path / "cf.json"), "--method", "closed-form"]) == 0
+    assert (
+        main(["identify", str(path), "-o", str(tmp_path / "cf.json"), "--method", "closed-form"])
+        == 0
+    )
     assert main(["identify", str(path), "-o", str(tmp_path / "r.json"), "--method", "refined"]) == 0
     cf, ref = load_model(tmp_path / "cf.json"), load_model(tmp_path / "r.json")
     assert ref.metadata.provenance.method == "refined"
@@ -213,7 +241,14 @@ def test_identify_cli_method_refined(tmp_path):
     # What the refinement promises per data set is a weighted fit no worse than its start (one
     # trial's held-out error is a noisy draw; the averages are tested above).
     chart = Parametrization(cf, PLATES)
-    prob = IdentificationProblem(chart, measured.q, measured.poses, {f: measured.has_pose(f) for f in PLATES}, SIGMA_T, SIGMA_R)
+    prob = IdentificationProblem(
+        chart,
+        measured.q,
+        measured.poses,
+        {f: measured.has_pose(f) for f in PLATES},
+        SIGMA_T,
+        SIGMA_R,
+    )
     cost_cf = float(np.sum(prob.residuals(np.zeros(chart.n_params)) ** 2))
     cost_ref = float(np.sum(prob.residuals(chart.vector_from_model(ref)) ** 2))
     assert cost_ref <= cost_cf
@@ -221,9 +256,16 @@ def test_identify_cli_method_refined(tmp_path):
     std = predicted_position_std(ref, heldout.q)
     assert set(std) == set(PLATES) and np.all((std["plate_left"] > 0) & (std["plate_left"] < 2e-3))
     # Cameras ride along with their plates.
-    for cam, plate in (("camera_left_optical", "plate_left"), ("camera_right_optical", "plate_right")):
-        rel_cf = np.linalg.solve(cf.fk(heldout.q[:1], [plate])[plate][0], cf.fk(heldout.q[:1], [cam])[cam][0])
-        rel_r = np.linalg.solve(ref.fk(heldout.q[:1], [plate])[plate][0], ref.fk(heldout.q[:1], [cam])[cam][0])
+    for cam, plate in (
+        ("camera_left_optical", "plate_left"),
+        ("camera_right_optical", "plate_right"),
+    ):
+        rel_cf = np.linalg.solve(
+            cf.fk(heldout.q[:1], [plate])[plate][0], cf.fk(heldout.q[:1], [cam])[cam][0]
+        )
+        rel_r = np.linalg.solve(
+            ref.fk(heldout.q[:1], [plate])[plate][0], ref.fk(heldout.q[:1], [cam])[cam][0]
+        )
         np.testing.assert_allclose(rel_r, rel_cf, atol=1e-12)
     # Random configurations (no protocol): the closed form cannot start, the nominal model does.
     rng = np.random.default_rng(7)
@@ -231,7 +273,12 @@ def test_identify_cli_method_refined(tmp_path):
     free = measure(truth, q, rng, 0.0, 0.0)
     free = MeasurementSet.from_arrays(truth.structure, q, free.poses, robot="iis_head")
     path2 = save_measurements(free, tmp_path / "free.json", robot="iis_head")
-    assert main(["identify", str(path2), "-o", str(tmp_path / "free_model.json"), "--method", "refined"]) == 0
+    assert (
+        main(
+            ["identify", str(path2), "-o", str(tmp_path / "free_model.json"), "--method", "refined"]
+        )
+        == 0
+    )
     m = load_model(tmp_path / "free_model.json")
     assert m.metadata.provenance.details["start"] == "nominal"
     assert heldout_error(m, truth, heldout.q) < 1e-9
@@ -242,12 +289,18 @@ def test_crb_study_runs_with_tiny_sizes(tmp_path):
 
     from cpc2urdf.cli import main
 
-    assert main(["study", "crb", "--trials", "2", "--heldout", "5", "--M", "4", "--out", str(tmp_path)]) == 0
+    assert (
+        main(
+            ["study", "crb", "--trials", "2", "--heldout", "5", "--M", "4", "--out", str(tmp_path)]
+        )
+        == 0
+    )
     s = json.loads((tmp_path / "crb.json").read_text())["summary"]
     assert s["n_params"] == 32 and (tmp_path / "crb.png").stat().st_size > 10_000
     assert 0.3 < s["estimators"]["refined"]["param_ratio"] < 2.0
     # The default pipeline (refined + consistency gate) is the refinement, and passes clean data.
     assert s["estimators"]["default: refined + consistency gate"]["param_ratio"] == pytest.approx(
-        s["estimators"]["refined"]["param_ratio"], rel=1e-6)
+        s["estimators"]["refined"]["param_ratio"], rel=1e-6
+    )
     assert s["gate_passed_clean"] == "2/2" and s["outliers"]["default_named_exactly"] == "2/2"
     assert main(["study", "crb", "--trials", "1", "--out", str(tmp_path)]) == 2

@@ -43,8 +43,9 @@ def test_exact_on_general_3d_points_and_batched() -> None:
     a = rng.normal(size=(6, 3))
     b = np.einsum("nij,kj->nki", Ts[:, :3, :3], a) + Ts[:, None, :3, 3]
     np.testing.assert_allclose(transforms_from_point_pairs(a, b), Ts, atol=1e-12)
-    np.testing.assert_allclose(plate_pose_from_points(LAYOUT, np.stack([_apply(T, LAYOUT) for T in Ts])),
-                               Ts, atol=1e-12)
+    np.testing.assert_allclose(
+        plate_pose_from_points(LAYOUT, np.stack([_apply(T, LAYOUT) for T in Ts])), Ts, atol=1e-12
+    )
 
 
 def test_agrees_with_scipy_align_vectors_on_noisy_points() -> None:

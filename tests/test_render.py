@@ -22,8 +22,23 @@ from cpc2urdf.identification.vision.render import (
 )
 from cpc2urdf.identification.vision.targets import plate_design, target_design
 
-GRID3 = np.array([[0, 0, 0], [-25, -25, 0], [0, -25, 0], [25, -25, 0], [-25, 0, 0], [25, 0, 0],
-                  [-25, 25, 0], [0, 25, 0], [25, 25, 0]], dtype=float) * 1e-3
+GRID3 = (
+    np.array(
+        [
+            [0, 0, 0],
+            [-25, -25, 0],
+            [0, -25, 0],
+            [25, -25, 0],
+            [-25, 0, 0],
+            [25, 0, 0],
+            [-25, 25, 0],
+            [0, 25, 0],
+            [25, 25, 0],
+        ],
+        dtype=float,
+    )
+    * 1e-3
+)
 K = np.array([[1600.0, 0.0, 319.5], [0.0, 1600.0, 239.5], [0.0, 0.0, 1.0]])
 
 
@@ -36,14 +51,18 @@ def _pose(rotvec: list[float], t: list[float]) -> np.ndarray:
 
 def _facing(tilt_deg: float, spin_deg: float, t: list[float]) -> np.ndarray:
     """A plate facing the camera (its +z towards it), tilted about a random in-plane axis."""
-    R = Rotation.from_euler("x", 180, degrees=True) * Rotation.from_euler("zxz", [spin_deg, tilt_deg, 0], degrees=True)
+    R = Rotation.from_euler("x", 180, degrees=True) * Rotation.from_euler(
+        "zxz", [spin_deg, tilt_deg, 0], degrees=True
+    )
     T = np.eye(4)
     T[:3, :3] = R.as_matrix()
     T[:3, 3] = t
     return T
 
 
-def _centroid(img: np.ndarray, uv: np.ndarray, radius: float, level_bg: float) -> tuple[np.ndarray, float]:
+def _centroid(
+    img: np.ndarray, uv: np.ndarray, radius: float, level_bg: float
+) -> tuple[np.ndarray, float]:
     R = int(math.ceil(radius)) + 3
     u0, v0 = int(round(uv[0])), int(round(uv[1]))
     win = img[v0 - R : v0 + R + 1, u0 - R : u0 + R + 1].astype(float)
@@ -81,7 +100,11 @@ def test_rendered_centroid_is_the_ellipse_centre_and_area_is_covered() -> None:
     rng = np.random.default_rng(0)
     errs, area_err = [], []
     for _ in range(3):
-        T = _facing(rng.uniform(0, 55), rng.uniform(0, 360), [rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02), 0.8])
+        T = _facing(
+            rng.uniform(0, 55),
+            rng.uniform(0, 360),
+            [rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02), 0.8],
+        )
         img = render_view(view, [(design, T)], supersample=8)
         off = ellipse_centre_offset(K, T, design)
         H = K @ np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]])
@@ -124,8 +147,12 @@ def test_noise_blur_distortion_and_target() -> None:
     D = np.array([-0.2, 0.1, 0.0, 0.0, 0.0])
     view = PinholeView(K, D, (640, 480))
     T = _facing(20.0, 10.0, [0.0, 0.0, 0.8])
-    a = render_view(view, [(design, T)], blur_sigma=0.8, noise_sigma=2.0, rng=np.random.default_rng(0))
-    b = render_view(view, [(design, T)], blur_sigma=0.8, noise_sigma=2.0, rng=np.random.default_rng(0))
+    a = render_view(
+        view, [(design, T)], blur_sigma=0.8, noise_sigma=2.0, rng=np.random.default_rng(0)
+    )
+    b = render_view(
+        view, [(design, T)], blur_sigma=0.8, noise_sigma=2.0, rng=np.random.default_rng(0)
+    )
     c = render_view(view, [(design, T)], blur_sigma=0.8)
     assert np.array_equal(a, b)
     resid = a.astype(float) - c

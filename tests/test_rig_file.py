@@ -23,8 +23,12 @@ def _write(path: Path, **entries: object) -> Path:
 
 def _rig_entries(rig: StereoRig, scale: float = 1.0) -> dict[str, object]:
     return {
-        "K1": rig.K1, "D1": rig.D1.reshape(1, 5), "K2": rig.K2, "D2": rig.D2.reshape(1, 5),
-        "R": rig.R, "T": (rig.T * scale).reshape(3, 1),
+        "K1": rig.K1,
+        "D1": rig.D1.reshape(1, 5),
+        "K2": rig.K2,
+        "D2": rig.D2.reshape(1, 5),
+        "R": rig.R,
+        "T": (rig.T * scale).reshape(3, 1),
     }
 
 
@@ -130,7 +134,24 @@ def test_hostile_rig_files_are_refused_in_one_line(tmp_path, name, text, expecte
     (tmp_path / "imgs").mkdir()
     (tmp_path / name).write_text(text)
     r = subprocess.run(
-        [sys.executable, "-m", "cpc2urdf", "measure", str(tmp_path / "imgs"), "--rig", str(tmp_path / name),
-         "-o", str(tmp_path / "m.json")], capture_output=True, text=True)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1 and expected in r.stderr and "Traceback" not in r.stderr
+        [
+            sys.executable,
+            "-m",
+            "cpc2urdf",
+            "measure",
+            str(tmp_path / "imgs"),
+            "--rig",
+            str(tmp_path / name),
+            "-o",
+            str(tmp_path / "m.json"),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert (
+        r.returncode == 2
+        and r.stderr.count("\n") == 1
+        and expected in r.stderr
+        and "Traceback" not in r.stderr
+    )
     assert not (tmp_path / "m.json").exists()

@@ -63,7 +63,9 @@ def opencv_robot_world(H: np.ndarray, C: np.ndarray, method: int) -> tuple[np.nd
     return inverse(homogeneous(R_gc, t_gc.ravel())), inverse(homogeneous(R_bw, t_bw.ravel()))
 
 
-@pytest.mark.parametrize("cv_method", [cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI, cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH])
+@pytest.mark.parametrize(
+    "cv_method", [cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI, cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH]
+)
 def test_agrees_with_opencv_noise_free(cv_method: int) -> None:
     rng = np.random.default_rng(1)
     X, Z, H, C = make_data(rng)
@@ -171,8 +173,12 @@ def test_degenerate_inputs(method: str) -> None:
         calibrate_robot_world(H[:2], C[:2], method)
     with pytest.raises(DegenerateDataError, match="inconsistent directions"):
         calibrate_robot_world(H, inverse(C), method)
-    Hp = np.array([homogeneous(Rotation.from_euler("z", a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                   for a in np.linspace(0, 1.5, 6)])
+    Hp = np.array(
+        [
+            homogeneous(Rotation.from_euler("z", a).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a in np.linspace(0, 1.5, 6)
+        ]
+    )
     with pytest.raises(DegenerateDataError, match="parallel axes"):
         calibrate_robot_world(Hp, inverse(X)[None] @ inverse(Hp) @ Z[None], method)
 
@@ -191,7 +197,9 @@ def test_tsai_and_park_martin_survive_motions_near_180_deg() -> None:
     for k in range(0, 10, 2):
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
-        H[k + 1, :3, :3] = Rotation.from_rotvec(axis * math.radians(179.9)).as_matrix() @ H[k, :3, :3]
+        H[k + 1, :3, :3] = (
+            Rotation.from_rotvec(axis * math.radians(179.9)).as_matrix() @ H[k, :3, :3]
+        )
     C = add_noise(rng, inverse(X)[None] @ inverse(H) @ Z[None], math.radians(0.2), 0.0005)
     for method in ("tsai", "park_martin", "daniilidis"):
         r = calibrate(H, C, method)
@@ -224,13 +232,24 @@ def test_li2010_study_runs_tiny(tmp_path: Path, capsys: pytest.CaptureFixture[st
 
     res = st.run_study(repeats=1, pose_counts=(3, 5), ratio_counts=(4,))
     assert {r["method"] for r in res["rows"]} == set(st.PAPER_METHODS + st.EXTRA_METHODS)
-    assert all(r["X_rot"] < 0.1 and r["Z_mm"] < 50 for r in res["rows"] if r["method"] != "kronecker_mm")
+    assert all(
+        r["X_rot"] < 0.1 and r["Z_mm"] < 50 for r in res["rows"] if r["method"] != "kronecker_mm"
+    )
     report = st.format_report(res)
     assert "Kronecker < dual quaternion < quaternion" in report and "Tsai/TSAI" in report
     # noise-free sanity of the metric: the truth has zero error
-    assert st.pose_errors(st.X_TRUE, st.Z_TRUE) == {"X_rot": 0.0, "X_mm": 0.0, "Z_rot": 0.0, "Z_mm": 0.0}
-    assert main(["study", "li2010", "--repeats", "1", "--max-poses", "3", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "li2010.md").exists() and (tmp_path / "li2010_fig1c.png").stat().st_size > 1000
+    assert st.pose_errors(st.X_TRUE, st.Z_TRUE) == {
+        "X_rot": 0.0,
+        "X_mm": 0.0,
+        "Z_rot": 0.0,
+        "Z_mm": 0.0,
+    }
+    assert (
+        main(["study", "li2010", "--repeats", "1", "--max-poses", "3", "--out", str(tmp_path)]) == 0
+    )
+    assert (tmp_path / "li2010.md").exists() and (
+        tmp_path / "li2010_fig1c.png"
+    ).stat().st_size > 1000
     assert main(["study", "li2010", "--repeats", "0", "--out", str(tmp_path)]) == 2
 
 

@@ -46,8 +46,10 @@ def test_protocol_is_one_joint_at_a_time() -> None:
     q0 = r.mean(axis=1)
     np.testing.assert_allclose(q[0], q0)
     for i in range(6):
-        block = q[1 + 9 * i: 1 + 9 * (i + 1)]
-        np.testing.assert_allclose(np.delete(block, i, axis=1), np.delete(np.tile(q0, (9, 1)), i, axis=1))
+        block = q[1 + 9 * i : 1 + 9 * (i + 1)]
+        np.testing.assert_allclose(
+            np.delete(block, i, axis=1), np.delete(np.tile(q0, (9, 1)), i, axis=1)
+        )
         np.testing.assert_allclose(block[:, i], np.linspace(r[i, 0], r[i, 1], 9))
     with pytest.raises(ConfigurationError, match="M must be at least 2"):
         protocol_configurations(r, 1, s.joint_names)
@@ -59,8 +61,10 @@ def test_calibration_range_rule_and_jittered_protocol() -> None:
     """Without a spec calibration_range a joint uses the middle half of its limits; the jittered
     protocol keeps q0 and one joint moving per record, moves values by at most 20 % of the
     spacing and stays inside the limits."""
-    joints = [Joint("a", "revolute", "base", -1.0, 3.0),
-              Joint("b", "prismatic", "a", 0.0, 0.2, calibration_range=(0.0, 0.2))]
+    joints = [
+        Joint("a", "revolute", "base", -1.0, 3.0),
+        Joint("b", "prismatic", "a", 0.0, 0.2, calibration_range=(0.0, 0.2)),
+    ]
     s = RobotStructure("two", joints, [Frame("plate", "b", "plate", PLATE)])
     r = calibration_ranges(s)
     np.testing.assert_array_equal(r, [[0.0, 2.0], [0.0, 0.2]])
@@ -78,8 +82,12 @@ def test_true_geometry_follows_the_fig10_convention() -> None:
     """The true robot's error of a placement is Fig. 10 noise on (R, l) of eq. (3), same draws."""
     p = load_robot("iis_head").nominal_model().joints["tilt"]
     moved = perturb_params(p, np.random.default_rng(4), 1e-3, 0.01)
-    T = fig10_noise(np.block([[p.rotation(), np.reshape(p.l, (3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]),
-                    1e-3, 0.01, np.random.default_rng(4))
+    T = fig10_noise(
+        np.block([[p.rotation(), np.reshape(p.l, (3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]),
+        1e-3,
+        0.01,
+        np.random.default_rng(4),
+    )
     np.testing.assert_allclose(moved.rotation(), T[:3, :3], atol=1e-15)
     np.testing.assert_allclose(moved.l, T[:3, 3], atol=1e-15)
 
@@ -123,38 +131,60 @@ def test_noise_free_measurements_are_the_truth_and_plates_stay_in_view() -> None
     assert np.all((held.q >= r[:, 0]) & (held.q <= r[:, 1]))
     nominal = load_robot("iis_head").nominal_model()
     assert truth.joints["tilt"] != nominal.joints["tilt"]
-    view = check_view(truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
+    view = check_view(
+        truth, StereoRig.verged(), np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels
+    )
     assert view.ok and view.min_margin_px > 20
     lo, hi = view.distance_range
     assert lo > 1.2 and hi < 1.8 and lo < hi  # ~1.5 m from the rig
 
 
 def _rig_views(rig: StereoRig) -> list[PinholeView]:
-    return [PinholeView(K, D, rig.image_size, np.linalg.inv(rig.T_world_camera(w)))
-            for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))]
+    return [
+        PinholeView(K, D, rig.image_size, np.linalg.inv(rig.T_world_camera(w)))
+        for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))
+    ]
 
 
-def _hidden_per_record(model: CPCModel, rig: StereoRig, q: np.ndarray, margin_px: float) -> np.ndarray:
+def _hidden_per_record(
+    model: CPCModel, rig: StereoRig, q: np.ndarray, margin_px: float
+) -> np.ndarray:
     """Hidden circles per (record, camera) by the renderer's image-space test (independent of the
     simulator's 3-D ray test), shape (N, 2)."""
     designs = robot_plate_designs(model.structure.frames)
     fk = model.fk(q, [d.name for d in designs])
-    return np.array([[sum(hidden_circles(v, [(d, fk[d.name][i]) for d in designs], margin_px=margin_px).values())
-                      for v in _rig_views(rig)] for i in range(len(q))])
+    return np.array(
+        [
+            [
+                sum(
+                    hidden_circles(
+                        v, [(d, fk[d.name][i]) for d in designs], margin_px=margin_px
+                    ).values()
+                )
+                for v in _rig_views(rig)
+            ]
+            for i in range(len(q))
+        ]
+    )
 
 
 def test_default_placement_hides_no_circle() -> None:
     rig = StereoRig.verged()
     truth, ms, held = simulate_experiment("iis_head", seed=5, noise="none")  # M = 9, 50 held out
     assert ms.n_records == 55 and held.n_records == 50
-    assert not _hidden_per_record(truth, rig, np.vstack([ms.q, held.q]), margin_px=OCCLUSION_MARGIN_PX).any()
+    assert not _hidden_per_record(
+        truth, rig, np.vstack([ms.q, held.q]), margin_px=OCCLUSION_MARGIN_PX
+    ).any()
     view = check_view(truth, rig, np.vstack([ms.q, held.q]), ms.frames, ms.labels + held.labels)
     assert view.ok and view.hidden == 0 and view.unseen == 0
     lo, hi = view.distance_range
     assert lo > 1.2 and hi < 1.8 and lo < hi
     # The placement depends on the robot, rig and protocol, not on the seed.
     t2, _, _ = simulate_experiment("iis_head", seed=6, n_heldout=2, noise="none")
-    assert t2.metadata.provenance.details["nominal_world_to_base"] == truth.metadata.provenance.details["nominal_world_to_base"]
+    assert (
+        t2.metadata.provenance.details["nominal_world_to_base"]
+        == truth.metadata.provenance.details["nominal_world_to_base"]
+    )
 
 
 def test_occlusion_is_reported_by_the_view_check() -> None:
@@ -171,10 +201,16 @@ def test_occlusion_is_reported_by_the_view_check() -> None:
     render_hidden = _hidden_per_record(model, rig, q, margin_px=OCCLUSION_MARGIN_PX)
     flagged = {labels.index(p.split(" at ")[1].split(":")[0]) for p in view.problems}
     assert flagged == set(np.flatnonzero(render_hidden.any(axis=1)))
-    assert len(flagged) > 40 and abs(view.hidden - render_hidden.sum()) <= 0.05 * render_hidden.sum()
+    assert (
+        len(flagged) > 40 and abs(view.hidden - render_hidden.sum()) <= 0.05 * render_hidden.sum()
+    )
     assert check_view(model, rig, q, measured_frames(s), labels, occlusion_margin_px=None).ok
-    with pytest.raises(ConfigurationError, match=r"plate_left at q0: \d of 9 circles hidden from the right camera"):
-        simulate_experiment(spec, M=9, n_heldout=0, world_to_base=w2b, geometry_error_t=0, geometry_error_r=0)
+    with pytest.raises(
+        ConfigurationError, match=r"plate_left at q0: \d of 9 circles hidden from the right camera"
+    ):
+        simulate_experiment(
+            spec, M=9, n_heldout=0, world_to_base=w2b, geometry_error_t=0, geometry_error_r=0
+        )
 
 
 def test_noise_changes_measurements_not_the_truth() -> None:
@@ -187,16 +223,29 @@ def test_noise_changes_measurements_not_the_truth() -> None:
     assert 0.1e-3 < np.sqrt(np.mean(e1**2)) / np.sqrt(3) < 1e-3  # sigma 0.5 mm per entry
     assert m2.points["plate_left"].shape == (19, 9, 3)
     assert np.all(m2.fit_rms["plate_left"] < 2e-3)
-    assert m1.metadata["noise"] == {"model": "fig10", "sigma_t_m": 0.5e-3, "sigma_r_rad": math.radians(0.5)}
+    assert m1.metadata["noise"] == {
+        "model": "fig10",
+        "sigma_t_m": 0.5e-3,
+        "sigma_r_rad": math.radians(0.5),
+    }
 
 
 def test_any_robot_with_plates() -> None:
-    joints = [Joint("pan", "revolute", "base", -1.0, 1.0), Joint("tilt", "revolute", "pan", -0.5, 0.5)]
+    joints = [
+        Joint("pan", "revolute", "base", -1.0, 1.0),
+        Joint("tilt", "revolute", "pan", -0.5, 0.5),
+    ]
     frames = [Frame("plate", "tilt", "plate", PLATE), Frame("cam", "tilt", "camera")]
     s = RobotStructure("pan_tilt", joints, frames)
-    model = CPCModel(s, CPCParams(), {"pan": CPCParams(), "tilt": CPCParams((0.0, 1.0, 0.0), 0.0, (0.0, 0.0, 0.1))},
-                     {"plate": CPCParams((1.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.1)), "cam": CPCParams()})
-    truth, ms, held = simulate_experiment(model, M=4, n_heldout=3, noise="stereo", robot_ref="pan_tilt.json")
+    model = CPCModel(
+        s,
+        CPCParams(),
+        {"pan": CPCParams(), "tilt": CPCParams((0.0, 1.0, 0.0), 0.0, (0.0, 0.0, 0.1))},
+        {"plate": CPCParams((1.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.1)), "cam": CPCParams()},
+    )
+    truth, ms, held = simulate_experiment(
+        model, M=4, n_heldout=3, noise="stereo", robot_ref="pan_tilt.json"
+    )
     assert ms.n_records == 9 and ms.frames == ["plate"] and held.robot == "pan_tilt.json"
     assert not ms.has_pose("cam").any()
 
@@ -205,32 +254,54 @@ def test_view_failure_is_explained() -> None:
     with pytest.raises(ConfigurationError, match=r"the rig does not see plate_\w+ at pan \d/5"):
         simulate_experiment("iis_head", M=5, ranges={"pan": (0.0, math.pi)}, n_heldout=0)
     # ...unless asked to go on: then the stereo model loses circles but the run completes.
-    _, ms, _ = simulate_experiment("iis_head", M=3, ranges={"pan": (0.0, math.pi)}, n_heldout=0,
-                                   require_view=False)
+    _, ms, _ = simulate_experiment(
+        "iis_head", M=3, ranges={"pan": (0.0, math.pi)}, n_heldout=0, require_view=False
+    )
     assert ms.metadata["provenance"]["view"]["problems"]
 
 
-def test_cli_writes_reproducible_loadable_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_writes_reproducible_loadable_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     args = ["simulate", "iis_head", "--M", "4", "--heldout", "7", "--seed", "11"]
     assert main([*args, "-o", str(tmp_path / "a")]) == 0
     assert main([*args, "-o", str(tmp_path / "b")]) == 0
     assert main([*args[:-1], "12", "-o", str(tmp_path / "c")]) == 0
     for name in ("measurements.json", "truth.json", "heldout.json"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
-    assert (tmp_path / "a" / "truth.json").read_bytes() != (tmp_path / "c" / "truth.json").read_bytes()
+    assert (tmp_path / "a" / "truth.json").read_bytes() != (
+        tmp_path / "c" / "truth.json"
+    ).read_bytes()
     assert "25 records" in capsys.readouterr().out
     ms = load_measurements(tmp_path / "a" / "measurements.json")
     held = load_measurements(tmp_path / "a" / "heldout.json")
     truth = load_model(tmp_path / "a" / "truth.json")
     assert ms.n_records == 25 and held.n_records == 7
-    np.testing.assert_allclose(held.poses["plate_left"], truth.fk(held.q, ["plate_left"])["plate_left"], atol=1e-12)
+    np.testing.assert_allclose(
+        held.poses["plate_left"], truth.fk(held.q, ["plate_left"])["plate_left"], atol=1e-12
+    )
 
 
 def test_cli_robot_file_is_referenced_relative_to_the_output(tmp_path: Path) -> None:
     save_model(load_robot("iis_head").nominal_model(), tmp_path / "head.json")
     out = tmp_path / "runs" / "one"
-    assert main(["simulate", str(tmp_path / "head.json"), "-o", str(out), "--M", "2", "--heldout", "1",
-                 "--noise", "stereo"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(tmp_path / "head.json"),
+                "-o",
+                str(out),
+                "--M",
+                "2",
+                "--heldout",
+                "1",
+                "--noise",
+                "stereo",
+            ]
+        )
+        == 0
+    )
     assert json.loads((out / "measurements.json").read_text())["robot"] == "../../head.json"
     ms = load_measurements(out / "measurements.json")
     assert ms.points["plate_left"].shape == (13, 9, 3)
@@ -300,8 +371,9 @@ def test_an_occasional_hidden_circle_is_recorded_not_fatal():
 # ---- a URDF robot: simulate --measure -------------------------------------------------------
 
 
-def test_cli_urdf_robot_names_its_measured_links_and_round_trips(tmp_path: Path,
-                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_urdf_robot_names_its_measured_links_and_round_trips(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``simulate robot.urdf --measure LINK``: records read only the joints on the paths to the link,
     in the URDF's names; ``identify`` then ``export`` write the URDF back, and its plate is where
     the simulated truth puts it at the held-out configurations (within the fit's noise)."""
@@ -313,15 +385,43 @@ def test_cli_urdf_robot_names_its_measured_links_and_round_trips(tmp_path: Path,
 
     urdf = tiago_with_plate(tmp_path)
     out = tmp_path / "sim"
-    assert main(["simulate", str(urdf), "--measure", "calib_plate", "-o", str(out), "--M", "5", "--heldout", "5",
-                 "--range", "head_1_joint=-20:20", "--seed", "3"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(urdf),
+                "--measure",
+                "calib_plate",
+                "-o",
+                str(out),
+                "--M",
+                "5",
+                "--heldout",
+                "5",
+                "--range",
+                "head_1_joint=-20:20",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     doc = json.loads((out / "measurements.json").read_text())
     assert doc["robot"] == "../tiago_plate.urdf"
-    assert all(set(r["joints"]) == set(TIAGO_HEAD) and set(r["poses"]) == {"calib_plate"} for r in doc["records"])
+    assert all(
+        set(r["joints"]) == set(TIAGO_HEAD) and set(r["poses"]) == {"calib_plate"}
+        for r in doc["records"]
+    )
     head_1 = [r["joints"]["head_1_joint"] for r in doc["records"]]
-    assert max(head_1) == pytest.approx(math.radians(20)) and min(head_1) == pytest.approx(math.radians(-20))
-    assert main(["identify", str(out / "measurements.json"), "-o", str(tmp_path / "model.json")]) == 0
-    assert main(["export", str(tmp_path / "model.json"), "-o", str(tmp_path / "calibrated.urdf")]) == 0
+    assert max(head_1) == pytest.approx(math.radians(20)) and min(head_1) == pytest.approx(
+        math.radians(-20)
+    )
+    assert (
+        main(["identify", str(out / "measurements.json"), "-o", str(tmp_path / "model.json")]) == 0
+    )
+    assert (
+        main(["export", str(tmp_path / "model.json"), "-o", str(tmp_path / "calibrated.urdf")]) == 0
+    )
     capsys.readouterr()
     model, truth = load(tmp_path / "model.json"), load(out / "truth.json")
     assert urdf_source(model) is not None and urdf_source(truth) is not None
@@ -330,18 +430,31 @@ def test_cli_urdf_robot_names_its_measured_links_and_round_trips(tmp_path: Path,
     errors = []
     for q, T_true in zip(held.q, held.poses["calib_plate"], strict=True):
         readings = {names[n]: float(v) for n, v in zip(model.structure.joint_names, q, strict=True)}
-        T = model.T_world_base() @ pinocchio_poses(tmp_path / "calibrated.urdf", readings, ["calib_plate"])["calib_plate"]
+        T = (
+            model.T_world_base()
+            @ pinocchio_poses(tmp_path / "calibrated.urdf", readings, ["calib_plate"])[
+                "calib_plate"
+            ]
+        )
         errors.append(np.linalg.norm(T[:3, 3] - T_true[:3, 3]))
     predicted = predicted_position_std(model, held.q, ["calib_plate"])["calib_plate"]
-    assert np.sqrt(np.mean(np.square(errors))) <= 2.0 * np.sqrt(np.mean(predicted**2))  # as test_real_robots
+    assert np.sqrt(np.mean(np.square(errors))) <= 2.0 * np.sqrt(
+        np.mean(predicted**2)
+    )  # as test_real_robots
 
 
-@pytest.mark.parametrize(("measure", "message"), [
-    (None, "name the links the rig measures with --measure"),
-    (["nope"], "no link 'nope' (a measured link)"),
-    (["head_2_link"], "measured link 'head_2_link' is moved by joint 'head_2_joint' (revolute, line"),
-    (["base_footprint"], "link 'base_footprint' is the root of the tree"),
-])
+@pytest.mark.parametrize(
+    ("measure", "message"),
+    [
+        (None, "name the links the rig measures with --measure"),
+        (["nope"], "no link 'nope' (a measured link)"),
+        (
+            ["head_2_link"],
+            "measured link 'head_2_link' is moved by joint 'head_2_joint' (revolute, line",
+        ),
+        (["base_footprint"], "link 'base_footprint' is the root of the tree"),
+    ],
+)
 def test_cli_urdf_measured_links_are_checked_before_anything_is_written(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], measure: list[str] | None, message: str
 ) -> None:
@@ -349,7 +462,10 @@ def test_cli_urdf_measured_links_are_checked_before_anything_is_written(
 
     urdf = tiago_with_plate(tmp_path)
     out = tmp_path / "sim"
-    assert main(["simulate", str(urdf), "-o", str(out), *(["--measure", *measure] if measure else [])]) == 2
+    assert (
+        main(["simulate", str(urdf), "-o", str(out), *(["--measure", *measure] if measure else [])])
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not out.exists()
@@ -357,11 +473,15 @@ def test_cli_urdf_measured_links_are_checked_before_anything_is_written(
 
 def test_cli_measure_needs_a_urdf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["simulate", "iis_head", "--measure", "plate_left", "-o", str(tmp_path / "x")]) == 2
-    assert "--measure names links of a URDF robot; 'iis_head' is not a URDF" in capsys.readouterr().err
+    assert (
+        "--measure names links of a URDF robot; 'iis_head' is not a URDF" in capsys.readouterr().err
+    )
     assert not (tmp_path / "x").exists()
 
 
-def test_cli_stereo_noise_on_a_urdf_names_the_urdf_link(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_stereo_noise_on_a_urdf_names_the_urdf_link(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A URDF link carries no circle layout: ``--noise stereo`` is refused before the placement
     search, naming the link as the URDF does (a ``*_link`` name keeps its suffix)."""
     from urdf_cases import tiago_with_plate
@@ -369,30 +489,61 @@ def test_cli_stereo_noise_on_a_urdf_names_the_urdf_link(tmp_path: Path, capsys: 
     urdf = tiago_with_plate(tmp_path)
     urdf.write_text(urdf.read_text().replace("calib_plate", "calib_plate_link"))
     out = tmp_path / "sim"
-    assert main(["simulate", str(urdf), "--measure", "calib_plate_link", "-o", str(out), "--noise", "stereo"]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                str(urdf),
+                "--measure",
+                "calib_plate_link",
+                "-o",
+                str(out),
+                "--noise",
+                "stereo",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "'calib_plate_link' has none" in err, err
     assert not out.exists()
 
 
-@pytest.mark.parametrize("option", ["--sigma-mm", "--sigma-deg", "--pixel-sigma", "--geometry-error-mm",
-                                    "--geometry-error-deg", "--marker-sigma-mm"])
+@pytest.mark.parametrize(
+    "option",
+    [
+        "--sigma-mm",
+        "--sigma-deg",
+        "--pixel-sigma",
+        "--geometry-error-mm",
+        "--geometry-error-deg",
+        "--marker-sigma-mm",
+    ],
+)
 @pytest.mark.parametrize("value", ["-0.5", "nan", "inf"])
-def test_cli_noise_options_are_named_as_typed(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                              option: str, value: str) -> None:
+def test_cli_noise_options_are_named_as_typed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str
+) -> None:
     out = tmp_path / "sim"
     assert main(["simulate", "iis_head", "-o", str(out), option, value]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"{option} must be a finite number >= 0, got {float(value):g}") and "\n" not in err, err
+    assert (
+        err.endswith(f"{option} must be a finite number >= 0, got {float(value):g}")
+        and "\n" not in err
+    ), err
     assert not out.exists()
 
 
-@pytest.mark.parametrize(("argv", "words"), [
-    (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
-    (["--markers", "0"], "--markers must be at least 1"),
-])
-def test_cli_seed_and_markers_are_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                          argv: list[str], words: str) -> None:
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
+        (["--markers", "0"], "--markers must be at least 1"),
+    ],
+)
+def test_cli_seed_and_markers_are_checked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
     assert main(["simulate", "iis_head", "-o", str(tmp_path / "sim"), *argv]) == 2
     assert words in capsys.readouterr().err
     assert not (tmp_path / "sim").exists()
@@ -406,4 +557,7 @@ def test_zero_fig10_noise_is_written_as_no_noise_and_reads_back(tmp_path: Path) 
     _, m, _ = simulate_experiment("iis_head", seed=1, M=2, sigma_t=1e-3, sigma_r=0.0, n_heldout=1)
     assert m.metadata["noise"] == {"model": "fig10", "sigma_t_m": 1e-3}
     save_measurements(m, tmp_path / "m.json", robot="iis_head")
-    assert load_measurements(tmp_path / "m.json").metadata["noise"] == {"model": "fig10", "sigma_t_m": 1e-3}
+    assert load_measurements(tmp_path / "m.json").metadata["noise"] == {
+        "model": "fig10",
+        "sigma_t_m": 1e-3,
+    }

@@ -31,8 +31,12 @@ def test_target_definition() -> None:
     L = targets.TARGET_LAYOUT
     assert L.shape == (25, 3) and np.allclose(L[:, 2], 0.0)
     assert np.allclose(L.mean(axis=0), 0.0)
-    assert np.allclose(L[1] - L[0], [targets.TARGET_PITCH, 0, 0]) and np.allclose(L[5] - L[0], [0, targets.TARGET_PITCH, 0])
-    assert np.all(np.abs(L[:, :2]) + targets.TARGET_MARKER_RADIUS < np.array(targets.TARGET_SIZE) / 2)
+    assert np.allclose(L[1] - L[0], [targets.TARGET_PITCH, 0, 0]) and np.allclose(
+        L[5] - L[0], [0, targets.TARGET_PITCH, 0]
+    )
+    assert np.all(
+        np.abs(L[:, :2]) + targets.TARGET_MARKER_RADIUS < np.array(targets.TARGET_SIZE) / 2
+    )
     K = s2.DEFAULT_INTRINSICS.K
     assert K.shape == (3, 3) and s2.DEFAULT_INTRINSICS.D.shape == (5,)
 
@@ -42,7 +46,9 @@ def test_pnp_exact_without_noise() -> None:
     from scipy.spatial.transform import Rotation
 
     for _ in range(5):
-        R = Rotation.from_euler("xyz", [math.pi + rng.normal(0, 0.3), rng.normal(0, 0.3), rng.uniform(-3, 3)]).as_matrix()
+        R = Rotation.from_euler(
+            "xyz", [math.pi + rng.normal(0, 0.3), rng.normal(0, 0.3), rng.uniform(-3, 3)]
+        ).as_matrix()
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = R, [rng.normal(0, 0.03), rng.normal(0, 0.03), 0.4]
         uv, ok = s2.project_target(T)
@@ -75,7 +81,12 @@ def test_exact_recovery_without_noise(nominal_and_truth: tuple, method: str) -> 
     assert hd["camera_left_optical"].hand == "plate_left" and hd["camera_left_optical"].n_poses == 8
     # the camera frame pose = T_link_plate @ X
     X = hd["camera_right_optical"].T_hand_camera
-    assert np.abs(truth.frames["plate_right"].matrix() @ X - truth.frames["camera_right_optical"].matrix()).max() < 1e-8
+    assert (
+        np.abs(
+            truth.frames["plate_right"].matrix() @ X - truth.frames["camera_right_optical"].matrix()
+        ).max()
+        < 1e-8
+    )
 
 
 def test_model_file_and_urdf_carry_the_cameras(nominal_and_truth: tuple, tmp_path: Path) -> None:
@@ -85,7 +96,9 @@ def test_model_file_and_urdf_carry_the_cameras(nominal_and_truth: tuple, tmp_pat
     back = load_model(path)
     assert back.metadata.handeye.keys() == set(CAMERAS) and "handeye" in model_to_json(r.model)
     for c in CAMERAS:
-        np.testing.assert_array_equal(back.metadata.handeye[c].T_hand_camera, r.model.metadata.handeye[c].T_hand_camera)
+        np.testing.assert_array_equal(
+            back.metadata.handeye[c].T_hand_camera, r.model.metadata.handeye[c].T_hand_camera
+        )
     for c in CAMERAS:
         assert np.abs(back.frames[c].matrix() - truth.frames[c].matrix()).max() < 1e-8
     assert 'link name="camera_left_optical"' in urdf_from_model(back)
@@ -114,7 +127,9 @@ def test_unreachable_target_is_explained(nominal_and_truth: tuple) -> None:
         s2.run_stage2(nominal, truth, n_poses=3, T_base_target=behind)
 
 
-def test_pose_files_feed_the_cli(nominal_and_truth: tuple, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_pose_files_feed_the_cli(
+    nominal_and_truth: tuple, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     nominal, truth = nominal_and_truth
     r = s2.run_stage2(nominal, truth, n_poses=6, pixel_noise=0.0, seed=5)
     paths = s2.write_pose_files(r, tmp_path)

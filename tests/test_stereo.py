@@ -25,7 +25,9 @@ def test_default_rig_is_the_papers_geometry() -> None:
     # Verged inward: the right camera looks left (towards -x of the left camera).
     assert T_wr[0, 2] == pytest.approx(-np.sin(2 * theta))
     # OpenCV convention x_right = R x_left + T.
-    np.testing.assert_allclose(inverse(T_wr), np.block([[rig.R, rig.T[:, None]], [np.zeros((1, 3)), 1.0]]))
+    np.testing.assert_allclose(
+        inverse(T_wr), np.block([[rig.R, rig.T[:, None]], [np.zeros((1, 3)), 1.0]])
+    )
 
 
 def test_projection_matches_the_pinhole_formula_without_distortion() -> None:
@@ -81,7 +83,9 @@ def test_stereo_study_runs_small_and_matches_first_order_depth(tmp_path) -> None
     for row in result["rows"]:
         assert row["depth_rms_mm"] == pytest.approx(row["depth_pred_mm"], rel=0.1)
         assert row["plate_pos_rms_mm"] < row["circle_rms_mm"]
-    assert result["rows"][1]["circle_rms_mm"] == pytest.approx(5 * result["rows"][0]["circle_rms_mm"], rel=0.15)
+    assert result["rows"][1]["circle_rms_mm"] == pytest.approx(
+        5 * result["rows"][0]["circle_rms_mm"], rel=0.15
+    )
     assert main(["study", "stereo", "--samples", "5", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "stereo_noise.png").stat().st_size > 1000
     assert "| 0.50 |" in (tmp_path / "stereo_noise.md").read_text()

@@ -9,7 +9,20 @@ from cpc2urdf.cli import main
 
 def test_fig11_study_writes_table_json_and_plot(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "fig11"
-    argv = ["study", "fig11", "--M", "2,5", "--sigmas", "0,0.5", "--trials", "1", "--heldout", "3", "--out", str(out)]
+    argv = [
+        "study",
+        "fig11",
+        "--M",
+        "2,5",
+        "--sigmas",
+        "0,0.5",
+        "--trials",
+        "1",
+        "--heldout",
+        "3",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     text = (out / "fig11.md").read_text()
     assert "| 5 |" in text and "σ = 0.5 mm" in text and "paper's conclusion" in text

@@ -41,14 +41,19 @@ def test_copied_records_of_noisy_data_are_refused() -> None:
     ms = _head(q, 1e-3)
     twice = ms.subset(np.r_[np.arange(len(q)), [3, 17]])
     assert exact_copies(twice) == [(len(q), 3), (len(q) + 1, 17)]
-    with pytest.raises(DegenerateDataError, match=r"record 55 \(record 3\) repeats record 3 to the last digit.*remove the 2 copies"):
+    with pytest.raises(
+        DegenerateDataError,
+        match=r"record 55 \(record 3\) repeats record 3 to the last digit.*remove the 2 copies",
+    ):
         check_data_suffice(twice)
 
 
 def test_too_few_distinct_configurations_say_how_many_more() -> None:
     head = load_model("iis_head")
     lo, hi = head.structure.lower, head.structure.upper
-    q = np.array([lo + 0.3 * (hi - lo), lo + 0.6 * (hi - lo)])  # every joint moves, two configurations
+    q = np.array(
+        [lo + 0.3 * (hi - lo), lo + 0.6 * (hi - lo)]
+    )  # every joint moves, two configurations
     ms = _head(np.repeat(q, 3, axis=0), 1e-3)
     with pytest.raises(DegenerateDataError) as e:
         check_data_suffice(ms)
@@ -61,16 +66,23 @@ def test_too_few_distinct_configurations_say_how_many_more() -> None:
 def test_several_joints_never_moved_are_all_named() -> None:
     q = protocol_q(load_model("iis_head"), 3)
     keep = [i for i in range(len(q)) if not (1 <= i <= 6)]  # drop the table_x and table_y sweeps
-    with pytest.raises(DegenerateDataError, match=r"joints 'table_x', 'table_y' have fewer than two distinct readings"):
+    with pytest.raises(
+        DegenerateDataError,
+        match=r"joints 'table_x', 'table_y' have fewer than two distinct readings",
+    ):
         check_data_suffice(_head(q[keep], 1e-3))
 
 
 def test_a_joint_moving_no_measured_frame_is_named() -> None:
     rng = np.random.default_rng(3)
-    model = random_model(rng, 4, serial=False, p_branch=1.0)  # each joint on the base: one plate each
+    model = random_model(
+        rng, 4, serial=False, p_branch=1.0
+    )  # each joint on the base: one plate each
     plates = [f.name for f in model.structure.frames if f.kind == "plate"]
     q = protocol_q(model, 3)
     T = model.fk(q, plates[1:])
     ms = MeasurementSet.from_arrays(model.structure, q, T)
-    with pytest.raises(DegenerateDataError, match=rf"moves no measured frame \(no pose of {plates[0]}"):
+    with pytest.raises(
+        DegenerateDataError, match=rf"moves no measured frame \(no pose of {plates[0]}"
+    ):
         check_data_suffice(ms)

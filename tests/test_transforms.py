@@ -49,7 +49,9 @@ def test_rpy_round_trip_including_gimbal_lock():
 
 def test_matrix_from_rpy_matches_scipy_extrinsic_xyz():
     rpy = [0.3, -1.1, 2.5]
-    np.testing.assert_allclose(matrix_from_rpy(rpy), Rotation.from_euler("xyz", rpy).as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(
+        matrix_from_rpy(rpy), Rotation.from_euler("xyz", rpy).as_matrix(), atol=1e-15
+    )
 
 
 def test_vectorised_rot_z_and_inverse():

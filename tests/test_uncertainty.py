@@ -58,7 +58,11 @@ def test_a_posteriori_scale(refined):
     ms = measure(truth, protocol_q(truth, 9), rng, SIGMA_T, SIGMA_R)
     known = refine(res.start, ms, SIGMA_T, SIGMA_R)
     post = refine(res.start, ms, SIGMA_T, SIGMA_R, covariance_scale="a_posteriori")
-    np.testing.assert_allclose(post.covariance.matrix, known.covariance.variance_factor * known.covariance.matrix, rtol=1e-9)
+    np.testing.assert_allclose(
+        post.covariance.matrix,
+        known.covariance.variance_factor * known.covariance.matrix,
+        rtol=1e-9,
+    )
     # Sigmas 2x too large: the variance factor says so (about 1/4).
     big = refine(res.start, ms, 2 * SIGMA_T, 2 * SIGMA_R)
     assert 0.15 < big.covariance.variance_factor < 0.35

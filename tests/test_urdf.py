@@ -40,7 +40,6 @@ def _all_poses_agree(model, urdf_path, Q):
             assert np.max(np.abs(T_ydf - T[k])) < FK_AGREEMENT_TOL, name
 
 
-
 def test_yourdfpy_poses_follow_moves_below_1e_8(tmp_path):
     """The independent FK follows every move, however small: readings that creep by 3e-9 rad per
     configuration (30 steps, as a solver's answers near a limit can) agree with the model to
@@ -52,6 +51,7 @@ def test_yourdfpy_poses_follow_moves_below_1e_8(tmp_path):
     Q = np.repeat(q0[None], 30, axis=0)
     Q[:, model.structure.joint_index("pan")] += 3e-9 * np.arange(30)
     _all_poses_agree(model, path, Q)
+
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**31 - 1))
@@ -77,13 +77,20 @@ def test_iis_head_urdf_structure(tmp_path):
         assert j.find("limit") is not None
     assert "continuous" not in text
     assert {lk.get("name") for lk in root.findall("link")} >= {
-        "world", "base", "plate_left", "plate_right", "camera_left_optical", "camera_right_optical"
+        "world",
+        "base",
+        "plate_left",
+        "plate_right",
+        "camera_left_optical",
+        "camera_right_optical",
     }
     # root link is world: it is nobody's child
     children = {j.find("child").get("link") for j in root.findall("joint")}
     assert "world" not in children
     write_urdf(model, tmp_path / "h.urdf")
-    _all_poses_agree(model, tmp_path / "h.urdf", np.vstack([model.structure.lower, model.structure.upper]))
+    _all_poses_agree(
+        model, tmp_path / "h.urdf", np.vstack([model.structure.lower, model.structure.upper])
+    )
 
 
 def test_export_is_deterministic():
@@ -126,7 +133,10 @@ def _joint_T(root, name):
 def test_every_link_has_an_inertial_and_element_names_are_unique():
     from cpc2urdf.identification.simulation.random_robots import random_model
 
-    for model in (load_model("iis_head"), random_model(np.random.default_rng(4), 6, cameras=2, extra_plates=2)):
+    for model in (
+        load_model("iis_head"),
+        random_model(np.random.default_rng(4), 6, cameras=2, extra_plates=2),
+    ):
         root = _xml(model)
         links = root.findall("link")
         assert [lk.find("inertial") is None for lk in links].count(True) == 1  # world only
@@ -136,13 +146,17 @@ def test_every_link_has_an_inertial_and_element_names_are_unique():
         # solid shapes collide; paint (circles, markers, the base plate) does not
         collisions = {el.get("name") for el in root.iter("collision")}
         assert "table_x_axis_collision" in collisions or model.structure.name != "iis_head"
-        assert not any("circle" in n or "marker" in n or n.startswith("base_plate") for n in collisions)
+        assert not any(
+            "circle" in n or "marker" in n or n.startswith("base_plate") for n in collisions
+        )
 
 
 def test_camera_body_frames_follow_rep_103():
     model = load_model("iis_head")
     root = _xml(model)
-    parent = {j.find("child").get("link"): j.find("parent").get("link") for j in root.findall("joint")}
+    parent = {
+        j.find("child").get("link"): j.find("parent").get("link") for j in root.findall("joint")
+    }
     for side in ("left", "right"):
         assert parent[f"camera_{side}_optical"] == f"camera_{side}"
         assert parent[f"camera_{side}"] == f"vergence_{side}_link"
@@ -159,11 +173,22 @@ def test_camera_body_names_avoid_taken_names():
     from cpc2urdf.model import Frame, Joint, RobotStructure
     from cpc2urdf.urdf.document import camera_body_names, urdf_link_names
 
-    s = RobotStructure("r", [Joint("a", "revolute")], [
-        Frame("eye_optical", "a", "camera"), Frame("eye", "a", "plate"), Frame("cam", "a", "camera"),
-        Frame("cam_body", "a", "frame"), Frame("x_optical_frame", "a", "camera"),
-    ])
-    assert camera_body_names(s) == {"eye_optical": "eye_optical_body", "cam": "cam_body_2", "x_optical_frame": "x"}
+    s = RobotStructure(
+        "r",
+        [Joint("a", "revolute")],
+        [
+            Frame("eye_optical", "a", "camera"),
+            Frame("eye", "a", "plate"),
+            Frame("cam", "a", "camera"),
+            Frame("cam_body", "a", "frame"),
+            Frame("x_optical_frame", "a", "camera"),
+        ],
+    )
+    assert camera_body_names(s) == {
+        "eye_optical": "eye_optical_body",
+        "cam": "cam_body_2",
+        "x_optical_frame": "x",
+    }
     links = urdf_link_names(s)
     assert len(links) == len(set(links)) == 2 + 1 + 5 + 3
 
@@ -175,18 +200,26 @@ def test_mounts_rig_and_base():
     from cpc2urdf.model import CPCParams
 
     spec = load_robot("iis_head")
-    model = calibrated_iis_head(0).with_params(world_to_base=CPCParams((0.6, 0.0, 0.8), 0.3, (0.1, 0.2, 1.5)))
+    model = calibrated_iis_head(0).with_params(
+        world_to_base=CPCParams((0.6, 0.0, 0.8), 0.3, (0.1, 0.2, 1.5))
+    )
     rig = _joint_T(_xml(model, mount="rig", physical=spec.physical), "base_joint")
     assert np.max(np.abs(rig - model.T_world_base())) < 1e-15
     base = _joint_T(_xml(model, mount="base", physical=spec.physical), "base_joint")
     assert np.all(base[:3, 3] == 0)
     up = spec.physical.up_in_base(model)  # the identified pan axis at zero readings, in base
     assert np.max(np.abs(base[:3, :3] @ up - [0, 0, 1])) < 1e-15
-    assert np.max(np.abs(_joint_T(_xml(model, mount="base"), "base_joint") - np.eye(4))) < 1e-15  # default: base z up
-    assert urdf_from_model(model) == urdf_from_model(model, mount="rig")  # the writer's default keeps the rig
+    assert (
+        np.max(np.abs(_joint_T(_xml(model, mount="base"), "base_joint") - np.eye(4))) < 1e-15
+    )  # default: base z up
+    assert urdf_from_model(model) == urdf_from_model(
+        model, mount="rig"
+    )  # the writer's default keeps the rig
     with pytest.raises(ConfigurationError, match="mount must be one of rig, base"):
         urdf_from_model(model, mount="floor")
-    assert "<mujoco>" in urdf_from_model(model) and "<mujoco>" not in urdf_from_model(model, mujoco=False)
+    assert "<mujoco>" in urdf_from_model(model) and "<mujoco>" not in urdf_from_model(
+        model, mujoco=False
+    )
 
 
 def test_inertials_from_density_or_stated_masses():
@@ -196,11 +229,22 @@ def test_inertials_from_density_or_stated_masses():
     model = load_model("iis_head")
     floors = 3e-3  # base (a marker plate) and the two optical frames: nothing solid, 1 g each
     m1000 = total_mass(model)
-    assert m1000 - floors == pytest.approx((total_mass(model, PhysicalProperties(density=2000.0)) - floors) / 2, rel=1e-12)
-    stated = PhysicalProperties(masses={"camera_left": 0.35, "camera_left_optical": 0.01, "pan_link": 4.0})
+    assert m1000 - floors == pytest.approx(
+        (total_mass(model, PhysicalProperties(density=2000.0)) - floors) / 2, rel=1e-12
+    )
+    stated = PhysicalProperties(
+        masses={"camera_left": 0.35, "camera_left_optical": 0.01, "pan_link": 4.0}
+    )
     root = _xml(model, physical=stated)
-    mass = {lk.get("name"): float(lk.find("inertial/mass").get("value")) for lk in root.findall("link")[1:]}
-    assert mass["camera_left"] == 0.35 and mass["camera_left_optical"] == 0.01 and mass["pan_link"] == 4.0
+    mass = {
+        lk.get("name"): float(lk.find("inertial/mass").get("value"))
+        for lk in root.findall("link")[1:]
+    }
+    assert (
+        mass["camera_left"] == 0.35
+        and mass["camera_left_optical"] == 0.01
+        and mass["pan_link"] == 4.0
+    )
     assert mass["plate_left_link" if "plate_left_link" in mass else "plate_left"] > 0
     assert mass["camera_right_optical"] == 1e-3  # nothing solid: the 1 g floor
 
@@ -214,7 +258,11 @@ def test_spec_states_density_masses_and_up(tmp_path):
 
     doc = json.loads(spec_path("iis_head").read_text())
     spec = load_spec(spec_path("iis_head"))
-    assert spec.physical.density == 2700 and spec.physical.up_joint == "pan" and spec.physical.masses == {}
+    assert (
+        spec.physical.density == 2700
+        and spec.physical.up_joint == "pan"
+        and spec.physical.masses == {}
+    )
     assert np.allclose(spec.physical.up_in_base(spec.nominal_model()), [-1, 0, 0], atol=1e-15)
 
     def parsed(**changes):
@@ -247,8 +295,13 @@ def test_export_cli_mount_and_up(tmp_path, capsys):
     assert main(["export", "iis_head", "-o", str(tmp_path / "up.urdf"), "--up", "0", "0", "2"]) == 0
     out = capsys.readouterr().out
     assert "up = base (0, 0, 1)" in out and "up from --up" in out and "total mass 2.376 kg" in out
-    assert np.max(np.abs(_joint_T(ET.parse(tmp_path / "up.urdf").getroot(), "base_joint") - np.eye(4))) == 0
-    assert main(["export", "iis_head", "-o", str(tmp_path / "bad.urdf"), "--up", "0", "0", "0"]) == 2
+    assert (
+        np.max(np.abs(_joint_T(ET.parse(tmp_path / "up.urdf").getroot(), "base_joint") - np.eye(4)))
+        == 0
+    )
+    assert (
+        main(["export", "iis_head", "-o", str(tmp_path / "bad.urdf"), "--up", "0", "0", "0"]) == 2
+    )
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "--up must be a non-zero direction" in err[0]
     assert not (tmp_path / "bad.urdf").exists()
@@ -268,16 +321,26 @@ def test_check_accepts_both_mounts_and_older_urdfs_but_not_a_moved_base(tmp_path
     root = ET.parse(tmp_path / "base.urdf").getroot()
     for side in ("left", "right"):
         root.remove(next(lk for lk in root.findall("link") if lk.get("name") == f"camera_{side}"))
-        root.remove(next(j for j in root.findall("joint") if j.get("name") == f"camera_{side}_joint"))
-        joint = next(j for j in root.findall("joint") if j.get("name") == f"camera_{side}_optical_joint")
+        root.remove(
+            next(j for j in root.findall("joint") if j.get("name") == f"camera_{side}_joint")
+        )
+        joint = next(
+            j for j in root.findall("joint") if j.get("name") == f"camera_{side}_optical_joint"
+        )
         joint.find("parent").set("link", f"vergence_{side}_link")
         T = model.frames[f"camera_{side}_optical"].matrix()
         joint.find("origin").set("xyz", " ".join(repr(float(v)) for v in T[:3, 3]))
-        joint.find("origin").set("rpy", " ".join(repr(float(v)) for v in rpy_from_matrix(T[:3, :3])))
+        joint.find("origin").set(
+            "rpy", " ".join(repr(float(v)) for v in rpy_from_matrix(T[:3, :3]))
+        )
     ET.ElementTree(root).write(tmp_path / "old.urdf")
     report = cross_check(model, tmp_path / "old.urdf", n=3)
     assert report.ok and "camera_left" not in report.frames, report.format()
-    moved = (tmp_path / "base.urdf").read_text().replace('<origin xyz="0 0 0"', '<origin xyz="0 0 0.5"', 1)
+    moved = (
+        (tmp_path / "base.urdf")
+        .read_text()
+        .replace('<origin xyz="0 0 0"', '<origin xyz="0 0 0.5"', 1)
+    )
     (tmp_path / "moved.urdf").write_text(moved)
     report = cross_check(model, tmp_path / "moved.urdf", n=3)
     assert not report.ok and "world -> base is neither the model's T_world_base" in report.format()
@@ -294,18 +357,37 @@ def test_export_says_where_the_physical_properties_came_from(tmp_path, capsys):
 
     model = load_model("iis_head")
     assert plan_export(model).physical_from == "defaults (none stated)"
-    lost = model.with_params(metadata=model.metadata.replace(provenance=Provenance(method="x", robot="nope.json")))
+    lost = model.with_params(
+        metadata=model.metadata.replace(provenance=Provenance(method="x", robot="nope.json"))
+    )
     plan = plan_export(save_model(lost, tmp_path / "m.json"))
-    assert plan.physical_from.startswith("defaults (the model's robot 'nope.json' cannot be read: nope.json: no such file")
-    assert plan.physical.density == 1000.0 and plan.physical.up is None and plan.physical.up_joint is None
-    found = model.with_params(metadata=model.metadata.replace(provenance=Provenance(method="x", robot="iis_head")))
+    assert plan.physical_from.startswith(
+        "defaults (the model's robot 'nope.json' cannot be read: nope.json: no such file"
+    )
+    assert (
+        plan.physical.density == 1000.0
+        and plan.physical.up is None
+        and plan.physical.up_joint is None
+    )
+    found = model.with_params(
+        metadata=model.metadata.replace(provenance=Provenance(method="x", robot="iis_head"))
+    )
     plan = plan_export(save_model(found.without_frames(["camera"]), tmp_path / "f.json"))
     assert plan.physical_from == "robot iis_head" and plan.physical.up_joint == "pan"
     assert main(["export", str(tmp_path / "m.json"), "-o", str(tmp_path / "m.urdf")]) == 0
-    assert "physical properties from defaults (the model's robot 'nope.json' cannot be read" in capsys.readouterr().out
+    assert (
+        "physical properties from defaults (the model's robot 'nope.json' cannot be read"
+        in capsys.readouterr().out
+    )
     # masses of links this model does not have (its cameras were dropped) are left out, not refused
     doc = json.loads(spec_path("iis_head").read_text())
-    (tmp_path / "heavy.json").write_text(json.dumps({**doc, "masses": {"camera_left": 0.3, "pan_link": 2.0}}))
-    heavy = model.with_params(metadata=model.metadata.replace(provenance=Provenance(method="x", robot="heavy.json")))
+    (tmp_path / "heavy.json").write_text(
+        json.dumps({**doc, "masses": {"camera_left": 0.3, "pan_link": 2.0}})
+    )
+    heavy = model.with_params(
+        metadata=model.metadata.replace(provenance=Provenance(method="x", robot="heavy.json"))
+    )
     plan = plan_export(save_model(heavy.without_frames(["camera"]), tmp_path / "h.json"))
-    assert plan.physical_from == "robot heavy.json" and dict(plan.physical.masses) == {"pan_link": 2.0}
+    assert plan.physical_from == "robot heavy.json" and dict(plan.physical.masses) == {
+        "pan_link": 2.0
+    }

@@ -44,7 +44,10 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _readings(robot: UrdfRobot, q: np.ndarray) -> dict[str, float]:
     assert robot.names is not None
-    return {robot.names.urdf_joint(n): float(v) for n, v in zip(robot.structure.joint_names, q, strict=True)}
+    return {
+        robot.names.urdf_joint(n): float(v)
+        for n, v in zip(robot.structure.joint_names, q, strict=True)
+    }
 
 
 def test_a_urdf_path_is_a_robot_everywhere(tiago: Path) -> None:
@@ -52,7 +55,11 @@ def test_a_urdf_path_is_a_robot_everywhere(tiago: Path) -> None:
     assert isinstance(robot, UrdfRobot) and robot.measured is None
     assert load_model(tiago).structure.joint_names == robot.structure.joint_names
     source = urdf_source(robot.nominal_model())
-    assert source is not None and source.path == str(tiago.resolve()) and source.root == "base_footprint"
+    assert (
+        source is not None
+        and source.path == str(tiago.resolve())
+        and source.root == "base_footprint"
+    )
 
 
 def test_measured_subtree_of_tiago_head(tiago: Path) -> None:
@@ -60,7 +67,10 @@ def test_measured_subtree_of_tiago_head(tiago: Path) -> None:
     s = robot.structure
     assert [robot.names.urdf_joint(n) for n in s.joint_names] == list(TIAGO_HEAD)  # type: ignore[union-attr]
     assert [(j.name, j.type, j.parent) for j in s.joints] == [
-        ("torso_lift", "prismatic", "base"), ("head_1", "revolute", "torso_lift"), ("head_2", "revolute", "head_1")]
+        ("torso_lift", "prismatic", "base"),
+        ("head_1", "revolute", "torso_lift"),
+        ("head_2", "revolute", "head_1"),
+    ]
     assert s.frame_names == ("calib_plate",) and s.frame("calib_plate").parent == "head_2"
     head_2 = read_urdf_tree(tiago).joints["head_2_joint"]
     assert (s.joint("head_2").lower, s.joint("head_2").upper) == (head_2.lower, head_2.upper)
@@ -109,12 +119,20 @@ def test_measurement_file_needs_only_the_joints_on_the_path(tiago: Path, tmp_pat
     robot = load_urdf_robot(tiago, ["calib_plate"])
     simulate(robot, np.random.default_rng(2), tmp_path / "m.json", M=3)
     doc = json.loads((tmp_path / "m.json").read_text())
-    assert set(doc["records"][0]["joints"]) == set(TIAGO_HEAD) and set(doc["records"][0]["poses"]) == {"calib_plate"}
+    assert set(doc["records"][0]["joints"]) == set(TIAGO_HEAD) and set(
+        doc["records"][0]["poses"]
+    ) == {"calib_plate"}
     (tmp_path / "tiago_plate.urdf").write_text(tiago.read_text())
-    doc["records"][0]["joints"]["arm_1_joint"] = 0.3  # a whole /joint_states: other joints are ignored
+    doc["records"][0]["joints"]["arm_1_joint"] = (
+        0.3  # a whole /joint_states: other joints are ignored
+    )
     (tmp_path / "m.json").write_text(json.dumps(doc))
     ms = load_measurements(tmp_path / "m.json")
-    assert isinstance(ms.spec, UrdfRobot) and ms.structure.joint_names == ("torso_lift", "head_1", "head_2")
+    assert isinstance(ms.spec, UrdfRobot) and ms.structure.joint_names == (
+        "torso_lift",
+        "head_1",
+        "head_2",
+    )
     save_measurements(ms, tmp_path / "again.json")
     again = json.loads((tmp_path / "again.json").read_text())
     assert set(again["records"][0]["joints"]) == set(TIAGO_HEAD)
@@ -132,18 +150,33 @@ def test_model_file_keeps_the_urdf_section(tiago: Path) -> None:
     assert urdf_source(model_from_json(doc, "m.json")) is None  # old files still read
 
 
-@pytest.mark.parametrize(("links", "message"), [
-    (["nope"], "no link 'nope' (a measured link)"),
-    (["floater"], f"joint 'float_joint' (floating, line {FLOAT_LINE}) is on the path from the root link 'base_link' "
-                  "to the measured link 'floater'"),
-    (["planar_thing"], "joint 'planar_joint' (planar"),
-    (["head"], f"measured link 'head' is moved by joint 'head_joint' (revolute, line {HEAD_LINE}) directly"),
-    (["base_link"], "link 'base_link' is the root of the tree"),
-])
-def test_links_that_cannot_be_measured_are_named(small: Path, links: list[str], message: str) -> None:
+@pytest.mark.parametrize(
+    ("links", "message"),
+    [
+        (["nope"], "no link 'nope' (a measured link)"),
+        (
+            ["floater"],
+            f"joint 'float_joint' (floating, line {FLOAT_LINE}) is on the path from the root link 'base_link' "
+            "to the measured link 'floater'",
+        ),
+        (["planar_thing"], "joint 'planar_joint' (planar"),
+        (
+            ["head"],
+            f"measured link 'head' is moved by joint 'head_joint' (revolute, line {HEAD_LINE}) directly",
+        ),
+        (["base_link"], "link 'base_link' is the root of the tree"),
+    ],
+)
+def test_links_that_cannot_be_measured_are_named(
+    small: Path, links: list[str], message: str
+) -> None:
     with pytest.raises(InputFileError) as e:
         load_urdf_robot(small, links)
-    assert str(e.value).startswith(f"{small}: ") and message in str(e.value) and "\n" not in str(e.value)
+    assert (
+        str(e.value).startswith(f"{small}: ")
+        and message in str(e.value)
+        and "\n" not in str(e.value)
+    )
 
 
 def _identify_cli(tmp_path: Path, doc: dict, capsys: pytest.CaptureFixture[str]) -> str:
@@ -156,24 +189,33 @@ def _identify_cli(tmp_path: Path, doc: dict, capsys: pytest.CaptureFixture[str])
     return err
 
 
-def test_bad_urdf_input_to_identify_is_one_line_exit_2(small: Path, tmp_path: Path,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_urdf_input_to_identify_is_one_line_exit_2(
+    small: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     urdf = write(tmp_path, "small.urdf", SMALL)
     robot = load_urdf_robot(urdf, ["marker"])
     simulate(robot, np.random.default_rng(3), tmp_path / "m.json", M=3)
     doc = json.loads((tmp_path / "m.json").read_text())
     bad = json.loads(json.dumps(doc))
     bad["records"][1]["poses"]["markr"] = bad["records"][1]["poses"]["marker"]
-    assert "m.json: records[1].poses: 'markr' is not a link of" in _identify_cli(tmp_path, bad, capsys)
+    assert "m.json: records[1].poses: 'markr' is not a link of" in _identify_cli(
+        tmp_path, bad, capsys
+    )
     bad = json.loads(json.dumps(doc))
     bad["records"][0]["poses"]["floater"] = bad["records"][0]["poses"]["marker"]
-    assert f"joint 'float_joint' (floating, line {FLOAT_LINE}) is on the path" in _identify_cli(tmp_path, bad, capsys)
+    assert f"joint 'float_joint' (floating, line {FLOAT_LINE}) is on the path" in _identify_cli(
+        tmp_path, bad, capsys
+    )
     bad = json.loads(json.dumps(doc))
     del bad["records"][2]["joints"]["head_joint"]
     assert "records[2].joints lacks ['head_joint']" in _identify_cli(tmp_path, bad, capsys)
     bad = json.loads(json.dumps(doc))
     bad["records"][0]["joints"]["neck"] = 0.0
     assert "records[0].joints: unknown joint 'neck'" in _identify_cli(tmp_path, bad, capsys)
-    urdf.write_text(SMALL.replace('<joint name="slide" type="prismatic">', '<joint name="slide" type="prismatic"'))
+    urdf.write_text(
+        SMALL.replace(
+            '<joint name="slide" type="prismatic">', '<joint name="slide" type="prismatic"'
+        )
+    )
     err = _identify_cli(tmp_path, doc, capsys)
     assert "m.json: robot 'small.urdf':" in err and "small.urdf: not well-formed XML" in err

@@ -64,7 +64,9 @@ def test_rule_translation_rotation_and_size() -> None:
     assert big.rotation == pytest.approx(theta, rel=1e-12) and big.translation < 1e-15
     assert big.displacement == pytest.approx(2 * 0.3 * math.sin(theta / 2), rel=1e-12)
     assert bare.displacement == pytest.approx(2 * CHANGE_LEVER * math.sin(theta / 2), rel=1e-12)
-    assert abs(bare.displacement - 1.75e-3) < 5e-5  # the documented "1 deg ~ 1.7 mm" (0.1 m x 1 deg)
+    assert (
+        abs(bare.displacement - 1.75e-3) < 5e-5
+    )  # the documented "1 deg ~ 1.7 mm" (0.1 m x 1 deg)
     # Tiny rotations keep their precision (no arccos near 1).
     tiny = link_change("d", T_nom @ pose((1e-9, 0, 0)), T_nom, np.zeros((0, 3)))
     assert tiny.rotation == pytest.approx(1e-9, rel=1e-6)

@@ -43,6 +43,7 @@ from cpc2urdf.validation.view.region import (
 
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 
+
 def clouds(window: object) -> dict[str, list[dict[str, object]]]:
     """Category -> its drawn clouds in grid order (``reach/<category>/<k>``, k the grid's first
     axis), each {"k": k, "position": (K, 3), "color": (K, 3), "material": dict}."""
@@ -52,9 +53,13 @@ def clouds(window: object) -> dict[str, list[dict[str, object]]]:
         if len(parts) == 5 and parts[2] == REGION_NODE and "object" in entry:
             obj = entry["object"]
             attrs = obj["geometries"][0]["data"]["attributes"]  # type: ignore[index]
-            arrays = {k: np.frombuffer(attrs[k]["array"].data, dtype=np.float32).reshape(-1, 3)  # type: ignore[index]
-                      for k in ("position", "color")}
-            out.setdefault(parts[3], []).append({"k": int(parts[4]), **arrays, "material": obj["materials"][0]})  # type: ignore[index]
+            arrays = {
+                k: np.frombuffer(attrs[k]["array"].data, dtype=np.float32).reshape(-1, 3)  # type: ignore[index]
+                for k in ("position", "color")
+            }
+            out.setdefault(parts[3], []).append(
+                {"k": int(parts[4]), **arrays, "material": obj["materials"][0]}
+            )  # type: ignore[index]
     return {c: sorted(v, key=lambda e: e["k"]) for c, v in out.items()}
 
 
@@ -74,8 +79,9 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
     the others (not pointed at) translucent; the summary and the page's legend give the counts."""
     r = nominal_region
     vis = static_visualizer()
-    page, summary = static_view_html(load_view_robot("iis_head"), region=r, sweep=False,
-                                     region_notes=["moving pan, tilt"])
+    page, summary = static_view_html(
+        load_view_robot("iis_head"), region=r, sweep=False, region_notes=["moving pan, tilt"]
+    )
     build_view(vis, "iis_head", region=r, sweep=False)
     drawn = clouds(vis.window)
     counts = r.counts()
@@ -90,7 +96,9 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
         np.testing.assert_allclose(positions(drawn[name]), r.points[mask], atol=1e-6)
         for cloud in drawn[name]:
             P = cloud["position"]
-            np.testing.assert_allclose(cloud["color"], np.tile(CATEGORY_COLOURS[name], (len(P), 1)), atol=1e-7)
+            np.testing.assert_allclose(
+                cloud["color"], np.tile(CATEGORY_COLOURS[name], (len(P), 1)), atol=1e-7
+            )
             # each cloud holds one shell: its distance, its point size
             d = distance[mask][np.isclose(distance[mask], r.grid.axes[0][cloud["k"]])]
             assert len(d) == len(P)
@@ -99,7 +107,10 @@ def test_every_target_is_drawn_where_the_solver_put_it(nominal_region):
             assert material.get("opacity", 1.0) == (1.0 if name in POINTED else OTHER_OPACITY)
     assert summary.region is not None and summary.region.counts == counts
     assert summary.region.offset < 1e-12  # one model: the same world
-    assert f"fixated: {counts['fixated']}" in page and f"joint limits: {counts['joint_limits']}" in page
+    assert (
+        f"fixated: {counts['fixated']}" in page
+        and f"joint limits: {counts['joint_limits']}" in page
+    )
     assert "moving pan, tilt" in page and "reachable region" in summary.format()
     # 0.4 of the smaller angular spacing (elevation: 20 deg; azimuth 22.5 deg) at each distance,
     # at most 0.8 of the distances' spacing (0.733 m) and 0.05 of the far range (2.5 m)
@@ -139,7 +150,9 @@ def test_a_model_identified_from_a_users_urdf_gets_the_region_on_its_camera(tmp_
     vis = static_visualizer()
     summary = build_view(vis, robot, region=r, cameras=("calib_plate",), sweep=False)
     drawn_clouds = clouds(vis.window)
-    drawn = np.concatenate([positions(drawn_clouds[c]) for c in REGION_CATEGORIES if c in drawn_clouds])
+    drawn = np.concatenate(
+        [positions(drawn_clouds[c]) for c in REGION_CATEGORIES if c in drawn_clouds]
+    )
     order = np.concatenate([np.flatnonzero(r.category == k) for k in range(len(REGION_CATEGORIES))])
     T_view = robot.link_poses(robot.default_q())["calib_plate"]
     T_model = model.fk(mid_limits(solver.lower, solver.upper), ["calib_plate"])["calib_plate"]
@@ -148,34 +161,61 @@ def test_a_model_identified_from_a_users_urdf_gets_the_region_on_its_camera(tmp_
     np.testing.assert_allclose(in_view, in_model, atol=2e-6)  # float32 points
     moved = np.linalg.norm((r.points[order] - drawn.astype(float)), axis=1).max()
     assert summary.region is not None and summary.region.offset == pytest.approx(moved, abs=1e-5)
-    assert moved > 1e-3 and f"{1e3 * summary.region.offset:.3g} mm from the solver's" in summary.region.moved()
+    assert (
+        moved > 1e-3
+        and f"{1e3 * summary.region.offset:.3g} mm from the solver's" in summary.region.moved()
+    )
     assert summary.region.moved() in summary.format()
 
 
 @pytest.mark.slow
-def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_reach_html_and_the_page_in_headless_chromium(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``reach --html --screenshot`` writes the PNG, the page and its picture; in the picture the
     fixated targets are green where the viewer camera projects them, and the translucent
     joint-limit ones blue; the legend is in the page."""
     require_chromium()
     args = ["--samples", "4", "9", "7", "--range", "0.3", "2.5"]
     png, page, shot = tmp_path / "r.png", tmp_path / "r.html", tmp_path / "v.png"
-    assert main(["reach", "iis_head", *args, "-o", str(png), "--html", str(page), "--screenshot", str(shot)]) == 0
+    assert (
+        main(
+            [
+                "reach",
+                "iis_head",
+                *args,
+                "-o",
+                str(png),
+                "--html",
+                str(page),
+                "--screenshot",
+                str(shot),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert f"{page}: the region in the 3D view" in out and str(shot) in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.html", "r.png", "v.png"]
     text = page.read_text()
-    assert "reachable region" in text and "fixated: " in text and "moving pan, tilt, vergence_left" in text
+    assert (
+        "reachable region" in text
+        and "fixated: " in text
+        and "moving pan, tilt, vergence_left" in text
+    )
     # the same page through the API, for where each target lands on screen
     solver = GazeSolver.from_model(load_model("iis_head"))
     r = reachable_region(solver, make_grid(solver, "shell", 0.3, 2.5, (4, 9, 7)))
     summary = write_view("iis_head", tmp_path / "api.html", region=r)
     assert summary.region is not None and summary.region.counts == r.counts()
-    img = matplotlib.image.imread(str(screenshot_html(tmp_path / "api.html", tmp_path / "api.png", size=SIZE)))[..., :3]
+    img = matplotlib.image.imread(
+        str(screenshot_html(tmp_path / "api.html", tmp_path / "api.png", size=SIZE))
+    )[..., :3]
     # green, also seen through the translucent blue points in front ((0.15, 0.58, 0.33))
     green = (img[..., 1] > img[..., 0] + 0.2) & (img[..., 1] > img[..., 2] + 0.1)
     blue = hue_mask(img, CATEGORY_COLOURS["joint_limits"], 15.0) | (
-        (img[..., 2] > img[..., 0] + 0.08) & (img[..., 2] > img[..., 1] + 0.02))  # blended with the background
+        (img[..., 2] > img[..., 0] + 0.08) & (img[..., 2] > img[..., 1] + 0.02)
+    )  # blended with the background
     # the nearest shell (0.3 m) lies among the head's parts, which hide some of it
     away = np.linalg.norm(r.grid.points_head, axis=1) > 0.5
     fixated = (r.category == REGION_CATEGORIES.index("fixated")) & away
@@ -184,7 +224,9 @@ def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys
         ok = []
         for p in points:
             u, v = summary.pixel(p, *SIZE)
-            if 40 < v < SIZE[1] - 130 and 4 < u < SIZE[0] - 4:  # away from the controls bar and the legends
+            if (
+                40 < v < SIZE[1] - 130 and 4 < u < SIZE[0] - 4
+            ):  # away from the controls bar and the legends
                 ok.append(mask[int(v) - 2 : int(v) + 3, int(u) - 2 : int(u) + 3].any())
         assert len(ok) > 20
         return float(np.mean(ok))
@@ -206,10 +248,20 @@ def test_cli_reach_html_and_the_page_in_headless_chromium(tmp_path: Path, capsys
         (["--html", "{d}/v.txt"], "expected an .html path"),
     ],
 )
-def test_cli_reach_html_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
-                                  match: str) -> None:
-    argv = ["reach", "iis_head", "--samples", "2", "3", "3", "-o", str(tmp_path / "r.png"),
-            *(a.format(d=tmp_path) for a in extra)]
+def test_cli_reach_html_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], match: str
+) -> None:
+    argv = [
+        "reach",
+        "iis_head",
+        "--samples",
+        "2",
+        "3",
+        "3",
+        "-o",
+        str(tmp_path / "r.png"),
+        *(a.format(d=tmp_path) for a in extra),
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0], err
@@ -225,7 +277,9 @@ def test_a_far_region_moves_the_viewer_cameras_far_plane() -> None:
     solver = GazeSolver.from_model(load_model("iis_head"))
     far: dict[float, object] = {}
     for reach_far in (3.0, 1000.0):
-        r = reachable_region(solver, make_grid(solver, "shell", reach_far / 10, reach_far, (2, 5, 3)))
+        r = reachable_region(
+            solver, make_grid(solver, "shell", reach_far / 10, reach_far, (2, 5, 3))
+        )
         vis = static_visualizer()
         summary = build_view(vis, "iis_head", region=r, sweep=False)
         props = decoded(vis.window)["/Cameras/default/rotated/<object>"]["properties"]
@@ -236,14 +290,25 @@ def test_a_far_region_moves_the_viewer_cameras_far_plane() -> None:
     assert far[1000.0][0] > 10 * VIEWER_FAR  # type: ignore[index]
 
 
-def test_cli_reach_screenshot_without_chromium_fails_before_solving(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+def test_cli_reach_screenshot_without_chromium_fails_before_solving(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     from cpc2urdf.validation.gaze import reachable as reach
 
     monkeypatch.setenv("CPC2URDF_CHROMIUM", str(tmp_path / "no-chromium"))
-    monkeypatch.setattr(reach, "reachable_region", lambda *a, **k: pytest.fail("solved before checking Chromium"))
-    argv = ["reach", "iis_head", "-o", str(tmp_path / "r.png"), "--html", str(tmp_path / "r.html"),
-            "--screenshot", str(tmp_path / "v.png")]
+    monkeypatch.setattr(
+        reach, "reachable_region", lambda *a, **k: pytest.fail("solved before checking Chromium")
+    )
+    argv = [
+        "reach",
+        "iis_head",
+        "-o",
+        str(tmp_path / "r.png"),
+        "--html",
+        str(tmp_path / "r.html"),
+        "--screenshot",
+        str(tmp_path / "v.png"),
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--screenshot needs Chromium" in err[0]
@@ -251,8 +316,12 @@ def test_cli_reach_screenshot_without_chromium_fails_before_solving(tmp_path: Pa
 
 
 @pytest.mark.parametrize("command", ["reach", "view"])
-def test_a_failed_screenshot_writes_nothing_and_names_the_users_png(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                                     monkeypatch: pytest.MonkeyPatch, command: str) -> None:
+def test_a_failed_screenshot_writes_nothing_and_names_the_users_png(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    command: str,
+) -> None:
     """A Chromium that fails: one line naming the --screenshot path (not a temporary file), and
     neither the page nor anything else written (the page used to be written first)."""
     browser = tmp_path / "bin" / "chromium"
@@ -262,32 +331,75 @@ def test_a_failed_screenshot_writes_nothing_and_names_the_users_png(tmp_path: Pa
     monkeypatch.setenv("CPC2URDF_CHROMIUM", str(browser))
     out = tmp_path / "out"
     out.mkdir()
-    extra = ["--samples", "2", "3", "3", "-o", str(out / "r.png")] if command == "reach" else ["--no-sweep"]
-    argv = [command, "iis_head", *extra, "--html", str(out / "v.html"), "--screenshot", str(out / "v.png")]
+    extra = (
+        ["--samples", "2", "3", "3", "-o", str(out / "r.png")]
+        if command == "reach"
+        else ["--no-sweep"]
+    )
+    argv = [
+        command,
+        "iis_head",
+        *extra,
+        "--html",
+        str(out / "v.html"),
+        "--screenshot",
+        str(out / "v.png"),
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"{out / 'v.png'}: Chromium failed (exit 1): GPU process crashed" in err[0], err
+    assert (
+        len(err) == 1
+        and f"{out / 'v.png'}: Chromium failed (exit 1): GPU process crashed" in err[0]
+    ), err
     assert list(out.iterdir()) == []
 
 
-def test_cli_view_reach_draws_reachs_default_region(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_view_reach_draws_reachs_default_region(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``view ROBOT --reach``: the default grid of ``reach``, solved on the robot as drawn, with
     the fixation of --target; the same counts as ``reach``'s JSON."""
     page = tmp_path / "v.html"
-    assert main(["view", "iis_head", "--reach", "--target", "-0.3", "-0.4", "0.66", "--no-sweep", "--html", str(page)]) == 0
+    assert (
+        main(
+            [
+                "view",
+                "iis_head",
+                "--reach",
+                "--target",
+                "-0.3",
+                "-0.4",
+                "0.66",
+                "--no-sweep",
+                "--html",
+                str(page),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
-    assert main(["reach", "iis_head", "-o", str(tmp_path / "r.png"), "--json", str(tmp_path / "r.json")]) == 0
+    assert (
+        main(
+            ["reach", "iis_head", "-o", str(tmp_path / "r.png"), "--json", str(tmp_path / "r.json")]
+        )
+        == 0
+    )
     capsys.readouterr()
     import json
 
     counts = json.loads((tmp_path / "r.json").read_text())["counts"]
     from cpc2urdf.validation.view.region import COLOUR_NAMES
 
-    parts = ", ".join(f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in counts.items() if k)
+    parts = ", ".join(
+        f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in counts.items() if k
+    )
     assert f"reachable region: {sum(counts.values())} targets (shell grid): {parts};" in out
     assert "target [-0.3  -0.4   0.66] m: fixated" in out
     text = page.read_text()
-    assert f"fixated: {counts['fixated']}" in text and "held where shown: table_x=0.5, table_y=0.25" in text
+    assert (
+        f"fixated: {counts['fixated']}" in text
+        and "held where shown: table_x=0.5, table_y=0.25" in text
+    )
 
 
 def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
@@ -297,7 +409,9 @@ def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
     robot = load_view_robot("iis_head")
     shown = robot.q_from({"table_x": 0.0, "table_y": 0.0})
     solver = GazeSolver(robot.pinocchio, CAMERAS)
-    r = reachable_region(solver, make_grid(solver, "shell", 0.4, 2.0, (3, 7, 5), q=shown), q_current=shown)
+    r = reachable_region(
+        solver, make_grid(solver, "shell", 0.4, 2.0, (3, 7, 5), q=shown), q_current=shown
+    )
     vis = static_visualizer()
     summary = build_view(vis, robot, q={"table_x": 0.0, "table_y": 0.0}, region=r, sweep=False)
     T = robot.link_poses(shown)
@@ -315,17 +429,41 @@ def test_view_reach_holds_the_joints_where_shown(tmp_path: Path) -> None:
             assert math.atan2(math.hypot(d[0], d[1]), d[2]) < 1e-8
 
 
-def test_cli_view_reach_lays_the_grid_out_as_reach_does(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_view_reach_lays_the_grid_out_as_reach_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``--q`` holds the joints that do not move (the table) where shown; a moving one turned by
     --q (pan) does not turn the grid, nor does --target: the region is the one laid out with the
     moving joints at the middle of their limits (with pan turned the grid lost 166 fixated)."""
     page = tmp_path / "v.html"
-    assert main(["view", "iis_head", "--reach", "--q", "table_x=0.1", "table_y=0.4", "pan=2.0", "--target", "-0.3",
-                 "-0.4", "0.66", "--no-sweep", "--html", str(page)]) == 0
+    assert (
+        main(
+            [
+                "view",
+                "iis_head",
+                "--reach",
+                "--q",
+                "table_x=0.1",
+                "table_y=0.4",
+                "pan=2.0",
+                "--target",
+                "-0.3",
+                "-0.4",
+                "0.66",
+                "--no-sweep",
+                "--html",
+                str(page),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     robot = load_view_robot("iis_head")
     posture = robot.q_from({"table_x": 0.1, "table_y": 0.4})
     solver = GazeSolver(robot.pinocchio, CAMERAS)
     r = reachable_region(solver, make_grid(solver, q=posture), q_current=posture)
     assert f"{r.counts()['fixated']} fixated (green)" in out
-    assert "held where shown: table_x=0.1, table_y=0.4" in out and "held where shown: table_x=0.1" in page.read_text()
+    assert (
+        "held where shown: table_x=0.1, table_y=0.4" in out
+        and "held where shown: table_x=0.1" in page.read_text()
+    )

@@ -102,8 +102,15 @@ def write(folder: Path, name: str, text: str) -> Path:
     return path
 
 
-def simulate(robot: UrdfRobot, rng: np.random.Generator, path: Path, *, M: int = 7,
-             sigma_t: float = 0.0, sigma_r: float = 0.0) -> CPCModel:
+def simulate(
+    robot: UrdfRobot,
+    rng: np.random.Generator,
+    path: Path,
+    *,
+    M: int = 7,
+    sigma_t: float = 0.0,
+    sigma_r: float = 0.0,
+) -> CPCModel:
     """A perturbed true robot of ``robot`` (a measured sub-tree), its one-joint-at-a-time
     measurements (Fig. 10 noise of the given sigmas [m], [rad]) saved as ``path`` with the
     URDF's names, robot reference = the URDF's file name; returns the truth."""
@@ -120,7 +127,9 @@ def simulate(robot: UrdfRobot, rng: np.random.Generator, path: Path, *, M: int =
     return truth
 
 
-def pinocchio_poses(urdf: Path, readings: dict[str, float], links: list[str]) -> dict[str, np.ndarray]:
+def pinocchio_poses(
+    urdf: Path, readings: dict[str, float], links: list[str]
+) -> dict[str, np.ndarray]:
     """``T_root_link`` of ``links`` by Pinocchio (urdfdom) from the file, joints by URDF name."""
     model = pin.buildModelFromUrdf(str(urdf))
     data = model.createData()

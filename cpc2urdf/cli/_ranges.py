@@ -10,7 +10,9 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the spec module loads numpy: imported inside the function (fast `cpc2urdf --help`)
+if (
+    TYPE_CHECKING
+):  # the spec module loads numpy: imported inside the function (fast `cpc2urdf --help`)
     from cpc2urdf.files.spec import RobotSpec
 
 
@@ -35,7 +37,9 @@ def parse_ranges(items: list[str], spec: RobotSpec) -> dict[str, tuple[float, fl
             if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
                 raise ValueError
         except ValueError:
-            raise ConfigurationError(f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)") from None
+            raise ConfigurationError(
+                f"--range {item!r}: expected JOINT=LO:HI with LO <= HI (mm or deg)"
+            ) from None
         if isinstance(spec, UrdfRobot) and spec.names is not None:
             name = spec.cpc_joint(name) or name
         j = structure.joint(name)

@@ -25,7 +25,9 @@ def add_group(
         description=f"{help_text}\n\navailable:\n{lines}\n\nRun 'cpc2urdf {name} WHICH --help' for its options.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("which", choices=sorted(registry), metavar="WHICH", help=", ".join(sorted(registry)))
+    p.add_argument(
+        "which", choices=sorted(registry), metavar="WHICH", help=", ".join(sorted(registry))
+    )
     p.add_argument("options", nargs=argparse.REMAINDER, help="options of that " + name)
 
     def run(args: argparse.Namespace) -> int:

@@ -20,12 +20,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "deviation of |e_x|, |e_y|, |e_z| and the mean Euclidean error, in mm, and the rotation error. "
         "Errors inconsistent with the model's own predicted uncertainty are refused (exit code 2).",
     )
-    p.add_argument("model", help="model file (e.g. from 'cpc2urdf identify'), robot spec or shipped name")
+    p.add_argument(
+        "model", help="model file (e.g. from 'cpc2urdf identify'), robot spec or shipped name"
+    )
     p.add_argument("heldout", help="held-out measurement file")
     p.add_argument("--json", action="store_true", help="print the table as JSON (mm, degrees)")
-    p.add_argument("--accept-inconsistent", action="store_true",
-                   help="print the table even when the held-out errors are inconsistent with the model's own "
-                   "prediction (the mismatch is printed as a warning)")
+    p.add_argument(
+        "--accept-inconsistent",
+        action="store_true",
+        help="print the table even when the held-out errors are inconsistent with the model's own "
+        "prediction (the mismatch is printed as a warning)",
+    )
     p.set_defaults(run=run)
 
 

@@ -8,7 +8,10 @@ from cpc2urdf.cli._registry import add_group
 
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "fk": ("cpc2urdf.studies.bench_fk", "vectorised CPC forward kinematics vs a Pinocchio loop"),
-    "gaze": ("cpc2urdf.studies.bench_gaze", "gaze IK solve time and success vs scipy least_squares"),
+    "gaze": (
+        "cpc2urdf.studies.bench_gaze",
+        "gaze IK solve time and success vs scipy least_squares",
+    ),
 }
 
 

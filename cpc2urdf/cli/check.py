@@ -33,11 +33,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     p.add_argument("urdf", help="URDF file")
     p.add_argument("--model", required=True, help="model file, robot spec or shipped robot name")
-    p.add_argument("-n", "--configurations", type=int, default=100, help="number of configurations (default 100)")
+    p.add_argument(
+        "-n",
+        "--configurations",
+        type=int,
+        default=100,
+        help="number of configurations (default 100)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the configurations (default 0)")
-    p.add_argument("--gaze-report", action="store_true",
-                   help="also report the model as a gaze head when it has two camera frames: its kind and, for two "
-                   "eyes, whether they can fixate exactly and their vertical disparity (builds the gaze solver)")
+    p.add_argument(
+        "--gaze-report",
+        action="store_true",
+        help="also report the model as a gaze head when it has two camera frames: its kind and, for two "
+        "eyes, whether they can fixate exactly and their vertical disparity (builds the gaze solver)",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(run=run)
 
@@ -61,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
         if head is not None:
             from cpc2urdf.validation.gaze.head_report import format_head_report
 
-            print("\n".join(format_head_report(head)) if "error" not in head else f"gaze head: not analysed ({head['error']})")
+            print(
+                "\n".join(format_head_report(head))
+                if "error" not in head
+                else f"gaze head: not analysed ({head['error']})"
+            )
     return 0 if report.ok else 1
 
 

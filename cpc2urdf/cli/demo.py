@@ -117,16 +117,27 @@ def run(args: argparse.Namespace) -> int:
     st.done()
 
     if args.from_images:
-        st.start("render the stage-1 experiment as stereo images, then measure them (circle detector)")
+        st.start(
+            "render the stage-1 experiment as stereo images, then measure them (circle detector)"
+        )
         from cpc2urdf.identification.simulation.image_experiment import render_experiment
 
         exp = render_experiment(out / "images", seed=args.seed, show_progress=True)
         truth = perturb_cameras(exp.truth, np.random.default_rng(args.seed))
         save_model(truth, f"{d}/images/truth.json")
-        _cli("measure", f"{d}/images", "--rig", f"{d}/images/rig.yaml", "-o", f"{d}/measurements.json")
+        _cli(
+            "measure",
+            f"{d}/images",
+            "--rig",
+            f"{d}/images/rig.yaml",
+            "-o",
+            f"{d}/measurements.json",
+        )
         measurements, heldout = f"{d}/measurements.json", f"{d}/images/heldout.json"
     else:
-        st.start("simulate the stage-1 experiment: stereo rig measures both plates, one joint at a time")
+        st.start(
+            "simulate the stage-1 experiment: stereo rig measures both plates, one joint at a time"
+        )
         _cli("simulate", "iis_head", "-o", f"{d}/sim", "--seed", seed)
         # The simulated real head's camera mounts differ from the drawing by millimetres and
         # degrees; stage 2 has to find them.
@@ -146,19 +157,49 @@ def run(args: argparse.Namespace) -> int:
     st.done()
 
     if args.from_images:
-        st.start("stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye")
+        st.start(
+            "stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye"
+        )
         from cpc2urdf.identification.simulation.image_experiment import render_head_experiment
 
         render_head_experiment(out / "head", truth, seed=args.seed)
-        _cli("measure", f"{d}/head", "--stage2", "--model", f"{d}/stage1_model.json", "-o", f"{d}/handeye")
-        _cli("handeye", f"{d}/handeye/handeye_camera_left_optical.json", "--method", "refined",
-             "--model", f"{d}/stage1_model.json", "-o", f"{d}/model.json")
-        _cli("handeye", f"{d}/handeye/handeye_camera_right_optical.json", "--method", "refined",
-             "--model", f"{d}/model.json", "-o", f"{d}/model.json")
+        _cli(
+            "measure",
+            f"{d}/head",
+            "--stage2",
+            "--model",
+            f"{d}/stage1_model.json",
+            "-o",
+            f"{d}/handeye",
+        )
+        _cli(
+            "handeye",
+            f"{d}/handeye/handeye_camera_left_optical.json",
+            "--method",
+            "refined",
+            "--model",
+            f"{d}/stage1_model.json",
+            "-o",
+            f"{d}/model.json",
+        )
+        _cli(
+            "handeye",
+            f"{d}/handeye/handeye_camera_right_optical.json",
+            "--method",
+            "refined",
+            "--model",
+            f"{d}/model.json",
+            "-o",
+            f"{d}/model.json",
+        )
         print(_camera_errors(load_model(f"{d}/model.json"), truth))
     else:
-        st.start("stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, AX = ZB refined)")
-        result = run_stage2(load_model(f"{d}/stage1_model.json"), truth, seed=args.seed, method="refined")
+        st.start(
+            "stage 2: hand-eye calibration of both cameras (5x5 disk target, solvePnP, AX = ZB refined)"
+        )
+        result = run_stage2(
+            load_model(f"{d}/stage1_model.json"), truth, seed=args.seed, method="refined"
+        )
         print(result.summary())
         paths = write_pose_files(result, out)
         save_model(result.model, f"{d}/model.json")
@@ -180,12 +221,31 @@ def run(args: argparse.Namespace) -> int:
         print(f"   no target found where this head's two optical axes meet exactly: {e}")
         reachable = ahead
     else:
-        print("   a target where this calibrated head's two optical axes can meet (found from its FK), with the\n"
-              "   min-motion policy, which keeps an exact fixation where one exists:")
-        _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in reachable), "--q-current", *home,
-             "--policy", "min-motion", ok=(0, 1))
+        print(
+            "   a target where this calibrated head's two optical axes can meet (found from its FK), with the\n"
+            "   min-motion policy, which keeps an exact fixation where one exists:"
+        )
+        _cli(
+            "gaze",
+            f"{d}/model.json",
+            "--target",
+            *(repr(float(v)) for v in reachable),
+            "--q-current",
+            *home,
+            "--policy",
+            "min-motion",
+            ok=(0, 1),
+        )
     print("   a target 0.6 m straight ahead of the cameras:")
-    _cli("gaze", f"{d}/model.json", "--target", *(repr(float(v)) for v in ahead), "--q-current", *home, ok=(0, 1))
+    _cli(
+        "gaze",
+        f"{d}/model.json",
+        "--target",
+        *(repr(float(v)) for v in ahead),
+        "--q-current",
+        *home,
+        ok=(0, 1),
+    )
     print(
         "   (a calibrated head whose two eyes do not sweep exactly one plane can make both optical\n"
         "    axes meet only on a thin set of targets. The default policy, cyclopean, answers every\n"
@@ -199,7 +259,9 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.view import find_chromium, screenshot_html, write_view_html
 
     truth_path = f"{d}/images/truth.json" if args.from_images else f"{d}/sim/truth.json"
-    summary = write_view_html(out / "view.html", model, target=reachable, q=q_home, ghost=truth_path)
+    summary = write_view_html(
+        out / "view.html", model, target=reachable, q=q_home, ghost=truth_path
+    )
     print(summary.format())
     print(f"   wrote {out / 'view.html'} (open it in a browser)")
     if find_chromium():
@@ -207,11 +269,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"   wrote {out / 'view.png'} (headless Chromium screenshot)")
     st.done()
 
-    st.start("reach: where the calibrated head can point its eyes (slices as PNG, and in the 3D view)")
+    st.start(
+        "reach: where the calibrated head can point its eyes (slices as PNG, and in the 3D view)"
+    )
     shot = ["--screenshot", f"{d}/reach_view.png"] if find_chromium() else []
     _cli("reach", f"{d}/model.json", "-o", f"{d}/reach.png", "--html", f"{d}/reach.html", *shot)
-    print("   (disparity: pointed at with the head facing the target, each eye off by the vertical\n"
-          "    disparity of this calibrated head; joint limits: the tilt or pan range stops it)")
+    print(
+        "   (disparity: pointed at with the head facing the target, each eye off by the vertical\n"
+        "    disparity of this calibrated head; joint limits: the tilt or pan range stops it)"
+    )
     st.done()
 
     print(f"\ndemo finished: the calibrated head is {d}/model.json and {d}/head.urdf")

@@ -18,12 +18,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument("model", help="model file, robot spec, or shipped robot name")
     p.add_argument("-o", "--output", required=True, help="URDF file to write (atomically)")
     p.add_argument(
-        "--mount", choices=("base", "rig"),
+        "--mount",
+        choices=("base", "rig"),
         help="what root link 'world' is: 'base' (default) gravity-aligned at the base origin; "
         "'rig' the model's world, the measuring rig (T_world_base)",
     )
     p.add_argument(
-        "--up", nargs=3, type=float, metavar=("X", "Y", "Z"),
+        "--up",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
         help="the up direction in base coordinates (default: the robot spec's 'up', else base +z)",
     )
     p.set_defaults(run=run, written=reports)
@@ -66,11 +70,15 @@ def run(args: argparse.Namespace) -> int:
                 "its own URDF is written back into that URDF, root and inertials as they are"
             )
         path = export_urdf(plan.model, args.output, source=str(args.model))
-        print(f"wrote {path}: {s.n_joints} joints, {len(s.frames)} frames, from the robot's own URDF")
+        print(
+            f"wrote {path}: {s.n_joints} joints, {len(s.frames)} frames, from the robot's own URDF"
+        )
         return 0
     mount = args.mount or "base"
     path = export_urdf(args.model, args.output, source=str(args.model), mount=mount, up=args.up)
-    print(f"wrote {path}: {s.n_joints} joints, {len(s.frames)} frames ({', '.join(s.frame_names)}); "
-          f"total mass {total_mass(plan.model, plan.physical):.4g} kg")
+    print(
+        f"wrote {path}: {s.n_joints} joints, {len(s.frames)} frames ({', '.join(s.frame_names)}); "
+        f"total mass {total_mass(plan.model, plan.physical):.4g} kg"
+    )
     print(f"  {describe(plan, mount)}")
     return 0

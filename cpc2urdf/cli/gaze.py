@@ -21,7 +21,9 @@ from cpc2urdf.cli._gaze_options import add_solver_options, solver_options
 POLICIES = ("cyclopean", "min-motion", "eyes-only")
 DEFAULT_CAMERAS = ("camera_left_optical", "camera_right_optical")
 # argparse reads "-1.7e308" as an option (its own pattern has no exponent): numbers, inf and nan
-NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+NEGATIVE_NUMBER = re.compile(
+    r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE
+)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -35,15 +37,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "fixate exactly: status disparity), 2 bad input.",
     )
     p._negative_number_matcher = NEGATIVE_NUMBER  # --target -1 -2e3 0
-    p.add_argument("head", metavar="URDF_OR_MODEL", help=".urdf file, model file, robot spec or shipped robot name")
-    p.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="target in world [m]")
+    p.add_argument(
+        "head",
+        metavar="URDF_OR_MODEL",
+        help=".urdf file, model file, robot spec or shipped robot name",
+    )
+    p.add_argument(
+        "--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="target in world [m]"
+    )
     p.add_argument(
         "--report",
         action="store_true",
         help="report the head once: its kind and, for two eyes, whether they can fixate exactly and their "
         "vertical disparity over the workspace ahead (with or without --target)",
     )
-    p.add_argument("--policy", choices=POLICIES, default="cyclopean", help="redundancy policy (default cyclopean)")
+    p.add_argument(
+        "--policy",
+        choices=POLICIES,
+        default="cyclopean",
+        help="redundancy policy (default cyclopean)",
+    )
     p.add_argument(
         "--q-current",
         nargs="+",
@@ -73,10 +86,14 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.gaze import solver_for
 
     if len(args.cameras) > 2:
-        raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
+        raise ConfigurationError(
+            f"--camera takes one or two optical frames, got {len(args.cameras)}"
+        )
     if args.target is None and not args.report:
         raise ConfigurationError("give --target X Y Z, or --report for the head alone")
-    q_given = joint_readings(args.q_current, "--q-current")  # refused before anything is loaded or printed
+    q_given = joint_readings(
+        args.q_current, "--q-current"
+    )  # refused before anything is loaded or printed
     solver = solver_for(args.head, tuple(args.cameras), solver_options(args))
     if isinstance(q_given, dict):  # the joints not named: the middle of their limits
         q_given = {**dict(zip(solver.joint_names, solver.home.tolist(), strict=True)), **q_given}
@@ -94,7 +111,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     sol = solver.solve(args.target, q_current, args.policy)
     if args.json:
-        print(json.dumps(sol.to_json() if head is None else {"head": head, "solution": sol.to_json()}, indent=2))
+        print(
+            json.dumps(
+                sol.to_json() if head is None else {"head": head, "solution": sol.to_json()},
+                indent=2,
+            )
+        )
         return 0 if sol.reachable else 1
     t = ", ".join(f"{v:.10g}" for v in sol.target)
     print(f"target ({t}) m, policy {sol.policy}: {sol.status} after {sol.iterations} iterations")
@@ -109,13 +131,19 @@ def run(args: argparse.Namespace) -> int:
         flag = "  (at limit)" if name in sol.at_limit else ""
         print(f"  {name:{width}s} {shown}{flag}")
     if len(names) < len(sol.joints):
-        print(f"  ({len(sol.joints) - len(names)} other joints, off the cameras' paths, at --q-current or the middle "
-              "of their limits; --json lists every joint)")
+        print(
+            f"  ({len(sol.joints) - len(names)} other joints, off the cameras' paths, at --q-current or the middle "
+            "of their limits; --json lists every joint)"
+        )
     e, m = sol.pointing_error, sol.miss_distance
     if len(e) == 2:
         print(f"pointing error: left {e[0]:.3g} rad, right {e[1]:.3g} rad")
         print(f"miss distance:  left {m[0]:.3g} m, right {m[1]:.3g} m")
-        fix = "none (axes parallel)" if sol.fixation_point is None else "(" + ", ".join(f"{v:.10g}" for v in sol.fixation_point) + ") m"
+        fix = (
+            "none (axes parallel)"
+            if sol.fixation_point is None
+            else "(" + ", ".join(f"{v:.10g}" for v in sol.fixation_point) + ") m"
+        )
         print(f"fixation point: {fix}; vergence {math.degrees(sol.vergence):.4f} deg")
     else:
         print(f"pointing error: {e[0]:.3g} rad; miss distance {m[0]:.3g} m")

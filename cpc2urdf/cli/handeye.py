@@ -17,7 +17,9 @@ METHOD_NOTES = {
     "refined": "AX = ZB, Kronecker start + joint nonlinear least squares",
 }
 X_DIRECTION = "X = T_hand_camera: camera pose in the hand frame (maps camera to hand coordinates)"
-Z_DIRECTION = "Z = T_base_target: target pose in the robot base frame (maps target to base coordinates)"
+Z_DIRECTION = (
+    "Z = T_base_target: target pose in the robot base frame (maps target to base coordinates)"
+)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -31,18 +33,31 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "Z = T_base_target and the residual of every pose in mm and degrees.",
     )
     p.add_argument("poses", help="hand-eye pose file (cpc2urdf/handeye-poses@1)")
-    p.add_argument("--method", default=DEFAULT_HANDEYE_METHOD, choices=[*ALL_METHODS, "all"],
-                   help=f"solver, or 'all' to compare every solver side by side (default {DEFAULT_HANDEYE_METHOD})")
-    p.add_argument("--json", action="store_true", help="print the result as JSON (SI units + mm/deg residuals)")
-    p.add_argument("--model", help="model file (or shipped robot) to put the camera frame into; needs -o")
+    p.add_argument(
+        "--method",
+        default=DEFAULT_HANDEYE_METHOD,
+        choices=[*ALL_METHODS, "all"],
+        help=f"solver, or 'all' to compare every solver side by side (default {DEFAULT_HANDEYE_METHOD})",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print the result as JSON (SI units + mm/deg residuals)"
+    )
+    p.add_argument(
+        "--model", help="model file (or shipped robot) to put the camera frame into; needs -o"
+    )
     p.add_argument("-o", "--output", help="write MODEL with the camera frame added (atomically)")
     p.add_argument("--camera", help="camera frame name (default: the pose file's 'camera')")
     p.add_argument("--hand", help="hand frame name in MODEL (default: the pose file's 'hand')")
-    p.add_argument("--accept-inconsistent", action="store_true",
-                   help="keep the result of poses the consistency gate finds inconsistent with A X = Z B "
-                   "(inverted or transposed poses, wrong units, pairing off by one, outliers; see "
-                   "docs/handeye.md): the diagnosis is printed as a warning and stored in the model")
-    p.set_defaults(run=run, may_replace=("model",))  # -o MODEL: the model updated in place, atomically
+    p.add_argument(
+        "--accept-inconsistent",
+        action="store_true",
+        help="keep the result of poses the consistency gate finds inconsistent with A X = Z B "
+        "(inverted or transposed poses, wrong units, pairing off by one, outliers; see "
+        "docs/handeye.md): the diagnosis is printed as a warning and stored in the model",
+    )
+    p.set_defaults(
+        run=run, may_replace=("model",)
+    )  # -o MODEL: the model updated in place, atomically
 
 
 def _pose_line(T: Any) -> str:
@@ -50,8 +65,10 @@ def _pose_line(T: Any) -> str:
 
     xyz = T[:3, 3] * 1e3
     rpy = [math.degrees(v) for v in rpy_from_matrix(T[:3, :3])]
-    return (f"xyz = [{xyz[0]:10.4f} {xyz[1]:10.4f} {xyz[2]:10.4f}] mm   "
-            f"rpy = [{rpy[0]:9.4f} {rpy[1]:9.4f} {rpy[2]:9.4f}] deg")
+    return (
+        f"xyz = [{xyz[0]:10.4f} {xyz[1]:10.4f} {xyz[2]:10.4f}] mm   "
+        f"rpy = [{rpy[0]:9.4f} {rpy[1]:9.4f} {rpy[2]:9.4f}] deg"
+    )
 
 
 def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
@@ -61,11 +78,15 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
     from cpc2urdf.files.jsonio import check_output_path
 
     if (args.model is None) != (args.output is None):
-        raise ConfigurationError("--model and -o/--output go together (the model to extend and where to write it)")
+        raise ConfigurationError(
+            "--model and -o/--output go together (the model to extend and where to write it)"
+        )
     if args.model is None:
         return None
     if args.method == "all":
-        raise ConfigurationError("--model needs one --method (not 'all') to decide which X to store")
+        raise ConfigurationError(
+            "--model needs one --method (not 'all') to decide which X to store"
+        )
     check_output_path(args.output)  # before the solve, not after it
     model = load_model(args.model)
     camera_mount(model, data, camera=args.camera, hand=args.hand)
@@ -93,8 +114,15 @@ def run(args: argparse.Namespace) -> int:
     if not results:  # every solver refused: the data is the problem, say it once
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
     if model is not None:
-        out = calibrate_cameras(model, data, args.method, camera=args.camera, hand=args.hand,
-                                result=results[args.method], accept_inconsistent=args.accept_inconsistent)
+        out = calibrate_cameras(
+            model,
+            data,
+            args.method,
+            camera=args.camera,
+            hand=args.hand,
+            result=results[args.method],
+            accept_inconsistent=args.accept_inconsistent,
+        )
         path = save_model(out, args.output)
         camera, hand = args.camera or data.camera, args.hand or data.hand
 
@@ -116,14 +144,18 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     n = len(data.labels)
-    who = ", ".join(x for x in (data.camera and f"camera {data.camera}", data.hand and f"hand {data.hand}") if x)
+    who = ", ".join(
+        x for x in (data.camera and f"camera {data.camera}", data.hand and f"hand {data.hand}") if x
+    )
     print(f"hand-eye calibration of {args.poses}: {n} poses" + (f" ({who})" if who else ""))
     print(f"  {X_DIRECTION}")
     print(f"  {Z_DIRECTION}")
-    print("  residual of pose k: camera pose T_base_hand[k] X vs Z inv(T_camera_target[k]), "
-          "position [mm] and angle [deg]")
+    print(
+        "  residual of pose k: camera pose T_base_hand[k] X vs Z inv(T_camera_target[k]), "
+        "position [mm] and angle [deg]"
+    )
     if len(results) == 1 and not refused:
-        (m, r), = results.items()
+        ((m, r),) = results.items()
         print(f"\nmethod {m} ({METHOD_NOTES[m]})")
         print(f"X  {_pose_line(r.X)}")
         for row in r.X[:3]:
@@ -133,8 +165,12 @@ def run(args: argparse.Namespace) -> int:
             print("     [" + " ".join(f"{v:13.9f}" for v in row[:3]) + f" {row[3] * 1e3:12.6f} mm]")
         print(f"\n{'pose':>20s} {'translation [mm]':>17s} {'rotation [deg]':>15s}")
         for k, lab in enumerate(data.labels):
-            print(f"{lab:>20s} {r.residual_translation[k] * 1e3:17.4f} {math.degrees(r.residual_rotation[k]):15.4f}")
-        print(f"{'RMS':>20s} {r.rms_translation() * 1e3:17.4f} {math.degrees(r.rms_rotation()):15.4f}")
+            print(
+                f"{lab:>20s} {r.residual_translation[k] * 1e3:17.4f} {math.degrees(r.residual_rotation[k]):15.4f}"
+            )
+        print(
+            f"{'RMS':>20s} {r.rms_translation() * 1e3:17.4f} {math.degrees(r.rms_rotation()):15.4f}"
+        )
         for w in r.warnings:
             print(f"warning: {w}")
         if model is not None:
@@ -145,16 +181,20 @@ def run(args: argparse.Namespace) -> int:
     for m, r in results.items():
         print(f"{m:16s} X  {_pose_line(r.X)}")
         print(f"{'':16s} Z  {_pose_line(r.Z)}")
-        print(f"{'':16s} RMS residual {r.rms_translation() * 1e3:.4f} mm, "
-              f"{math.degrees(r.rms_rotation()):.4f} deg   ({METHOD_NOTES[m]})")
+        print(
+            f"{'':16s} RMS residual {r.rms_translation() * 1e3:.4f} mm, "
+            f"{math.degrees(r.rms_rotation()):.4f} deg   ({METHOD_NOTES[m]})"
+        )
     for m, why in refused.items():
         print(f"{m:16s} refused: {why}")
     names = list(results)
     print("\nresidual per pose [mm / deg]")
     print(f"{'pose':>20s} " + " ".join(f"{m:>18s}" for m in names))
     for k, lab in enumerate(data.labels):
-        cells = [f"{results[m].residual_translation[k] * 1e3:8.3f} /{math.degrees(results[m].residual_rotation[k]):8.4f}"
-                 for m in names]
+        cells = [
+            f"{results[m].residual_translation[k] * 1e3:8.3f} /{math.degrees(results[m].residual_rotation[k]):8.4f}"
+            for m in names
+        ]
         print(f"{lab:>20s} " + " ".join(f"{c:>18s}" for c in cells))
     warned = {w for r in results.values() for w in r.warnings}
     for w in sorted(warned):

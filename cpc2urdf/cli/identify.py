@@ -26,7 +26,9 @@ if TYPE_CHECKING:
     from cpc2urdf.files.measurements import MeasurementSet
 
 
-NOT_BETTER_EXIT = 3  # --method map: no calibration predicts better than the URDF as it is (model still written)
+NOT_BETTER_EXIT = (
+    3  # --method map: no calibration predicts better than the URDF as it is (model still written)
+)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -43,41 +45,82 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "keep their nominal placement relative to a measured plate on the same link, or are dropped "
         "if the robot has no nominal geometry. A tracker CSV export (.csv) needs --robot and --marker.",
     )
-    p.add_argument("measurements", help="measurement file: cpc2urdf/measurements@1 (poses) or @2 (markers), "
-                   "or a tracker CSV export (.csv: config,marker,x,y,z[,joints...])")
+    p.add_argument(
+        "measurements",
+        help="measurement file: cpc2urdf/measurements@1 (poses) or @2 (markers), "
+        "or a tracker CSV export (.csv: config,marker,x,y,z[,joints...])",
+    )
     p.add_argument("-o", "--output", required=True, help="model file to write (atomically)")
-    p.add_argument("--method", choices=sorted(METHODS), default=None,
-                   help=f"identification method (default {DEFAULT_METHOD}: closed form + maximum-likelihood "
-                   "refinement with covariance; closed-form: Shih et al. sec. 4.2 only; map: maximum a posteriori "
-                   "about the URDF, the model chosen by cross-validation, the default for a FIGAROH CSV; exit "
-                   "code 3 when no calibration predicts better than the URDF as it is)")
-    p.add_argument("--robot", help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
-                   "(required for a .csv)")
-    p.add_argument("--joints", metavar="J1,J2,...", help="--method map: the joints to calibrate (URDF names); "
-                   "every other joint keeps the URDF's values (default: those the data move on the paths to the "
-                   "measured links)")
-    p.add_argument("--level", choices=("frames", "offsets", "geometry", "compliance"),
-                   help="--method map: fit this level alone instead of choosing one by cross-validation")
-    p.add_argument("--noise", metavar="MM[,DEG]", help="the measurements' noise, one standard deviation: of each "
-                   "position coordinate in mm (and, for frame poses, of the orientation error's angle in deg, as "
-                   "simulate's Fig. 10 noise); default: the file's "
-                   "noise section, else estimated from the data (map) or 0.5 mm / 0.5 deg with the a-posteriori "
-                   "scale (refined)")
-    p.add_argument("--accept-inconsistent", action="store_true",
-                   help="keep the model even when the data are inconsistent with it (a fit far from the file's "
-                   "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
-                   "notes and provenance")
+    p.add_argument(
+        "--method",
+        choices=sorted(METHODS),
+        default=None,
+        help=f"identification method (default {DEFAULT_METHOD}: closed form + maximum-likelihood "
+        "refinement with covariance; closed-form: Shih et al. sec. 4.2 only; map: maximum a posteriori "
+        "about the URDF, the model chosen by cross-validation, the default for a FIGAROH CSV; exit "
+        "code 3 when no calibration predicts better than the URDF as it is)",
+    )
+    p.add_argument(
+        "--robot",
+        help="robot spec/model file, URDF or shipped name, instead of the file's 'robot' "
+        "(required for a .csv)",
+    )
+    p.add_argument(
+        "--joints",
+        metavar="J1,J2,...",
+        help="--method map: the joints to calibrate (URDF names); "
+        "every other joint keeps the URDF's values (default: those the data move on the paths to the "
+        "measured links)",
+    )
+    p.add_argument(
+        "--level",
+        choices=("frames", "offsets", "geometry", "compliance"),
+        help="--method map: fit this level alone instead of choosing one by cross-validation",
+    )
+    p.add_argument(
+        "--noise",
+        metavar="MM[,DEG]",
+        help="the measurements' noise, one standard deviation: of each "
+        "position coordinate in mm (and, for frame poses, of the orientation error's angle in deg, as "
+        "simulate's Fig. 10 noise); default: the file's "
+        "noise section, else estimated from the data (map) or 0.5 mm / 0.5 deg with the a-posteriori "
+        "scale (refined)",
+    )
+    p.add_argument(
+        "--accept-inconsistent",
+        action="store_true",
+        help="keep the model even when the data are inconsistent with it (a fit far from the file's "
+        "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
+        "notes and provenance",
+    )
     csv = p.add_argument_group("tracker CSV export or FIGAROH CSV (measurements ending in .csv)")
-    csv.add_argument("--link", help="FIGAROH CSV (a row per posture: x1,y1,z1[,phix1,phiy1,phiz1] ... and the "
-                     "URDF's joints): the URDF link the measured points ride on")
-    csv.add_argument("--marker", action="append", default=[], metavar="NAME=LINK",
-                     help="the link (a spec frame or URDF link) marker NAME is fixed to (repeat for each marker)")
-    csv.add_argument("--joints-csv", metavar="FILE", help="joint readings config,<joint>,... when the points file "
-                     "has no joint columns")
-    csv.add_argument("--units-length", choices=sorted(LENGTH_UNITS), help="length unit of the CSV if its "
-                     "'# units:' header does not say (default m)")
-    csv.add_argument("--units-angle", choices=sorted(ANGLE_UNITS), help="angle unit of the CSV if its "
-                     "'# units:' header does not say (default rad)")
+    csv.add_argument(
+        "--link",
+        help="FIGAROH CSV (a row per posture: x1,y1,z1[,phix1,phiy1,phiz1] ... and the "
+        "URDF's joints): the URDF link the measured points ride on",
+    )
+    csv.add_argument(
+        "--marker",
+        action="append",
+        default=[],
+        metavar="NAME=LINK",
+        help="the link (a spec frame or URDF link) marker NAME is fixed to (repeat for each marker)",
+    )
+    csv.add_argument(
+        "--joints-csv",
+        metavar="FILE",
+        help="joint readings config,<joint>,... when the points file has no joint columns",
+    )
+    csv.add_argument(
+        "--units-length",
+        choices=sorted(LENGTH_UNITS),
+        help="length unit of the CSV if its '# units:' header does not say (default m)",
+    )
+    csv.add_argument(
+        "--units-angle",
+        choices=sorted(ANGLE_UNITS),
+        help="angle unit of the CSV if its '# units:' header does not say (default rad)",
+    )
     p.set_defaults(run=run)
 
 
@@ -95,12 +138,17 @@ def _noise(text: str, poses: bool) -> dict[str, float | str]:
     except ValueError:
         values = []
     if len(parts) > 2 or not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise ConfigurationError(f"--noise {text!r}: expected MM or MM,DEG (positive numbers: position noise "
-                                 "in mm, orientation noise in deg)")
+        raise ConfigurationError(
+            f"--noise {text!r}: expected MM or MM,DEG (positive numbers: position noise "
+            "in mm, orientation noise in deg)"
+        )
     if poses and len(values) == 1:
-        raise ConfigurationError(f"--noise {text!r}: the data are frame poses; give their orientation noise too "
-                                 "(MM,DEG)")
-    sigma_r = math.radians(values[1]) if len(values) == 2 else DEFAULT_SIGMA_R  # unused by marker points
+        raise ConfigurationError(
+            f"--noise {text!r}: the data are frame poses; give their orientation noise too (MM,DEG)"
+        )
+    sigma_r = (
+        math.radians(values[1]) if len(values) == 2 else DEFAULT_SIGMA_R
+    )  # unused by marker points
     return {"model": "stated", "sigma_t_m": values[0] * 1e-3, "sigma_r_rad": sigma_r}
 
 
@@ -112,9 +160,13 @@ def _markers(items: list[str]) -> dict[str, str]:
     for item in items:
         name, sep, link = (t.strip() for t in item.partition("="))
         if not sep or not name or not link:
-            raise ConfigurationError(f"--marker {item!r}: expected NAME=LINK (the link the marker is fixed to)")
+            raise ConfigurationError(
+                f"--marker {item!r}: expected NAME=LINK (the link the marker is fixed to)"
+            )
         if name in out:
-            raise ConfigurationError(f"--marker {name!r} is given twice ({out[name]!r} and {link!r})")
+            raise ConfigurationError(
+                f"--marker {name!r} is given twice ({out[name]!r} and {link!r})"
+            )
         out[name] = link
     return out
 
@@ -124,14 +176,23 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
     from cpc2urdf.api import load_measurements, load_robot
     from cpc2urdf.errors import ConfigurationError
 
-    csv_only = {"--marker": args.marker, "--joints-csv": args.joints_csv, "--link": args.link,
-                "--units-length": args.units_length, "--units-angle": args.units_angle}
+    csv_only = {
+        "--marker": args.marker,
+        "--joints-csv": args.joints_csv,
+        "--link": args.link,
+        "--units-length": args.units_length,
+        "--units-angle": args.units_angle,
+    }
     if not str(args.measurements).lower().endswith(".csv"):
         given = [k for k, v in csv_only.items() if v]
         if given:
-            raise ConfigurationError(f"{given[0]} applies to a tracker CSV export (.csv); "
-                                     f"{args.measurements} is a measurement file")
-        return load_measurements(args.measurements, robot=load_robot(args.robot) if args.robot else None)
+            raise ConfigurationError(
+                f"{given[0]} applies to a tracker CSV export (.csv); "
+                f"{args.measurements} is a measurement file"
+            )
+        return load_measurements(
+            args.measurements, robot=load_robot(args.robot) if args.robot else None
+        )
     from cpc2urdf.files.marker_csv import load_marker_csv
 
     if args.link:
@@ -140,18 +201,33 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
 
         robot = load_robot(args.robot) if args.robot else None
         if not isinstance(robot, UrdfRobot):
-            raise ConfigurationError(f"{args.measurements}: a FIGAROH CSV needs --robot ROBOT.urdf (the URDF it was "
-                                     "recorded against)")
+            raise ConfigurationError(
+                f"{args.measurements}: a FIGAROH CSV needs --robot ROBOT.urdf (the URDF it was "
+                "recorded against)"
+            )
         if args.marker:
-            raise ConfigurationError("--marker applies to a tracker export; a FIGAROH CSV names its points x1, y1, z1 ...")
+            raise ConfigurationError(
+                "--marker applies to a tracker export; a FIGAROH CSV names its points x1, y1, z1 ..."
+            )
         return load_figaroh_csv(args.measurements, robot, args.link, robot_ref=args.robot)
     if not args.robot:
-        raise ConfigurationError(f"{args.measurements}: a tracker CSV export needs --robot (the robot the markers are on)")
+        raise ConfigurationError(
+            f"{args.measurements}: a tracker CSV export needs --robot (the robot the markers are on)"
+        )
     if not args.marker:
-        raise ConfigurationError(f"{args.measurements}: a tracker CSV export needs --marker NAME=LINK for each marker "
-                                 "(the export does not say which link a marker is on)")
-    return load_marker_csv(args.measurements, load_robot(args.robot), _markers(args.marker), robot_ref=args.robot,
-                           joints_csv=args.joints_csv, length=args.units_length, angle=args.units_angle)
+        raise ConfigurationError(
+            f"{args.measurements}: a tracker CSV export needs --marker NAME=LINK for each marker "
+            "(the export does not say which link a marker is on)"
+        )
+    return load_marker_csv(
+        args.measurements,
+        load_robot(args.robot),
+        _markers(args.marker),
+        robot_ref=args.robot,
+        joints_csv=args.joints_csv,
+        length=args.units_length,
+        angle=args.units_angle,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -173,42 +249,67 @@ def run(args: argparse.Namespace) -> int:
     for option, value in (("--level", args.level), ("--joints", args.joints)):
         if value is not None and args.method != "map":
             raise ConfigurationError(f"{option} applies to --method map, not {args.method}")
-    joints = [j.strip() for j in args.joints.split(",") if j.strip()] if args.joints is not None else None
+    joints = (
+        [j.strip() for j in args.joints.split(",") if j.strip()]
+        if args.joints is not None
+        else None
+    )
     if joints is not None and not joints:
-        raise ConfigurationError("--joints: name at least one joint to calibrate (URDF names, comma-separated)")
-    model = identify(ms, args.method, accept_inconsistent=args.accept_inconsistent, level=args.level, joints=joints)
+        raise ConfigurationError(
+            "--joints: name at least one joint to calibrate (URDF names, comma-separated)"
+        )
+    model = identify(
+        ms,
+        args.method,
+        accept_inconsistent=args.accept_inconsistent,
+        level=args.level,
+        joints=joints,
+    )
     elapsed = time.perf_counter() - start
-    prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(identification_time_s=elapsed)
+    prov = (model.metadata.provenance or Provenance(method=args.method)).with_details(
+        identification_time_s=elapsed
+    )
     meta = model.metadata.replace(provenance=prov)
     path = save_model(model.with_params(metadata=meta), args.output)
     count = prov.details.get("identified_parameters", {}).get("total")
-    print(f"wrote {path}: {args.method} identification of {ms.structure.name!r} from {ms.n_records} records "
-          f"in {elapsed * 1e3:.0f} ms" + (f", {count} independent parameters" if count else ""))
+    print(
+        f"wrote {path}: {args.method} identification of {ms.structure.name!r} from {ms.n_records} records "
+        f"in {elapsed * 1e3:.0f} ms" + (f", {count} independent parameters" if count else "")
+    )
     if "start" in prov.details:  # closed-form, circle-point or nominal
         print(f"  start: {prov.details['start']}")
     points_only = bool(ms.marker_points) and not ms.frames  # marker rows carry no rotation
     for f, r in (meta.residuals.per_frame if meta.residuals else {}).items():
         rotation = "" if points_only else f", {math.degrees(r.rms_rotation_rad):.3f} deg rms"
-        print(f"  {f}: fit residual rms {r.rms_translation_m * 1e3:.3f} mm (max "
-              f"{r.max_translation_m * 1e3:.3f} mm){rotation}")
+        print(
+            f"  {f}: fit residual rms {r.rms_translation_m * 1e3:.3f} mm (max "
+            f"{r.max_translation_m * 1e3:.3f} mm){rotation}"
+        )
     for note in meta.notes:
         print(f"  note: {note}")
     consistency = prov.details.get("consistency", {})
     if consistency.get("accepted"):
-        print(f"warning: the data are INCONSISTENT with the model; kept because of --accept-inconsistent: "
-              f"{consistency['diagnosis']['cause']} (stored in the model's notes)")
+        print(
+            f"warning: the data are INCONSISTENT with the model; kept because of --accept-inconsistent: "
+            f"{consistency['diagnosis']['cause']} (stored in the model's notes)"
+        )
     if "cross_validation_rms_m" in prov.details:
         scores = prov.details["cross_validation_rms_m"]
-        print("  left-out RMS by level: " + ", ".join(f"{lv} {v * 1e3:.2f} mm" for lv, v in scores.items())
-              + f"; chosen: {prov.details['chosen_level']}")
+        print(
+            "  left-out RMS by level: "
+            + ", ".join(f"{lv} {v * 1e3:.2f} mm" for lv, v in scores.items())
+            + f"; chosen: {prov.details['chosen_level']}"
+        )
         whole = prov.details.get("whole_range")
         if whole and whole["joints"]:
             w = whole["whole_range_m"]
             j, r = max(whole["joints"].items(), key=lambda kv: kv[1]["whole_range_m"])
-            print(f"  over the whole joint range the measured point moves from your URDF's prediction by "
-                  f"{w['median'] * 1e3:.1f} / {w['p95'] * 1e3:.1f} / {w['max'] * 1e3:.1f} mm (median / p95 / max); "
-                  f"most by {j} ({r['whole_range_m'] * 1e3:.1f} mm over its range, {r['within_data_m'] * 1e3:.1f} mm "
-                  "within the data)")
+            print(
+                f"  over the whole joint range the measured point moves from your URDF's prediction by "
+                f"{w['median'] * 1e3:.1f} / {w['p95'] * 1e3:.1f} / {w['max'] * 1e3:.1f} mm (median / p95 / max); "
+                f"most by {j} ({r['whole_range_m'] * 1e3:.1f} mm over its range, {r['within_data_m'] * 1e3:.1f} mm "
+                "within the data)"
+            )
         if prov.details["beats_urdf"] is False:
             return NOT_BETTER_EXIT
     return 0

@@ -41,27 +41,50 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "T_base_hand from --model). See docs/images.md.",
     )
     p.add_argument("images", metavar="IMAGES_DIR", help="folder of images (see docs/images.md)")
-    p.add_argument("-o", "--output", required=True,
-                   help="measurement file to write (stage 1), or output folder (--stage2)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="measurement file to write (stage 1), or output folder (--stage2)",
+    )
     p.add_argument("--joints", help="joint readings CSV (default IMAGES_DIR/joints.csv)")
-    p.add_argument("--on-error", choices=("skip", "skip-record", "stop"), default="skip",
-                   help="a plate not found or ambiguous: skip that plate (default), skip the whole "
-                   "record, or stop (exit 2); skips are listed on stderr and in the output")
-    p.add_argument("--no-bias-correction", action="store_true",
-                   help="do not remove the ellipse-centre offset of the circles' images")
-    p.add_argument("--board", action="append", default=[], metavar="[FRAME=]FILE",
-                   help="a standard board (cpc2urdf/board@1: chessboard, ChArUco, circle grid; docs/images.md) "
-                   "instead of the default circle plates / 25-disk target: with --stage2 one FILE, the target; "
-                   "stage 1 FRAME=FILE per plate frame (several plates: ChArUco boards with distinct marker ids)")
+    p.add_argument(
+        "--on-error",
+        choices=("skip", "skip-record", "stop"),
+        default="skip",
+        help="a plate not found or ambiguous: skip that plate (default), skip the whole "
+        "record, or stop (exit 2); skips are listed on stderr and in the output",
+    )
+    p.add_argument(
+        "--no-bias-correction",
+        action="store_true",
+        help="do not remove the ellipse-centre offset of the circles' images",
+    )
+    p.add_argument(
+        "--board",
+        action="append",
+        default=[],
+        metavar="[FRAME=]FILE",
+        help="a standard board (cpc2urdf/board@1: chessboard, ChArUco, circle grid; docs/images.md) "
+        "instead of the default circle plates / 25-disk target: with --stage2 one FILE, the target; "
+        "stage 1 FRAME=FILE per plate frame (several plates: ChArUco boards with distinct marker ids)",
+    )
     g1 = p.add_argument_group("stage 1 (stereo rig)")
     g1.add_argument("--rig", help="stereo rig file: OpenCV FileStorage YAML with K1 D1 K2 D2 R T")
-    g1.add_argument("--robot", default="iis_head", help="shipped robot name or spec file (default iis_head)")
+    g1.add_argument(
+        "--robot", default="iis_head", help="shipped robot name or spec file (default iis_head)"
+    )
     g2 = p.add_argument_group("stage 2 (head cameras)")
     g2.add_argument("--stage2", action="store_true", help="measure the head cameras' target images")
     g2.add_argument("--model", help="identified model file (gives T_base_hand)")
-    g2.add_argument("--camera", action="append", default=[], metavar="NAME=FILE",
-                    help="a camera frame and its intrinsics (OpenCV FileStorage: K, D, image_size); "
-                    "default: every IMAGES_DIR/<camera>.yaml next to an IMAGES_DIR/<camera>/ folder")
+    g2.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        metavar="NAME=FILE",
+        help="a camera frame and its intrinsics (OpenCV FileStorage: K, D, image_size); "
+        "default: every IMAGES_DIR/<camera>.yaml next to an IMAGES_DIR/<camera>/ folder",
+    )
     p.set_defaults(run=run, read=default_joints)
 
 
@@ -69,7 +92,11 @@ def default_joints(args: argparse.Namespace) -> dict[str, str]:
     """The joint readings read without being named (checked against ``-o`` before the command runs)."""
     import os
 
-    return {} if args.joints else {"joints (default IMAGES_DIR/joints.csv)": os.path.join(args.images, "joints.csv")}
+    return (
+        {}
+        if args.joints
+        else {"joints (default IMAGES_DIR/joints.csv)": os.path.join(args.images, "joints.csv")}
+    )
 
 
 def _report(problems: list[str], limit: int = 20) -> None:
@@ -78,7 +105,10 @@ def _report(problems: list[str], limit: int = 20) -> None:
     for line in problems[:limit]:
         print(f"  skipped: {line}", file=sys.stderr)
     if len(problems) > limit:
-        print(f"  ... and {len(problems) - limit} more (all listed in the output's provenance)", file=sys.stderr)
+        print(
+            f"  ... and {len(problems) - limit} more (all listed in the output's provenance)",
+            file=sys.stderr,
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -93,23 +123,34 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.identification.vision.rig_file import load_rig
 
     if not args.rig:
-        raise ConfigurationError("stage 1 needs --rig rig.yaml (or pass --stage2 for the head cameras)")
+        raise ConfigurationError(
+            "stage 1 needs --rig rig.yaml (or pass --stage2 for the head cameras)"
+        )
     rig = load_rig(args.rig)
     spec = load_robot(args.robot)
     boards = _plate_boards(args.board, [f.name for f in spec.structure.frames if f.kind == "plate"])
     check_output_path(args.output)
     res = measure_stereo_images(
-        args.images, rig, spec.structure, joints=args.joints, on_error=args.on_error, boards=boards,
-        correct_bias=not args.no_bias_correction, robot_ref=args.robot, show_progress=True,
+        args.images,
+        rig,
+        spec.structure,
+        joints=args.joints,
+        on_error=args.on_error,
+        boards=boards,
+        correct_bias=not args.no_bias_correction,
+        robot_ref=args.robot,
+        show_progress=True,
         joint_aliases=urdf_joint_columns(spec),
     )
     ms = res.measurements
     path = save_measurements(ms, args.output)
     n_plates = sum(int(ms.has_pose(f).sum()) for f in ms.poses)
     fits = [v for f in ms.fit_rms for v in ms.fit_rms[f] if v == v]
-    print(f"wrote {path}: {ms.n_records} records, {n_plates} plate poses"
-          + (f", registration RMS median {sorted(fits)[len(fits) // 2] * 1e3:.3f} mm" if fits else "")
-          + (f"; skipped {len(res.problems)} (see stderr)" if res.problems else ""))
+    print(
+        f"wrote {path}: {ms.n_records} records, {n_plates} plate poses"
+        + (f", registration RMS median {sorted(fits)[len(fits) // 2] * 1e3:.3f} mm" if fits else "")
+        + (f"; skipped {len(res.problems)} (see stderr)" if res.problems else "")
+    )
     _report(res.problems)
     return 0
 
@@ -134,7 +175,11 @@ def _run_stage2(args: argparse.Namespace) -> int:
             raise ConfigurationError(f"--camera expects NAME=FILE, got {item!r}")
         files[name] = Path(f)
     if not files:
-        files = {c: images / f"{c}.yaml" for c in HAND_OF_CAMERA if (images / c).is_dir() and (images / f"{c}.yaml").is_file()}
+        files = {
+            c: images / f"{c}.yaml"
+            for c in HAND_OF_CAMERA
+            if (images / c).is_dir() and (images / f"{c}.yaml").is_file()
+        }
         if not files:
             raise ConfigurationError(
                 f"no camera found: expected {images}/<camera>/ image folders with {images}/<camera>.yaml "
@@ -143,7 +188,9 @@ def _run_stage2(args: argparse.Namespace) -> int:
             )
     for c in files:  # write_handeye_files needs each camera's hand frame in the model
         if c not in HAND_OF_CAMERA:
-            raise ConfigurationError(f"no hand frame known for camera {c!r}; known: {sorted(HAND_OF_CAMERA)}")
+            raise ConfigurationError(
+                f"no hand frame known for camera {c!r}; known: {sorted(HAND_OF_CAMERA)}"
+            )
         model.structure.frame(HAND_OF_CAMERA[c])
     cams = {c: HeadCamera(*load_camera(f)) for c, f in files.items()}
     board = None
@@ -151,25 +198,41 @@ def _run_stage2(args: argparse.Namespace) -> int:
         from cpc2urdf.identification.vision.boards.board_file import load_board
 
         if len(args.board) > 1 or "=" in args.board[0]:
-            raise ConfigurationError(f"--stage2 takes one --board FILE (the target), got {' '.join(args.board)}")
+            raise ConfigurationError(
+                f"--stage2 takes one --board FILE (the target), got {' '.join(args.board)}"
+            )
         board = load_board(args.board[0])
         if board.pose_ambiguity:
-            raise ConfigurationError(f"{args.board[0]}: {board.pose_ambiguity}, so it gives no unique target pose; "
-                                     "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard")
+            raise ConfigurationError(
+                f"{args.board[0]}: {board.pose_ambiguity}, so it gives no unique target pose; "
+                "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard"
+            )
     out = Path(args.output)
     if out.exists() and not out.is_dir():
-        raise OutputError(f"{out}: --stage2 writes one file per camera into a folder; this is a file")
+        raise OutputError(
+            f"{out}: --stage2 writes one file per camera into a folder; this is a file"
+        )
     if not out.exists() and not out.parent.is_dir():
         raise OutputError(f"{out}: parent folder {out.parent} does not exist")
-    res = measure_head_images(images, cams, model.structure, joints=args.joints, on_error=args.on_error, board=board,
-                              joint_aliases=urdf_joint_columns(model),
-                              correct_bias=not args.no_bias_correction, show_progress=True)
+    res = measure_head_images(
+        images,
+        cams,
+        model.structure,
+        joints=args.joints,
+        on_error=args.on_error,
+        board=board,
+        joint_aliases=urdf_joint_columns(model),
+        correct_bias=not args.no_bias_correction,
+        show_progress=True,
+    )
     if not out.exists():
         out.mkdir()
     paths = write_handeye_files(res, model, out)
     for c, p in paths.items():
         rms = res.reprojection_rms[c]
-        print(f"wrote {p}: {len(rms)} target poses, reprojection RMS median {float(sorted(rms)[len(rms) // 2]):.3f} px")
+        print(
+            f"wrote {p}: {len(rms)} target poses, reprojection RMS median {float(sorted(rms)[len(rms) // 2]):.3f} px"
+        )
     if res.problems:
         print(f"skipped {len(res.problems)} images (see stderr)")
     _report(res.problems)
@@ -188,8 +251,10 @@ def _plate_boards(items: list[str], plates: list[str]) -> dict[str, Board] | Non
         frame, sep, f = item.rpartition("=")
         if not sep:
             if len(plates) != 1:
-                raise ConfigurationError(f"--board {item}: the robot has plates {', '.join(plates)}; "
-                                         "say which one with --board FRAME=FILE")
+                raise ConfigurationError(
+                    f"--board {item}: the robot has plates {', '.join(plates)}; "
+                    "say which one with --board FRAME=FILE"
+                )
             frame = plates[0]
         if frame in out:
             raise ConfigurationError(f"--board: two boards for {frame}")

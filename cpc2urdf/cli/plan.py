@@ -26,45 +26,116 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "(Cramér-Rao bound at the nominal model); compared with D-optimal selection and the paper's "
         "one-joint-at-a-time protocol. Writes PLAN.json, PLAN.csv (joints to send to the robot) and PLAN.png.",
     )
-    p.add_argument("robot", help="shipped robot name, robot spec/model file or URDF (with --measure)")
-    p.add_argument("-o", "--output", required=True, metavar="PLAN.json", help="plan file (PLAN.csv and PLAN.png next to it)")
+    p.add_argument(
+        "robot", help="shipped robot name, robot spec/model file or URDF (with --measure)"
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="PLAN.json",
+        help="plan file (PLAN.csv and PLAN.png next to it)",
+    )
     size = p.add_mutually_exclusive_group(required=True)
     size.add_argument("--n", type=int, help="configurations to plan")
-    size.add_argument("--target-error", type=float, metavar="MM",
-                      help="plan the fewest configurations whose predicted RMS position error over the task region is <= MM")
-    p.add_argument("--measure", nargs="+", metavar="LINK", default=[],
-                   help="the measured frames: a URDF's links carrying the calibration targets (as for simulate), or a "
-                   "spec's frames (default: the spec's plates)")
-    p.add_argument("--rig", metavar="RIG.yaml", help="stereo rig file (default: the paper's 600 mm rig at 1.5 m)")
-    p.add_argument("--sigma-mm", type=float, default=0.5, help="pose noise: std of each translation entry [mm] (default 0.5)")
-    p.add_argument("--sigma-deg", type=float, default=0.5, help="pose noise: std of the rotation error angle [deg] (default 0.5)")
-    p.add_argument("--noise", choices=("fig10", "stereo"), default="fig10",
-                   help="fig10: pose noise --sigma-mm/--sigma-deg, the same for every view (default); stereo: "
-                   "--pixel-sigma on each circle centre through the rig, triangulation and registration, so that far "
-                   "and oblique views count less (needs the plates' circle layouts)")
-    p.add_argument("--pixel-sigma", type=float, default=0.15, metavar="PX",
-                   help="stereo: std of each pixel coordinate of a circle centre [px] (default 0.15)")
-    p.add_argument("--markers", type=int, default=0, metavar="K",
-                   help="position-only data (laser tracker, mocap): K markers of unknown position on each measured "
-                   "frame, placed as `simulate --markers K --seed MARKER_SEED` places them; the predicted error is then "
-                   "the markers' point error (default 0: plate poses)")
-    p.add_argument("--marker-sigma-mm", type=float, default=0.1, help="--markers: noise per point coordinate [mm] (default 0.1)")
-    p.add_argument("--marker-seed", type=int, default=0,
-                   help="--markers: seed of their placement; simulate the plan with the same --markers K --seed (default 0)")
-    p.add_argument("--one-joint", action="store_true",
-                   help="keep the one-joint-at-a-time structure the closed form needs (q0 plus single-joint moves)")
-    p.add_argument("--task-region", default="calibration", metavar="calibration|limits|TASK.csv",
-                   help="where the robot must be accurate: the calibration ranges (default), the joint limits, or a "
-                   "joints CSV of task configurations")
-    p.add_argument("--range", action="append", default=[], metavar="JOINT=LO:HI",
-                   help="calibration range of a joint in mm or deg (repeatable; a URDF robot's joints by their URDF "
-                   "or model names; default: the spec's)")
-    p.add_argument("--candidates", type=int, default=500, help="candidate configurations (default 500)")
+    size.add_argument(
+        "--target-error",
+        type=float,
+        metavar="MM",
+        help="plan the fewest configurations whose predicted RMS position error over the task region is <= MM",
+    )
+    p.add_argument(
+        "--measure",
+        nargs="+",
+        metavar="LINK",
+        default=[],
+        help="the measured frames: a URDF's links carrying the calibration targets (as for simulate), or a "
+        "spec's frames (default: the spec's plates)",
+    )
+    p.add_argument(
+        "--rig",
+        metavar="RIG.yaml",
+        help="stereo rig file (default: the paper's 600 mm rig at 1.5 m)",
+    )
+    p.add_argument(
+        "--sigma-mm",
+        type=float,
+        default=0.5,
+        help="pose noise: std of each translation entry [mm] (default 0.5)",
+    )
+    p.add_argument(
+        "--sigma-deg",
+        type=float,
+        default=0.5,
+        help="pose noise: std of the rotation error angle [deg] (default 0.5)",
+    )
+    p.add_argument(
+        "--noise",
+        choices=("fig10", "stereo"),
+        default="fig10",
+        help="fig10: pose noise --sigma-mm/--sigma-deg, the same for every view (default); stereo: "
+        "--pixel-sigma on each circle centre through the rig, triangulation and registration, so that far "
+        "and oblique views count less (needs the plates' circle layouts)",
+    )
+    p.add_argument(
+        "--pixel-sigma",
+        type=float,
+        default=0.15,
+        metavar="PX",
+        help="stereo: std of each pixel coordinate of a circle centre [px] (default 0.15)",
+    )
+    p.add_argument(
+        "--markers",
+        type=int,
+        default=0,
+        metavar="K",
+        help="position-only data (laser tracker, mocap): K markers of unknown position on each measured "
+        "frame, placed as `simulate --markers K --seed MARKER_SEED` places them; the predicted error is then "
+        "the markers' point error (default 0: plate poses)",
+    )
+    p.add_argument(
+        "--marker-sigma-mm",
+        type=float,
+        default=0.1,
+        help="--markers: noise per point coordinate [mm] (default 0.1)",
+    )
+    p.add_argument(
+        "--marker-seed",
+        type=int,
+        default=0,
+        help="--markers: seed of their placement; simulate the plan with the same --markers K --seed (default 0)",
+    )
+    p.add_argument(
+        "--one-joint",
+        action="store_true",
+        help="keep the one-joint-at-a-time structure the closed form needs (q0 plus single-joint moves)",
+    )
+    p.add_argument(
+        "--task-region",
+        default="calibration",
+        metavar="calibration|limits|TASK.csv",
+        help="where the robot must be accurate: the calibration ranges (default), the joint limits, or a "
+        "joints CSV of task configurations",
+    )
+    p.add_argument(
+        "--range",
+        action="append",
+        default=[],
+        metavar="JOINT=LO:HI",
+        help="calibration range of a joint in mm or deg (repeatable; a URDF robot's joints by their URDF "
+        "or model names; default: the spec's)",
+    )
+    p.add_argument(
+        "--candidates", type=int, default=500, help="candidate configurations (default 500)"
+    )
     p.add_argument("--grid", action="store_true", help="grid candidates instead of random ones")
     p.add_argument("--seed", type=int, default=0, help="seed of the candidates (default 0)")
-    p.add_argument("--curve", metavar="N,N,...",
-                   help="plan sizes of the predicted-error curve (default: the protocol's joints*M+1 for M = 2, 3, 5, 9, "
-                   "and the plan's N)")
+    p.add_argument(
+        "--curve",
+        metavar="N,N,...",
+        help="plan sizes of the predicted-error curve (default: the protocol's joints*M+1 for M = 2, 3, 5, 9, "
+        "and the plan's N)",
+    )
     p.set_defaults(run=run, written=companions)
 
 
@@ -75,7 +146,10 @@ def companions(args: argparse.Namespace) -> dict[str, str]:
     plan = Path(args.output)
     if plan.suffix.lower() in (".csv", ".png") or plan.name in ("", ".", ".."):
         return {}  # refused by plan itself, with its own message
-    return {"-o (its .csv)": str(plan.with_suffix(".csv")), "-o (its .png)": str(plan.with_suffix(".png"))}
+    return {
+        "-o (its .csv)": str(plan.with_suffix(".csv")),
+        "-o (its .png)": str(plan.with_suffix(".png")),
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,17 +165,25 @@ def run(args: argparse.Namespace) -> int:
 
     output_paths(args.output)  # a bad -o is refused before the work
     if args.markers < 0:
-        raise ConfigurationError(f"--markers must be >= 0 markers per measured frame, got {args.markers}")
+        raise ConfigurationError(
+            f"--markers must be >= 0 markers per measured frame, got {args.markers}"
+        )
     if args.marker_seed < 0:
         raise ConfigurationError(f"--marker-seed must be >= 0, got {args.marker_seed}")
     for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "marker_sigma_mm"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
-            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v}")
+            raise ConfigurationError(
+                f"--{flag.replace('_', '-')} must be a positive number, got {v}"
+            )
     if args.n is not None and args.n < 1:
         raise ConfigurationError(f"--n must be at least 1, got {args.n}")
-    if args.target_error is not None and not (math.isfinite(args.target_error) and args.target_error > 0):
-        raise ConfigurationError(f"--target-error must be a positive number of mm, got {args.target_error}")
+    if args.target_error is not None and not (
+        math.isfinite(args.target_error) and args.target_error > 0
+    ):
+        raise ConfigurationError(
+            f"--target-error must be a positive number of mm, got {args.target_error}"
+        )
     if args.candidates < 1:
         raise ConfigurationError(f"--candidates must be at least 1, got {args.candidates}")
     curve_ns = None
@@ -109,7 +191,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             curve_ns = [int(v) for v in args.curve.split(",")]
         except ValueError:
-            raise ConfigurationError(f"--curve {args.curve!r}: expected plan sizes like 13,19,31") from None
+            raise ConfigurationError(
+                f"--curve {args.curve!r}: expected plan sizes like 13,19,31"
+            ) from None
         if min(curve_ns) < 1:
             raise ConfigurationError(f"--curve {args.curve!r}: plan sizes must be >= 1")
     spec = load_robot(args.robot)
@@ -126,25 +210,43 @@ def run(args: argparse.Namespace) -> int:
 
         task = read_joints_csv(args.task_region, structure, aliases=urdf_joint_columns(robot)).q
     out = plan_robot(
-        spec, robot_ref=str(args.robot), measured=args.measure or None, rig=rig,
-        sigma_t=args.sigma_mm / 1000, sigma_r=math.radians(args.sigma_deg),
-        ranges=parse_ranges(args.range, robot), n=args.n,
+        spec,
+        robot_ref=str(args.robot),
+        measured=args.measure or None,
+        rig=rig,
+        sigma_t=args.sigma_mm / 1000,
+        sigma_r=math.radians(args.sigma_deg),
+        ranges=parse_ranges(args.range, robot),
+        n=args.n,
         target_error=None if args.target_error is None else args.target_error / 1000,
-        one_joint=args.one_joint, task_region=task, n_candidates=args.candidates, grid=args.grid, seed=args.seed,
-        curve_ns=curve_ns, noise=args.noise, pixel_sigma=args.pixel_sigma, markers=args.markers,
-        marker_sigma=args.marker_sigma_mm / 1000, marker_seed=args.marker_seed,
+        one_joint=args.one_joint,
+        task_region=task,
+        n_candidates=args.candidates,
+        grid=args.grid,
+        seed=args.seed,
+        curve_ns=curve_ns,
+        noise=args.noise,
+        pixel_sigma=args.pixel_sigma,
+        markers=args.markers,
+        marker_sigma=args.marker_sigma_mm / 1000,
+        marker_seed=args.marker_seed,
     )
     paths = write_plan_outputs(out, args.output)
     pred = out.result.prediction
     what = "marker point" if args.markers else "position"
-    print(f"plan: {len(out.result.q)} configurations ({out.result.strategy}"
-          f"{', one joint at a time' if out.result.one_joint else ''}); predicted RMS error over the task region: "
-          f"{_mm(pred.position_rms)} {what}" + ("" if args.markers else f", {_deg(pred.orientation_rms)} orientation")
-          + "; "
-          f"{pred.rank} of {pred.n_params} parameters determined")
+    print(
+        f"plan: {len(out.result.q)} configurations ({out.result.strategy}"
+        f"{', one joint at a time' if out.result.one_joint else ''}); predicted RMS error over the task region: "
+        f"{_mm(pred.position_rms)} {what}"
+        + ("" if args.markers else f", {_deg(pred.orientation_rms)} orientation")
+        + "; "
+        f"{pred.rank} of {pred.n_params} parameters determined"
+    )
     if args.noise == "stereo" and math.isfinite(pred.bound_position_rms):
-        print(f"  (stereo: predicted for the identification's scalar weights; per-view weights would reach "
-              f"{_mm(pred.bound_position_rms)})")
+        print(
+            f"  (stereo: predicted for the identification's scalar weights; per-view weights would reach "
+            f"{_mm(pred.bound_position_rms)})"
+        )
     for line in pred.free_combinations:
         print(f"  undetermined: {line}")
     same = [c for c in out.result.curve if c.n == len(out.result.q)]

@@ -31,7 +31,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "elevation +-60 deg; box: forward NEAR..FAR, lateral +-FAR, vertical +-FAR/2. Exit code "
         "0 drawn, 2 bad input.",
     )
-    p.add_argument("robot", metavar="ROBOT", help=".urdf file, model file, robot spec or shipped robot name")
+    p.add_argument(
+        "robot", metavar="ROBOT", help=".urdf file, model file, robot spec or shipped robot name"
+    )
     p.add_argument(
         "--camera",
         nargs="+",
@@ -59,7 +61,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     )
     add_solver_options(p)
     p.add_argument("-o", "--output", required=True, metavar="REGION.png", help="the PNG to write")
-    p.add_argument("--json", metavar="REGION.json", help="also write every target's point, status and error")
+    p.add_argument(
+        "--json", metavar="REGION.json", help="also write every target's point, status and error"
+    )
     p.add_argument(
         "--html",
         metavar="REGION.html",
@@ -68,7 +72,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "target as a point coloured by category (the PNG's colours; not pointed at: translucent), each "
         "category a node under 'reach' in meshcat's controls",
     )
-    p.add_argument("--screenshot", metavar="VIEW.png", help="with --html: also render the page in headless Chromium")
+    p.add_argument(
+        "--screenshot",
+        metavar="VIEW.png",
+        help="with --html: also render the page in headless Chromium",
+    )
     p.add_argument(
         "--package-path",
         action="append",
@@ -96,20 +104,32 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.validation.view.screenshot import require_chromium, screenshot_page
 
     if Path(args.output).suffix.lower() != ".png":
-        raise ConfigurationError(f"-o {args.output}: the region is drawn as PNG, expected a .png path")
+        raise ConfigurationError(
+            f"-o {args.output}: the region is drawn as PNG, expected a .png path"
+        )
     check_grid_args(args.range[0], args.range[1], args.samples)
     check_output_path(args.output)
     if args.screenshot and not args.html:
         raise ConfigurationError("--screenshot needs --html (the page to render)")
     if args.package_path and not args.html:
-        raise ConfigurationError("--package-path needs --html (meshes are drawn only in the 3D view)")
+        raise ConfigurationError(
+            "--package-path needs --html (meshes are drawn only in the 3D view)"
+        )
     if args.html and Path(args.html).suffix.lower() not in (".html", ".htm"):
-        raise ConfigurationError(f"--html {args.html}: the view is a web page, expected an .html path")
+        raise ConfigurationError(
+            f"--html {args.html}: the view is a web page, expected an .html path"
+        )
     if args.screenshot and Path(args.screenshot).suffix.lower() != ".png":
-        raise ConfigurationError(f"--screenshot {args.screenshot}: the view is rendered as PNG, expected a .png path")
+        raise ConfigurationError(
+            f"--screenshot {args.screenshot}: the view is rendered as PNG, expected a .png path"
+        )
     if args.screenshot:
         require_chromium()  # before the solve, not after it
-    for path in (args.json, args.html, args.screenshot):  # (two outputs naming one file: refused by the CLI)
+    for path in (
+        args.json,
+        args.html,
+        args.screenshot,
+    ):  # (two outputs naming one file: refused by the CLI)
         if path is not None:
             check_output_path(path)
     # the robot as drawn (its meshes) loads before the grid is solved: a missing mesh fails at once
@@ -123,14 +143,24 @@ def run(args: argparse.Namespace) -> int:
     files: dict[str, str | bytes] = {args.output: png}
     if args.json:
         # what "fixated" meant: the tolerance, the unknowns that moved, the policy's nearest approach
-        doc = {"format": "cpc2urdf/reach@1", "robot": str(args.robot), "cameras": list(solver.cameras),
-               "tolerance_rad": solver.tolerance, "moving": list(solver.moving),
-               "min_distance_m": solver.min_distance, **region.to_json()}
+        doc = {
+            "format": "cpc2urdf/reach@1",
+            "robot": str(args.robot),
+            "cameras": list(solver.cameras),
+            "tolerance_rad": solver.tolerance,
+            "moving": list(solver.moving),
+            "min_distance_m": solver.min_distance,
+            **region.to_json(),
+        }
         files[args.json] = dumps(doc)
     view = None
     if view_robot is not None:
-        page, view = static_view_html(view_robot, region=region, region_notes=notes,
-                                      cameras=view_cameras(view_robot, region.cameras))
+        page, view = static_view_html(
+            view_robot,
+            region=region,
+            region_notes=notes,
+            cameras=view_cameras(view_robot, region.cameras),
+        )
         files[args.html] = page
         if args.screenshot:
             files[args.screenshot] = screenshot_page(page, args.screenshot)

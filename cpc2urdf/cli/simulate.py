@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 
 FILES = ("measurements.json", "truth.json", "heldout.json")  # what simulate writes into its folder
 
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = subparsers.add_parser(
         "simulate",
@@ -39,46 +40,115 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "placed ~1.5 m in front of a 600 mm-baseline rig. Writes DIR/measurements.json, "
         "DIR/truth.json and DIR/heldout.json. Same seed, same files.",
     )
-    p.add_argument("robot", help="shipped robot name (e.g. iis_head), robot spec/model file with nominal geometry, "
-                   "or a URDF (then name the measured links with --measure)")
-    p.add_argument("--measure", nargs="+", metavar="LINK", default=None,
-                   help="URDF robot: the links the rig measures (plate, marker or camera links, each on a fixed "
-                   "joint); the records have readings for the joints on the paths from the root to them only")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument(
+        "robot",
+        help="shipped robot name (e.g. iis_head), robot spec/model file with nominal geometry, "
+        "or a URDF (then name the measured links with --measure)",
+    )
+    p.add_argument(
+        "--measure",
+        nargs="+",
+        metavar="LINK",
+        default=None,
+        help="URDF robot: the links the rig measures (plate, marker or camera links, each on a fixed "
+        "joint); the records have readings for the joints on the paths from the root to them only",
+    )
+    p.add_argument(
+        "-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)"
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--M", type=int, default=9, help="values per joint over its calibration range (default 9)")
-    p.add_argument("--noise", choices=("fig10", "stereo", "none"), default=None,
-                   help="fig10: Gaussian pose noise (Shih et al. Fig. 10); stereo: pixel noise -> "
-                   "triangulation -> registration; none (default fig10, or the plan's with --plan)")
-    p.add_argument("--sigma-mm", type=float, default=None,
-                   help="fig10: std of each translation entry [mm] (default 0.5, or the plan's with --plan)")
-    p.add_argument("--sigma-deg", type=float, default=None,
-                   help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5, or the plan's)")
-    p.add_argument("--pixel-sigma", type=float, default=None,
-                   help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15, or the plan's)")
-    p.add_argument("--geometry-error-mm", type=float, default=1.0,
-                   help="true robot: std of each CPC offset component error [mm] (default 1)")
-    p.add_argument("--geometry-error-deg", type=float, default=0.5,
-                   help="true robot: std of each CPC axis/placement rotation error [deg] (default 0.5)")
-    p.add_argument("--heldout", type=int, default=50, metavar="N", help="held-out configurations (default 50)")
-    p.add_argument("--range", action="append", default=[], metavar="JOINT=LO:HI",
-                   help="calibration range of a joint in mm or deg (repeatable; default: the spec's)")
-    p.add_argument("--baseline-mm", type=float, default=600.0, help="rig baseline [mm] (default 600)")
-    p.add_argument("--distance-mm", type=float, default=1500.0,
-                   help="distance from the rig to the plates [mm] (default 1500)")
-    p.add_argument("--focal-px", type=float, default=1600.0, help="rig focal length [px], 1280x1024 images (default 1600)")
-    p.add_argument("--allow-out-of-view", action="store_true",
-                   help="do not fail when a plate leaves a camera's view (stereo noise then loses circles)")
-    p.add_argument("--plan", metavar="PLAN.json",
-                   help="measure the configurations of a plan (cpc2urdf plan) instead of the one-joint protocol, "
-                   "from where the plan put the robot, with the plan's rig and noise (unless --sigma-mm/--sigma-deg "
-                   "are given); --M, --range and the rig options then do not apply")
-    p.add_argument("--markers", type=int, default=None, metavar="K",
-                   help="position-only data instead of poses: K markers at random 5-15 cm from each measured "
-                   "frame, their points measured with --marker-sigma-mm noise (a cpc2urdf/measurements@2 file; "
-                   "--noise and its sigmas then do not apply; the held-out file holds the markers' true points)")
-    p.add_argument("--marker-sigma-mm", type=float, default=0.1,
-                   help="--markers: std of each marker point coordinate [mm] (default 0.1)")
+    p.add_argument(
+        "--M", type=int, default=9, help="values per joint over its calibration range (default 9)"
+    )
+    p.add_argument(
+        "--noise",
+        choices=("fig10", "stereo", "none"),
+        default=None,
+        help="fig10: Gaussian pose noise (Shih et al. Fig. 10); stereo: pixel noise -> "
+        "triangulation -> registration; none (default fig10, or the plan's with --plan)",
+    )
+    p.add_argument(
+        "--sigma-mm",
+        type=float,
+        default=None,
+        help="fig10: std of each translation entry [mm] (default 0.5, or the plan's with --plan)",
+    )
+    p.add_argument(
+        "--sigma-deg",
+        type=float,
+        default=None,
+        help="fig10: std of the rotation error angle about a random axis [deg] (default 0.5, or the plan's)",
+    )
+    p.add_argument(
+        "--pixel-sigma",
+        type=float,
+        default=None,
+        help="stereo: std of each circle-centre pixel coordinate [px] (default 0.15, or the plan's)",
+    )
+    p.add_argument(
+        "--geometry-error-mm",
+        type=float,
+        default=1.0,
+        help="true robot: std of each CPC offset component error [mm] (default 1)",
+    )
+    p.add_argument(
+        "--geometry-error-deg",
+        type=float,
+        default=0.5,
+        help="true robot: std of each CPC axis/placement rotation error [deg] (default 0.5)",
+    )
+    p.add_argument(
+        "--heldout", type=int, default=50, metavar="N", help="held-out configurations (default 50)"
+    )
+    p.add_argument(
+        "--range",
+        action="append",
+        default=[],
+        metavar="JOINT=LO:HI",
+        help="calibration range of a joint in mm or deg (repeatable; default: the spec's)",
+    )
+    p.add_argument(
+        "--baseline-mm", type=float, default=600.0, help="rig baseline [mm] (default 600)"
+    )
+    p.add_argument(
+        "--distance-mm",
+        type=float,
+        default=1500.0,
+        help="distance from the rig to the plates [mm] (default 1500)",
+    )
+    p.add_argument(
+        "--focal-px",
+        type=float,
+        default=1600.0,
+        help="rig focal length [px], 1280x1024 images (default 1600)",
+    )
+    p.add_argument(
+        "--allow-out-of-view",
+        action="store_true",
+        help="do not fail when a plate leaves a camera's view (stereo noise then loses circles)",
+    )
+    p.add_argument(
+        "--plan",
+        metavar="PLAN.json",
+        help="measure the configurations of a plan (cpc2urdf plan) instead of the one-joint protocol, "
+        "from where the plan put the robot, with the plan's rig and noise (unless --sigma-mm/--sigma-deg "
+        "are given); --M, --range and the rig options then do not apply",
+    )
+    p.add_argument(
+        "--markers",
+        type=int,
+        default=None,
+        metavar="K",
+        help="position-only data instead of poses: K markers at random 5-15 cm from each measured "
+        "frame, their points measured with --marker-sigma-mm noise (a cpc2urdf/measurements@2 file; "
+        "--noise and its sigmas then do not apply; the held-out file holds the markers' true points)",
+    )
+    p.add_argument(
+        "--marker-sigma-mm",
+        type=float,
+        default=0.1,
+        help="--markers: std of each marker point coordinate [mm] (default 0.1)",
+    )
     p.set_defaults(run=run, written=written_files)
 
 
@@ -106,15 +176,21 @@ def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> Rob
 
     if not isinstance(spec, UrdfRobot):
         if measure is not None:
-            raise ConfigurationError(f"--measure names links of a URDF robot; {ref!r} is not a URDF (its plates are measured)")
+            raise ConfigurationError(
+                f"--measure names links of a URDF robot; {ref!r} is not a URDF (its plates are measured)"
+            )
         return spec
     if measure is None:
-        raise ConfigurationError(f"{ref}: name the links the rig measures with --measure LINK [LINK ...] "
-                                 "(plate, marker or camera links, each on a fixed joint)")
+        raise ConfigurationError(
+            f"{ref}: name the links the rig measures with --measure LINK [LINK ...] "
+            "(plate, marker or camera links, each on a fixed joint)"
+        )
     return spec.restricted(measure)
 
 
-def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[MeasurementSet, MeasurementSet]:
+def _as_markers(
+    exp: Experiment, k: int, sigma_p: float, seed: int
+) -> tuple[MeasurementSet, MeasurementSet]:
     """The experiment as position-only data (``cpc2urdf/measurements@2``): ``k`` seeded random
     markers on each measured frame of the true robot, their points at the protocol's configurations
     with ``sigma_p`` [m] noise per coordinate, and their true points at the held-out ones."""
@@ -125,7 +201,9 @@ def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[Mea
     from cpc2urdf.identification.simulation.marker_points import place_markers_on, simulate_markers
 
     truth, measured, heldout = exp
-    rng = np.random.default_rng([seed, 1])  # its own stream: the true robot and q stay those of the pose data
+    rng = np.random.default_rng(
+        [seed, 1]
+    )  # its own stream: the true robot and q stay those of the pose data
     frames = [f for f in truth.structure.frame_names if f in measured.poses]
     markers = place_markers_on(truth, {f: k for f in frames}, rng)
     sets = []
@@ -133,10 +211,18 @@ def _as_markers(exp: Experiment, k: int, sigma_p: float, seed: int) -> tuple[Mea
         pts = simulate_markers(truth, markers, ms.q, sigma_p=sigma, rng=rng, robot=ms.robot)
         noise = pts.metadata.get("noise", {"model": "none"})
         kind = "marker points" if sigma else "TRUE marker points (no noise)"
-        metadata = {**ms.metadata, "noise": noise,
-                    "description": ms.metadata["description"].replace("measurements", kind)
-                    if sigma else f"held-out configurations of {truth.structure.name} with {kind}"}
-        sets.append(dataclasses.replace(pts, source=ms.source, labels=ms.labels, metadata=metadata, spec=ms.spec))
+        metadata = {
+            **ms.metadata,
+            "noise": noise,
+            "description": ms.metadata["description"].replace("measurements", kind)
+            if sigma
+            else f"held-out configurations of {truth.structure.name} with {kind}",
+        }
+        sets.append(
+            dataclasses.replace(
+                pts, source=ms.source, labels=ms.labels, metadata=metadata, spec=ms.spec
+            )
+        )
     return sets[0], sets[1]
 
 
@@ -147,19 +233,28 @@ def _simulate_plan(args: argparse.Namespace, spec: RobotSpec, ref: str) -> Exper
     from cpc2urdf.identification.planning.plan_file import load_plan
 
     plan = load_plan(args.plan, spec.structure)
-    if plan.markers and args.markers is None:  # a marker plan: its markers (same K and seed: same places)
+    if (
+        plan.markers and args.markers is None
+    ):  # a marker plan: its markers (same K and seed: same places)
         args.markers, args.marker_sigma_mm = plan.markers, plan.marker_sigma * 1e3
     if plan.markers and (args.markers, args.seed) != (plan.markers, plan.marker_seed):
-        print(f"note: {args.plan} was planned for {plan.markers} markers per frame placed with seed {plan.marker_seed}; "
-              f"--markers {args.markers} --seed {args.seed} places other markers")
+        print(
+            f"note: {args.plan} was planned for {plan.markers} markers per frame placed with seed {plan.marker_seed}; "
+            f"--markers {args.markers} --seed {args.seed} places other markers"
+        )
     return simulate_from_plan(
-        spec.nominal_model(), plan, seed=args.seed, noise=args.noise,
+        spec.nominal_model(),
+        plan,
+        seed=args.seed,
+        noise=args.noise,
         sigma_t=None if args.sigma_mm is None else args.sigma_mm / 1000,
         sigma_r=None if args.sigma_deg is None else math.radians(args.sigma_deg),
         geometry_error_t=args.geometry_error_mm / 1000,
         geometry_error_r=math.radians(args.geometry_error_deg),
         pixel_sigma=args.pixel_sigma,
-        n_heldout=args.heldout, require_view=not args.allow_out_of_view, robot_ref=ref,
+        n_heldout=args.heldout,
+        require_view=not args.allow_out_of_view,
+        robot_ref=ref,
     )
 
 
@@ -183,21 +278,34 @@ def run(args: argparse.Namespace) -> int:
     for flag in ("baseline_mm", "distance_mm", "focal_px"):
         v = getattr(args, flag)
         if not (math.isfinite(v) and v > 0):
-            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a positive number, got {v:g}")
+            raise ConfigurationError(
+                f"--{flag.replace('_', '-')} must be a positive number, got {v:g}"
+            )
     plan_noise = args.plan is not None
     if not plan_noise:  # the protocol's defaults; with --plan, the plan's own noise unless given
         args.noise = DEFAULT_NOISE if args.noise is None else args.noise
         args.pixel_sigma = DEFAULT_PIXEL_SIGMA if args.pixel_sigma is None else args.pixel_sigma
         args.sigma_mm = DEFAULT_SIGMA_MM if args.sigma_mm is None else args.sigma_mm
         args.sigma_deg = DEFAULT_SIGMA_DEG if args.sigma_deg is None else args.sigma_deg
-    for flag in ("sigma_mm", "sigma_deg", "pixel_sigma", "geometry_error_mm", "geometry_error_deg", "marker_sigma_mm"):
+    for flag in (
+        "sigma_mm",
+        "sigma_deg",
+        "pixel_sigma",
+        "geometry_error_mm",
+        "geometry_error_deg",
+        "marker_sigma_mm",
+    ):
         v = getattr(args, flag)
         if v is not None and not (math.isfinite(v) and v >= 0):
-            raise ConfigurationError(f"--{flag.replace('_', '-')} must be a finite number >= 0, got {v:g}")
+            raise ConfigurationError(
+                f"--{flag.replace('_', '-')} must be a finite number >= 0, got {v:g}"
+            )
     if args.seed < 0:  # numpy's seed sequences take non-negative integers only
         raise ConfigurationError(f"--seed must be a non-negative integer, got {args.seed}")
     if args.markers is not None and args.markers < 1:
-        raise ConfigurationError(f"--markers must be at least 1 (markers per measured frame), got {args.markers}")
+        raise ConfigurationError(
+            f"--markers must be at least 1 (markers per measured frame), got {args.markers}"
+        )
     spec = _measured_robot(load_robot(args.robot), args.robot, args.measure)
     # A robot file is referred to relative to DIR, so the files can move together.
     text = str(args.robot)
@@ -206,8 +314,11 @@ def run(args: argparse.Namespace) -> int:
     if args.plan:
         exp = _simulate_plan(args, spec, ref)
     else:
-        rig = StereoRig.verged(baseline=args.baseline_mm / 1000, distance=args.distance_mm / 1000,
-                               focal_px=args.focal_px)
+        rig = StereoRig.verged(
+            baseline=args.baseline_mm / 1000,
+            distance=args.distance_mm / 1000,
+            focal_px=args.focal_px,
+        )
         exp = simulate_experiment(
             spec,
             seed=args.seed,
@@ -229,8 +340,17 @@ def run(args: argparse.Namespace) -> int:
     if args.markers:
         measured, heldout = _as_markers(exp, args.markers, args.marker_sigma_mm * 1e-3, args.seed)
     # Everything is computed before anything is written; each file is written atomically.
-    texts = dict(zip(FILES, (dumps(measurements_to_json(measured)), dumps(model_to_json(exp.truth)),
-                             dumps(measurements_to_json(heldout))), strict=True))
+    texts = dict(
+        zip(
+            FILES,
+            (
+                dumps(measurements_to_json(measured)),
+                dumps(model_to_json(exp.truth)),
+                dumps(measurements_to_json(heldout)),
+            ),
+            strict=True,
+        )
+    )
     make_folder(out)
     write_all_atomic({out / name: t for name, t in texts.items()})
     view = exp.measured.metadata["provenance"]["view"]
@@ -246,9 +366,13 @@ def run(args: argparse.Namespace) -> int:
         noise = f"{len(measured.markers)} markers, point noise {args.marker_sigma_mm:g} mm"
     where = ""
     if "distance_range_m" in view:
-        where = (f"; plates {view['distance_range_m'][0]:.2f}-{view['distance_range_m'][1]:.2f} m from the rig, "
-                 f">= {view['min_margin_px']:.0f} px inside the images")
+        where = (
+            f"; plates {view['distance_range_m'][0]:.2f}-{view['distance_range_m'][1]:.2f} m from the rig, "
+            f">= {view['min_margin_px']:.0f} px inside the images"
+        )
     source = f", the configurations of {args.plan}" if args.plan else ""
-    print(f"wrote {out}/measurements.json ({measured.n_records} records{source}, {noise}), {out}/truth.json, "
-          f"{out}/heldout.json ({heldout.n_records} records){where}")
+    print(
+        f"wrote {out}/measurements.json ({measured.n_records} records{source}, {noise}), {out}/truth.json, "
+        f"{out}/heldout.json ({heldout.n_records} records){where}"
+    )
     return 0

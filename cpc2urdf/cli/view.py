@@ -136,7 +136,9 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshot:
         require_chromium()
     if len(args.cameras) > 2:
-        raise ConfigurationError(f"--camera takes one or two optical frames, got {len(args.cameras)}")
+        raise ConfigurationError(
+            f"--camera takes one or two optical frames, got {len(args.cameras)}"
+        )
     target = finite_numbers(args.target, "--target X Y Z") if args.target else None
     robot = load_view_robot(args.robot, package_dirs=args.package_path)
     options: dict[str, Any] = {
@@ -168,14 +170,18 @@ def run(args: argparse.Namespace) -> int:
         solver = GazeSolver(robot.pinocchio, tuple(args.cameras))
         moving = solver.free_joints("cyclopean")
         posture[moving] = mid_limits(solver.lower, solver.upper)[moving]
-        options["region"] = reachable_region(solver, make_grid(solver, q=posture), q_current=posture)
+        options["region"] = reachable_region(
+            solver, make_grid(solver, q=posture), q_current=posture
+        )
         notes = region_notes(solver, posture)
 
     for line in notes:  # what the region assumed (a served view has no legend)
         print(f"reachable region: {line}")
     if args.html:
         # the page and its picture are rendered before either is written: a failure leaves neither
-        page, summary = static_view_html(robot, sweep=not args.no_sweep, region_notes=notes, **options)
+        page, summary = static_view_html(
+            robot, sweep=not args.no_sweep, region_notes=notes, **options
+        )
         files: dict[str, str | bytes] = {args.html: page}
         if args.screenshot:
             files[args.screenshot] = screenshot_page(page, args.screenshot)

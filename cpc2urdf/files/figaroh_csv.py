@@ -41,7 +41,9 @@ LIMIT_TOLERANCE_RAD = math.radians(1.0)  # [rad]
 _POINT = re.compile(r"^(x|y|z|phix|phiy|phiz)(\d+)$")
 
 
-def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path, lines: list[int]) -> tuple[np.ndarray, list[str]]:
+def _within_limits(
+    v: np.ndarray, joint: Joint, name: str, path: Path, lines: list[int]
+) -> tuple[np.ndarray, list[str]]:
     """Readings ``v`` of ``joint`` (from the file's ``lines``) with 360-deg wraps undone, and what
     was said about them."""
     tol = LIMIT_TOLERANCE_M if joint.type == "prismatic" else LIMIT_TOLERANCE_RAD
@@ -55,23 +57,31 @@ def _within_limits(v: np.ndarray, joint: Joint, name: str, path: Path, lines: li
         ok = (wrapped >= lo - tol) & (wrapped <= hi + tol) & (turns != 0)
         out[ok] = wrapped[ok]
         if ok.any():
-            notes.append(f"{name}: {int(ok.sum())} reading(s) wrapped by a multiple of 360 deg into its limits")
+            notes.append(
+                f"{name}: {int(ok.sum())} reading(s) wrapped by a multiple of 360 deg into its limits"
+            )
     bad = np.flatnonzero((out < lo - tol) | (out > hi + tol))
     if len(bad):
         i = int(bad[0])
-        raise InputFileError(path, f"row {lines[i]}, column {name!r}: {v[i]:.6g} is outside the URDF limits "
-                             f"[{lo:.6g}, {hi:.6g}] by more than {tol:.3g} (wrong units or column?)")
+        raise InputFileError(
+            path,
+            f"row {lines[i]}, column {name!r}: {v[i]:.6g} is outside the URDF limits "
+            f"[{lo:.6g}, {hi:.6g}] by more than {tol:.3g} (wrong units or column?)",
+        )
     past = np.maximum(out - hi, lo - out)
     if (past > 0).any():
         unit = "mm" if joint.type == "prismatic" else "deg"
         size = past.max() * (1e3 if joint.type == "prismatic" else 180 / math.pi)
-        notes.append(f"{name}: {int((past > 0).sum())} reading(s) up to {size:.3g} {unit} past its URDF limits "
-                     f"(accepted: within {LIMIT_TOLERANCE_M * 1e3:g} mm / {math.degrees(LIMIT_TOLERANCE_RAD):g} deg)")
+        notes.append(
+            f"{name}: {int((past > 0).sum())} reading(s) up to {size:.3g} {unit} past its URDF limits "
+            f"(accepted: within {LIMIT_TOLERANCE_M * 1e3:g} mm / {math.degrees(LIMIT_TOLERANCE_RAD):g} deg)"
+        )
     return out, notes
 
 
-def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, *,
-                     robot_ref: str | None = None) -> MeasurementSet:
+def load_figaroh_csv(
+    path: str | os.PathLike[str], robot: UrdfRobot, link: str, *, robot_ref: str | None = None
+) -> MeasurementSet:
     """Read a FIGAROH calibration CSV of ``robot`` (a URDF robot) whose points ride on ``link``.
 
     Raises:
@@ -101,12 +111,19 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
             if cpc_of.get(c) in sub.structure.joint_names:
                 joints[cpc_of[c]] = i
         elif c not in IGNORED_COLUMNS:
-            raise InputFileError(p, f"column {c!r} is neither a point coordinate (x1, y1, z1[, phix1, phiy1, "
-                                 f"phiz1] ...) nor a joint of {robot.tree.source}")
+            raise InputFileError(
+                p,
+                f"column {c!r} is neither a point coordinate (x1, y1, z1[, phix1, phiy1, "
+                f"phiz1] ...) nor a joint of {robot.tree.source}",
+            )
     missing = [j for j in sub.structure.joint_names if j not in joints]
     if missing:
-        raise InputFileError(p, f"no column for joint {sub.names.urdf_joint(missing[0])!r} on the path to {link!r}")
-    body = [(k + 2, row) for k, row in enumerate(rows[1:]) if any(c.strip() for c in row)]  # (line, cells)
+        raise InputFileError(
+            p, f"no column for joint {sub.names.urdf_joint(missing[0])!r} on the path to {link!r}"
+        )
+    body = [
+        (k + 2, row) for k, row in enumerate(rows[1:]) if any(c.strip() for c in row)
+    ]  # (line, cells)
     if not body:
         raise InputFileError(p, "expected a header row and at least one row of numbers")
     data = np.full((len(body), len(header)), np.nan)
@@ -117,13 +134,19 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
             try:
                 data[r, i] = float(v)
             except ValueError:
-                raise InputFileError(p, f"row {line}, column {header[i]!r}: {v!r} is not a number") from None
+                raise InputFileError(
+                    p, f"row {line}, column {header[i]!r}: {v!r} is not a number"
+                ) from None
             if not math.isfinite(data[r, i]):
-                raise InputFileError(p, f"row {line}, column {header[i]!r}: {v!r} is not a finite number")
+                raise InputFileError(
+                    p, f"row {line}, column {header[i]!r}: {v!r} is not a finite number"
+                )
     q = data[:, [joints[j] for j in sub.structure.joint_names]]
     notes: list[str] = []
     for k, j in enumerate(sub.structure.joints):
-        q[:, k], said = _within_limits(q[:, k], j, sub.names.urdf_joint(j.name), p, [line for line, _ in body])
+        q[:, k], said = _within_limits(
+            q[:, k], j, sub.names.urdf_joint(j.name), p, [line for line, _ in body]
+        )
         notes += said
     frame = sub.names.links[link]
     poses: dict[str, np.ndarray] = {}
@@ -132,10 +155,19 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
     for k in sorted(points):
         cols = points[k]
         if set(cols) >= {"phix", "phiy", "phiz", "x", "y", "z"}:
-            T = np.stack([homogeneous(matrix_from_rpy(data[r, [cols["phix"], cols["phiy"], cols["phiz"]]]),
-                                      data[r, [cols["x"], cols["y"], cols["z"]]]) for r in range(len(data))])
+            T = np.stack(
+                [
+                    homogeneous(
+                        matrix_from_rpy(data[r, [cols["phix"], cols["phiy"], cols["phiz"]]]),
+                        data[r, [cols["x"], cols["y"], cols["z"]]],
+                    )
+                    for r in range(len(data))
+                ]
+            )
             if poses:
-                raise InputFileError(p, f"more than one 6-D pose per row (point {k}): one measured frame is read")
+                raise InputFileError(
+                    p, f"more than one 6-D pose per row (point {k}): one measured frame is read"
+                )
             poses[frame] = T
         elif set(cols) == {"x", "y", "z"}:
             Y = data[:, [cols["x"], cols["y"], cols["z"]]]
@@ -147,13 +179,24 @@ def load_figaroh_csv(path: str | os.PathLike[str], robot: UrdfRobot, link: str, 
             markers[name] = Marker(name, frame)
             marker_points[name] = Y
         else:
-            raise InputFileError(p, f"point {k}: columns {sorted(cols)}; expected x{k}, y{k}, z{k} "
-                                 f"(and phix{k}, phiy{k}, phiz{k} for a 6-D pose)")
+            raise InputFileError(
+                p,
+                f"point {k}: columns {sorted(cols)}; expected x{k}, y{k}, z{k} "
+                f"(and phix{k}, phiy{k}, phiz{k} for a 6-D pose)",
+            )
     metadata: dict[str, object] = {UNKNOWN_MOUNTS: [frame]} if poses else {}
     if notes:
         metadata["notes"] = notes
-    ms = MeasurementSet.from_arrays(sub.structure, q, poses, robot=robot_ref, source=str(p), markers=markers,
-                                    marker_points=marker_points, metadata=metadata)
+    ms = MeasurementSet.from_arrays(
+        sub.structure,
+        q,
+        poses,
+        robot=robot_ref,
+        source=str(p),
+        markers=markers,
+        marker_points=marker_points,
+        metadata=metadata,
+    )
     ms.spec = sub
     return ms
 

@@ -92,7 +92,9 @@ def read_json(path: str | os.PathLike[str]) -> Any:
             parse_int=reader.int,
         )
     except json.JSONDecodeError as e:
-        raise InputFileError(p, f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+        raise InputFileError(
+            p, f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})"
+        ) from None
     except RecursionError:  # nested far deeper than JSON_MAX_DEPTH: find where from the text
         raise InputFileError(p, _too_deep(_deep_position(text))) from None
     # Only a \uD800-\uDFFF escape gives a lone surrogate: look at the strings only then.
@@ -177,7 +179,9 @@ class _StrictJson:
                 if check_strings:
                     bad = next((k for k in value if not _is_unicode(k)), None)
                     if bad is not None:
-                        return f"{_spell((trail, bad))}: key is not valid Unicode (a lone surrogate)"
+                        return (
+                            f"{_spell((trail, bad))}: key is not valid Unicode (a lone surrogate)"
+                        )
                 children: list[tuple[str | int, Any]] = list(value.items())
             elif isinstance(value, list):
                 if depth >= JSON_MAX_DEPTH:
@@ -190,7 +194,9 @@ class _StrictJson:
             else:
                 continue
             stack.extend(
-                (v, depth + 1, (trail, k)) for k, v in reversed(children) if scalars or isinstance(v, (dict, list))
+                (v, depth + 1, (trail, k))
+                for k, v in reversed(children)
+                if scalars or isinstance(v, (dict, list))
             )
         return None
 
@@ -245,7 +251,7 @@ def require_format(doc: Any, expected: str, path: object) -> Mapping[str, Any]:
     """Check that ``doc`` is an object whose ``format`` tag is ``expected`` (any ``@`` version
     of the same family is named in the error)."""
     if not isinstance(doc, Mapping):
-        raise InputFileError(path, f"expected a JSON object with \"format\": \"{expected}\"")
+        raise InputFileError(path, f'expected a JSON object with "format": "{expected}"')
     tag = doc.get("format")
     if tag != expected:
         raise InputFileError(path, f"format is {tag!r}, expected {expected!r}")
@@ -316,7 +322,9 @@ def write_all_atomic(files: Mapping[_PathT, str | bytes]) -> list[Path]:
     if len({os.path.abspath(p) for p in paths}) != len(paths):
         raise OutputError(f"{', '.join(map(str, paths))}: a file is named twice")
     temps: list[str] = []
-    backups: dict[Path, str | None] = {}  # target -> hard link to the file it replaces (None: new file)
+    backups: dict[
+        Path, str | None
+    ] = {}  # target -> hard link to the file it replaces (None: new file)
     try:
         for p, data in zip(paths, files.values(), strict=True):
             temps.append(_temp_copy(p, data))

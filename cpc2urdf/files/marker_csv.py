@@ -36,7 +36,9 @@ from cpc2urdf.files.spec import RobotSpec
 POINT_COLUMNS = ("config", "marker", "x", "y", "z")
 
 
-def _read(path: Path, length: str | None, angle: str | None) -> tuple[list[dict[str, str]], list[str], dict[str, str]]:
+def _read(
+    path: Path, length: str | None, angle: str | None
+) -> tuple[list[dict[str, str]], list[str], dict[str, str]]:
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as e:
@@ -49,12 +51,16 @@ def _read(path: Path, length: str | None, angle: str | None) -> tuple[list[dict[
             for item in head[6:].replace(",", " ").split():
                 key, _, value = item.partition("=")
                 if key not in ("length", "angle") or not value:
-                    raise InputFileError(path, f"units header item {item!r}: expected length=UNIT or angle=UNIT")
+                    raise InputFileError(
+                        path, f"units header item {item!r}: expected length=UNIT or angle=UNIT"
+                    )
                 units[key] = value
     for key, given in (("length", length), ("angle", angle)):
         if given is not None:
             if key in units and units[key] != given:
-                raise InputFileError(path, f"header says {key}={units[key]} but {given} was asked for")
+                raise InputFileError(
+                    path, f"header says {key}={units[key]} but {given} was asked for"
+                )
             units[key] = given
     reader = csv.DictReader(lines)
     if not reader.fieldnames:
@@ -70,7 +76,9 @@ def _number(path: Path, row: int, col: str, text: str) -> float:
     try:
         v = float(text)
     except ValueError:
-        raise InputFileError(path, f"row {row + 2}, column {col!r}: {text!r} is not a number") from None
+        raise InputFileError(
+            path, f"row {row + 2}, column {col!r}: {text!r} is not a number"
+        ) from None
     if v != v or v in (float("inf"), float("-inf")):
         raise InputFileError(path, f"row {row + 2}, column {col!r}: not finite")
     return v
@@ -109,61 +117,99 @@ def marker_csv_document(
     allowed_joints = set(joint_names)
     for c in POINT_COLUMNS:
         if c not in cols:
-            raise InputFileError(ppath, f"lacks column {c!r}; expected {', '.join(POINT_COLUMNS)}"
-                                 + ("" if joints_csv else " and joint columns"))
+            raise InputFileError(
+                ppath,
+                f"lacks column {c!r}; expected {', '.join(POINT_COLUMNS)}"
+                + ("" if joints_csv else " and joint columns"),
+            )
     extra = [c for c in cols if c not in POINT_COLUMNS]
     joints_here = [c for c in extra if c in allowed_joints]
     unknown = [c for c in extra if c not in allowed_joints]
     if unknown:
-        raise InputFileError(ppath, f"unknown column {unknown[0]!r}; expected {', '.join(POINT_COLUMNS)}"
-                             + (" only (joints come from the joints file)" if joints_csv else " and joint columns ("
-                                + ", ".join(sorted(allowed_joints)) + ")"))
+        raise InputFileError(
+            ppath,
+            f"unknown column {unknown[0]!r}; expected {', '.join(POINT_COLUMNS)}"
+            + (
+                " only (joints come from the joints file)"
+                if joints_csv
+                else " and joint columns (" + ", ".join(sorted(allowed_joints)) + ")"
+            ),
+        )
     readings: dict[str, dict[str, float]] = {}
     if joints_csv is not None:
         if joints_here:
-            raise InputFileError(ppath, f"column {joints_here[0]!r}: joint readings are in the joints file {joints_csv}")
+            raise InputFileError(
+                ppath,
+                f"column {joints_here[0]!r}: joint readings are in the joints file {joints_csv}",
+            )
         jpath = Path(joints_csv)
         jrows, jcols, junits = _read(jpath, length, angle)
         for k, v in junits.items():
             if units.setdefault(k, v) != v:
-                raise InputFileError(jpath, f"units {k}={v} differ from the points file's {units[k]}")
+                raise InputFileError(
+                    jpath, f"units {k}={v} differ from the points file's {units[k]}"
+                )
         if "config" not in jcols:
             raise InputFileError(jpath, "lacks column 'config'")
         bad = [c for c in jcols if c != "config" and c not in allowed_joints]
         if bad:
-            raise InputFileError(jpath, f"unknown column {bad[0]!r}; expected config and joint columns "
-                                 f"({', '.join(sorted(allowed_joints))})")
+            raise InputFileError(
+                jpath,
+                f"unknown column {bad[0]!r}; expected config and joint columns "
+                f"({', '.join(sorted(allowed_joints))})",
+            )
         for i, r in enumerate(jrows):
             if r["config"] in readings:
-                raise InputFileError(jpath, f"row {i + 2}: configuration {r['config']!r} appears twice")
+                raise InputFileError(
+                    jpath, f"row {i + 2}: configuration {r['config']!r} appears twice"
+                )
             readings[r["config"]] = {c: _number(jpath, i, c, r[c]) for c in jcols if c != "config"}
     elif not joints_here:
-        raise InputFileError(ppath, "no joint columns: give the joint readings as columns or in a joints file")
+        raise InputFileError(
+            ppath, "no joint columns: give the joint readings as columns or in a joints file"
+        )
     points: dict[str, dict[str, list[float]]] = {}
     for i, r in enumerate(rows):
         cfg, name = r["config"], r["marker"]
         if name not in markers:
-            raise InputFileError(ppath, f"row {i + 2}: marker {name!r} has no link; known markers: "
-                                 f"{', '.join(markers) or 'none'}")
+            raise InputFileError(
+                ppath,
+                f"row {i + 2}: marker {name!r} has no link; known markers: "
+                f"{', '.join(markers) or 'none'}",
+            )
         xyz = [_number(ppath, i, c, r[c]) for c in ("x", "y", "z")]
         if joints_csv is None:
             q = {c: _number(ppath, i, c, r[c]) for c in joints_here}
             if cfg in readings and readings[cfg] != q:
-                raise InputFileError(ppath, f"row {i + 2}: configuration {cfg!r} has other joint readings than its first row")
+                raise InputFileError(
+                    ppath,
+                    f"row {i + 2}: configuration {cfg!r} has other joint readings than its first row",
+                )
             readings.setdefault(cfg, q)
         elif cfg not in readings:
-            raise InputFileError(ppath, f"row {i + 2}: configuration {cfg!r} is not in the joints file {joints_csv}")
+            raise InputFileError(
+                ppath, f"row {i + 2}: configuration {cfg!r} is not in the joints file {joints_csv}"
+            )
         seen = points.setdefault(cfg, {})
         if name in seen:
-            raise InputFileError(ppath, f"row {i + 2}: marker {name!r} appears twice in configuration {cfg!r}")
+            raise InputFileError(
+                ppath, f"row {i + 2}: marker {name!r} appears twice in configuration {cfg!r}"
+            )
         seen[name] = xyz
     defs: dict[str, Any] = {}
     for name, link in markers.items():
         defs[name] = {"link": link}
         if known_positions and name in known_positions:
             defs[name]["position"] = [float(v) for v in known_positions[name]]
-    records = [{"label": cfg, "joints": readings[cfg], "markers": pts} for cfg, pts in points.items()]
-    doc: dict[str, Any] = {"format": MEASUREMENTS_FORMAT_2, "robot": robot, "markers": defs, "records": records}
+    records = [
+        {"label": cfg, "joints": readings[cfg], "markers": pts} for cfg, pts in points.items()
+    ]
+    doc: dict[str, Any] = {
+        "format": MEASUREMENTS_FORMAT_2,
+        "robot": robot,
+        "markers": defs,
+        "records": records,
+    }
     if units:
         doc["units"] = units
     return doc
@@ -199,8 +245,16 @@ def load_marker_csv(
     else:
         names = list(robot.structure.joint_names)
     ref = robot_ref or robot.source or robot.structure.name
-    doc = marker_csv_document(points_csv, ref, markers, joints_csv=joints_csv, joint_names=names,
-                              known_positions=known_positions, length=length, angle=angle)
+    doc = marker_csv_document(
+        points_csv,
+        ref,
+        markers,
+        joints_csv=joints_csv,
+        joint_names=names,
+        known_positions=known_positions,
+        length=length,
+        angle=angle,
+    )
     if noise_sigma_p is not None:
         doc["noise"] = {"model": "isotropic points", "sigma_p_m": float(noise_sigma_p)}
     return measurements_from_json(doc, str(points_csv), robot=robot)

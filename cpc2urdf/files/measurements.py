@@ -159,7 +159,9 @@ class MeasurementSet:
             layout = s.frame(name).layout
             P = np.asarray(P, dtype=float)
             if layout is None or P.shape != (N, len(layout), 3):
-                raise ValueError(f"points[{name!r}] must have shape (N, K, 3) for a plate with a layout")
+                raise ValueError(
+                    f"points[{name!r}] must have shape (N, K, 3) for a plate with a layout"
+                )
             self.points[name] = P
         for name, m in self.markers.items():
             s.frame(m.frame)
@@ -167,7 +169,9 @@ class MeasurementSet:
                 raise ValueError(f"marker {name!r}: position must have 3 entries")
         for name, Y in list(self.marker_points.items()):
             if name not in self.markers:
-                raise ValueError(f"marker_points[{name!r}]: no such marker (markers: {sorted(self.markers)})")
+                raise ValueError(
+                    f"marker_points[{name!r}]: no such marker (markers: {sorted(self.markers)})"
+                )
             Y = np.asarray(Y, dtype=float)
             if Y.shape != (N, 3):
                 raise ValueError(f"marker_points[{name!r}] must have shape ({N}, 3), got {Y.shape}")
@@ -185,7 +189,11 @@ class MeasurementSet:
     @property
     def frames(self) -> list[str]:
         """Frames with at least one measured pose, in the structure's frame order."""
-        return [f for f in self.structure.frame_names if f in self.poses and bool(self.has_pose(f).any())]
+        return [
+            f
+            for f in self.structure.frame_names
+            if f in self.poses and bool(self.has_pose(f).any())
+        ]
 
     def has_pose(self, frame: str) -> NDArray[np.bool_]:
         """Which records measured ``frame``: boolean array of shape (N,)."""
@@ -213,7 +221,11 @@ class MeasurementSet:
 
     def markers_on(self, frame: str) -> list[str]:
         """Names of the markers on ``frame`` seen at least once."""
-        return [m for m in self.marker_points if self.markers[m].frame == frame and self.has_marker(m).any()]
+        return [
+            m
+            for m in self.marker_points
+            if self.markers[m].frame == frame and self.has_marker(m).any()
+        ]
 
     def subset(self, index: ArrayLike) -> MeasurementSet:
         """The records selected by ``index`` (integer indices or a boolean mask of shape (N,))."""
@@ -296,11 +308,20 @@ def measurements_from_json(
     try:
         tag = doc.get("format") if isinstance(doc, Mapping) else None
         if isinstance(doc, Mapping) and tag not in MEASUREMENTS_FORMATS:
-            raise InputFileError(source, f"format is {tag!r}, expected {MEASUREMENTS_FORMAT!r} (poses) or "
-                                 f"{MEASUREMENTS_FORMAT_2!r} (with markers)")
-        d = require_format(doc, MEASUREMENTS_FORMAT_2 if tag == MEASUREMENTS_FORMAT_2 else MEASUREMENTS_FORMAT, source)
+            raise InputFileError(
+                source,
+                f"format is {tag!r}, expected {MEASUREMENTS_FORMAT!r} (poses) or "
+                f"{MEASUREMENTS_FORMAT_2!r} (with markers)",
+            )
+        d = require_format(
+            doc,
+            MEASUREMENTS_FORMAT_2 if tag == MEASUREMENTS_FORMAT_2 else MEASUREMENTS_FORMAT,
+            source,
+        )
         version = 2 if tag == MEASUREMENTS_FORMAT_2 else 1
-        allowed = {"format", "robot", "units", "records", *OPTIONAL_SECTIONS} | ({"markers"} if version == 2 else set())
+        allowed = {"format", "robot", "units", "records", *OPTIONAL_SECTIONS} | (
+            {"markers"} if version == 2 else set()
+        )
         unknown = set(d) - allowed
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
@@ -309,7 +330,9 @@ def measurements_from_json(
             _check_noise(d["noise"])
         if robot is None:
             if "robot" not in d:
-                raise ValueError("lacks 'robot' (a shipped robot name or a robot spec/model file path)")
+                raise ValueError(
+                    "lacks 'robot' (a shipped robot name or a robot spec/model file path)"
+                )
             if base_dir is None and source and not source.startswith("<"):
                 base_dir = Path(source).parent
             robot = _resolve_robot(d["robot"], Path(base_dir) if base_dir is not None else None)
@@ -320,7 +343,17 @@ def measurements_from_json(
         marker_defs = _marker_links(d.get("markers", {})) if version == 2 else {}
         if isinstance(robot, UrdfRobot):
             robot = robot.restricted(_measured_links(records, robot, marker_defs))
-        ms = _parse_records(records, robot.structure, units, source, ref, d, _FileNames.of(robot), version, marker_defs)
+        ms = _parse_records(
+            records,
+            robot.structure,
+            units,
+            source,
+            ref,
+            d,
+            _FileNames.of(robot),
+            version,
+            marker_defs,
+        )
         ms.spec = robot
         return ms
     except InputFileError as e:
@@ -355,8 +388,12 @@ class _FileNames:
         assert s is not None
         if isinstance(robot, UrdfRobot) and robot.names is not None and robot.tree is not None:
             joints = {n: robot.names.urdf_joint(n) for n in s.joint_names}
-            return cls(joints, {n: robot.names.urdf_link(n) for n in s.frame_names},
-                       frozenset(robot.tree.joints) - set(joints.values()), True)
+            return cls(
+                joints,
+                {n: robot.names.urdf_link(n) for n in s.frame_names},
+                frozenset(robot.tree.joints) - set(joints.values()),
+                True,
+            )
         return cls({n: n for n in s.joint_names}, {n: n for n in s.frame_names})
 
     def frame(self, name: str) -> str | None:
@@ -365,9 +402,11 @@ class _FileNames:
 
 
 # The ``noise`` entries identification trusts (``noise_from_metadata``, ``marker_sigma``): SI units.
-NOISE_SIGMAS = {"sigma_t_m": "the std of each translation entry [m]",
-                "sigma_r_rad": "the std of the rotation error angle [rad]",
-                "sigma_p_m": "the std of each marker point coordinate [m]"}
+NOISE_SIGMAS = {
+    "sigma_t_m": "the std of each translation entry [m]",
+    "sigma_r_rad": "the std of the rotation error angle [rad]",
+    "sigma_p_m": "the std of each marker point coordinate [m]",
+}
 
 
 def _check_noise(section: Any) -> None:
@@ -378,8 +417,10 @@ def _check_noise(section: Any) -> None:
         ValueError: Naming ``noise.<key>`` and what is expected.
     """
     if not isinstance(section, Mapping):
-        raise ValueError(f"noise must be an object such as {{\"sigma_t_m\": 0.0005, \"sigma_r_rad\": 0.0087}}, "
-                         f"got {section!r}")
+        raise ValueError(
+            f'noise must be an object such as {{"sigma_t_m": 0.0005, "sigma_r_rad": 0.0087}}, '
+            f"got {section!r}"
+        )
     for key, meaning in NOISE_SIGMAS.items():
         if key not in section:
             continue
@@ -391,20 +432,27 @@ def _check_noise(section: Any) -> None:
 def _marker_links(section: Any) -> dict[str, Mapping[str, Any]]:
     """The ``markers`` section's entries, checked for shape (links are checked against the robot later)."""
     if not isinstance(section, Mapping) or not section:
-        raise ValueError("'markers' must be a non-empty object {marker name: {\"link\": ..., \"position\"?: [x, y, z]}}")
+        raise ValueError(
+            '\'markers\' must be a non-empty object {marker name: {"link": ..., "position"?: [x, y, z]}}'
+        )
     out: dict[str, Mapping[str, Any]] = {}
     for name, m in section.items():
         if not isinstance(m, Mapping) or not isinstance(m.get("link"), str):
-            raise ValueError(f"markers.{name} must be an object with a 'link' (the link the marker is fixed to)")
+            raise ValueError(
+                f"markers.{name} must be an object with a 'link' (the link the marker is fixed to)"
+            )
         extra = set(m) - _MARKER_KEYS
         if extra:
-            raise ValueError(f"markers.{name} has unknown keys {sorted(extra)}; expected some of {sorted(_MARKER_KEYS)}")
+            raise ValueError(
+                f"markers.{name} has unknown keys {sorted(extra)}; expected some of {sorted(_MARKER_KEYS)}"
+            )
         out[str(name)] = m
     return out
 
 
-def _measured_links(records: list[Any], robot: UrdfRobot,
-                    markers: Mapping[str, Mapping[str, Any]] | None = None) -> list[str]:
+def _measured_links(
+    records: list[Any], robot: UrdfRobot, markers: Mapping[str, Mapping[str, Any]] | None = None
+) -> list[str]:
     """The URDF links the records measure (``poses`` and ``points`` keys, and the links of the
     markers), in order of appearance.
 
@@ -415,15 +463,19 @@ def _measured_links(records: list[Any], robot: UrdfRobot,
     links: list[str] = []
     for name, m in (markers or {}).items():
         if not robot.tree.has_link(m["link"]):
-            raise ValueError(f"markers.{name}.link: {m['link']!r} is not a link of {robot.tree.source}")
+            raise ValueError(
+                f"markers.{name}.link: {m['link']!r} is not a link of {robot.tree.source}"
+            )
         links.append(m["link"])
     for i, rec in enumerate(records):
         for key in ("poses", "points"):
             named = rec.get(key) if isinstance(rec, Mapping) else None
             for name in named if isinstance(named, Mapping) else ():
                 if not robot.tree.has_link(name):
-                    raise ValueError(f"records[{i}].{key}: {name!r} is not a link of {robot.tree.source} "
-                                     "(measured frames are URDF link names)")
+                    raise ValueError(
+                        f"records[{i}].{key}: {name!r} is not a link of {robot.tree.source} "
+                        "(measured frames are URDF link names)"
+                    )
                 links.append(name)
     return list(dict.fromkeys(links))
 
@@ -446,8 +498,13 @@ def _parse_records(
         pos = m.get("position")
         if pos is not None:
             if not isinstance(pos, list) or len(pos) != 3:
-                raise ValueError(f"markers.{mname}.position must be [x, y, z] (file units, in the link's frame), got {pos!r}")
-            pos = tuple(finite_float(v, f"markers.{mname}.position[{c}]") * units.length for c, v in enumerate(pos))
+                raise ValueError(
+                    f"markers.{mname}.position must be [x, y, z] (file units, in the link's frame), got {pos!r}"
+                )
+            pos = tuple(
+                finite_float(v, f"markers.{mname}.position[{c}]") * units.length
+                for c, v in enumerate(pos)
+            )
         markers[mname] = Marker(mname, frame, pos)
     record_keys = _RECORD_KEYS_2 if version == 2 else _RECORD_KEYS
     file_joints = [names.joints[n] for n in s.joint_names]
@@ -459,7 +516,9 @@ def _parse_records(
     points: dict[str, NDArray[np.float64]] = {}
     marker_points: dict[str, NDArray[np.float64]] = {}
 
-    def slot(store: dict[str, NDArray[np.float64]], name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    def slot(
+        store: dict[str, NDArray[np.float64]], name: str, shape: tuple[int, ...]
+    ) -> NDArray[np.float64]:
         if name not in store:
             store[name] = np.full((N, *shape), np.nan)
         return store[name]
@@ -470,7 +529,9 @@ def _parse_records(
             raise ValueError(f"{where} must be an object with 'joints' and 'poses' and/or 'points'")
         extra = set(rec) - record_keys
         if extra:
-            raise ValueError(f"{where} has unknown keys {sorted(extra)}; expected some of {sorted(record_keys)}")
+            raise ValueError(
+                f"{where} has unknown keys {sorted(extra)}; expected some of {sorted(record_keys)}"
+            )
         label = rec.get("label", f"record {i}")
         if not isinstance(label, str):
             raise ValueError(f"{where}.label must be a string, got {label!r}")
@@ -485,7 +546,11 @@ def _parse_records(
                 )
         missing = [j for j in file_joints if j not in joints]
         if missing:
-            need = "every joint on the paths from the root to the measured links" if names.subtree else "every joint"
+            need = (
+                "every joint on the paths from the root to the measured links"
+                if names.subtree
+                else "every joint"
+            )
             raise ValueError(f"{where}.joints lacks {missing} ({need} needs a reading)")
         for k, j in enumerate(s.joints):
             key = names.joints[j.name]
@@ -506,20 +571,30 @@ def _parse_records(
             raise ValueError(f"{where}.points must be an object {{plate name: [[x, y, z], ...]}}")
         rec_markers = rec.get("markers", {})
         if not isinstance(rec_markers, Mapping):
-            raise ValueError(f"{where}.markers must be an object {{marker name: [x, y, z] or null}}")
+            raise ValueError(
+                f"{where}.markers must be an object {{marker name: [x, y, z] or null}}"
+            )
         if not rec_poses and not rec_points and not rec_markers:
-            what = "no 'poses', 'points' or 'markers'" if version == 2 else "no 'poses' and no 'points'"
+            what = (
+                "no 'poses', 'points' or 'markers'"
+                if version == 2
+                else "no 'poses' and no 'points'"
+            )
             raise ValueError(f"{where} has {what}: a record must measure at least one frame")
         for key, y in rec_markers.items():
             if key not in markers:
-                raise ValueError(f"{where}.markers: unknown marker {key!r}; the 'markers' section names "
-                                 f"{', '.join(markers) or 'none'}")
+                raise ValueError(
+                    f"{where}.markers: unknown marker {key!r}; the 'markers' section names "
+                    f"{', '.join(markers) or 'none'}"
+                )
             if y is None:
                 continue
             if not isinstance(y, list) or len(y) != 3:
                 raise ValueError(f"{where}.markers.{key} must be [x, y, z] or null, got {y!r}")
             slot(marker_points, key, (3,))[i] = [
-                finite_float(v, f"{where}.markers.{key}[{c}]") * units.length for c, v in enumerate(y)]
+                finite_float(v, f"{where}.markers.{key}[{c}]") * units.length
+                for c, v in enumerate(y)
+            ]
         for key, obj in rec_poses.items():
             name = _known_frame(s, names, key, f"{where}.poses").name
             slot(poses, name, (4, 4))[i] = pose_from_json(obj, units, f"{where}.poses.{key}")
@@ -542,8 +617,13 @@ def _parse_records(
                 if p is None:
                     continue
                 if not isinstance(p, list) or len(p) != 3:
-                    raise ValueError(f"{where}.points.{key}[{k}] must be [x, y, z] or null, got {p!r}")
-                P[i, k] = [finite_float(v, f"{where}.points.{key}[{k}][{c}]") * units.length for c, v in enumerate(p)]
+                    raise ValueError(
+                        f"{where}.points.{key}[{k}] must be [x, y, z] or null, got {p!r}"
+                    )
+                P[i, k] = [
+                    finite_float(v, f"{where}.points.{key}[{k}][{c}]") * units.length
+                    for c, v in enumerate(p)
+                ]
     # Poses from points (sec. 3.3) where the record did not give the pose itself.
     fit_rms: dict[str, NDArray[np.float64]] = {}
     for name, P in points.items():
@@ -553,12 +633,25 @@ def _parse_records(
         rms = np.full(N, np.nan)
         for i in np.flatnonzero(have).tolist():
             if not np.all(np.isfinite(T[i])):
-                T[i] = plate_pose_from_points(layout, P[i], what=f"records[{i}].points.{names.frames[name]}")
+                T[i] = plate_pose_from_points(
+                    layout, P[i], what=f"records[{i}].points.{names.frames[name]}"
+                )
             rms[i] = registration_rms(T[i], layout, P[i])
         fit_rms[name] = rms
     metadata = {k: doc[k] for k in OPTIONAL_SECTIONS if k in doc}
-    return MeasurementSet(s, q, poses, source, robot_ref, labels, points, fit_rms, metadata,
-                          markers=markers, marker_points=marker_points)
+    return MeasurementSet(
+        s,
+        q,
+        poses,
+        source,
+        robot_ref,
+        labels,
+        points,
+        fit_rms,
+        metadata,
+        markers=markers,
+        marker_points=marker_points,
+    )
 
 
 def _known_frame(s: RobotStructure, names: _FileNames, key: str, where: str) -> Any:
@@ -570,7 +663,9 @@ def _known_frame(s: RobotStructure, names: _FileNames, key: str, where: str) -> 
         ) from None
 
 
-def load_measurements(path: str | os.PathLike[str], *, robot: RobotSpec | None = None) -> MeasurementSet:
+def load_measurements(
+    path: str | os.PathLike[str], *, robot: RobotSpec | None = None
+) -> MeasurementSet:
     """Read a measurement file (see the module docstring and ``docs/measurements.md``).
 
     Args:
@@ -599,43 +694,61 @@ def measurements_to_json(ms: MeasurementSet, *, robot: str | None = None) -> dic
     """
     ref = robot or ms.robot
     if not ref:
-        raise ValueError("the measurement set has no robot reference (pass robot='iis_head' or a spec path)")
+        raise ValueError(
+            "the measurement set has no robot reference (pass robot='iis_head' or a spec path)"
+        )
     s = ms.structure
     names = _FileNames.of(ms.spec, s)
     records = []
     for i in range(ms.n_records):
         joints = {names.joints[n]: v for n, v in s.q_to_dict(ms.q[i]).items()}
         rec: dict[str, Any] = {"label": ms.labels[i], "joints": joints}
-        poses = {names.frames[f]: pose_to_json(ms.poses[f][i])
-                 for f in s.frame_names if f in ms.poses and ms.has_pose(f)[i]}
+        poses = {
+            names.frames[f]: pose_to_json(ms.poses[f][i])
+            for f in s.frame_names
+            if f in ms.poses and ms.has_pose(f)[i]
+        }
         if poses:
             rec["poses"] = poses
         pts = {}
         for f in s.frame_names:
             if f in ms.points and np.any(np.isfinite(ms.points[f][i])):
-                pts[names.frames[f]] = [None if not np.all(np.isfinite(p)) else [float(v) for v in p]
-                                        for p in ms.points[f][i]]
+                pts[names.frames[f]] = [
+                    None if not np.all(np.isfinite(p)) else [float(v) for v in p]
+                    for p in ms.points[f][i]
+                ]
         if pts:
             rec["points"] = pts
-        seen = {m: [float(v) for v in Y[i]] for m, Y in ms.marker_points.items() if ms.has_marker(m)[i]}
+        seen = {
+            m: [float(v) for v in Y[i]] for m, Y in ms.marker_points.items() if ms.has_marker(m)[i]
+        }
         if seen:
             rec["markers"] = seen
         records.append(rec)
     version_2 = bool(ms.markers)
-    doc: dict[str, Any] = {"format": MEASUREMENTS_FORMAT_2 if version_2 else MEASUREMENTS_FORMAT, "robot": ref,
-                           "units": {"length": "m", "angle": "rad"}}
+    doc: dict[str, Any] = {
+        "format": MEASUREMENTS_FORMAT_2 if version_2 else MEASUREMENTS_FORMAT,
+        "robot": ref,
+        "units": {"length": "m", "angle": "rad"},
+    }
     for k in OPTIONAL_SECTIONS:
         if k in ms.metadata:
             doc[k] = ms.metadata[k]
     if version_2:
-        doc["markers"] = {m.name: {"link": names.frames[m.frame],
-                                   **({"position": [float(v) for v in m.position]} if m.position is not None else {})}
-                          for m in ms.markers.values()}
+        doc["markers"] = {
+            m.name: {
+                "link": names.frames[m.frame],
+                **({"position": [float(v) for v in m.position]} if m.position is not None else {}),
+            }
+            for m in ms.markers.values()
+        }
     doc["records"] = records
     return doc
 
 
-def save_measurements(ms: MeasurementSet, path: str | os.PathLike[str], *, robot: str | None = None) -> Path:
+def save_measurements(
+    ms: MeasurementSet, path: str | os.PathLike[str], *, robot: str | None = None
+) -> Path:
     """Write ``ms`` atomically as a measurement file (SI units; poses as matrices).
 
     Args:

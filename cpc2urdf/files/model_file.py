@@ -45,14 +45,30 @@ from cpc2urdf.urdf.robot import URDF_SECTION, UrdfSource, urdf_source, with_urdf
 
 MODEL_FORMAT = "cpc2urdf/model@1"
 # Optional sections a model file may carry: CPCModel.metadata (cpc2urdf.model_metadata) types them.
-OPTIONAL_SECTIONS = ("description", "provenance", "uncertainty", "residuals", "handeye", "notes", URDF_SECTION)
+OPTIONAL_SECTIONS = (
+    "description",
+    "provenance",
+    "uncertainty",
+    "residuals",
+    "handeye",
+    "notes",
+    URDF_SECTION,
+)
 
 
 def model_from_json(doc: Any, source: str = "<model>") -> CPCModel:
     """Parse a ``cpc2urdf/model@1`` document; errors name ``source`` and the field."""
     try:
         d = require_format(doc, MODEL_FORMAT, source)
-        allowed = {"format", "name", "units", "world_to_base", "joints", "frames", *OPTIONAL_SECTIONS}
+        allowed = {
+            "format",
+            "name",
+            "units",
+            "world_to_base",
+            "joints",
+            "frames",
+            *OPTIONAL_SECTIONS,
+        }
         unknown = set(d) - allowed
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")

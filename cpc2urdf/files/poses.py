@@ -34,10 +34,14 @@ def pose_from_json(obj: Any, units: Units, where: str) -> Array:
             rotation (max |R^T R - I| > ROTATION_TOL), a quaternion far from unit length.
     """
     if not isinstance(obj, Mapping):
-        raise ValueError(f"{where} must be an object with 'matrix' or 'xyz'+'quat_xyzw', got {obj!r}")
+        raise ValueError(
+            f"{where} must be an object with 'matrix' or 'xyz'+'quat_xyzw', got {obj!r}"
+        )
     unknown = set(obj) - set(POSE_KEYS)
     if unknown:
-        raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected one of {list(POSE_KEYS)}")
+        raise ValueError(
+            f"{where} has unknown keys {sorted(unknown)}; expected one of {list(POSE_KEYS)}"
+        )
     if "matrix" in obj:
         if set(obj) != {"matrix"}:
             raise ValueError(f"{where}: give either 'matrix' or 'xyz'+'quat_xyzw', not both")

@@ -76,7 +76,9 @@ def load_robot(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
         return ref
     text = os.fspath(ref)
     if not text:
-        raise InputFileError("<robot>", "empty robot reference; expected a shipped robot name or a file path")
+        raise InputFileError(
+            "<robot>", "empty robot reference; expected a shipped robot name or a file path"
+        )
     if not looks_like_path(text) and not os.path.exists(text):
         from cpc2urdf.robots import spec_path
 
@@ -114,4 +116,11 @@ def load_model(ref: RobotRef, *, relative_to: str | os.PathLike[str] | None = No
     return load_robot(ref, relative_to=relative_to).nominal_model()
 
 
-__all__ = ["RobotRef", "is_urdf_ref", "load_model", "load_robot", "looks_like_path", "shipped_robots"]
+__all__ = [
+    "RobotRef",
+    "is_urdf_ref",
+    "load_model",
+    "load_robot",
+    "looks_like_path",
+    "shipped_robots",
+]

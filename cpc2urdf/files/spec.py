@@ -66,8 +66,19 @@ ROBOT_FORMAT = "cpc2urdf/robot@1"
 DEFAULT_VELOCITY = {"revolute": 1.0, "prismatic": 0.1}  # [rad/s], [m/s]
 DEFAULT_EFFORT = {"revolute": 10.0, "prismatic": 100.0}  # [N m], [N]
 
-_JOINT_KEYS = {"name", "type", "parent", "lower", "upper", "velocity", "effort",
-               "calibration_range", "nominal", "cpc", "description"}
+_JOINT_KEYS = {
+    "name",
+    "type",
+    "parent",
+    "lower",
+    "upper",
+    "velocity",
+    "effort",
+    "calibration_range",
+    "nominal",
+    "cpc",
+    "description",
+}
 _FRAME_KEYS = {"name", "parent", "kind", "layout", "nominal", "cpc", "description"}
 
 
@@ -130,7 +141,9 @@ def parse_placement(obj: Any, units: Units, where: str) -> CPCParams:
     return CPCParams.from_matrix(pose_from_json(m, units, where))
 
 
-def _named_entry(obj: Any, kind: str, i: int, keys: set[str]) -> tuple[Mapping[str, Any], str, str, str]:
+def _named_entry(
+    obj: Any, kind: str, i: int, keys: set[str]
+) -> tuple[Mapping[str, Any], str, str, str]:
     """Common checks of a ``joints[i]`` / ``frames[i]`` entry: an object with a non-empty name,
     known keys only, a parent name. Returns ``(entry, name, where, parent)``."""
     where = f"{kind}s[{i}]"
@@ -141,7 +154,9 @@ def _named_entry(obj: Any, kind: str, i: int, keys: set[str]) -> tuple[Mapping[s
     where = f"{kind} {name!r}"
     unknown = set(m) - keys
     if unknown:
-        raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected some of {sorted(keys)}")
+        raise ValueError(
+            f"{where} has unknown keys {sorted(unknown)}; expected some of {sorted(keys)}"
+        )
     parent = m.get("parent", BASE)
     if not isinstance(parent, str):
         raise ValueError(f"{where}.parent must be a joint name or 'base', got {parent!r}")
@@ -164,7 +179,9 @@ def _parse_joint(obj: Any, units: Units, i: int) -> tuple[Joint, Any]:
         if "velocity" in m
         else DEFAULT_VELOCITY[jtype]
     )
-    effort = finite_float(m["effort"], f"{where}.effort") if "effort" in m else DEFAULT_EFFORT[jtype]
+    effort = (
+        finite_float(m["effort"], f"{where}.effort") if "effort" in m else DEFAULT_EFFORT[jtype]
+    )
     cal = None
     if "calibration_range" in m:
         lo, hi = float_list(m["calibration_range"], 2, f"{where}.calibration_range")
@@ -187,7 +204,8 @@ def _parse_frame(obj: Any, units: Units, i: int) -> tuple[Frame, Any]:
         if not isinstance(pts, list) or len(pts) < 3:
             raise ValueError(f"{where}.layout must be a list of at least 3 points [x, y, z]")
         layout = tuple(
-            tuple(v * units.length for v in float_list(p, 3, f"{where}.layout[{k}]")) for k, p in enumerate(pts)
+            tuple(v * units.length for v in float_list(p, 3, f"{where}.layout[{k}]"))
+            for k, p in enumerate(pts)
         )
     if "cpc" in m and "nominal" in m:
         raise ValueError(f"{where}: give either 'cpc' or 'nominal', not both")
@@ -228,7 +246,9 @@ def _nominal_from_dh(
         unknown = set(dh) - {"theta", "d", "a", "alpha"}
         if unknown:
             raise ValueError(f"{where}.dh has unknown keys {sorted(unknown)}")
-        vals = {k: finite_float(dh.get(k, 0.0), f"{where}.dh.{k}") for k in ("theta", "d", "a", "alpha")}
+        vals = {
+            k: finite_float(dh.get(k, 0.0), f"{where}.dh.{k}") for k in ("theta", "d", "a", "alpha")
+        }
         # The joint variable replaces theta (revolute) or d (prismatic): it is the reading.
         theta = 0.0 if j.type == "revolute" else vals["theta"] * units.angle
         d = 0.0 if j.type == "prismatic" else vals["d"] * units.length
@@ -255,8 +275,17 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
     """Parse a ``cpc2urdf/robot@1`` document; errors name ``source`` and the field."""
     try:
         d = require_format(doc, ROBOT_FORMAT, source)
-        allowed = {"format", "name", "description", "units", "geometry", "world_to_base", "joints", "frames",
-                   *SPEC_KEYS}
+        allowed = {
+            "format",
+            "name",
+            "description",
+            "units",
+            "geometry",
+            "world_to_base",
+            "joints",
+            "frames",
+            *SPEC_KEYS,
+        }
         unknown = set(d) - allowed
         if unknown:
             raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(allowed)}")
@@ -264,7 +293,11 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
         structure, geo_j, geo_f = parse_tree(d, units)
         physical = physical_from_json(d, structure.joint_names)
         check_masses(physical, urdf_link_names(structure))
-        T_wb = parse_placement(d["world_to_base"], units, "world_to_base") if "world_to_base" in d else IDENTITY
+        T_wb = (
+            parse_placement(d["world_to_base"], units, "world_to_base")
+            if "world_to_base" in d
+            else IDENTITY
+        )
         style = d.get("geometry", "cpc")
         if style not in ("cpc", "dh"):
             raise ValueError(f"'geometry' must be 'cpc' or 'dh', got {style!r}")
@@ -274,7 +307,9 @@ def spec_from_json(doc: Any, source: str = "<spec>") -> RobotSpec:
             names = list(structure.joint_names) + list(structure.frame_names)
             lacking = [n for n, ok in zip(names, given, strict=True) if not ok]
             if lacking:
-                raise ValueError(f"nominal geometry is given for some joints/frames but not for {lacking}")
+                raise ValueError(
+                    f"nominal geometry is given for some joints/frames but not for {lacking}"
+                )
             if style == "dh":
                 nominal = _nominal_from_dh(structure, geo_j, geo_f, units, T_wb)
             else:

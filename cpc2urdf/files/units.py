@@ -19,9 +19,7 @@ class Units:
 
     def __init__(self, length: str = "m", angle: str = "rad") -> None:
         if length not in LENGTH_UNITS:
-            raise ValueError(
-                f"units.length must be one of {sorted(LENGTH_UNITS)}, got {length!r}"
-            )
+            raise ValueError(f"units.length must be one of {sorted(LENGTH_UNITS)}, got {length!r}")
         if angle not in ANGLE_UNITS:
             raise ValueError(f"units.angle must be one of {sorted(ANGLE_UNITS)}, got {angle!r}")
         self.length_name = length
@@ -39,10 +37,14 @@ class Units:
         if obj is None:
             return cls()
         if not isinstance(obj, Mapping):
-            raise ValueError(f"units must be an object like {{'length': 'm', 'angle': 'rad'}}, got {obj!r}")
+            raise ValueError(
+                f"units must be an object like {{'length': 'm', 'angle': 'rad'}}, got {obj!r}"
+            )
         unknown = set(obj) - {"length", "angle"}
         if unknown:
-            raise ValueError(f"units has unknown keys {sorted(unknown)}; expected 'length' and 'angle'")
+            raise ValueError(
+                f"units has unknown keys {sorted(unknown)}; expected 'length' and 'angle'"
+            )
         return cls(str(obj.get("length", "m")), str(obj.get("angle", "rad")))
 
     def to_json(self) -> dict[str, str]:

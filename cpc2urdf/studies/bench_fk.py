@@ -22,7 +22,9 @@ from cpc2urdf.argparsing import OneLineParser
 R = TypeVar("R")  # what a timed function returns
 
 
-def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5, seed: int = 0) -> dict[str, float]:
+def run_benchmark(
+    model_name: str = "iis_head", n: int = 20000, repeat: int = 5, seed: int = 0
+) -> dict[str, float]:
     """Time both FKs; returns configurations per second and the agreement.
 
     Args:
@@ -81,7 +83,11 @@ def run_benchmark(model_name: str = "iis_head", n: int = 20000, repeat: int = 5,
 
 
 def main(argv: list[str]) -> int:
-    p = OneLineParser(prog="cpc2urdf bench fk", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(
+        prog="cpc2urdf bench fk",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--model", default="iis_head")
     p.add_argument("--configurations", type=int, default=20000)
     p.add_argument("--repeat", type=int, default=5)
@@ -93,7 +99,9 @@ def main(argv: list[str]) -> int:
     if args.json:
         print(json.dumps(r, indent=2))
     else:
-        print(f"forward kinematics of {int(r['frames'])} frames, {int(r['configurations'])} configurations (best of {args.repeat}):")
+        print(
+            f"forward kinematics of {int(r['frames'])} frames, {int(r['configurations'])} configurations (best of {args.repeat}):"
+        )
         print(f"  CPC vectorised (numpy)   {r['cpc_vectorised_per_s']:12,.0f} configurations/s")
         print(f"  Pinocchio loop (python)  {r['pinocchio_loop_per_s']:12,.0f} configurations/s")
         print(f"  ratio                    {r['speedup']:12.1f}x")

@@ -93,7 +93,11 @@ REAL_HEADS = {
     "tiago": ("tiago_description/robots/tiago.urdf", ("xtion_rgb_optical_frame",)),
     "talos": ("talos_data/robots/talos_reduced.urdf", ("rgbd_rgb_optical_frame",)),
 }
-HEADS = ("nominal", "calibrated", *REAL_HEADS)  # nominal: the IIS-head; calibrated: calibrated_iis_head(seed)
+HEADS = (
+    "nominal",
+    "calibrated",
+    *REAL_HEADS,
+)  # nominal: the IIS-head; calibrated: calibrated_iis_head(seed)
 TRACK_DT = 1e-3  # [s]: the tracking loop's period
 TRACK_DEADLINE = TRACK_DT  # [s]: a tracking step must end within its period
 TRACK_RADIUS = 0.05  # [m]: the tracked target circles this far about a reachable target
@@ -174,7 +178,10 @@ def _solve_times(
 
 
 def _after_ours(
-    solver: GazeSolver, P: Array, reference: Callable[[Array], Any], check: Callable[[Array, Any], Any]
+    solver: GazeSolver,
+    P: Array,
+    reference: Callable[[Array], Any],
+    check: Callable[[Array, Any], Any],
 ) -> tuple[Array, Array, list[Any]]:
     """Every target of ``P`` solved by us, then at once by ``reference`` (``p -> answer``), whose
     answer ``check(p, answer)`` judges untimed before the next target (so both see the same
@@ -289,7 +296,9 @@ def _placo_run(solver: GazeSolver, axes: SolvedAxes, P: Array) -> dict[str, Any]
         "placo_median_us": float(np.median(times) * 1e6),
         "placo_steps_median": float(np.median(steps)),
         "placo_ratio": float(np.median(times) / np.median(ours)),
-        "placo_core_median_us": float(np.median(core) * 1e6),  # in placo's own calls: QP steps, kinematics
+        "placo_core_median_us": float(
+            np.median(core) * 1e6
+        ),  # in placo's own calls: QP steps, kinematics
         "placo_core_ratio": float(np.median(core) / np.median(ours)),
         **placo_summary(errors),
     }
@@ -309,7 +318,9 @@ def _batch_throughput(solver: GazeSolver, P: Array, repeats: int = 7) -> tuple[f
     return float(P.shape[0] / best), path
 
 
-def tracking_targets(lower: Array, upper: Array, P: Array, Q: Array, seconds: float, dt: float = TRACK_DT) -> Array:
+def tracking_targets(
+    lower: Array, upper: Array, P: Array, Q: Array, seconds: float, dt: float = TRACK_DT
+) -> Array:
     """A 1 kHz target trajectory through reachable targets ``P`` (world) [m], shape (T, 3): it
     circles (:data:`TRACK_RADIUS`, one turn per second) about one of them, and every
     :data:`TRACK_HOLD` s jumps to circle about the next, so that saccades start.
@@ -385,13 +396,22 @@ def _real_urdf(name: str) -> tuple[str, tuple[str, ...]]:
     from cpc2urdf.errors import InputFileError
 
     rel, cams = REAL_HEADS[name]
-    path = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots" / rel
+    path = (
+        Path(sysconfig.get_paths()["purelib"])
+        / "cmeel.prefix/share/example-robot-data/robots"
+        / rel
+    )
     if not path.is_file():
-        raise InputFileError(path, f"no such file (head {name!r} needs example-robot-data: pip install example-robot-data)")
+        raise InputFileError(
+            path,
+            f"no such file (head {name!r} needs example-robot-data: pip install example-robot-data)",
+        )
     return str(path), cams
 
 
-def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()) -> BenchHead:
+def bench_head(
+    name: str, seed: int = 0, urdf: str | None = None, cameras: tuple[str, ...] = ()
+) -> BenchHead:
     """The head ``name`` (:data:`HEADS`), or with ``urdf`` any URDF and its ``cameras``."""
     from cpc2urdf.files.robot_ref import load_model
     from cpc2urdf.urdf.pinocchio import PinocchioRobot
@@ -405,7 +425,9 @@ def bench_head(name: str, seed: int = 0, urdf: str | None = None, cameras: tuple
         return BenchHead(name, GazeSolver.from_model(model), model)
     if name in REAL_HEADS:
         path, cams = _real_urdf(name)
-        return BenchHead(name, GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams))
+        return BenchHead(
+            name, GazeSolver(PinocchioRobot.from_urdf(path, continuous_as_revolute=True), cams)
+        )
     from cpc2urdf.errors import ConfigurationError
 
     raise ConfigurationError(f"unknown head {name!r}; expected one of {', '.join(HEADS)}")
@@ -431,7 +453,11 @@ def run_head(
         U = unreachable_targets(head.model, unreachable, seed) if unreachable else np.zeros((0, 3))
     else:
         P, Q = generic_reachable_targets(axes, n, seed)
-        U = generic_unreachable_targets(solver, unreachable, seed) if unreachable else np.zeros((0, 3))
+        U = (
+            generic_unreachable_targets(solver, unreachable, seed)
+            if unreachable
+            else np.zeros((0, 3))
+        )
     solver.solve(P[0])  # warm up: first-call costs (caches, compiled code)
     solve_batch(solver, P[:2])
     kin = kinematics_timer(solver, seed=seed)
@@ -443,9 +469,14 @@ def run_head(
     placo = _placo_run(solver, axes, P[:m_ref])
     rate, path = _batch_throughput(solver, np.concatenate([P, U]))
     # every head shape tracks (one camera and rigid pairs through the chain's FK); centres for the tracked target: a pool of TRACK_POOL reachable targets at least
-    Pt, Qt = (P, Q) if n >= TRACK_POOL else (
-        reachable_targets(head.model, TRACK_POOL, seed + 1) if head.model is not None
-        else generic_reachable_targets(axes, TRACK_POOL, seed + 1)
+    Pt, Qt = (
+        (P, Q)
+        if n >= TRACK_POOL
+        else (
+            reachable_targets(head.model, TRACK_POOL, seed + 1)
+            if head.model is not None
+            else generic_reachable_targets(axes, TRACK_POOL, seed + 1)
+        )
     )
     ttimes, tcpu, n_saccade, track_err = _tracking_step_times(
         solver, tracking_targets(solver.lower, solver.upper, Pt, Qt, track_seconds)
@@ -473,7 +504,9 @@ def run_head(
     kin_us = float(np.median(kin_times) * 1e6)
     median_us = float(np.median(times) * 1e6)
     p99_us = float(np.percentile(times, 99) * 1e6)
-    u_median = float(np.median(utimes) * 1e6) if utimes.size else None  # None: no unreachable targets
+    u_median = (
+        float(np.median(utimes) * 1e6) if utimes.size else None
+    )  # None: no unreachable targets
     disparity = float(np.mean(statuses == "disparity"))
     r: dict[str, Any] = {
         "kind": str(solver.kind) if hasattr(solver, "kind") else "binocular",
@@ -498,7 +531,9 @@ def run_head(
         "reference_p99_us": float(np.percentile(rtimes, 99) * 1e6),
         "reference_success": float(rok.mean()),
         "ratio": float(np.median(rtimes) / np.median(otimes)),  # same targets, interleaved
-        "after_reference_median_us": float(np.median(otimes) * 1e6),  # ours, each right after a scipy solve
+        "after_reference_median_us": float(
+            np.median(otimes) * 1e6
+        ),  # ours, each right after a scipy solve
         **blocks,
         **placo,
         "batch_targets": int(P.shape[0] + U.shape[0]),
@@ -579,7 +614,13 @@ def run_benchmark(
         is_urdf = urdf is not None and name == names[-1] and name not in heads
         head = bench_head(name, seed, urdf if is_urdf else None, cameras)
         results[name] = run_head(
-            head, n, seed, unreachable=unreachable, reference=reference, track_seconds=track_seconds, audit=audit
+            head,
+            n,
+            seed,
+            unreachable=unreachable,
+            reference=reference,
+            track_seconds=track_seconds,
+            audit=audit,
         )
     return results
 
@@ -604,7 +645,8 @@ def format_table(res: dict[str, Any]) -> str:
         success = r["success"] + r["disparity"]
         track = (
             f"{r['track_p99_us']:8.0f}us {r['track_cpu_p99_us']:6.0f}us {r['track_over_deadline']:8d}"
-            if "track_p99_us" in r else f"{'n/a':>10s} {'n/a':>8s} {'n/a':>8s}"
+            if "track_p99_us" in r
+            else f"{'n/a':>10s} {'n/a':>8s} {'n/a':>8s}"
         )
         missed = f"{r['audit_missed']}/{r['audit_unfixated']}" if r.get("audit_targets") else "n/a"
         lines.append(
@@ -653,26 +695,62 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.errors import ConfigurationError
 
     parser = OneLineParser(prog="cpc2urdf bench gaze", description=__doc__.split("\n")[0])
-    parser.add_argument("--targets", type=int, default=2000, help="reachable targets per head (default 2000)")
-    parser.add_argument("--unreachable", type=int, default=200, help="unreachable targets per head (default 200)")
-    parser.add_argument("--reference", type=int, default=300, help="targets the scipy reference solves (default 300)")
-    parser.add_argument("--track-seconds", type=float, default=4.0, help="length of the 1 kHz tracking run [s] (default 4)")
-    parser.add_argument("--heads", nargs="+", choices=HEADS, default=list(HEADS), help="heads (default all)")
-    parser.add_argument("--urdf", help="also this head (a URDF file; named by its file stem), with --camera")
-    parser.add_argument("--camera", nargs="+", default=[], metavar="FRAME", help="--urdf: its one or two camera frames")
-    parser.add_argument("--audit", type=int, default=1500,
-                        help="random targets per head whose unfixated answers are tried again from "
-                             f"{AUDIT_STARTS} random starts (default 1500; 0: none)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of targets and calibration errors")
+    parser.add_argument(
+        "--targets", type=int, default=2000, help="reachable targets per head (default 2000)"
+    )
+    parser.add_argument(
+        "--unreachable", type=int, default=200, help="unreachable targets per head (default 200)"
+    )
+    parser.add_argument(
+        "--reference",
+        type=int,
+        default=300,
+        help="targets the scipy reference solves (default 300)",
+    )
+    parser.add_argument(
+        "--track-seconds",
+        type=float,
+        default=4.0,
+        help="length of the 1 kHz tracking run [s] (default 4)",
+    )
+    parser.add_argument(
+        "--heads", nargs="+", choices=HEADS, default=list(HEADS), help="heads (default all)"
+    )
+    parser.add_argument(
+        "--urdf", help="also this head (a URDF file; named by its file stem), with --camera"
+    )
+    parser.add_argument(
+        "--camera",
+        nargs="+",
+        default=[],
+        metavar="FRAME",
+        help="--urdf: its one or two camera frames",
+    )
+    parser.add_argument(
+        "--audit",
+        type=int,
+        default=1500,
+        help="random targets per head whose unfixated answers are tried again from "
+        f"{AUDIT_STARTS} random starts (default 1500; 0: none)",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of targets and calibration errors"
+    )
     parser.add_argument("--json", help="also write the numbers to this JSON file")
     args = parser.parse_args(argv)
     check_outputs_are_not_inputs(args)
     if (args.urdf is None) != (not args.camera):
-        raise ConfigurationError("--urdf and --camera go together: a URDF file and its one or two camera frames")
+        raise ConfigurationError(
+            "--urdf and --camera go together: a URDF file and its one or two camera frames"
+        )
     if args.targets < 1 or args.reference < 1 or args.unreachable < 0 or args.audit < 0:
-        raise ConfigurationError("--targets and --reference must be at least 1, --unreachable and --audit at least 0")
+        raise ConfigurationError(
+            "--targets and --reference must be at least 1, --unreachable and --audit at least 0"
+        )
     if not (math.isfinite(args.track_seconds) and args.track_seconds >= TRACK_DT):
-        raise ConfigurationError(f"--track-seconds must be at least {TRACK_DT:g} s, got {args.track_seconds}")
+        raise ConfigurationError(
+            f"--track-seconds must be at least {TRACK_DT:g} s, got {args.track_seconds}"
+        )
     if args.json:
         from cpc2urdf.files.jsonio import check_output_path
 

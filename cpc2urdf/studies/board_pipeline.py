@@ -35,16 +35,41 @@ from cpc2urdf.identification.vision.image_folders import read_grey
 
 BOARDS: dict[str, dict[str, Any]] = {
     "chessboard 9 x 6, 20 mm": {"kind": "chessboard", "pattern_size": [9, 6], "square_size": 20},
-    "ChArUco 7 x 5, 30 mm": {"kind": "charuco", "squares": [7, 5], "square_size": 30, "marker_size": 22,
-                             "dictionary": "DICT_5X5_100"},
-    "asymmetric circles 4 x 11, 15 mm": {"kind": "asymmetric_circles", "pattern_size": [4, 11], "spacing": 15,
-                                         "circle_radius": 5},
-    "circles 7 x 5, 25 mm (up to 180 deg)": {"kind": "circles", "pattern_size": [7, 5], "spacing": 25,
-                                             "circle_radius": 7},
+    "ChArUco 7 x 5, 30 mm": {
+        "kind": "charuco",
+        "squares": [7, 5],
+        "square_size": 30,
+        "marker_size": 22,
+        "dictionary": "DICT_5X5_100",
+    },
+    "asymmetric circles 4 x 11, 15 mm": {
+        "kind": "asymmetric_circles",
+        "pattern_size": [4, 11],
+        "spacing": 15,
+        "circle_radius": 5,
+    },
+    "circles 7 x 5, 25 mm (up to 180 deg)": {
+        "kind": "circles",
+        "pattern_size": [7, 5],
+        "spacing": 25,
+        "circle_radius": 7,
+    },
 }
-PLATE = {"kind": "charuco", "squares": [4, 4], "square_size": 40, "marker_size": 30, "dictionary": "DICT_4X4_50",
-         "margin": 10}
-RIG_BOARD = {"kind": "charuco", "squares": [9, 7], "square_size": 40, "marker_size": 30, "dictionary": "DICT_5X5_100"}
+PLATE = {
+    "kind": "charuco",
+    "squares": [4, 4],
+    "square_size": 40,
+    "marker_size": 30,
+    "dictionary": "DICT_4X4_50",
+    "margin": 10,
+}
+RIG_BOARD = {
+    "kind": "charuco",
+    "squares": [9, 7],
+    "square_size": 40,
+    "marker_size": 30,
+    "dictionary": "DICT_5X5_100",
+}
 
 
 def _board(doc: dict[str, Any], name: str, **extra: Any) -> Any:
@@ -70,21 +95,41 @@ def _single_camera(views: int, seed: int) -> list[dict[str, Any]]:
         poses = random_board_poses([view], b, views, rng, distance=(0.35, 0.6))
         res, errs, pred, maha = [], [], [], []
         for T in poses:
-            r = board_pose(render_board_view(view, [(b, T)], blur_sigma=0.7, noise_sigma=2.0, rng=rng), K, D, b,
-                           allow_symmetric=True)
+            r = board_pose(
+                render_board_view(view, [(b, T)], blur_sigma=0.7, noise_sigma=2.0, rng=rng),
+                K,
+                D,
+                b,
+                allow_symmetric=True,
+            )
             if isinstance(r, Exception):
                 continue
             Te = r.T_camera_board
             truth = view.project(b.object_points() @ T[:3, :3].T + T[:3, 3])
             if b.pose_ambiguity:  # symmetric grid: the nearer of the two equal fits, nearest points
                 flip = Te @ np.diag([-1.0, -1.0, 1.0, 1.0])
-                rv = [np.linalg.norm(Rotation.from_matrix(X[:3, :3] @ T[:3, :3].T).as_rotvec()) for X in (Te, flip)]
+                rv = [
+                    np.linalg.norm(Rotation.from_matrix(X[:3, :3] @ T[:3, :3].T).as_rotvec())
+                    for X in (Te, flip)
+                ]
                 Te = flip if rv[1] < rv[0] else Te
-                res.append(r.uv - truth[np.argmin(((r.uv[:, None] - truth[None]) ** 2).sum(-1), axis=1)])
+                res.append(
+                    r.uv - truth[np.argmin(((r.uv[:, None] - truth[None]) ** 2).sum(-1), axis=1)]
+                )
             else:
                 res.append(r.uv - truth[r.ids])
-            errs.append((T, np.concatenate([Rotation.from_matrix(Te[:3, :3] @ T[:3, :3].T).as_rotvec(), Te[:3, 3] - T[:3, 3]]),
-                         r.ids))
+            errs.append(
+                (
+                    T,
+                    np.concatenate(
+                        [
+                            Rotation.from_matrix(Te[:3, :3] @ T[:3, :3].T).as_rotvec(),
+                            Te[:3, 3] - T[:3, 3],
+                        ]
+                    ),
+                    r.ids,
+                )
+            )
         sigma = float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
         for T, e, ids in errs:
             C = pnp_pose_covariance(K, D, T, b.object_points()[ids], sigma)
@@ -92,12 +137,18 @@ def _single_camera(views: int, seed: int) -> list[dict[str, Any]]:
             maha.append(float(e @ np.linalg.solve(C, e)) / 6)
         E = np.array([e for _, e, _ in errs])
         P = np.array(pred)
-        rows.append({"board": name, "views": len(errs), "sigma_px": sigma,
-                     "pos_rms_mm": float(np.sqrt(np.mean(np.sum(E[:, 3:] ** 2, 1)))) * 1e3,
-                     "pred_pos_rms_mm": float(np.sqrt(np.mean(P[:, 1]))) * 1e3,
-                     "rot_rms_deg": float(np.degrees(np.sqrt(np.mean(np.sum(E[:, :3] ** 2, 1))))),
-                     "pred_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(P[:, 0])))),
-                     "maha": float(np.mean(maha))})
+        rows.append(
+            {
+                "board": name,
+                "views": len(errs),
+                "sigma_px": sigma,
+                "pos_rms_mm": float(np.sqrt(np.mean(np.sum(E[:, 3:] ** 2, 1)))) * 1e3,
+                "pred_pos_rms_mm": float(np.sqrt(np.mean(P[:, 1]))) * 1e3,
+                "rot_rms_deg": float(np.degrees(np.sqrt(np.mean(np.sum(E[:, :3] ** 2, 1))))),
+                "pred_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(P[:, 0])))),
+                "maha": float(np.mean(maha)),
+            }
+        )
     return rows
 
 
@@ -110,8 +161,16 @@ def _camera_calibration(tmp: Path, views: int, seed: int) -> dict[str, Any]:
     b = _board(BOARDS["ChArUco 7 x 5, 30 mm"], "charuco")
     render_board_calibration(tmp / "cam", b, camera=cam, n_views=views, seed=seed)
     c = calibrate_camera_images(tmp / "cam", b)
-    err = np.array([c.K[0, 0] - cam.fx, c.K[1, 1] - cam.fy, c.K[0, 2] - cam.cx, c.K[1, 2] - cam.cy,
-                    c.D[0] - cam.dist[0], c.D[1] - cam.dist[1]])
+    err = np.array(
+        [
+            c.K[0, 0] - cam.fx,
+            c.K[1, 1] - cam.fy,
+            c.K[0, 2] - cam.cx,
+            c.K[1, 2] - cam.cy,
+            c.D[0] - cam.dist[0],
+            c.D[1] - cam.dist[1],
+        ]
+    )
     return {"views": len(c.view_rms), "rms": c.rms, "err": err, "std": c.std_intrinsics[:6]}
 
 
@@ -145,17 +204,42 @@ def _rig_calibration(tmp: Path, views: int, seed: int) -> dict[str, Any]:
             uv = rig.project(P @ Ti[:3, :3].T + Ti[:3, 3])
             obj.append(P.astype(np.float32).reshape(-1, 1, 3))
             for k in range(2):
-                pts[k].append((uv[k] + rng.normal(0, sigma, uv[k].shape)).astype(np.float32).reshape(-1, 1, 2))
-        mono = [cv2.calibrateCamera(obj, p, rig.image_size, np.eye(3), np.zeros(5), flags=cv2.CALIB_FIX_K3)[1:3] for p in pts]
-        r = cv2.stereoCalibrate(obj, pts[0], pts[1], mono[0][0], mono[0][1], mono[1][0], mono[1][1], rig.image_size,
-                                np.eye(3), np.zeros((3, 1)), flags=cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3)
+                pts[k].append(
+                    (uv[k] + rng.normal(0, sigma, uv[k].shape)).astype(np.float32).reshape(-1, 1, 2)
+                )
+        mono = [
+            cv2.calibrateCamera(
+                obj, p, rig.image_size, np.eye(3), np.zeros(5), flags=cv2.CALIB_FIX_K3
+            )[1:3]
+            for p in pts
+        ]
+        r = cv2.stereoCalibrate(
+            obj,
+            pts[0],
+            pts[1],
+            mono[0][0],
+            mono[0][1],
+            mono[1][0],
+            mono[1][1],
+            rig.image_size,
+            np.eye(3),
+            np.zeros((3, 1)),
+            flags=cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3,
+        )
         dt.append(np.linalg.norm(np.asarray(r[6]).ravel() - rig.T))
         dr.append(np.linalg.norm(Rotation.from_matrix(np.asarray(r[5]) @ rig.R.T).as_rotvec()))
-    return {"views": len(cal.view_rms), "rms": cal.rms, "sigma": sigma,
-            "err_t_mm": float(np.linalg.norm(cal.rig.T - rig.T)) * 1e3,
-            "err_r_deg": float(np.degrees(np.linalg.norm(Rotation.from_matrix(cal.rig.R @ rig.R.T).as_rotvec()))),
-            "mc_t_mm": float(np.sqrt(np.mean(np.square(dt)))) * 1e3, "mc_r_deg": float(np.degrees(np.sqrt(np.mean(np.square(dr))))),
-            "outliers": cal.outliers}
+    return {
+        "views": len(cal.view_rms),
+        "rms": cal.rms,
+        "sigma": sigma,
+        "err_t_mm": float(np.linalg.norm(cal.rig.T - rig.T)) * 1e3,
+        "err_r_deg": float(
+            np.degrees(np.linalg.norm(Rotation.from_matrix(cal.rig.R @ rig.R.T).as_rotvec()))
+        ),
+        "mc_t_mm": float(np.sqrt(np.mean(np.square(dt)))) * 1e3,
+        "mc_r_deg": float(np.degrees(np.sqrt(np.mean(np.square(dr))))),
+        "outliers": cal.outliers,
+    }
 
 
 def _stage1(tmp: Path, M: int, seed: int) -> dict[str, Any]:
@@ -168,7 +252,10 @@ def _stage1(tmp: Path, M: int, seed: int) -> dict[str, Any]:
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
     from cpc2urdf.validation.heldout import accuracy
 
-    boards = {"plate_left": _board(PLATE, "left", first_marker_id=0), "plate_right": _board(PLATE, "right", first_marker_id=8)}
+    boards = {
+        "plate_left": _board(PLATE, "left", first_marker_id=0),
+        "plate_right": _board(PLATE, "right", first_marker_id=8),
+    }
     exp = render_board_experiment(tmp / "stage1", boards, M=M, n_heldout=30, seed=seed)
     s = exp.truth.structure
     meas = measure_stereo_images(tmp / "stage1", exp.rig, s, boards=boards)
@@ -182,7 +269,9 @@ def _stage1(tmp: Path, M: int, seed: int) -> dict[str, Any]:
                 r = board_pose(img, *((rig.K1, rig.D1) if k == 0 else (rig.K2, rig.D2)), b)
                 if not isinstance(r, Exception):
                     T = exp.measured.poses[f][i]
-                    res.append(r.uv - rig.project(b.object_points()[r.ids] @ T[:3, :3].T + T[:3, 3])[k])
+                    res.append(
+                        r.uv - rig.project(b.object_points()[r.ids] @ T[:3, :3].T + T[:3, 3])[k]
+                    )
     sigma = float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
 
     def score(m: MeasurementSet) -> dict[str, float]:
@@ -201,9 +290,15 @@ def _stage1(tmp: Path, M: int, seed: int) -> dict[str, Any]:
             P[~ms.has_pose(f)] = np.nan
             poses[f] = P
         ref.append(score(MeasurementSet(s, ms.q, poses, labels=ms.labels)))
-    return {"records": exp.measured.n_records, "measured": ms.n_records, "skipped": len(meas.problems), "sigma": sigma,
-            "from_images": from_images, "ref": ref,
-            "plates": {f: int(ms.has_pose(f).sum()) for f in boards}}
+    return {
+        "records": exp.measured.n_records,
+        "measured": ms.n_records,
+        "skipped": len(meas.problems),
+        "sigma": sigma,
+        "from_images": from_images,
+        "ref": ref,
+        "plates": {f: int(ms.has_pose(f).sum()) for f in boards},
+    }
 
 
 def _stage2(tmp: Path, n_poses: int, seed: int) -> dict[str, Any]:
@@ -230,18 +325,25 @@ def _stage2(tmp: Path, n_poses: int, seed: int) -> dict[str, Any]:
     intr = DEFAULT_INTRINSICS
     cameras = ("camera_left_optical", "camera_right_optical")
     cams = {c: HeadCamera(intr.K, intr.D, (intr.width, intr.height)) for c in cameras}
-    obs = stage2_observations(measure_head_images(tmp / "head", cams, truth.structure, board=b), cams)
+    obs = stage2_observations(
+        measure_head_images(tmp / "head", cams, truth.structure, board=b), cams
+    )
     model, _ = calibrate_cameras(truth.without_frames(["camera"]), obs, "tsai")
     from_images = camera_errors(model, truth, list(cameras))
     T_bt = np.array(json.loads((tmp / "head" / "target_truth.json").read_text())["T_base_target"])
-    C = {c: inverse(inverse(truth.T_world_base())[None] @ truth.fk_frame(c, obs.q)) @ T_bt for c in cameras}
+    C = {
+        c: inverse(inverse(truth.T_world_base())[None] @ truth.fk_frame(c, obs.q)) @ T_bt
+        for c in cameras
+    }
     P = b.object_points()
     res = []
     for c in cameras:
         for i, Ci in enumerate(C[c]):
             r = board_pose(read_grey(tmp / "head" / c / f"{i:04d}.png"), intr.K, intr.D, b)
             if not isinstance(r, Exception):
-                uv, _ = cv2.projectPoints(P[r.ids], cv2.Rodrigues(Ci[:3, :3])[0], Ci[:3, 3], intr.K, intr.D)
+                uv, _ = cv2.projectPoints(
+                    P[r.ids], cv2.Rodrigues(Ci[:3, :3])[0], Ci[:3, 3], intr.K, intr.D
+                )
                 res.append(r.uv - uv.reshape(-1, 2))
     sigma = float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
     ref = []
@@ -251,11 +353,23 @@ def _stage2(tmp: Path, n_poses: int, seed: int) -> dict[str, Any]:
         for c in cameras:
             Ts = []
             for Ci in C[c]:
-                uv, _ = cv2.projectPoints(P, cv2.Rodrigues(Ci[:3, :3])[0], Ci[:3, 3], intr.K, intr.D)
-                Ts.append(_solve(P, uv.reshape(-1, 2) + rk.normal(0.0, sigma, (len(P), 2)), intr.K, intr.D)[0])
+                uv, _ = cv2.projectPoints(
+                    P, cv2.Rodrigues(Ci[:3, :3])[0], Ci[:3, 3], intr.K, intr.D
+                )
+                Ts.append(
+                    _solve(
+                        P, uv.reshape(-1, 2) + rk.normal(0.0, sigma, (len(P), 2)), intr.K, intr.D
+                    )[0]
+                )
             poses[c] = np.array(Ts)
         o = Stage2Observations(obs.q, poses, {}, intr, sigma, T_bt)
-        ref.append(camera_errors(calibrate_cameras(truth.without_frames(["camera"]), o, "tsai")[0], truth, list(cameras)))
+        ref.append(
+            camera_errors(
+                calibrate_cameras(truth.without_frames(["camera"]), o, "tsai")[0],
+                truth,
+                list(cameras),
+            )
+        )
     return {"poses": len(obs.q), "sigma": sigma, "from_images": from_images, "ref": ref}
 
 
@@ -282,8 +396,10 @@ def run_study(*, views: int = 16, M: int = 3, seed: int = 0) -> dict[str, Any]:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in single:
-        md.append(f"| {r['board']} | {r['views']} | {r['sigma_px']:.4f} | {r['pos_rms_mm']:.4f} | {r['pred_pos_rms_mm']:.4f} | "
-                  f"{r['rot_rms_deg']:.4f} | {r['pred_rot_rms_deg']:.4f} | {r['maha']:.2f} |")
+        md.append(
+            f"| {r['board']} | {r['views']} | {r['sigma_px']:.4f} | {r['pos_rms_mm']:.4f} | {r['pred_pos_rms_mm']:.4f} | "
+            f"{r['rot_rms_deg']:.4f} | {r['pred_rot_rms_deg']:.4f} | {r['maha']:.2f} |"
+        )
     names = ("fx", "fy", "cx", "cy", "k1", "k2")
     md += [
         "",
@@ -324,10 +440,19 @@ def run_study(*, views: int = 16, M: int = 3, seed: int = 0) -> dict[str, Any]:
     for c, (t, r) in st2["from_images"].items():
         ts = [x[c][0] * 1e3 for x in st2["ref"]]
         rs = [np.degrees(x[c][1]) for x in st2["ref"]]
-        md.append(f"| {c} | {t * 1e3:.3f}, {np.degrees(r):.4f} | {np.median(ts):.3f}, {np.median(rs):.4f} | "
-                  f"{min(ts):.3f} - {max(ts):.3f} |")
+        md.append(
+            f"| {c} | {t * 1e3:.3f}, {np.degrees(r):.4f} | {np.median(ts):.3f}, {np.median(rs):.4f} | "
+            f"{min(ts):.3f} - {max(ts):.3f} |"
+        )
     md.append("")
-    return {"single": single, "camera": cam, "rig": rig, "stage1": st1, "stage2": st2, "md": "\n".join(md)}
+    return {
+        "single": single,
+        "camera": cam,
+        "rig": rig,
+        "stage1": st1,
+        "stage2": st2,
+        "md": "\n".join(md),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -335,13 +460,24 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import make_folder, write_atomic
 
-    parser = OneLineParser(prog="cpc2urdf study boards", description=__doc__,
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--views", type=int, default=16,
-                        help="views per board, camera-calibration views and stage-2 configurations (default 16)")
-    parser.add_argument("--M", type=int, default=3, help="values per joint of the stage-1 experiment (default 3)")
+    parser = OneLineParser(
+        prog="cpc2urdf study boards",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--views",
+        type=int,
+        default=16,
+        help="views per board, camera-calibration views and stage-2 configurations (default 16)",
+    )
+    parser.add_argument(
+        "--M", type=int, default=3, help="values per joint of the stage-1 experiment (default 3)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--out", default="study_boards", help="output folder (default study_boards)")
+    parser.add_argument(
+        "--out", default="study_boards", help="output folder (default study_boards)"
+    )
     args = parser.parse_args(argv)
     if args.views < 6 or args.M < 2:
         raise ConfigurationError("--views must be >= 6 and --M >= 2")

@@ -57,13 +57,25 @@ if TYPE_CHECKING:  # the library is imported inside the functions (fast `cpc2urd
     from cpc2urdf.identification.kinematics.refine import RefinementResult
     from cpc2urdf.model import CPCModel
 
-ESTIMATORS = ("closed-form", "refined", "refined (rotation / sigma_r per axis)", "default: refined + consistency gate")
+ESTIMATORS = (
+    "closed-form",
+    "refined",
+    "refined (rotation / sigma_r per axis)",
+    "default: refined + consistency gate",
+)
 DEFAULT = ESTIMATORS[3]
 AT_BOUND = 1.10  # the issue's "within ~10 %"
 
 
-def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int, robot: str = "iis_head",
-              outliers: float = 0.0) -> dict[str, Any]:
+def run_trial(
+    seed: int,
+    M: int,
+    sigma_t: float,
+    sigma_r: float,
+    n_heldout: int,
+    robot: str = "iis_head",
+    outliers: float = 0.0,
+) -> dict[str, Any]:
     """One trial: errors of every estimator and the bound's predictions."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.kinematics.methods import identify
@@ -82,7 +94,9 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     angle = np.array([u == "rad" for u in chart.units])
     # Held-out prediction of the bound: trace(G C G^T) per configuration and plate.
     _, D = Parametrization(truth, frames).pose_jacobian(np.zeros(P), heldout.q)
-    pred_ms = float(np.mean([np.einsum("nip,pq,niq->n", D[f][:, :3], C, D[f][:, :3]) for f in frames]))
+    pred_ms = float(
+        np.mean([np.einsum("nip,pq,niq->n", D[f][:, :3], C, D[f][:, :3]) for f in frames])
+    )
 
     t0 = time.perf_counter()
     cf, _ = identify_closed_form(measured)
@@ -90,7 +104,9 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     t0 = time.perf_counter()
     ref = refine(cf, measured, sigma_t, sigma_r, warn=False)
     t_ref = time.perf_counter() - t0
-    ref_axis = refine(cf, measured, sigma_t, sigma_r * math.sqrt(3.0), warn=False)  # 1/sigma_r per axis
+    ref_axis = refine(
+        cf, measured, sigma_t, sigma_r * math.sqrt(3.0), warn=False
+    )  # 1/sigma_r per axis
     # The pipeline `cpc2urdf identify` runs by default (with its consistency gate), kept whatever
     # the gate says so that a false alarm would show here as a count, not as a missing trial.
     default = identify(measured, accept_inconsistent=True)
@@ -113,7 +129,9 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
     for name, model in zip(ESTIMATORS, (cf, ref.model, ref_axis.model, default), strict=True):
         e = chart.vector_from_model(model)
         T = model.fk(heldout.q, frames)
-        sq = np.concatenate([np.sum((T[f][:, :3, 3] - T_true[f][:, :3, 3]) ** 2, axis=1) for f in frames])
+        sq = np.concatenate(
+            [np.sum((T[f][:, :3, 3] - T_true[f][:, :3, 3]) ** 2, axis=1) for f in frames]
+        )
         out[name] = {
             "normalised": float(e @ F @ e / P),
             "sq_angle": float(np.mean(e[angle] ** 2)),
@@ -124,12 +142,19 @@ def run_trial(seed: int, M: int, sigma_t: float, sigma_r: float, n_heldout: int,
         }
     out["names"] = list(chart.names)
     if outliers > 0:
-        out["outliers"] = _outlier_trial(measured, cf, ref.model, heldout, T_true, frames, sigma_t, sigma_r, outliers, seed)
+        out["outliers"] = _outlier_trial(
+            measured, cf, ref.model, heldout, T_true, frames, sigma_t, sigma_r, outliers, seed
+        )
     return out
 
 
-def corrupt(measured: MeasurementSet, fraction: float, rng: np.random.Generator, shift: float = 10e-3,
-            angle: float = math.radians(5.0)) -> tuple[MeasurementSet, list[tuple[int, str]]]:
+def corrupt(
+    measured: MeasurementSet,
+    fraction: float,
+    rng: np.random.Generator,
+    shift: float = 10e-3,
+    angle: float = math.radians(5.0),
+) -> tuple[MeasurementSet, list[tuple[int, str]]]:
     """Mis-detected plates: ``shift`` [m] in a random direction and ``angle`` [rad] about a random
     axis on one random plate of ``round(fraction * N)`` random records (at least one)."""
     from scipy.spatial.transform import Rotation
@@ -145,17 +170,35 @@ def corrupt(measured: MeasurementSet, fraction: float, rng: np.random.Generator,
         f = frames[int(rng.integers(len(frames)))]
         u, w = rng.normal(size=3), rng.normal(size=3)
         poses[f][k, :3, 3] += shift * u / np.linalg.norm(u)
-        poses[f][k, :3, :3] = Rotation.from_rotvec(angle * w / np.linalg.norm(w)).as_matrix() @ poses[f][k, :3, :3]
+        poses[f][k, :3, :3] = (
+            Rotation.from_rotvec(angle * w / np.linalg.norm(w)).as_matrix() @ poses[f][k, :3, :3]
+        )
         hit.append((int(k), f))
-    dirty = MeasurementSet(measured.structure, measured.q, poses, measured.source, measured.robot,
-                           list(measured.labels), metadata=dict(measured.metadata))
+    dirty = MeasurementSet(
+        measured.structure,
+        measured.q,
+        poses,
+        measured.source,
+        measured.robot,
+        list(measured.labels),
+        metadata=dict(measured.metadata),
+    )
     dirty.spec = measured.spec
     return dirty, hit
 
 
-def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, heldout: MeasurementSet,
-                   T_true: dict[str, np.ndarray], frames: list[str], sigma_t: float, sigma_r: float,
-                   fraction: float, seed: int) -> dict[str, Any]:
+def _outlier_trial(
+    measured: MeasurementSet,
+    cf: CPCModel,
+    clean: CPCModel,
+    heldout: MeasurementSet,
+    T_true: dict[str, np.ndarray],
+    frames: list[str],
+    sigma_t: float,
+    sigma_r: float,
+    fraction: float,
+    seed: int,
+) -> dict[str, Any]:
     """Corrupt ``fraction`` of the records; robust refinement vs the clean refinement."""
     from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
@@ -166,8 +209,18 @@ def _outlier_trial(measured: MeasurementSet, cf: CPCModel, clean: CPCModel, held
 
     def held_rms(model: CPCModel) -> float:
         T = model.fk(heldout.q, frames)
-        return float(np.sqrt(np.mean(np.concatenate(
-            [np.sum((T[f][:, :3, 3] - T_true[f][:, :3, 3]) ** 2, axis=1) for f in frames]))))
+        return float(
+            np.sqrt(
+                np.mean(
+                    np.concatenate(
+                        [
+                            np.sum((T[f][:, :3, 3] - T_true[f][:, :3, 3]) ** 2, axis=1)
+                            for f in frames
+                        ]
+                    )
+                )
+            )
+        )
 
     try:
         start, start_name = identify_closed_form(dirty)[0], "closed form of the corrupted data"
@@ -253,8 +306,12 @@ def summarise(trials: list[dict[str, Any]]) -> dict[str, Any]:
             "robust_over_clean_mean": float(ratio.mean()),
             "robust_over_clean_max": float(ratio.max()),
             "within_1.2": f"{int(np.sum(ratio <= 1.2))}/{n}",
-            "plain_over_clean_mean": float(np.mean([x["plain_rms_mm"] / x["clean_rms_mm"] for x in o])),
-            "closed_form_dirty_over_clean_mean": float(np.mean([x["closed_form_dirty_rms_mm"] / x["clean_rms_mm"] for x in o])),
+            "plain_over_clean_mean": float(
+                np.mean([x["plain_rms_mm"] / x["clean_rms_mm"] for x in o])
+            ),
+            "closed_form_dirty_over_clean_mean": float(
+                np.mean([x["closed_form_dirty_rms_mm"] / x["clean_rms_mm"] for x in o])
+            ),
             "time_robust_ms": 1e3 * float(np.median([x["time_robust_s"] for x in o])),
             "default_refused": f"{sum(x['default_refused'] for x in o)}/{n}",
             "default_named_exactly": f"{sum(x['default_named_exactly'] for x in o)}/{n}",
@@ -271,9 +328,13 @@ def summarise(trials: list[dict[str, Any]]) -> dict[str, Any]:
         "monte_carlo_2sigma_of_ratio": mc,
         "time_closed_form_ms": 1e3 * float(np.median([t["time_closed_form_s"] for t in trials])),
         "time_refined_ms": 1e3 * float(np.median([t["time_refined_s"] for t in trials])),
-        "refined_variance_factor_mean": float(np.mean([t["refined_variance_factor"] for t in trials])),
+        "refined_variance_factor_mean": float(
+            np.mean([t["refined_variance_factor"] for t in trials])
+        ),
         "gate_passed_clean": f"{sum(t['gate_passed'] for t in trials)}/{n}",
-        "refined_own_prediction_rms_mm": math.sqrt(np.mean([t["refined_predicted_heldout_rms_mm"] ** 2 for t in trials])),
+        "refined_own_prediction_rms_mm": math.sqrt(
+            np.mean([t["refined_predicted_heldout_rms_mm"] ** 2 for t in trials])
+        ),
     }
 
 
@@ -341,12 +402,20 @@ def plot(trials: list[dict[str, Any]], s: dict[str, Any], path: Path, setting: s
 
     P = s["n_params"]
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
-    top = max(3.0, float(np.percentile([t["closed-form"]["normalised"] for t in trials], 98)) * 1.05)
+    top = max(
+        3.0, float(np.percentile([t["closed-form"]["normalised"] for t in trials], 98)) * 1.05
+    )
     x = np.linspace(0.0, top, 400)
     for est, color in zip(ESTIMATORS[:2], ("tab:red", "tab:blue"), strict=True):
         v = np.clip([t[est]["normalised"] for t in trials], 0.0, top)
-        ax[0].hist(v, bins=np.linspace(0, top, 41), density=True, alpha=0.5, color=color,
-                   label=f"{est} (RMS ratio {s['estimators'][est]['param_ratio']:.2f})")
+        ax[0].hist(
+            v,
+            bins=np.linspace(0, top, 41),
+            density=True,
+            alpha=0.5,
+            color=color,
+            label=f"{est} (RMS ratio {s['estimators'][est]['param_ratio']:.2f})",
+        )
     ax[0].plot(x, chi2.pdf(x * P, P) * P, "k-", lw=1.5, label="at the bound: χ²(P)/P")
     ax[0].set_xlabel("normalised parameter error e^T C^-1 e / P")
     ax[0].set_ylabel("density")
@@ -356,7 +425,13 @@ def plot(trials: list[dict[str, Any]], s: dict[str, Any], path: Path, setting: s
     for est, color, m in zip(ESTIMATORS[:2], ("tab:red", "tab:blue"), ("s", "o"), strict=True):
         o = np.sqrt([t[est]["heldout_ms"] for t in trials]) * 1e3
         ax[1].scatter(b, o, s=18, color=color, marker=m, label=est)
-    lim = [0.0, max(0.1, float(np.max([np.sqrt(t["closed-form"]["heldout_ms"]) * 1e3 for t in trials])) * 1.05)]
+    lim = [
+        0.0,
+        max(
+            0.1,
+            float(np.max([np.sqrt(t["closed-form"]["heldout_ms"]) * 1e3 for t in trials])) * 1.05,
+        ),
+    ]
     ax[1].plot(lim, lim, "k--", lw=1, label="observed = bound")
     ax[1].set_xlim(0, max(lim[1], float(b.max()) * 1.1))
     ax[1].set_ylim(lim)
@@ -377,28 +452,55 @@ def main(argv: list[str]) -> int:
 
     p = OneLineParser(prog="cpc2urdf study crb", description=__doc__.split("\n\n")[0])
     p.add_argument("--trials", type=int, default=50, help="seeded trials (default 50)")
-    p.add_argument("--M", type=int, default=9, help="measurements per joint (default 9, the paper's)")
-    p.add_argument("--sigma-mm", type=float, default=0.5, help="translation noise per entry [mm] (default 0.5)")
-    p.add_argument("--sigma-deg", type=float, default=0.5, help="rotation noise angle [deg] (default 0.5)")
+    p.add_argument(
+        "--M", type=int, default=9, help="measurements per joint (default 9, the paper's)"
+    )
+    p.add_argument(
+        "--sigma-mm", type=float, default=0.5, help="translation noise per entry [mm] (default 0.5)"
+    )
+    p.add_argument(
+        "--sigma-deg", type=float, default=0.5, help="rotation noise angle [deg] (default 0.5)"
+    )
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default 0)")
-    p.add_argument("--heldout", type=int, default=100, help="held-out configurations per trial (default 100)")
-    p.add_argument("--robot", default="iis_head", help="robot with nominal geometry (default iis_head)")
-    p.add_argument("--outliers", type=float, default=0.05,
-                   help="also corrupt this fraction of records (10 mm / 5 deg) and test robust mode; 0 to skip (default 0.05)")
+    p.add_argument(
+        "--heldout", type=int, default=100, help="held-out configurations per trial (default 100)"
+    )
+    p.add_argument(
+        "--robot", default="iis_head", help="robot with nominal geometry (default iis_head)"
+    )
+    p.add_argument(
+        "--outliers",
+        type=float,
+        default=0.05,
+        help="also corrupt this fraction of records (10 mm / 5 deg) and test robust mode; 0 to skip (default 0.05)",
+    )
     p.add_argument("--out", default="study_crb", help="output folder (default study_crb)")
     args = p.parse_args(argv)
-    if args.trials < 2 or args.M < 2 or args.heldout < 1 or not (args.sigma_mm > 0 and args.sigma_deg > 0):
+    if (
+        args.trials < 2
+        or args.M < 2
+        or args.heldout < 1
+        or not (args.sigma_mm > 0 and args.sigma_deg > 0)
+    ):
         raise Cpc2UrdfError("need --trials >= 2, --M >= 2, --heldout >= 1 and positive sigmas")
     if not 0.0 <= args.outliers < 0.5:
         raise Cpc2UrdfError(f"--outliers must be in [0, 0.5), got {args.outliers}")
     sigma_t, sigma_r = args.sigma_mm * 1e-3, math.radians(args.sigma_deg)
     from cpc2urdf.files.robot_ref import load_robot
 
-    load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
+    load_robot(
+        args.robot
+    ).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     trials = []
     for k in progress(range(args.trials), "crb"):
-        trials.append(run_trial(args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers))
-        if k == 0:  # a robot the study cannot simulate (e.g. no plate to measure) fails before --out exists
+        trials.append(
+            run_trial(
+                args.seed + k, args.M, sigma_t, sigma_r, args.heldout, args.robot, args.outliers
+            )
+        )
+        if (
+            k == 0
+        ):  # a robot the study cannot simulate (e.g. no plate to measure) fails before --out exists
             out = make_folder(args.out)
     s = summarise(trials)
     s["outlier_fraction"] = args.outliers

@@ -36,14 +36,21 @@ PAPER_TARGET = 1.0  # [mm]: "for the requirement of 1mm calibration accuracy"
 COMPARE_M, COMPARE_SIGMA = 9, 0.5  # the paper's choice of M, and its rig's accuracy [mm]
 
 
-def trial_error(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int) -> tuple[float, float]:
+def trial_error(
+    robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int
+) -> tuple[float, float]:
     """One simulate-identify-test run: (mean held-out positioning error [m], identification time [s])."""
     from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     truth, measured, heldout = simulate_experiment(
-        robot, seed=seed, M=M, noise="fig10" if sigma_mm > 0 else "none",
-        sigma_t=sigma_mm * 1e-3, sigma_r=math.radians(sigma_mm), n_heldout=n_heldout,
+        robot,
+        seed=seed,
+        M=M,
+        noise="fig10" if sigma_mm > 0 else "none",
+        sigma_t=sigma_mm * 1e-3,
+        sigma_r=math.radians(sigma_mm),
+        n_heldout=n_heldout,
     )
     start = time.perf_counter()
     model, _ = identify_closed_form(measured)
@@ -54,7 +61,9 @@ def trial_error(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int) 
     return float(np.mean(np.concatenate(errors))), elapsed
 
 
-def shared_vs_paper(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int) -> tuple[float, float]:
+def shared_vs_paper(
+    robot: str, seed: int, M: int, sigma_mm: float, n_heldout: int
+) -> tuple[float, float]:
     """Mean held-out error [m] of the tree model (one tilt axis, 32 parameters) and of the paper's
     eq. (15) model (one tilt axis frame per branch, ``l_3L`` and ``l_3R``: 34), same data."""
     from cpc2urdf.identification.kinematics.closed_form import (
@@ -64,7 +73,12 @@ def shared_vs_paper(robot: str, seed: int, M: int, sigma_mm: float, n_heldout: i
     from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 
     _, measured, heldout = simulate_experiment(
-        robot, seed=seed, M=M, noise="fig10", sigma_t=sigma_mm * 1e-3, sigma_r=math.radians(sigma_mm),
+        robot,
+        seed=seed,
+        M=M,
+        noise="fig10",
+        sigma_t=sigma_mm * 1e-3,
+        sigma_r=math.radians(sigma_mm),
         n_heldout=n_heldout,
     )
     tree, _ = identify_closed_form(measured)
@@ -97,19 +111,39 @@ def run_study(
             errs.append(e)
             times.append(dt)
         a = np.array(errs) * 1e3
-        rows.append({"sigma_mm": sigma, "M": M, "mean_mm": float(a.mean()), "std_mm": float(a.std()),
-                     "max_mm": float(a.max())})
-    reference = [trial_error(robot, seed + t, min(M_values), 0.0, n_heldout)[0] * 1e3 for t in range(trials)]
+        rows.append(
+            {
+                "sigma_mm": sigma,
+                "M": M,
+                "mean_mm": float(a.mean()),
+                "std_mm": float(a.std()),
+                "max_mm": float(a.max()),
+            }
+        )
+    reference = [
+        trial_error(robot, seed + t, min(M_values), 0.0, n_heldout)[0] * 1e3 for t in range(trials)
+    ]
     # 32 vs 34 parameters (docs/identification.md on l_3R): same data, the paper's M = 9, sigma = 0.5 mm.
-    pairs = np.array([shared_vs_paper(robot, seed + t, COMPARE_M, COMPARE_SIGMA, n_heldout)
-                      for t in range(max(trials, 20))]) * 1e3
+    pairs = (
+        np.array(
+            [
+                shared_vs_paper(robot, seed + t, COMPARE_M, COMPARE_SIGMA, n_heldout)
+                for t in range(max(trials, 20))
+            ]
+        )
+        * 1e3
+    )
     claim = [r for r in rows if r["sigma_mm"] <= PAPER_SIGMA_MAX and r["M"] >= PAPER_M_MIN]
     return {
         "rows": rows,
         "shared_vs_paper": {
-            "M": COMPARE_M, "sigma_mm": COMPARE_SIGMA, "trials": len(pairs),
-            "tree_32_mean_mm": float(pairs[:, 0].mean()), "tree_32_std_mm": float(pairs[:, 0].std()),
-            "paper_34_mean_mm": float(pairs[:, 1].mean()), "paper_34_std_mm": float(pairs[:, 1].std()),
+            "M": COMPARE_M,
+            "sigma_mm": COMPARE_SIGMA,
+            "trials": len(pairs),
+            "tree_32_mean_mm": float(pairs[:, 0].mean()),
+            "tree_32_std_mm": float(pairs[:, 0].std()),
+            "paper_34_mean_mm": float(pairs[:, 1].mean()),
+            "paper_34_std_mm": float(pairs[:, 1].std()),
             "tree_better_fraction": float(np.mean(pairs[:, 0] < pairs[:, 1])),
         },
         "reference_noise_free_max_mm": float(max(reference)),
@@ -140,15 +174,22 @@ def format_table(result: dict[str, Any]) -> str:
         "|---:|" + "---:|" * len(sigmas),
     ]
     for M in Ms:
-        lines.append(f"| {M} | " + " | ".join(
-            f"{cell[(s, M)]['mean_mm']:.3f} ± {cell[(s, M)]['std_mm']:.3f}" for s in sigmas) + " |")
+        lines.append(
+            f"| {M} | "
+            + " | ".join(
+                f"{cell[(s, M)]['mean_mm']:.3f} ± {cell[(s, M)]['std_mm']:.3f}" for s in sigmas
+            )
+            + " |"
+        )
     if not result["paper_claim_cells"]:
         verdict = f"cannot be checked (no cell with σ ≤ {PAPER_SIGMA_MAX} mm and M ≥ {PAPER_M_MIN})"
         worst = ""
     else:
         verdict = "holds here" if result["paper_claim_holds"] else "does NOT hold here"
-        worst = (f": worst mean error over those {result['paper_claim_cells']} cells is "
-                 f"{result['paper_claim_worst_mm']:.3f} mm")
+        worst = (
+            f": worst mean error over those {result['paper_claim_cells']} cells is "
+            f"{result['paper_claim_worst_mm']:.3f} mm"
+        )
     c = result["shared_vs_paper"]
     lines += [
         "",
@@ -177,8 +218,14 @@ def plot(result: dict[str, Any], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for s in sorted({r["sigma_mm"] for r in result["rows"]}):
         rs = [r for r in result["rows"] if r["sigma_mm"] == s]
-        ax.errorbar([r["M"] for r in rs], [r["mean_mm"] for r in rs], yerr=[r["std_mm"] for r in rs],
-                    marker="o", capsize=3, label=f"σ = {s:g} mm / {s:g}°")
+        ax.errorbar(
+            [r["M"] for r in rs],
+            [r["mean_mm"] for r in rs],
+            yerr=[r["std_mm"] for r in rs],
+            marker="o",
+            capsize=3,
+            label=f"σ = {s:g} mm / {s:g}°",
+        )
     ax.axhline(PAPER_TARGET, color="k", ls="--", lw=1, label="1 mm")
     ax.axvline(PAPER_M_MIN, color="grey", ls=":", lw=1)
     ax.set_xlabel("measurements per joint M")
@@ -204,12 +251,24 @@ def main(argv: list[str]) -> int:
     from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study fig11", description=__doc__.split("\n\n")[0])
-    p.add_argument("--M", default="2:15", help="measurements per joint: LO:HI or a,b,c (default 2:15)")
-    p.add_argument("--sigmas", default="0.1,0.25,0.5,1.0", help="noise levels [mm and deg] (default 0.1,0.25,0.5,1.0)")
-    p.add_argument("--trials", type=int, default=TRIALS, help="seeded trials per point (default 10)")
+    p.add_argument(
+        "--M", default="2:15", help="measurements per joint: LO:HI or a,b,c (default 2:15)"
+    )
+    p.add_argument(
+        "--sigmas",
+        default="0.1,0.25,0.5,1.0",
+        help="noise levels [mm and deg] (default 0.1,0.25,0.5,1.0)",
+    )
+    p.add_argument(
+        "--trials", type=int, default=TRIALS, help="seeded trials per point (default 10)"
+    )
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default 0)")
-    p.add_argument("--heldout", type=int, default=50, help="held-out configurations per trial (default 50)")
-    p.add_argument("--robot", default="iis_head", help="robot with nominal geometry (default iis_head)")
+    p.add_argument(
+        "--heldout", type=int, default=50, help="held-out configurations per trial (default 50)"
+    )
+    p.add_argument(
+        "--robot", default="iis_head", help="robot with nominal geometry (default iis_head)"
+    )
     p.add_argument("--out", default="study_fig11", help="output folder (default study_fig11)")
     args = p.parse_args(argv)
     try:
@@ -221,10 +280,18 @@ def main(argv: list[str]) -> int:
         raise Cpc2UrdfError("need M >= 2, --trials >= 1, --heldout >= 1 and sigmas >= 0")
     from cpc2urdf.files.robot_ref import load_robot
 
-    load_robot(args.robot).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
+    load_robot(
+        args.robot
+    ).nominal_model()  # a robot that is missing or has no nominal geometry: before --out
     out = make_folder(args.out)
-    result = run_study(M_values=M_values, sigmas_mm=sigmas, trials=args.trials, seed=args.seed,
-                       n_heldout=args.heldout, robot=args.robot)
+    result = run_study(
+        M_values=M_values,
+        sigmas_mm=sigmas,
+        trials=args.trials,
+        seed=args.seed,
+        n_heldout=args.heldout,
+        robot=args.robot,
+    )
     table = format_table(result)
     write_atomic(out / "fig11.md", table)
     write_json(out / "fig11.json", result)

@@ -70,6 +70,7 @@ def _timed(cmd: list[str], env: dict[str, str], cwd: Path) -> tuple[float, int, 
 def _background_compile(cache: Path, line: str, timeout: float = 600.0) -> float | None:
     """Seconds until the compiled solve is in ``cache`` after a first run that started compiling it
     in the background (its last line on stderr, ``line``, says so); None for any other run."""
+
     def done() -> bool:
         return any(cache.rglob("flat._solve_rows-*.nbi"))
 
@@ -87,8 +88,18 @@ def measure(names: list[str]) -> list[dict[str, Any]]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="cpc2urdf-first-use-") as tmp:
         work = Path(tmp)
-        export = [sys.executable, "-m", "cpc2urdf", "export", "iis_head", "-o", str(work / "head.urdf")]
-        subprocess.run(export, env=_env(work / "export-cache"), cwd=work, check=True, capture_output=True)
+        export = [
+            sys.executable,
+            "-m",
+            "cpc2urdf",
+            "export",
+            "iis_head",
+            "-o",
+            str(work / "head.urdf"),
+        ]
+        subprocess.run(
+            export, env=_env(work / "export-cache"), cwd=work, check=True, capture_output=True
+        )
         cmds = commands(work)
         for name in names:
             cache = work / f"cache-{name}"
@@ -98,19 +109,39 @@ def measure(names: list[str]) -> list[dict[str, Any]]:
             first, rc1, line = _timed(cmds[name], env, work)
             background = _background_compile(cache, line)
             second, rc2, _ = _timed(cmds[name], env, work)
-            rows.append({"command": name, "first_s": round(first, 2), "second_s": round(second, 2),
-                         "ratio": round(first / second, 2), "exit": [rc1, rc2], "load": round(load, 2),
-                         "background_compile_s": background, "line": line})
-            after = "" if background is None else f"compiled in the background {background:.0f} s later; "
-            print(f"{name:11s} first {first:6.1f} s  second {second:6.1f} s  ({first / second:4.1f}x)  "
-                  f"exit {rc1},{rc2}  load {load:.1f}  {after}{line}", flush=True)
+            rows.append(
+                {
+                    "command": name,
+                    "first_s": round(first, 2),
+                    "second_s": round(second, 2),
+                    "ratio": round(first / second, 2),
+                    "exit": [rc1, rc2],
+                    "load": round(load, 2),
+                    "background_compile_s": background,
+                    "line": line,
+                }
+            )
+            after = (
+                ""
+                if background is None
+                else f"compiled in the background {background:.0f} s later; "
+            )
+            print(
+                f"{name:11s} first {first:6.1f} s  second {second:6.1f} s  ({first / second:4.1f}x)  "
+                f"exit {rc1},{rc2}  load {load:.1f}  {after}{line}",
+                flush=True,
+            )
     return rows
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--commands", nargs="+", default=["gaze", "python", "check", "check-gaze"],
-                        choices=["gaze", "python", "check", "check-gaze"])
+    parser.add_argument(
+        "--commands",
+        nargs="+",
+        default=["gaze", "python", "check", "check-gaze"],
+        choices=["gaze", "python", "check", "check-gaze"],
+    )
     parser.add_argument("--json", help="also write the rows to this JSON file")
     args = parser.parse_args(argv)
     print(f"{os.cpu_count()} cores; NUMBA_CACHE_DIR empty before each command's first run")

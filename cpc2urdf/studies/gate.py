@@ -83,18 +83,22 @@ def poses_inverted(doc: Doc) -> Doc:
 
 def rotations_transposed(doc: Doc) -> Doc:
     """Rotation blocks written transposed (translations right)."""
+
     def tr(T: np.ndarray) -> dict[str, Any]:
         T = T.copy()
         T[:3, :3] = T[:3, :3].T
         return {"matrix": T.tolist()}
+
     return _matrices(doc, tr)
 
 
 def quaternion_wxyz(doc: Doc) -> Doc:
     """Quaternions written w, x, y, z in the ``quat_xyzw`` field."""
+
     def q(T: np.ndarray) -> dict[str, Any]:
         x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
         return {"xyz": T[:3, 3].tolist(), "quat_xyzw": [w, x, y, z]}
+
     return _matrices(doc, q)
 
 
@@ -111,8 +115,11 @@ def next_record_poses(doc: Doc) -> Doc:
 def noise_understated(doc: Doc, factor: float = 20.0) -> Doc:
     """A noise section ``factor`` times smaller than the data's noise."""
     d = copy.deepcopy(doc)
-    d["noise"] = {**d["noise"], "sigma_t_m": d["noise"]["sigma_t_m"] / factor,
-                  "sigma_r_rad": d["noise"]["sigma_r_rad"] / factor}
+    d["noise"] = {
+        **d["noise"],
+        "sigma_t_m": d["noise"]["sigma_t_m"] / factor,
+        "sigma_r_rad": d["noise"]["sigma_r_rad"] / factor,
+    }
     return d
 
 
@@ -151,14 +158,18 @@ def outliers(doc: Doc, fraction: float = 0.05, seed: int = 1) -> tuple[Doc, list
     d = copy.deepcopy(doc)
     rng = np.random.default_rng(seed)
     n = len(d["records"])
-    bad = sorted(int(k) for k in rng.choice(np.arange(1, n), size=max(1, round(fraction * n)), replace=False))
+    bad = sorted(
+        int(k) for k in rng.choice(np.arange(1, n), size=max(1, round(fraction * n)), replace=False)
+    )
     for k in bad:
         poses = d["records"][k]["poses"]
         f = sorted(poses)[int(rng.integers(len(poses)))]
         T = np.array(poses[f]["matrix"], dtype=float)
         u, w = rng.normal(size=3), rng.normal(size=3)
         T[:3, 3] += 10e-3 * u / np.linalg.norm(u)
-        T[:3, :3] = Rotation.from_rotvec(np.radians(5.0) * w / np.linalg.norm(w)).as_matrix() @ T[:3, :3]
+        T[:3, :3] = (
+            Rotation.from_rotvec(np.radians(5.0) * w / np.linalg.norm(w)).as_matrix() @ T[:3, :3]
+        )
         poses[f] = {"matrix": T.tolist()}
     return d, bad
 
@@ -219,17 +230,29 @@ def clean_trials(kind: str, seeds: range) -> dict[str, Any]:
     for seed in progress(seeds, kind):
         if kind.startswith("random"):
             rng = np.random.default_rng([seed, 11])
-            nominal = random_model(rng, int(rng.integers(1, 7)), serial=bool(rng.random() < 0.5), cameras=1)
+            nominal = random_model(
+                rng, int(rng.integers(1, 7)), serial=bool(rng.random() < 0.5), cameras=1
+            )
             noise = "none" if kind.endswith("noise-free") else "fig10"
             try:
-                _, ms, _ = simulate_experiment(nominal, seed=seed, n_heldout=0, noise=noise, require_view=False,
-                                               M=int(rng.integers(2, 8)))
+                _, ms, _ = simulate_experiment(
+                    nominal,
+                    seed=seed,
+                    n_heldout=0,
+                    noise=noise,
+                    require_view=False,
+                    M=int(rng.integers(2, 8)),
+                )
             except Cpc2UrdfError:
                 skipped += 1
                 continue
         else:
-            _, ms, _ = simulate_experiment("iis_head", seed=seed, n_heldout=0,
-                                           noise="stereo" if kind.endswith("stereo") else "fig10")
+            _, ms, _ = simulate_experiment(
+                "iis_head",
+                seed=seed,
+                n_heldout=0,
+                noise="stereo" if kind.endswith("stereo") else "fig10",
+            )
             ms.spec = head
             if "unstated" in kind:
                 ms.metadata.pop("noise", None)
@@ -240,8 +263,14 @@ def clean_trials(kind: str, seeds: range) -> dict[str, Any]:
         if not ok:
             failures.append({"seed": seed, "said": said})
     n = len(seeds) - skipped
-    return {"kind": kind, "trials": n, "passed": passed, "skipped": skipped, "failures": failures,
-            "median_time_s": float(np.median(seconds)) if seconds else None}
+    return {
+        "kind": kind,
+        "trials": n,
+        "passed": passed,
+        "skipped": skipped,
+        "failures": failures,
+        "median_time_s": float(np.median(seconds)) if seconds else None,
+    }
 
 
 def _diagnosis(e: Exception) -> Any:
@@ -252,23 +281,28 @@ def _diagnosis(e: Exception) -> Any:
 
 def _names_fix(fix: str) -> Callable[[Exception], bool]:
     """A refusal whose diagnosis is the fix ``fix``."""
+
     def right(e: Exception) -> bool:
         d = _diagnosis(e)
         return d is not None and d.key == fix
+
     return right
 
 
 def _names_records(records: list[int]) -> Callable[[Exception], bool]:
     """A refusal naming exactly ``records`` as outliers."""
+
     def right(e: Exception) -> bool:
         d = _diagnosis(e)
         return d is not None and d.kind == "outliers" and list(d.records) == records
+
     return right
 
 
 def _says(words: str) -> Callable[[Exception], bool]:
     def right(e: Exception) -> bool:
         return words in str(e)
+
     return right
 
 
@@ -309,13 +343,25 @@ def mistake_trials(seeds: range) -> dict[str, dict[str, Any]]:
 
 
 def format_table(clean: list[dict[str, Any]], mistakes: dict[str, dict[str, Any]]) -> str:
-    lines = ["# Stage-1 consistency gate", "", "## Clean data (passed / trials)", "",
-             "| data | passed | median time [ms] |", "|---|---|---|"]
+    lines = [
+        "# Stage-1 consistency gate",
+        "",
+        "## Clean data (passed / trials)",
+        "",
+        "| data | passed | median time [ms] |",
+        "|---|---|---|",
+    ]
     for c in clean:
         t = "" if c["median_time_s"] is None else f"{c['median_time_s'] * 1e3:.0f}"
         lines.append(f"| {c['kind']} | {c['passed']}/{c['trials']} | {t} |")
     if mistakes:
-        lines += ["", "## Mistakes (refused with the right cause named / trials)", "", "| mistake | named |", "|---|---|"]
+        lines += [
+            "",
+            "## Mistakes (refused with the right cause named / trials)",
+            "",
+            "| mistake | named |",
+            "|---|---|",
+        ]
         lines += [f"| {k} | {v['named']}/{v['trials']} |" for k, v in mistakes.items()]
     return "\n".join(lines) + "\n"
 
@@ -326,10 +372,27 @@ def main(argv: list[str]) -> int:
     from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study gate", description=__doc__.split("\n\n")[0])
-    p.add_argument("--trials", type=int, default=200, help="IIS-head trials with the noise stated (default 200)")
-    p.add_argument("--unstated", type=int, default=50, help="IIS-head trials without a noise statement (default 50)")
-    p.add_argument("--stereo", type=int, default=20, help="stereo-measured IIS-head trials (default 20)")
-    p.add_argument("--random", type=int, default=100, help="random-robot trials, noisy and noise-free each (default 100)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=200,
+        help="IIS-head trials with the noise stated (default 200)",
+    )
+    p.add_argument(
+        "--unstated",
+        type=int,
+        default=50,
+        help="IIS-head trials without a noise statement (default 50)",
+    )
+    p.add_argument(
+        "--stereo", type=int, default=20, help="stereo-measured IIS-head trials (default 20)"
+    )
+    p.add_argument(
+        "--random",
+        type=int,
+        default=100,
+        help="random-robot trials, noisy and noise-free each (default 100)",
+    )
     p.add_argument("--mistakes", type=int, default=5, help="trials per mistake (default 5)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--out", default="study_gate", help="output folder (default study_gate)")
@@ -338,13 +401,17 @@ def main(argv: list[str]) -> int:
         raise Cpc2UrdfError("trial counts must be >= 0")
     out = make_folder(args.out)
     s = args.seed
-    clean = [clean_trials(kind, range(s, s + n)) for kind, n in (
-        ("IIS-head, Fig. 10 noise stated", args.trials),
-        ("IIS-head, Fig. 10 noise unstated", args.unstated),
-        ("IIS-head, stereo", args.stereo),
-        ("random robots, Fig. 10 noise stated", args.random),
-        ("random robots, noise-free", args.random),
-    ) if n]
+    clean = [
+        clean_trials(kind, range(s, s + n))
+        for kind, n in (
+            ("IIS-head, Fig. 10 noise stated", args.trials),
+            ("IIS-head, Fig. 10 noise unstated", args.unstated),
+            ("IIS-head, stereo", args.stereo),
+            ("random robots, Fig. 10 noise stated", args.random),
+            ("random robots, noise-free", args.random),
+        )
+        if n
+    ]
     mistakes = mistake_trials(range(s, s + args.mistakes)) if args.mistakes else {}
     table = format_table(clean, mistakes)
     write_atomic(out / "gate.md", table)
@@ -354,4 +421,12 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-__all__ = ["DEGENERATE", "EXPECTED_FIX", "MISTAKES", "clean_trials", "main", "mistake_trials", "outliers"]
+__all__ = [
+    "DEGENERATE",
+    "EXPECTED_FIX",
+    "MISTAKES",
+    "clean_trials",
+    "main",
+    "mistake_trials",
+    "outliers",
+]

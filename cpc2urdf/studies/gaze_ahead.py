@@ -31,7 +31,9 @@ from cpc2urdf.transforms import Array
 CAMERAS = ("camera_left_optical", "camera_right_optical")
 CONE = math.radians(10.0)  # [rad]: half-angle of the cone of targets about the home cyclopean axis
 NEAR, FAR = 0.8, 3.0  # [m]: the targets' distances from the home cyclopean point
-MAX_DEVIATION = math.radians(5.0)  # [rad]: pan and tilt of the calibrated head's answer vs the nominal's
+MAX_DEVIATION = math.radians(
+    5.0
+)  # [rad]: pan and tilt of the calibrated head's answer vs the nominal's
 
 
 def demo_head(seed: int) -> CPCModel:
@@ -48,7 +50,9 @@ def demo_head(seed: int) -> CPCModel:
 def _axis_points(model: CPCModel, Q: Array) -> Array:
     """Each camera's centre and the point 0.5 m along its optical axis at readings ``Q`` (N, n)."""
     T = model.fk(Q, CAMERAS)
-    return np.concatenate([p for c in CAMERAS for p in (T[c][:, :3, 3], T[c][:, :3, 3] + 0.5 * T[c][:, :3, 2])])
+    return np.concatenate(
+        [p for c in CAMERAS for p in (T[c][:, :3, 3], T[c][:, :3, 3] + 0.5 * T[c][:, :3, 2])]
+    )
 
 
 def world_map(nominal: CPCModel, calibrated: CPCModel, n: int = 100, seed: int = 0) -> Array:
@@ -76,7 +80,9 @@ def targets_ahead(solver: Any, n: int = 30, seed: int = 0) -> Array:
     ang = CONE * np.sqrt(rng.uniform(0.0, 1.0, n))
     phi = rng.uniform(0.0, 2.0 * math.pi, n)
     dist = rng.uniform(NEAR, FAR, n)
-    d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y)
+    d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (
+        np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y
+    )
     return c + dist[:, None] * d  # type: ignore[no-any-return]
 
 
@@ -98,8 +104,12 @@ def ahead_deviation(calibrated: CPCModel, n: int = 30, seed: int = 0) -> dict[st
         status[b.status] += 1
         vergence.append(b.vergence)
     D = np.array(dev)
-    return {"pan": float(D[:, 0].max()), "tilt": float(D[:, 1].max()), "statuses": dict(status),
-            "vergence": (float(min(vergence)), float(max(vergence)))}
+    return {
+        "pan": float(D[:, 0].max()),
+        "tilt": float(D[:, 1].max()),
+        "statuses": dict(status),
+        "vergence": (float(min(vergence)), float(max(vergence))),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -112,8 +122,10 @@ def main(argv: list[str] | None = None) -> int:
         r = ahead_deviation(demo_head(seed))
         worst = max(worst, r["pan"], r["tilt"])
         lo, hi = (math.degrees(v) for v in r["vergence"])
-        print(f"{seed:4d}  {math.degrees(r['pan']):9.2f} deg  {math.degrees(r['tilt']):10.2f} deg"
-              f"  {lo:5.2f}-{hi:5.2f}     {r['statuses']}")
+        print(
+            f"{seed:4d}  {math.degrees(r['pan']):9.2f} deg  {math.degrees(r['tilt']):10.2f} deg"
+            f"  {lo:5.2f}-{hi:5.2f}     {r['statuses']}"
+        )
     return 0 if worst <= MAX_DEVIATION else 1
 
 

@@ -52,7 +52,12 @@ def stream(n: int, rng: np.random.Generator) -> tuple[Array, Array]:
     f = rng.uniform(0.5, 2.0, (2, 6))
     ph = rng.uniform(0.0, 2.0 * math.pi, (2, 6))
     w = np.sin(2.0 * math.pi * f[0] * s + ph[0]) + 0.5 * np.sin(2.0 * math.pi * f[1] * s + ph[1])
-    A = np.array([homogeneous(Rotation.from_rotvec(0.8 * r).as_matrix(), 0.25 * p) for r, p in zip(w[:, :3], w[:, 3:], strict=True)])
+    A = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(0.8 * r).as_matrix(), 0.25 * p)
+            for r, p in zip(w[:, :3], w[:, 3:], strict=True)
+        ]
+    )
     B = inverse(Z_TRUE)[None] @ A @ X_TRUE[None]
     return np.array([perturb_zyz(T, rng) for T in A]), np.array([perturb_zyz(T, rng) for T in B])
 
@@ -81,11 +86,18 @@ def run(repeats: int, seed: int, poses: list[int]) -> list[str]:
                     for name, solve in SOLVERS.items():
                         X = solve(Am, Bm)
                         err.setdefault((kind, name), []).append(
-                            (float(np.linalg.norm(X[:3, :3] - X_TRUE[:3, :3])),
-                             float(np.linalg.norm(X[:3, 3] - X_TRUE[:3, 3]) * 1e3)))
+                            (
+                                float(np.linalg.norm(X[:3, :3] - X_TRUE[:3, :3])),
+                                float(np.linalg.norm(X[:3, 3] - X_TRUE[:3, 3]) * 1e3),
+                            )
+                        )
                 X = _opencv_tsai(A, B)
                 err.setdefault(("opencv", "tsai"), []).append(
-                    (float(np.linalg.norm(X[:3, :3] - X_TRUE[:3, :3])), float(np.linalg.norm(X[:3, 3] - X_TRUE[:3, 3]) * 1e3)))
+                    (
+                        float(np.linalg.norm(X[:3, :3] - X_TRUE[:3, :3])),
+                        float(np.linalg.norm(X[:3, 3] - X_TRUE[:3, 3]) * 1e3),
+                    )
+                )
             for kind in (*PAIRINGS, "opencv"):
                 cells = []
                 for name in SOLVERS:
@@ -97,12 +109,16 @@ def run(repeats: int, seed: int, poses: list[int]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = OneLineParser(prog="python -m cpc2urdf.studies.handeye_pairs", description=__doc__.split("\n")[0])
+    ap = OneLineParser(
+        prog="python -m cpc2urdf.studies.handeye_pairs", description=__doc__.split("\n")[0]
+    )
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--poses", type=int, nargs="+", default=[40, 60, 100, 200])
     a = ap.parse_args(argv)
-    print(f"mean X error over {a.repeats} repeats (seed {a.seed}), cells ||dR||_F; mm (opencv: its TSAI)\n")
+    print(
+        f"mean X error over {a.repeats} repeats (seed {a.seed}), cells ||dR||_F; mm (opencv: its TSAI)\n"
+    )
     print("| poses | n | pairs | " + " | ".join(SOLVERS) + " |")
     print("|---|---:|---|" + "---|" * len(SOLVERS))
     for row in run(a.repeats, a.seed, a.poses):

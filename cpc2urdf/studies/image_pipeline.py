@@ -45,8 +45,14 @@ def _pct(x: np.ndarray) -> str:
     return f"{np.mean(x):.4f} | {np.median(x):.4f} | {np.percentile(x, 95):.4f} | {np.max(x):.4f}"
 
 
-def _noise_rows(q: np.ndarray, designs: list[Any], T_true: dict[str, np.ndarray], views: list[Any], rig: Any,
-                rng: np.random.Generator) -> tuple[list[dict[str, Any]], float | None]:
+def _noise_rows(
+    q: np.ndarray,
+    designs: list[Any],
+    T_true: dict[str, np.ndarray],
+    views: list[Any],
+    rig: Any,
+    rng: np.random.Generator,
+) -> tuple[list[dict[str, Any]], float | None]:
     """Per grey-noise level: circle centres and plate poses from rendered stereo pairs against the
     truth and against the stereo noise model at the measured pixel noise; and the detector's pixel
     noise at grey level 2."""
@@ -62,7 +68,9 @@ def _noise_rows(q: np.ndarray, designs: list[Any], T_true: dict[str, np.ndarray]
         raw, corr, dp, dr, T_used = [], [], [], [], []
         for i in range(len(q)):
             plates = [(d, T_true[d.name][i]) for d in designs]
-            imgs = [render_view(v, plates, blur_sigma=BLUR, noise_sigma=noise, rng=rng) for v in views]
+            imgs = [
+                render_view(v, plates, blur_sigma=BLUR, noise_sigma=noise, rng=rng) for v in views
+            ]
             res = stereo_plate_poses(imgs[0], imgs[1], rig, designs)
             for d in designs:
                 r = res[d.name]
@@ -88,14 +96,21 @@ def _noise_rows(q: np.ndarray, designs: list[Any], T_true: dict[str, np.ndarray]
             Tm, _ = stereo_noise(np.repeat(T[None], 100, axis=0), d.layout, rig, sigma, rng)
             pe.append(np.linalg.norm(Tm[:, :3, 3] - T[:3, 3], axis=1))
             re.append(rotation_error(Tm[:, :3, :3], np.repeat(T[None, :3, :3], 100, axis=0)))
-        rows.append({
-            "noise": noise, "n_plates": len(dp), "n_centres": len(c),
-            "err_corr": np.linalg.norm(c, axis=1), "err_raw": np.linalg.norm(rr, axis=1), "sigma_px": sigma,
-            "bias_mean": c.mean(axis=0), "pos_rms_mm": float(np.sqrt(np.mean(np.square(dp)))) * 1e3,
-            "rot_rms_deg": math.degrees(float(np.sqrt(np.mean(np.square(dr))))),
-            "pred_pos_rms_mm": float(np.sqrt(np.mean(np.concatenate(pe) ** 2))) * 1e3,
-            "pred_rot_rms_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(re) ** 2)))),
-        })
+        rows.append(
+            {
+                "noise": noise,
+                "n_plates": len(dp),
+                "n_centres": len(c),
+                "err_corr": np.linalg.norm(c, axis=1),
+                "err_raw": np.linalg.norm(rr, axis=1),
+                "sigma_px": sigma,
+                "bias_mean": c.mean(axis=0),
+                "pos_rms_mm": float(np.sqrt(np.mean(np.square(dp)))) * 1e3,
+                "rot_rms_deg": math.degrees(float(np.sqrt(np.mean(np.square(dr))))),
+                "pred_pos_rms_mm": float(np.sqrt(np.mean(np.concatenate(pe) ** 2))) * 1e3,
+                "pred_rot_rms_deg": math.degrees(float(np.sqrt(np.mean(np.concatenate(re) ** 2)))),
+            }
+        )
 
     return rows, sigma_det
 
@@ -116,7 +131,9 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        exp = render_experiment(Path(tmp) / "images", M=M, n_heldout=max(poses, 30), seed=seed, show_progress=True)
+        exp = render_experiment(
+            Path(tmp) / "images", M=M, n_heldout=max(poses, 30), seed=seed, show_progress=True
+        )
         t_render = time.perf_counter() - t0
         rig = exp.rig
         s = exp.truth.structure
@@ -125,17 +142,26 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         meas = measure_stereo_images(exp.folder, rig, s, robot_ref="iis_head", show_progress=True)
         t_measure = time.perf_counter() - t0
     n_images = 2 * exp.measured.n_records
-    views = [PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w))) for w in ("left", "right")]
+    views = [
+        PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w)))
+        for w in ("left", "right")
+    ]
     Ks = (rig.K1, rig.K2)
     held = exp.heldout
     q = held.q[:poses]
     T_true = {d.name: held.poses[d.name][:poses] for d in designs}
 
     # Ellipse-centre offsets at these configurations (exact conic geometry).
-    offsets = np.array([
-        np.linalg.norm(ellipse_centre_offset(K, v.T_camera_world @ T_true[d.name][i], d), axis=1)
-        for i in range(len(q)) for d in designs for v, K in zip(views, Ks, strict=True)
-    ]).ravel()
+    offsets = np.array(
+        [
+            np.linalg.norm(
+                ellipse_centre_offset(K, v.T_camera_world @ T_true[d.name][i], d), axis=1
+            )
+            for i in range(len(q))
+            for d in designs
+            for v, K in zip(views, Ks, strict=True)
+        ]
+    ).ravel()
 
     rows, sigma_det = _noise_rows(q, designs, T_true, views, rig, rng)
 
@@ -150,8 +176,12 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
                 r = res[d.name]
                 if not isinstance(r, Exception):
                     T = T_true[d.name][i]
-                    sys_err[corr_flag].append((float(np.linalg.norm(r.T_world_plate[:3, 3] - T[:3, 3])) * 1e3,
-                                               math.degrees(float(rotation_error(r.T_world_plate[:3, :3], T[:3, :3])))))
+                    sys_err[corr_flag].append(
+                        (
+                            float(np.linalg.norm(r.T_world_plate[:3, 3] - T[:3, 3])) * 1e3,
+                            math.degrees(float(rotation_error(r.T_world_plate[:3, :3], T[:3, :3]))),
+                        )
+                    )
 
     # Identification from the rendered experiment vs exact poses + the detector's pixel noise.
     def score(ms: MeasurementSet) -> dict[str, float]:
@@ -163,7 +193,10 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     ref = []
     for k in range(5):
         rk = np.random.default_rng(1000 + k)
-        poses_k = {d.name: stereo_noise(exact.poses[d.name], d.layout, rig, sigma_det or 0.0, rk)[0] for d in designs}
+        poses_k = {
+            d.name: stereo_noise(exact.poses[d.name], d.layout, rig, sigma_det or 0.0, rk)[0]
+            for d in designs
+        }
         ref.append(score(MeasurementSet(s, exact.q, poses_k, labels=exact.labels)))
     ref_median = {f: float(np.median([r[f] for r in ref])) for f in from_images}
     ref_range = {f: (min(r[f] for r in ref), max(r[f] for r in ref)) for f in from_images}
@@ -183,8 +216,10 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
-        md.append(f"| {row['noise']:g} | {row['n_centres']} | {_pct(row['err_corr'])} | {_pct(row['err_raw'])} | "
-                  f"{row['sigma_px']:.4f} | ({row['bias_mean'][0]:+.4f}, {row['bias_mean'][1]:+.4f}) |")
+        md.append(
+            f"| {row['noise']:g} | {row['n_centres']} | {_pct(row['err_corr'])} | {_pct(row['err_raw'])} | "
+            f"{row['sigma_px']:.4f} | ({row['bias_mean'][0]:+.4f}, {row['bias_mean'][1]:+.4f}) |"
+        )
     md += [
         "",
         f"Ellipse-centre offset |ellipse centre - projected centre| at these poses: mean {offsets.mean():.4f}, "
@@ -196,8 +231,10 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         "|---|---|---|---|---|---|",
     ]
     for row in rows:
-        md.append(f"| {row['noise']:g} | {row['n_plates']} | {row['pos_rms_mm']:.4f} | {row['pred_pos_rms_mm']:.4f} | "
-                  f"{row['rot_rms_deg']:.4f} | {row['pred_rot_rms_deg']:.4f} |")
+        md.append(
+            f"| {row['noise']:g} | {row['n_plates']} | {row['pos_rms_mm']:.4f} | {row['pred_pos_rms_mm']:.4f} | "
+            f"{row['rot_rms_deg']:.4f} | {row['pred_rot_rms_deg']:.4f} |"
+        )
     se_f = np.array(sys_err[False])
     se_t = np.array(sys_err[True])
     md += [
@@ -214,7 +251,9 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         "|---|---|---|---|",
     ]
     for f in from_images:
-        md.append(f"| {f} | {from_images[f]:.4f} | {ref_median[f]:.4f} | {ref_range[f][0]:.4f} - {ref_range[f][1]:.4f} |")
+        md.append(
+            f"| {f} | {from_images[f]:.4f} | {ref_median[f]:.4f} | {ref_range[f][0]:.4f} - {ref_range[f][1]:.4f} |"
+        )
     md += [
         "",
         f"Detector pixel noise used for the reference: {sigma_det:.4f} px per coordinate. Skipped plates: "
@@ -225,7 +264,13 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         "triangulate, register).",
         "",
     ]
-    return {"rows": rows, "offsets": offsets, "from_images": from_images, "reference": ref, "md": "\n".join(md)}
+    return {
+        "rows": rows,
+        "offsets": offsets,
+        "from_images": from_images,
+        "reference": ref,
+        "md": "\n".join(md),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -233,12 +278,21 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import make_folder, write_atomic
 
-    parser = OneLineParser(prog="cpc2urdf study images", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--poses", type=int, default=20, help="held-out configurations per noise level (default 20)")
-    parser.add_argument("--M", type=int, default=9, help="values per joint of the rendered experiment (default 9)")
+    parser = OneLineParser(
+        prog="cpc2urdf study images",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--poses", type=int, default=20, help="held-out configurations per noise level (default 20)"
+    )
+    parser.add_argument(
+        "--M", type=int, default=9, help="values per joint of the rendered experiment (default 9)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--out", default="study_images", help="output folder (default study_images)")
+    parser.add_argument(
+        "--out", default="study_images", help="output folder (default study_images)"
+    )
     args = parser.parse_args(argv)
     if args.poses < 1 or args.M < 3:
         raise ConfigurationError("--poses must be >= 1 and --M >= 3")

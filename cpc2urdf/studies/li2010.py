@@ -43,7 +43,11 @@ from cpc2urdf.progress import progress
 from cpc2urdf.transforms import Array, homogeneous, inverse, matrix_from_rpy
 
 POSE_COUNTS = (3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30)
-CASES = {"A": "noise on A only (Fig. 1a)", "B": "noise on B only (Fig. 1b)", "AB": "noise on A and B (Fig. 1c)"}
+CASES = {
+    "A": "noise on A only (Fig. 1a)",
+    "B": "noise on B only (Fig. 1b)",
+    "AB": "noise on A and B (Fig. 1c)",
+}
 PAPER_METHODS = ("kronecker", "dual_quaternion", "zhuang")  # Li et al.'s claimed order, best first
 EXTRA_METHODS = ("kronecker_mm", "refined", "tsai")  # kronecker_mm: Kronecker solved in millimetres
 POSITION_NOISE = 1e-3  # [m]: U(-1, 1) mm per position component
@@ -67,8 +71,12 @@ def simulate(n: int, rng: np.random.Generator, case: str) -> tuple[Array, Array]
     axes = rng.normal(size=(n, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     ang = rng.uniform(math.radians(10.0), math.radians(150.0), n)
-    A = np.array([homogeneous(Rotation.from_rotvec(a * t).as_matrix(), rng.uniform(-0.5, 0.5, 3))
-                  for a, t in zip(axes, ang, strict=True)])
+    A = np.array(
+        [
+            homogeneous(Rotation.from_rotvec(a * t).as_matrix(), rng.uniform(-0.5, 0.5, 3))
+            for a, t in zip(axes, ang, strict=True)
+        ]
+    )
     B = inverse(Z_TRUE)[None] @ A @ X_TRUE[None]
     if "A" in case:
         A = np.array([perturb_zyz(T, rng) for T in A])
@@ -92,18 +100,29 @@ def _opencv_li(A: Array, B: Array) -> tuple[Array, Array]:
 
     C, Hi = inverse(B), inverse(A)  # world2cam = T_camera_target, base2gripper = T_hand_base
     R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
-        list(C[:, :3, :3]), list(C[:, :3, 3]), list(Hi[:, :3, :3]), list(Hi[:, :3, 3]),
-        method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI)
-    return (inverse(homogeneous(R_gc, np.asarray(t_gc).ravel())),
-            inverse(homogeneous(R_bw, np.asarray(t_bw).ravel())))
+        list(C[:, :3, :3]),
+        list(C[:, :3, 3]),
+        list(Hi[:, :3, :3]),
+        list(Hi[:, :3, 3]),
+        method=cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI,
+    )
+    return (
+        inverse(homogeneous(R_gc, np.asarray(t_gc).ravel())),
+        inverse(homogeneous(R_bw, np.asarray(t_bw).ravel())),
+    )
 
 
 def _opencv_tsai(A: Array, B: Array) -> Array:
     import cv2
 
     C = inverse(B)  # gripper2base = T_base_hand, target2cam = T_camera_target
-    R, t = cv2.calibrateHandEye(list(A[:, :3, :3]), list(A[:, :3, 3]), list(C[:, :3, :3]), list(C[:, :3, 3]),
-                                method=cv2.CALIB_HAND_EYE_TSAI)
+    R, t = cv2.calibrateHandEye(
+        list(A[:, :3, :3]),
+        list(A[:, :3, 3]),
+        list(C[:, :3, :3]),
+        list(C[:, :3, 3]),
+        method=cv2.CALIB_HAND_EYE_TSAI,
+    )
     return homogeneous(R, np.asarray(t).ravel())
 
 
@@ -161,14 +180,22 @@ def run_study(
             ours_t.append(pose_errors(calibrate(A, inverse(B), "tsai").X, Z_TRUE))
             cv_t.append(pose_errors(_opencv_tsai(A, B), Z_TRUE))
         mean = lambda es, k: float(np.mean([e[k] for e in es]))  # noqa: E731
-        ratios.append({
-            "n": n,
-            **{f"kron_{k}": mean(ours_k, k) for k in METRICS},
-            **{f"cvli_{k}": mean(cv_li, k) for k in METRICS},
-            **{f"tsai_{k}": mean(ours_t, k) for k in ("X_rot", "X_mm")},
-            **{f"cvtsai_{k}": mean(cv_t, k) for k in ("X_rot", "X_mm")},
-        })
-    return {"rows": rows, "ratios": ratios, "repeats": repeats, "seed": seed, "methods": list(methods)}
+        ratios.append(
+            {
+                "n": n,
+                **{f"kron_{k}": mean(ours_k, k) for k in METRICS},
+                **{f"cvli_{k}": mean(cv_li, k) for k in METRICS},
+                **{f"tsai_{k}": mean(ours_t, k) for k in ("X_rot", "X_mm")},
+                **{f"cvtsai_{k}": mean(cv_t, k) for k in ("X_rot", "X_mm")},
+            }
+        )
+    return {
+        "rows": rows,
+        "ratios": ratios,
+        "repeats": repeats,
+        "seed": seed,
+        "methods": list(methods),
+    }
 
 
 def _xz(r: HandEyeResult) -> tuple[Array, Array]:
@@ -200,11 +227,19 @@ def format_report(result: dict[str, Any]) -> str:
     """Markdown: per case a table of mean errors per pose count and method, the verdict, ratios."""
     rows = result["rows"]
     methods = result["methods"]
-    out = [f"# Li et al. (2010) Fig. 1 reproduction: {result['repeats']} repeats, seed {result['seed']}", "",
-           "Cells: X error / Z error, each `rotation ||dR||_F ; translation mm` (means over repeats).", ""]
+    out = [
+        f"# Li et al. (2010) Fig. 1 reproduction: {result['repeats']} repeats, seed {result['seed']}",
+        "",
+        "Cells: X error / Z error, each `rotation ||dR||_F ; translation mm` (means over repeats).",
+        "",
+    ]
     for case, title in CASES.items():
-        out += [f"## {title}", "", "| n | " + " | ".join(methods) + " |",
-                "|---:|" + "---|" * len(methods)]
+        out += [
+            f"## {title}",
+            "",
+            "| n | " + " | ".join(methods) + " |",
+            "|---:|" + "---|" * len(methods),
+        ]
         for n in sorted({r["n"] for r in rows}):
             cells = []
             for m in methods:
@@ -215,24 +250,39 @@ def format_report(result: dict[str, Any]) -> str:
                 cells.append(c)
             out.append(f"| {n} | " + " | ".join(cells) + " |")
         out.append("")
-    out += ["## Ranking (Li et al.: Kronecker < dual quaternion < quaternion)", "",
-            "| noise | error | pose counts where it holds | order of the means over n >= 4 |",
-            "|---|---|---|---|", *ranking_verdict(result), ""]
-    out += ["## Ours against OpenCV on identical seeded data (noise on A and B)", "",
-            "Ratio = our mean error / OpenCV's mean error (below 1: ours is more accurate).", "",
-            "| n | Kronecker/LI X rot | X mm | Z rot | Z mm | Tsai/TSAI X rot | X mm |",
-            "|---:|---:|---:|---:|---:|---:|---:|"]
+    out += [
+        "## Ranking (Li et al.: Kronecker < dual quaternion < quaternion)",
+        "",
+        "| noise | error | pose counts where it holds | order of the means over n >= 4 |",
+        "|---|---|---|---|",
+        *ranking_verdict(result),
+        "",
+    ]
+    out += [
+        "## Ours against OpenCV on identical seeded data (noise on A and B)",
+        "",
+        "Ratio = our mean error / OpenCV's mean error (below 1: ours is more accurate).",
+        "",
+        "| n | Kronecker/LI X rot | X mm | Z rot | Z mm | Tsai/TSAI X rot | X mm |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in result["ratios"]:
         kr = [r[f"kron_{k}"] / r[f"cvli_{k}"] for k in METRICS]
         ts = [r[f"tsai_{k}"] / r[f"cvtsai_{k}"] for k in ("X_rot", "X_mm")]
         out.append(f"| {r['n']} | " + " | ".join(f"{v:.3f}" for v in kr + ts) + " |")
-    out += ["", "Absolute mean errors (rot ||dR||_F; mm):", "",
-            "| n | ours Kronecker X | OpenCV LI X | ours Kronecker Z | OpenCV LI Z | ours Tsai X | OpenCV TSAI X |",
-            "|---:|---|---|---|---|---|---|"]
+    out += [
+        "",
+        "Absolute mean errors (rot ||dR||_F; mm):",
+        "",
+        "| n | ours Kronecker X | OpenCV LI X | ours Kronecker Z | OpenCV LI Z | ours Tsai X | OpenCV TSAI X |",
+        "|---:|---|---|---|---|---|---|",
+    ]
     for r in result["ratios"]:
         f = lambda p, a, r=r: f"{r[p + '_' + a + '_rot']:.4f}; {r[p + '_' + a + '_mm']:.2f}"  # noqa: E731
-        out.append(f"| {r['n']} | {f('kron', 'X')} | {f('cvli', 'X')} | {f('kron', 'Z')} | {f('cvli', 'Z')} | "
-                   f"{f('tsai', 'X')} | {f('cvtsai', 'X')} |")
+        out.append(
+            f"| {r['n']} | {f('kron', 'X')} | {f('cvli', 'X')} | {f('kron', 'Z')} | {f('cvli', 'Z')} | "
+            f"{f('tsai', 'X')} | {f('cvtsai', 'X')} |"
+        )
     return "\n".join(out) + "\n"
 
 
@@ -247,20 +297,38 @@ def plot(result: dict[str, Any], folder: Path) -> list[Path]:
     paths = []
     for letter, (case, title) in zip("abc", CASES.items(), strict=True):
         fig, axes = plt.subplots(2, 2, figsize=(10, 7))
-        for ax, k, label in zip(axes.ravel(), METRICS,
-                                ["X rotation ||dR||_F", "X translation [mm]", "Z rotation ||dR||_F",
-                                 "Z translation [mm]"], strict=True):
+        for ax, k, label in zip(
+            axes.ravel(),
+            METRICS,
+            [
+                "X rotation ||dR||_F",
+                "X translation [mm]",
+                "Z rotation ||dR||_F",
+                "Z translation [mm]",
+            ],
+            strict=True,
+        ):
             for m in result["methods"]:
-                rr = sorted((r for r in rows if r["case"] == case and r["method"] == m), key=lambda r: r["n"])
-                ax.plot([r["n"] for r in rr], [r[k] for r in rr], "o-" if m in PAPER_METHODS else ".--",
-                        label=m, ms=4)
+                rr = sorted(
+                    (r for r in rows if r["case"] == case and r["method"] == m),
+                    key=lambda r: r["n"],
+                )
+                ax.plot(
+                    [r["n"] for r in rr],
+                    [r[k] for r in rr],
+                    "o-" if m in PAPER_METHODS else ".--",
+                    label=m,
+                    ms=4,
+                )
             ax.set_yscale("log")
             ax.set_xlabel("number of poses")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3, which="both")
         axes[0, 0].legend(fontsize=8)
-        fig.suptitle(f"Li et al. 2010, {title}: U(±1 mm), U(±0.5°) on ZYZ angles, "
-                     f"{result['repeats']} repeats")
+        fig.suptitle(
+            f"Li et al. 2010, {title}: U(±1 mm), U(±0.5°) on ZYZ angles, "
+            f"{result['repeats']} repeats"
+        )
         fig.tight_layout()
         path = folder / f"li2010_fig1{letter}.png"
         tmp = folder / f".li2010_fig1{letter}.tmp.png"
@@ -276,12 +344,19 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import make_folder, write_atomic
 
-    parser = OneLineParser(prog="cpc2urdf study li2010", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=10, help="repeats per pose count (default 10, as the paper)")
+    parser = OneLineParser(
+        prog="cpc2urdf study li2010",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=10, help="repeats per pose count (default 10, as the paper)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--max-poses", type=int, default=30, help="largest pose count (default 30)")
-    parser.add_argument("--out", default="study_li2010", help="output folder (default study_li2010)")
+    parser.add_argument(
+        "--out", default="study_li2010", help="output folder (default study_li2010)"
+    )
     args = parser.parse_args(argv)
     if args.repeats < 1:
         raise ConfigurationError(f"--repeats must be >= 1, got {args.repeats}")
@@ -291,7 +366,9 @@ def main(argv: list[str] | None = None) -> int:
     make_folder(out)
     counts = tuple(n for n in POSE_COUNTS if n <= args.max_poses) or (3,)
     ratio_counts = tuple(n for n in RATIO_POSE_COUNTS if n <= args.max_poses) or (args.max_poses,)
-    result = run_study(repeats=args.repeats, seed=args.seed, pose_counts=counts, ratio_counts=ratio_counts)
+    result = run_study(
+        repeats=args.repeats, seed=args.seed, pose_counts=counts, ratio_counts=ratio_counts
+    )
     report = format_report(result)
     print(report, end="")
     write_atomic(out / "li2010.md", report)
@@ -304,4 +381,12 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["format_report", "main", "plot", "pose_errors", "ranking_verdict", "run_study", "simulate"]
+__all__ = [
+    "format_report",
+    "main",
+    "plot",
+    "pose_errors",
+    "ranking_verdict",
+    "run_study",
+    "simulate",
+]

@@ -45,7 +45,9 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 MAX_STEPS = 100  # placo steps per target at most
 STALL_STEPS = 3  # steps without any fall of the largest pointing error that end a solve (held at a bound, or a minimum)
-FLOOR = 3e-8  # [rad]: the task reads an error under ~2.5e-8 rad as 0 (acos near 1) and stops correcting
+FLOOR = (
+    3e-8  # [rad]: the task reads an error under ~2.5e-8 rad as 0 (acos near 1) and stops correcting
+)
 REGULARIZATION = 1e-9  # weight of placo's regularization task (|dq|^2): keeps the step unique on a redundant head
 NOT_INSTALLED = "placo is not installed (placo 0.10.2 requires pin==3.8.0: a virtual environment of its own, see docs/gaze.md)"
 
@@ -74,7 +76,12 @@ class PlacoGaze:
     """
 
     def __init__(
-        self, urdf: str, cameras: Sequence[str], joint_names: Sequence[str], free: Sequence[int], path: Sequence[int]
+        self,
+        urdf: str,
+        cameras: Sequence[str],
+        joint_names: Sequence[str],
+        free: Sequence[int],
+        path: Sequence[int],
     ) -> None:
         import placo
 
@@ -116,9 +123,14 @@ class PlacoGaze:
             worst = 0.0
             for c, task in zip(cameras, tasks, strict=True):
                 # in floats: numpy's cross and norm on 3-vectors cost ~10x placo's own step
-                (_, _, zx, ox), (_, _, zy, oy), (_, _, zz, oz) = robot.get_T_world_frame(c)[:3].tolist()
+                (_, _, zx, ox), (_, _, zy, oy), (_, _, zz, oz) = robot.get_T_world_frame(c)[
+                    :3
+                ].tolist()
                 dx, dy, dz = px - ox, py - oy, pz - oz
-                error = math.atan2(math.hypot(zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx), zx * dx + zy * dy + zz * dz)
+                error = math.atan2(
+                    math.hypot(zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx),
+                    zx * dx + zy * dy + zz * dz,
+                )
                 worst = max(worst, error)
                 d = math.sqrt(dx * dx + dy * dy + dz * dz)
                 task.targetAxis_world = np.array((dx / d, dy / d, dz / d))
@@ -150,11 +162,20 @@ def placo_reference(solver: GazeSolver) -> PlacoGaze | str:
         return "placo's tasks align real frames: this rigid pair is solved on its cyclopean axis (a virtual camera)"
     free = np.asarray(solver.free_joints("cyclopean"))
     A = chain.robot_A[free]
-    plain = (np.count_nonzero(A, axis=1) == 1).all() and (np.count_nonzero(A, axis=0) <= 1).all() and np.all(A[A != 0] == 1.0)
-    if plain:  # each free joint its own unknown: with no offset, and the joint's own limits as bounds
+    plain = (
+        (np.count_nonzero(A, axis=1) == 1).all()
+        and (np.count_nonzero(A, axis=0) <= 1).all()
+        and np.all(A[A != 0] == 1.0)
+    )
+    if (
+        plain
+    ):  # each free joint its own unknown: with no offset, and the joint's own limits as bounds
         cols = np.argmax(A != 0, axis=1)
-        plain = bool(np.all(chain.robot_b[free] == 0.0) and np.all(chain.lower[cols] == solver.lower[free])
-                     and np.all(chain.upper[cols] == solver.upper[free]))
+        plain = bool(
+            np.all(chain.robot_b[free] == 0.0)
+            and np.all(chain.lower[cols] == solver.lower[free])
+            and np.all(chain.upper[cols] == solver.upper[free])
+        )
     if not plain:
         return "placo's tasks move joints one by one within their limits: this head couples, offsets or bounds its joints otherwise (a URDF mimic or a stated coupling)"
     try:
@@ -162,7 +183,13 @@ def placo_reference(solver: GazeSolver) -> PlacoGaze | str:
     except ImportError:
         return NOT_INSTALLED
     cameras = [solver.cameras[int(c)] for c in chain.solve_cameras]
-    return PlacoGaze(solver.robot.urdf, cameras, solver.joint_names, free.tolist(), np.asarray(solver.path_joints).tolist())
+    return PlacoGaze(
+        solver.robot.urdf,
+        cameras,
+        solver.joint_names,
+        free.tolist(),
+        np.asarray(solver.path_joints).tolist(),
+    )
 
 
 def summary(errors: Array) -> dict[str, Any]:
@@ -175,4 +202,14 @@ def summary(errors: Array) -> dict[str, Any]:
     }
 
 
-__all__ = ["FLOOR", "MAX_STEPS", "NOT_INSTALLED", "REGULARIZATION", "STALL_STEPS", "PlacoGaze", "kinematic_urdf", "placo_reference", "summary"]
+__all__ = [
+    "FLOOR",
+    "MAX_STEPS",
+    "NOT_INSTALLED",
+    "REGULARIZATION",
+    "STALL_STEPS",
+    "PlacoGaze",
+    "kinematic_urdf",
+    "placo_reference",
+    "summary",
+]

@@ -66,9 +66,14 @@ def tiago_with_plate(folder: Path) -> Path:
     """example-robot-data's TIAGo URDF with ``calib_plate`` on ``head_2_link`` (as tests/urdf_cases.py)."""
     from cpc2urdf.errors import ConfigurationError
 
-    src = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots/tiago_description/robots/tiago.urdf"
+    src = (
+        Path(sysconfig.get_paths()["purelib"])
+        / "cmeel.prefix/share/example-robot-data/robots/tiago_description/robots/tiago.urdf"
+    )
     if not src.exists():
-        raise ConfigurationError(f"TIAGo's URDF is not installed ({src}): pip install example-robot-data")
+        raise ConfigurationError(
+            f"TIAGo's URDF is not installed ({src}): pip install example-robot-data"
+        )
     text = src.read_text()
     end = text.rindex("</robot>")
     path = folder / "tiago_plate.urdf"
@@ -76,8 +81,18 @@ def tiago_with_plate(folder: Path) -> Path:
     return path
 
 
-def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise: str = "fig10",
-              pixel_sigma: float = 0.15, markers: int = 0, marker_sigma: float = 0.1e-3) -> dict[str, Any]:
+def run_robot(
+    name: str,
+    folder: Path,
+    M: int,
+    trials: int,
+    seed: int,
+    *,
+    noise: str = "fig10",
+    pixel_sigma: float = 0.15,
+    markers: int = 0,
+    marker_sigma: float = 0.1e-3,
+) -> dict[str, Any]:
     """Plans, predictions and observed held-out errors for one robot."""
     from cpc2urdf.files.robot_ref import load_robot
     from cpc2urdf.identification.planning.experiment import (
@@ -94,10 +109,20 @@ def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise:
     )
     from cpc2urdf.urdf.robot import load_urdf_robot
 
-    spec = load_urdf_robot(tiago_with_plate(folder), ["calib_plate"]) if name == "tiago" else load_robot(name)
+    spec = (
+        load_urdf_robot(tiago_with_plate(folder), ["calib_plate"])
+        if name == "tiago"
+        else load_robot(name)
+    )
     nominal = spec.nominal_model()
-    setup = measuring_setup(nominal, noise=noise, pixel_sigma=pixel_sigma, markers=markers, marker_sigma=marker_sigma,
-                            marker_seed=seed)
+    setup = measuring_setup(
+        nominal,
+        noise=noise,
+        pixel_sigma=pixel_sigma,
+        markers=markers,
+        marker_sigma=marker_sigma,
+        marker_seed=seed,
+    )
     q_task = task_configurations(setup)
     n = nominal.structure.n_joints * M + 1
     free = Planner(setup, candidate_configurations(setup), q_task)
@@ -111,11 +136,18 @@ def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise:
     rows: dict[str, Any] = {}
     for strategy, (q, _) in plans.items():
         p = free.predict(q)
-        rows[strategy] = {"predicted_position_rms_mm": p.position_rms * 1e3,
-                          "predicted_orientation_rms_deg": math.degrees(p.orientation_rms),
-                          "bound_position_rms_mm": p.bound_position_rms * 1e3,
-                          "rank": p.rank, "n_params": p.n_params, "ms_p": [], "ms_r": [], "starts": {},
-                          "unmeasurable_views": 0, "plan_measurable_on_nominal": bool(setup.measurable(q).all())}
+        rows[strategy] = {
+            "predicted_position_rms_mm": p.position_rms * 1e3,
+            "predicted_orientation_rms_deg": math.degrees(p.orientation_rms),
+            "bound_position_rms_mm": p.bound_position_rms * 1e3,
+            "rank": p.rank,
+            "n_params": p.n_params,
+            "ms_p": [],
+            "ms_r": [],
+            "starts": {},
+            "unmeasurable_views": 0,
+            "plan_measurable_on_nominal": bool(setup.measurable(q).all()),
+        }
     t0 = time.perf_counter()
     for s in progress(range(seed, seed + trials), f"study plan {name}"):
         for strategy, (q, labels) in plans.items():
@@ -128,7 +160,9 @@ def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise:
                 r["ms_r"].append(math.nan)
                 r["starts"][start] = r["starts"].get(start, 0) + 1
                 continue
-            exp = simulate_plan(setup, q, labels, seed=s, noise=noise, q_heldout=q_task, require_view=False)
+            exp = simulate_plan(
+                setup, q, labels, seed=s, noise=noise, q_heldout=q_task, require_view=False
+            )
             r["unmeasurable_views"] += len(exp.measured.metadata["provenance"]["view"]["problems"])
             e = heldout_errors(exp, nominal)
             r["ms_p"].append(float(np.mean(e.position**2)))
@@ -139,21 +173,40 @@ def run_robot(name: str, folder: Path, M: int, trials: int, seed: int, *, noise:
         r["observed_position_rms_mm"] = obs
         r["observed_orientation_rms_deg"] = math.degrees(math.sqrt(float(np.mean(r["ms_r"]))))
         r["ratio_observed_predicted"] = obs / r["predicted_position_rms_mm"]
-        r["ratio_orientation"] = r["observed_orientation_rms_deg"] / r["predicted_orientation_rms_deg"]
+        r["ratio_orientation"] = (
+            r["observed_orientation_rms_deg"] / r["predicted_orientation_rms_deg"]
+        )
         # Spread of the observed RMS from trial to trial (bootstrap-free: std of the per-trial MS).
-        r["observed_rms_rel_se"] = float(np.std(r["ms_p"]) / np.mean(r["ms_p"]) / math.sqrt(len(r["ms_p"])) / 2)
+        r["observed_rms_rel_se"] = float(
+            np.std(r["ms_p"]) / np.mean(r["ms_p"]) / math.sqrt(len(r["ms_p"])) / 2
+        )
     base = rows["protocol"]["observed_position_rms_mm"]
     for r in rows.values():
         r["vs_protocol"] = r["observed_position_rms_mm"] / base
         for k, v in r.items():  # marker setups predict and observe no orientation: null, not NaN
             if isinstance(v, float) and math.isnan(v):
                 r[k] = None
-    curve = [(c.strategy, c.n, c.position_rms * 1e3) for c in free.curve(
-        [nominal.structure.n_joints * m + 1 for m in (2, 3, 5, 9)], ("I-optimal", "D-optimal", "protocol"))]
-    return {"robot": name, "N": n, "M": M, "trials": trials, "seconds": time.perf_counter() - t0, "noise": noise,
-            "pixel_sigma_px": pixel_sigma if noise == "stereo" else None,
-            "markers": markers, "marker_sigma_mm": marker_sigma * 1e3 if markers else None,
-            "n_task": len(q_task), "rows": rows, "curve": curve}
+    curve = [
+        (c.strategy, c.n, c.position_rms * 1e3)
+        for c in free.curve(
+            [nominal.structure.n_joints * m + 1 for m in (2, 3, 5, 9)],
+            ("I-optimal", "D-optimal", "protocol"),
+        )
+    ]
+    return {
+        "robot": name,
+        "N": n,
+        "M": M,
+        "trials": trials,
+        "seconds": time.perf_counter() - t0,
+        "noise": noise,
+        "pixel_sigma_px": pixel_sigma if noise == "stereo" else None,
+        "markers": markers,
+        "marker_sigma_mm": marker_sigma * 1e3 if markers else None,
+        "n_task": len(q_task),
+        "rows": rows,
+        "curve": curve,
+    }
 
 
 def table(results: list[dict[str, Any]]) -> str:
@@ -170,7 +223,8 @@ def table(results: list[dict[str, Any]]) -> str:
                 f"| {res['robot']} | {_noise(res)} | {res['N']} | {strategy} | {r['predicted_position_rms_mm']:.3f} | "
                 f"{r['observed_position_rms_mm']:.3f} | {r['ratio_observed_predicted']:.3f} | "
                 f"{_f(r['predicted_orientation_rms_deg'])} / {_f(r['observed_orientation_rms_deg'])} | "
-                f"{r['vs_protocol']:.2f} | {r['bound_position_rms_mm']:.3f} | {r['unmeasurable_views']} | {starts} |")
+                f"{r['vs_protocol']:.2f} | {r['bound_position_rms_mm']:.3f} | {r['unmeasurable_views']} | {starts} |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -193,15 +247,22 @@ def plot(results: list[dict[str, Any]], path: Path) -> None:
     cols = min(2, len(results))
     rows = math.ceil(len(results) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.5 * rows), squeeze=False)
-    for ax in axes.ravel()[len(results):]:
+    for ax in axes.ravel()[len(results) :]:
         ax.set_visible(False)
     for ax, res in zip(axes.ravel(), results, strict=False):
         for strategy, style in (("I-optimal", "o-"), ("D-optimal", "s--"), ("protocol", "^:")):
             pts = sorted((n, v) for s, n, v in res["curve"] if s == strategy)
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], style, label=f"{strategy} (predicted)")
+            ax.plot(
+                [p[0] for p in pts], [p[1] for p in pts], style, label=f"{strategy} (predicted)"
+            )
         for k, (strategy, r) in enumerate(res["rows"].items()):
-            ax.plot([res["N"] + 0.4 * (k - 1.5)], [r["observed_position_rms_mm"]], "x", ms=9,
-                    label=f"{strategy}: observed over {res['trials']} experiments")
+            ax.plot(
+                [res["N"] + 0.4 * (k - 1.5)],
+                [r["observed_position_rms_mm"]],
+                "x",
+                ms=9,
+                label=f"{strategy}: observed over {res['trials']} experiments",
+            )
         ax.set_xlabel("configurations measured N")
         ax.set_ylabel("held-out RMS position error [mm]")
         ax.set_title(f"{res['robot']}, {_noise(res)}, N = {res['N']} (protocol M = {res['M']})")
@@ -218,16 +279,45 @@ def main(argv: list[str]) -> int:
     from cpc2urdf.files.jsonio import make_folder, write_atomic, write_json
 
     p = OneLineParser(prog="cpc2urdf study plan", description=__doc__.split("\n\n")[0])
-    p.add_argument("--trials", type=int, default=100, help="seeded experiments per plan (default 100)")
-    p.add_argument("--M", default="3,9", help="protocol values per joint, comma-separated; N = joints M + 1 (default 3,9)")
-    p.add_argument("--robots", default="iis_head,tiago", help="robots: iis_head, tiago, a spec (default iis_head,tiago)")
+    p.add_argument(
+        "--trials", type=int, default=100, help="seeded experiments per plan (default 100)"
+    )
+    p.add_argument(
+        "--M",
+        default="3,9",
+        help="protocol values per joint, comma-separated; N = joints M + 1 (default 3,9)",
+    )
+    p.add_argument(
+        "--robots",
+        default="iis_head,tiago",
+        help="robots: iis_head, tiago, a spec (default iis_head,tiago)",
+    )
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    p.add_argument("--noise", choices=("fig10", "stereo"), default="fig10",
-                   help="fig10: pose noise 0.5 mm / 0.5 deg; stereo: pixel noise through the rig (default fig10)")
-    p.add_argument("--pixel-sigma", type=float, default=0.15, help="stereo: pixel noise per coordinate [px] (default 0.15)")
-    p.add_argument("--markers", type=int, default=0, metavar="K",
-                   help="position-only data: K markers of unknown position on each measured frame (default 0: poses)")
-    p.add_argument("--marker-sigma-mm", type=float, default=0.1, help="--markers: noise per point coordinate [mm] (default 0.1)")
+    p.add_argument(
+        "--noise",
+        choices=("fig10", "stereo"),
+        default="fig10",
+        help="fig10: pose noise 0.5 mm / 0.5 deg; stereo: pixel noise through the rig (default fig10)",
+    )
+    p.add_argument(
+        "--pixel-sigma",
+        type=float,
+        default=0.15,
+        help="stereo: pixel noise per coordinate [px] (default 0.15)",
+    )
+    p.add_argument(
+        "--markers",
+        type=int,
+        default=0,
+        metavar="K",
+        help="position-only data: K markers of unknown position on each measured frame (default 0: poses)",
+    )
+    p.add_argument(
+        "--marker-sigma-mm",
+        type=float,
+        default=0.1,
+        help="--markers: noise per point coordinate [mm] (default 0.1)",
+    )
     p.add_argument("--out", default="study_plan", help="output folder (default study_plan)")
     args = p.parse_args(argv)
     try:
@@ -237,13 +327,29 @@ def main(argv: list[str]) -> int:
     if args.trials < 1 or min(Ms) < 2:
         raise ConfigurationError("--trials must be >= 1 and every --M >= 2")
     if not (math.isfinite(args.pixel_sigma) and args.pixel_sigma > 0):
-        raise ConfigurationError(f"--pixel-sigma must be a positive number of px, got {args.pixel_sigma}")
+        raise ConfigurationError(
+            f"--pixel-sigma must be a positive number of px, got {args.pixel_sigma}"
+        )
     if args.markers < 0 or not (math.isfinite(args.marker_sigma_mm) and args.marker_sigma_mm > 0):
-        raise ConfigurationError("--markers must be >= 0 and --marker-sigma-mm a positive number of mm")
+        raise ConfigurationError(
+            "--markers must be >= 0 and --marker-sigma-mm a positive number of mm"
+        )
     out = make_folder(args.out)
-    results = [run_robot(r, out, M, args.trials, args.seed, noise=args.noise, pixel_sigma=args.pixel_sigma,
-                         markers=args.markers, marker_sigma=args.marker_sigma_mm * 1e-3)
-               for r in args.robots.split(",") for M in Ms]
+    results = [
+        run_robot(
+            r,
+            out,
+            M,
+            args.trials,
+            args.seed,
+            noise=args.noise,
+            pixel_sigma=args.pixel_sigma,
+            markers=args.markers,
+            marker_sigma=args.marker_sigma_mm * 1e-3,
+        )
+        for r in args.robots.split(",")
+        for M in Ms
+    ]
     for res in results:
         for r in res["rows"].values():
             del r["ms_p"], r["ms_r"]

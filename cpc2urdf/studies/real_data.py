@@ -67,13 +67,39 @@ class RealSet:
 
 
 SETS = (
-    RealSet("TIAGo, marker 1", "tiago/tiago_48_schunk.urdf", "tiago/qualysis_base_hand_calibration.csv",
-            "wrist_ft_tool_link", ("m1",), 4.54, 6.03, 23.0),
-    RealSet("TIAGo, markers 1-3", "tiago/tiago_48_schunk.urdf", "tiago/qualysis_base_hand_calibration.csv",
-            "wrist_ft_tool_link", None, 4.63, 4.30, None),
-    RealSet("TALOS", "talos/talos_full_v2.urdf", "talos/talos_left_arm_02_10_contact.csv",
-            "gripper_left_base_link", None, 5.45, 0.85, 40.0),
-    RealSet("UR10", "ur10/ur10_robot.urdf", "ur10/calibration.csv", "tool0", None, 4.13, 4.12, 19.0),
+    RealSet(
+        "TIAGo, marker 1",
+        "tiago/tiago_48_schunk.urdf",
+        "tiago/qualysis_base_hand_calibration.csv",
+        "wrist_ft_tool_link",
+        ("m1",),
+        4.54,
+        6.03,
+        23.0,
+    ),
+    RealSet(
+        "TIAGo, markers 1-3",
+        "tiago/tiago_48_schunk.urdf",
+        "tiago/qualysis_base_hand_calibration.csv",
+        "wrist_ft_tool_link",
+        None,
+        4.63,
+        4.30,
+        None,
+    ),
+    RealSet(
+        "TALOS",
+        "talos/talos_full_v2.urdf",
+        "talos/talos_left_arm_02_10_contact.csv",
+        "gripper_left_base_link",
+        None,
+        5.45,
+        0.85,
+        40.0,
+    ),
+    RealSet(
+        "UR10", "ur10/ur10_robot.urdf", "ur10/calibration.csv", "tool0", None, 4.13, 4.12, 19.0
+    ),
 )
 
 
@@ -107,8 +133,13 @@ def run_set(rs: RealSet) -> dict[str, Any]:
     assert nominal is not None
     loads = gravity_loads(ms)
     levels = [lv for lv in LEVELS if lv != "compliance" or loads is not None]
-    row: dict[str, Any] = {"set": rs.name, "records": ms.n_records, "nominal_mm": rs.nominal_mm,
-                           "figaroh_mm": rs.figaroh_mm, "figaroh_p95_mm": rs.figaroh_p95_mm}
+    row: dict[str, Any] = {
+        "set": rs.name,
+        "records": ms.n_records,
+        "nominal_mm": rs.nominal_mm,
+        "figaroh_mm": rs.figaroh_mm,
+        "figaroh_p95_mm": rs.figaroh_p95_mm,
+    }
     for lv in levels:
 
         def one_level(m: MeasurementSet, L: np.ndarray | None, lv: str = lv) -> MapFit:
@@ -133,8 +164,11 @@ def run_set(rs: RealSet) -> dict[str, Any]:
     row["seconds"] = time.perf_counter() - t0
     row["chosen"] = cal.fit.level
     d = divergence(cal.fit, cal.selection.fits["frames"], ms)
-    row["divergence_mm"] = {"median": float(np.median(d)) * 1e3, "p95": float(np.percentile(d, 95)) * 1e3,
-                            "max": float(d.max()) * 1e3}
+    row["divergence_mm"] = {
+        "median": float(np.median(d)) * 1e3,
+        "p95": float(np.percentile(d, 95)) * 1e3,
+        "max": float(d.max()) * 1e3,
+    }
     row["data_share"] = cal.fit.data_share
     return row
 
@@ -156,7 +190,9 @@ def scale_seconds(level: str = "geometry", seed: int = 0) -> tuple[float, float]
     frame = ms.markers[m].frame
     T = truth.model.fk(q, [frame])[frame]
     y = T[:, :3, :3] @ truth.markers[m] + T[:, :3, 3] + rng.normal(0, 3e-4, (SCALE_RECORDS, 3))
-    big = MeasurementSet.from_arrays(ms.structure, q, {}, markers={m: ms.markers[m]}, marker_points={m: y})
+    big = MeasurementSet.from_arrays(
+        ms.structure, q, {}, markers={m: ms.markers[m]}, marker_points={m: y}
+    )
     t0 = time.perf_counter()
     fit = fit_map(nominal, big, level)
     return time.perf_counter() - t0, fit.rms_m
@@ -164,17 +200,22 @@ def scale_seconds(level: str = "geometry", seed: int = 0) -> tuple[float, float]
 
 def format_table(rows: list[dict[str, Any]]) -> str:
     """The Markdown table of :func:`run_set` rows."""
-    head = ("| set | URDF (frames fitted) | FIGAROH 1.0.2 | offsets | geometry | compliance | **map (default)** "
-            "| predicted | chosen (all records) | full-range p95 (FIGAROH) | seconds |")
+    head = (
+        "| set | URDF (frames fitted) | FIGAROH 1.0.2 | offsets | geometry | compliance | **map (default)** "
+        "| predicted | chosen (all records) | full-range p95 (FIGAROH) | seconds |"
+    )
     lines = [head, "|" + "---|" * 11]
     for r in rows:
-        p95 = f"{r['divergence_mm']['p95']:.1f}" + (f" ({r['figaroh_p95_mm']:.0f})" if r["figaroh_p95_mm"] else "")
+        p95 = f"{r['divergence_mm']['p95']:.1f}" + (
+            f" ({r['figaroh_p95_mm']:.0f})" if r["figaroh_p95_mm"] else ""
+        )
         comp = f"{r['compliance_mm']:.2f}" if "compliance_mm" in r else "—"
         ok = r["map_mm"] <= min(r["nominal_mm"], r["figaroh_mm"]) + 5e-3
         lines.append(
             f"| {r['set']} | {r['frames_mm']:.2f} ({r['nominal_mm']:.2f}) | {r['figaroh_mm']:.2f} | "
             f"{r['offsets_mm']:.2f} | {r['geometry_mm']:.2f} | {comp} | **{r['map_mm']:.2f}**{'' if ok else ' ✗'} | "
-            f"{r['predicted_mm']:.2f} | {r['chosen']} | {p95} | {r['seconds']:.1f} |")
+            f"{r['predicted_mm']:.2f} | {r['chosen']} | {p95} | {r['seconds']:.1f} |"
+        )
     return "\n".join(lines)
 
 
@@ -190,15 +231,28 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(run_set(rs))
         print(f"  {rs.name}: done", flush=True)
     print(format_table(rows))
-    print("mm, held-out RMS of the measured points over the data's 5-fold split; URDF: ours (the data "
-          "README's in brackets); predicted: leave-one-record-out RMS of the chosen fits; p95: distance "
-          "from the URDF's prediction over the whole joint range, fitted on every record")
+    print(
+        "mm, held-out RMS of the measured points over the data's 5-fold split; URDF: ours (the data "
+        "README's in brackets); predicted: leave-one-record-out RMS of the chosen fits; p95: distance "
+        "from the URDF's prediction over the whole joint range, fitted on every record"
+    )
     seconds, rms = scale_seconds()
-    print(f"scale: {SCALE_RECORDS:,} simulated TALOS records, geometry level fixed (no choice): {seconds:.2f} s "
-          f"(fit rms {rms * 1e3:.3f} mm)")
+    print(
+        f"scale: {SCALE_RECORDS:,} simulated TALOS records, geometry level fixed (no choice): {seconds:.2f} s "
+        f"(fit rms {rms * 1e3:.3f} mm)"
+    )
     if args.json:
         Path(args.json).write_text(json.dumps({"sets": rows, "scale_seconds": seconds}, indent=1))
     return 0
 
 
-__all__ = ["SETS", "RealSet", "divergence", "format_table", "load_set", "main", "run_set", "scale_seconds"]
+__all__ = [
+    "SETS",
+    "RealSet",
+    "divergence",
+    "format_table",
+    "load_set",
+    "main",
+    "run_set",
+    "scale_seconds",
+]

@@ -27,7 +27,11 @@ METHODS = ("tsai", "park_martin", "kronecker", "refined")
 
 
 def run_study(
-    *, poses: int = 20, seeds: int = 10, noise: Sequence[float] = NOISE_LEVELS, methods: Sequence[str] = METHODS
+    *,
+    poses: int = 20,
+    seeds: int = 10,
+    noise: Sequence[float] = NOISE_LEVELS,
+    methods: Sequence[str] = METHODS,
 ) -> dict[tuple[float, str], tuple[float, float]]:
     """Run stage 2 ``seeds`` times per pixel noise [px] and solver.
 
@@ -66,24 +70,46 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.identification.handeye.stage2 import DEFAULT_INTRINSICS, DEFAULT_TARGET_DISTANCE
     from cpc2urdf.identification.vision.targets import TARGET_COLS, TARGET_PITCH, TARGET_ROWS
 
-    parser = OneLineParser(prog="cpc2urdf study stage2", description=main.__doc__,
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--poses", type=int, default=20, help="head configurations per run (default 20)")
+    parser = OneLineParser(
+        prog="cpc2urdf study stage2",
+        description=main.__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--poses", type=int, default=20, help="head configurations per run (default 20)"
+    )
     parser.add_argument("--seeds", type=int, default=10, help="runs per noise level (default 10)")
-    parser.add_argument("--noise", type=float, nargs="+", default=list(NOISE_LEVELS),
-                        help="pixel noise levels [px] (default 0 0.05 0.1 0.2 0.5)")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=ALL_METHODS, metavar="METHOD",
-                        help=f"hand-eye solvers, some of {', '.join(ALL_METHODS)} (default {' '.join(METHODS)})")
+    parser.add_argument(
+        "--noise",
+        type=float,
+        nargs="+",
+        default=list(NOISE_LEVELS),
+        help="pixel noise levels [px] (default 0 0.05 0.1 0.2 0.5)",
+    )
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        default=list(METHODS),
+        choices=ALL_METHODS,
+        metavar="METHOD",
+        help=f"hand-eye solvers, some of {', '.join(ALL_METHODS)} (default {' '.join(METHODS)})",
+    )
     args = parser.parse_args(argv)
     if args.poses < 3 or args.seeds < 1:
         raise ConfigurationError("--poses must be >= 3 and --seeds >= 1")
     bad = [v for v in args.noise if not (math.isfinite(v) and v >= 0)]
     if bad:
-        raise ConfigurationError(f"--noise: pixel noise levels must be finite numbers >= 0 [px], got {bad[0]:g}")
-    print(f"stage 2 on iis_head: {args.poses} configurations, {args.seeds} seeds, target "
-          f"{TARGET_ROWS}x{TARGET_COLS} disks at {TARGET_PITCH * 1e3:.0f} mm pitch, "
-          f"{DEFAULT_TARGET_DISTANCE:.1f} m ahead; f = {DEFAULT_INTRINSICS.fx:.0f} px")
-    print("median over seeds and both cameras of the T_link_camera error: translation [mm] / rotation [deg]")
+        raise ConfigurationError(
+            f"--noise: pixel noise levels must be finite numbers >= 0 [px], got {bad[0]:g}"
+        )
+    print(
+        f"stage 2 on iis_head: {args.poses} configurations, {args.seeds} seeds, target "
+        f"{TARGET_ROWS}x{TARGET_COLS} disks at {TARGET_PITCH * 1e3:.0f} mm pitch, "
+        f"{DEFAULT_TARGET_DISTANCE:.1f} m ahead; f = {DEFAULT_INTRINSICS.fx:.0f} px"
+    )
+    print(
+        "median over seeds and both cameras of the T_link_camera error: translation [mm] / rotation [deg]"
+    )
     print(f"{'noise [px]':>10s} " + " ".join(f"{m:>20s}" for m in args.methods))
     errors = run_study(poses=args.poses, seeds=args.seeds, noise=args.noise, methods=args.methods)
     cells = {k: f"{t * 1e3:9.4f} / {math.degrees(r):7.4f}" for k, (t, r) in errors.items()}

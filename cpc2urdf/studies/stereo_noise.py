@@ -35,7 +35,11 @@ PAPER_ACCURACY = 0.5e-3  # [m]: sec. 6, the rig's accuracy at ~1.5 m
 
 
 def run_study(
-    *, samples: int = 2000, seed: int = 0, pixel_sigmas: tuple[float, ...] = PIXEL_SIGMAS, robot: str = "iis_head"
+    *,
+    samples: int = 2000,
+    seed: int = 0,
+    pixel_sigmas: tuple[float, ...] = PIXEL_SIGMAS,
+    robot: str = "iis_head",
 ) -> dict[str, Any]:
     """Monte Carlo of the stereo noise model; returns rows of errors per pixel noise.
 
@@ -88,15 +92,17 @@ def run_study(
             ang.append(rotation_error(T_meas[:, :3, :3], T[:, :3, :3]))
         c, p, a, e = (np.concatenate(x) for x in (circle, pos, ang, entry))
         d, dp = np.concatenate(depth), np.concatenate(depth_pred)
-        rows.append({
-            "pixel_sigma": sigma,
-            "circle_rms_mm": float(np.sqrt(np.mean(c**2)) * 1e3),
-            "depth_rms_mm": float(np.sqrt(np.mean(d**2)) * 1e3),
-            "depth_pred_mm": float(np.sqrt(np.mean(dp**2)) * 1e3),
-            "plate_pos_rms_mm": float(np.sqrt(np.mean(p**2)) * 1e3),
-            "plate_entry_rms_mm": float(np.sqrt(np.mean(e**2)) * 1e3),
-            "plate_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(a**2)))),
-        })
+        rows.append(
+            {
+                "pixel_sigma": sigma,
+                "circle_rms_mm": float(np.sqrt(np.mean(c**2)) * 1e3),
+                "depth_rms_mm": float(np.sqrt(np.mean(d**2)) * 1e3),
+                "depth_pred_mm": float(np.sqrt(np.mean(dp**2)) * 1e3),
+                "plate_pos_rms_mm": float(np.sqrt(np.mean(p**2)) * 1e3),
+                "plate_entry_rms_mm": float(np.sqrt(np.mean(e**2)) * 1e3),
+                "plate_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(a**2)))),
+            }
+        )
     # Errors are linear in sigma_px (first order): the slopes answer "which pixel noise is 0.5 mm".
     sig = np.array([r["pixel_sigma"] for r in rows])
 
@@ -105,14 +111,21 @@ def run_study(
         return float(sig @ v / (sig @ sig))
 
     distances = np.linalg.norm(np.concatenate([true[n][:, :3, 3] for n in frames]), axis=1)
-    fit = {k: slope(k) for k in ("circle_rms_mm", "plate_pos_rms_mm", "plate_entry_rms_mm", "plate_rot_rms_deg")}
+    fit = {
+        k: slope(k)
+        for k in ("circle_rms_mm", "plate_pos_rms_mm", "plate_entry_rms_mm", "plate_rot_rms_deg")
+    }
     return {
         "rows": rows,
         "fit": fit,
         "sigma_for_paper_circle_px": PAPER_ACCURACY * 1e3 / fit["circle_rms_mm"],
         "sigma_for_fig10_entry_px": PAPER_ACCURACY * 1e3 / fit["plate_entry_rms_mm"],
-        "rig": {"baseline_m": B, "focal_px": f, "image_size": list(rig.image_size),
-                "plate_distance_m": [float(distances.min()), float(distances.max())]},
+        "rig": {
+            "baseline_m": B,
+            "focal_px": f,
+            "image_size": list(rig.image_size),
+            "plate_distance_m": [float(distances.min()), float(distances.max())],
+        },
         "samples": samples,
         "seed": seed,
     }
@@ -173,8 +186,10 @@ def plot(result: dict[str, Any], path: Path) -> None:
     ax2.set_ylabel("plate orientation RMS error [deg]")
     ax2.grid(alpha=0.3)
     rig = result["rig"]
-    fig.suptitle(f"Stereo plate measurement, baseline {rig['baseline_m'] * 1e3:.0f} mm, "
-                 f"plates {rig['plate_distance_m'][0]:.2f}-{rig['plate_distance_m'][1]:.2f} m")
+    fig.suptitle(
+        f"Stereo plate measurement, baseline {rig['baseline_m'] * 1e3:.0f} mm, "
+        f"plates {rig['plate_distance_m'][0]:.2f}-{rig['plate_distance_m'][1]:.2f} m"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -185,11 +200,18 @@ def main(argv: list[str] | None = None) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import make_folder, write_atomic
 
-    parser = OneLineParser(prog="cpc2urdf study stereo", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--samples", type=int, default=2000, help="configurations per pixel noise (default 2000)")
+    parser = OneLineParser(
+        prog="cpc2urdf study stereo",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--samples", type=int, default=2000, help="configurations per pixel noise (default 2000)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--out", default="study_stereo", help="output folder (default study_stereo)")
+    parser.add_argument(
+        "--out", default="study_stereo", help="output folder (default study_stereo)"
+    )
     args = parser.parse_args(argv)
     if args.samples < 1:
         raise ConfigurationError(f"--samples must be >= 1, got {args.samples}")

@@ -73,8 +73,12 @@ MIN_BONE = 1e-3  # [m]: shorter offsets get no bone
 MOUNTS = ("rig", "base")
 OPTICAL_SUFFIXES = ("_optical_frame", "_optical")
 # REP-103: the optical frame (z forward, x right, y down) in the body frame (x forward, y left, z up).
-T_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-MUJOCO_ELEMENT = '  <mujoco>\n    <compiler discardvisual="false" fusestatic="false"/>\n  </mujoco>\n'
+T_BODY_OPTICAL = np.array(
+    [[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
+MUJOCO_ELEMENT = (
+    '  <mujoco>\n    <compiler discardvisual="false" fusestatic="false"/>\n  </mujoco>\n'
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,8 +126,16 @@ def camera_body_names(structure: RobotStructure) -> dict[str, str]:
         if f.kind != "camera":
             continue
         stem = next((f.name[: -len(s)] for s in OPTICAL_SUFFIXES if f.name.endswith(s)), "")
-        candidates = ([stem] if stem else []) + [f"{f.name}_body"] + [f"{f.name}_body_{k}" for k in range(2, 100)]
-        body = next(c for c in candidates if c not in links and f"{c}_joint" not in joints and c not in RESERVED_NAMES)
+        candidates = (
+            ([stem] if stem else [])
+            + [f"{f.name}_body"]
+            + [f"{f.name}_body_{k}" for k in range(2, 100)]
+        )
+        body = next(
+            c
+            for c in candidates
+            if c not in links and f"{c}_joint" not in joints and c not in RESERVED_NAMES
+        )
         out[f.name] = body
         links.add(body)
         joints.add(f"{body}_joint")
@@ -171,7 +183,9 @@ def _bone(p: Array, material: str, name: str) -> Primitive:
     """A cylinder from the link origin to point ``p`` [m] in the link frame."""
     length = float(np.linalg.norm(p))
     # eq. (4) maps z onto the bone direction
-    return Primitive(name, "cylinder", (BONE_RADIUS, length), _at(p / 2.0, cpc_rotation(p / length)), material)
+    return Primitive(
+        name, "cylinder", (BONE_RADIUS, length), _at(p / 2.0, cpc_rotation(p / length)), material
+    )
 
 
 def _link_primitives(model: CPCModel, owner: str) -> list[Primitive]:
@@ -180,9 +194,21 @@ def _link_primitives(model: CPCModel, owner: str) -> list[Primitive]:
     material = "cpc2urdf_base" if owner == BASE else "cpc2urdf_head"
     if owner == BASE:
         # A marker of the base frame, not a part: the base is welded to the root, nothing to collide.
-        out = [Primitive("base_plate", "box", (0.12, 0.12, 0.01), np.eye(4), "cpc2urdf_base", solid=False)]
+        out = [
+            Primitive(
+                "base_plate", "box", (0.12, 0.12, 0.01), np.eye(4), "cpc2urdf_base", solid=False
+            )
+        ]
     elif s.joint(owner).type == "revolute":
-        out = [Primitive(f"{owner}_axis", "cylinder", (JOINT_RADIUS, JOINT_LENGTH), np.eye(4), "cpc2urdf_joint")]
+        out = [
+            Primitive(
+                f"{owner}_axis",
+                "cylinder",
+                (JOINT_RADIUS, JOINT_LENGTH),
+                np.eye(4),
+                "cpc2urdf_joint",
+            )
+        ]
     else:
         out = [Primitive(f"{owner}_axis", "box", (0.025, 0.025, 0.08), np.eye(4), "cpc2urdf_joint")]
     for child in s.children(owner):
@@ -203,20 +229,46 @@ def _frame_primitives(model: CPCModel, name: str) -> list[Primitive]:
     if f.kind == "plate":
         pts = np.array(f.layout) if f.layout is not None else np.zeros((1, 3))
         half = float(np.max(np.abs(pts[:, :2]))) + 0.015
-        out = [Primitive(f"{name}_board", "box", (2 * half, 2 * half, 0.004), _at([0, 0, -0.002]), "cpc2urdf_plate")]
+        out = [
+            Primitive(
+                f"{name}_board",
+                "box",
+                (2 * half, 2 * half, 0.004),
+                _at([0, 0, -0.002]),
+                "cpc2urdf_plate",
+            )
+        ]
         for k, p in enumerate(pts):
-            out.append(Primitive(f"{name}_circle_{k}", "cylinder", (0.006, 0.001), _at(p + [0, 0, 0.0005]),
-                                 "cpc2urdf_circle", solid=False))
+            out.append(
+                Primitive(
+                    f"{name}_circle_{k}",
+                    "cylinder",
+                    (0.006, 0.001),
+                    _at(p + [0, 0, 0.0005]),
+                    "cpc2urdf_circle",
+                    solid=False,
+                )
+            )
         return out
     if f.kind == "camera":  # a housing behind the lens, the lens along the optical axis (optical z)
         return [
-            Primitive(f"{name}_housing", "box", (0.045, 0.035, 0.05), T_BODY_OPTICAL @ _at([0, 0, -0.03]), "cpc2urdf_camera"),
+            Primitive(
+                f"{name}_housing",
+                "box",
+                (0.045, 0.035, 0.05),
+                T_BODY_OPTICAL @ _at([0, 0, -0.03]),
+                "cpc2urdf_camera",
+            ),
             Primitive(f"{name}_lens", "cylinder", (0.012, 0.02), T_BODY_OPTICAL, "cpc2urdf_lens"),
         ]
-    return [Primitive(f"{name}_marker", "sphere", (0.006,), np.eye(4), "cpc2urdf_joint", solid=False)]
+    return [
+        Primitive(f"{name}_marker", "sphere", (0.006,), np.eye(4), "cpc2urdf_joint", solid=False)
+    ]
 
 
-def _mass_properties(prims: Sequence[Primitive], mass: float | None, density: float) -> MassProperties:
+def _mass_properties(
+    prims: Sequence[Primitive], mass: float | None, density: float
+) -> MassProperties:
     solids = [solid(p.shape, p.size, p.T, density) for p in prims if p.solid]
     if not solids:
         return frame_floor() if mass is None else frame_floor(mass)
@@ -227,13 +279,15 @@ def _mass_properties(prims: Sequence[Primitive], mass: float | None, density: fl
 def _inertial(mp: MassProperties) -> str:
     R, moments = mp.principal()
     return (
-        f"    <inertial>\n      {_origin(_at(mp.com, R))}\n      <mass value=\"{urdf_number(mp.mass)}\"/>\n"
+        f'    <inertial>\n      {_origin(_at(mp.com, R))}\n      <mass value="{urdf_number(mp.mass)}"/>\n'
         f'      <inertia ixx="{urdf_number(moments[0])}" ixy="0" ixz="0" iyy="{urdf_number(moments[1])}" iyz="0" '
         f'izz="{urdf_number(moments[2])}"/>\n    </inertial>\n'
     )
 
 
-def _link(name: str, prims: Sequence[Primitive], names: dict[int, tuple[str, str]], mp: MassProperties) -> str:
+def _link(
+    name: str, prims: Sequence[Primitive], names: dict[int, tuple[str, str]], mp: MassProperties
+) -> str:
     out = [f"  <link name={quoteattr(name)}>\n", _inertial(mp)]
     for p in prims:
         out.append(
@@ -275,12 +329,14 @@ def _unique_names(links: Sequence[tuple[str, list[Primitive]]]) -> dict[int, tup
 
 def _fixed(name: str, parent: str, child: str, T: Array) -> str:
     return (
-        f"  <joint name={quoteattr(name)} type=\"fixed\">\n    <parent link={quoteattr(parent)}/>\n"
+        f'  <joint name={quoteattr(name)} type="fixed">\n    <parent link={quoteattr(parent)}/>\n'
         f"    <child link={quoteattr(child)}/>\n    {_origin(T)}\n  </joint>\n"
     )
 
 
-def T_world_base_of(model: CPCModel, mount: str, physical: PhysicalProperties | None = None) -> Array:
+def T_world_base_of(
+    model: CPCModel, mount: str, physical: PhysicalProperties | None = None
+) -> Array:
     """The ``base_joint`` origin the URDF of ``model`` gets with ``mount`` (shape (4, 4)):
     ``T_world_base`` for ``"rig"``, the gravity rotation of ``physical``'s up for ``"base"``."""
     if mount not in MOUNTS:
@@ -295,7 +351,8 @@ def _header(model: CPCModel, source: str | None, mount: str, physical: PhysicalP
     from cpc2urdf.version import __version__
 
     world = (
-        "the measuring rig (the model's world)" if mount == "rig"
+        "the measuring rig (the model's world)"
+        if mount == "rig"
         else f"gravity-aligned (+z up; up = {physical.describe_up()}) at the base origin"
     )
     text = (
@@ -349,9 +406,18 @@ def urdf_from_model(
     shapes = dict(links)
 
     def link_xml(name: str) -> str:
-        return _link(name, shapes[name], names, _mass_properties(shapes[name], phys.masses.get(name), phys.density))
+        return _link(
+            name,
+            shapes[name],
+            names,
+            _mass_properties(shapes[name], phys.masses.get(name), phys.density),
+        )
 
-    out = ['<?xml version="1.0"?>\n', _header(model, source, mount, phys), f"<robot name={quoteattr(s.name)}>\n"]
+    out = [
+        '<?xml version="1.0"?>\n',
+        _header(model, source, mount, phys),
+        f"<robot name={quoteattr(s.name)}>\n",
+    ]
     if mujoco:
         out.append(MUJOCO_ELEMENT)
     for name, rgba in MATERIALS.items():
@@ -361,7 +427,7 @@ def urdf_from_model(
     out.append(link_xml(BASE))
     for j in s.joints:
         out.append(
-            f"  <joint name={quoteattr(j.name)} type=\"{j.type}\">\n"
+            f'  <joint name={quoteattr(j.name)} type="{j.type}">\n'
             f'    <parent link="{link_name(j.parent)}"/>\n'
             f'    <child link="{link_name(j.name)}"/>\n'
             f"    {_origin(model.joints[j.name].matrix())}\n"
@@ -396,7 +462,9 @@ def write_urdf(
 ) -> Path:
     """Write the URDF of ``model`` (:func:`urdf_from_model`, same options) to ``path`` atomically
     (no partial file on failure)."""
-    return write_atomic(path, urdf_from_model(model, source=source, mount=mount, physical=physical, mujoco=mujoco))
+    return write_atomic(
+        path, urdf_from_model(model, source=source, mount=mount, physical=physical, mujoco=mujoco)
+    )
 
 
 def total_mass(model: CPCModel, physical: PhysicalProperties | None = None) -> float:

@@ -89,9 +89,13 @@ def plan_export(ref: RobotRef | CPCModel, *, up: ArrayLike | None = None) -> Exp
         u = np.asarray(up, dtype=float).reshape(-1)
         n = float(np.linalg.norm(u)) if u.shape == (3,) and np.all(np.isfinite(u)) else 0.0
         if n < 1e-9:
-            raise ConfigurationError(f"--up must be a non-zero direction X Y Z in base coordinates, got {u.tolist()}")
+            raise ConfigurationError(
+                f"--up must be a non-zero direction X Y Z in base coordinates, got {u.tolist()}"
+            )
         v = u / n
-        physical = replace(physical, up=(float(v[0]), float(v[1]), float(v[2])), up_joint=None, up_sign=1.0)
+        physical = replace(
+            physical, up=(float(v[0]), float(v[1]), float(v[2])), up_joint=None, up_sign=1.0
+        )
         where += "; up from --up"
     return ExportPlan(model, physical, where)
 

@@ -37,13 +37,23 @@ from cpc2urdf.files.jsonio import read_text_file
 URDF_MAX_DEPTH = 64  # XML elements deep; a URDF needs 5 (robot/link/visual/geometry/box)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 MOVING_TYPES = ("revolute", "continuous", "prismatic", "planar")  # those with an axis
-SHAPES = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("filename",)}
+SHAPES = {
+    "box": ("size",),
+    "cylinder": ("radius", "length"),
+    "sphere": ("radius",),
+    "mesh": ("filename",),
+}
 # element -> numeric attribute -> how many numbers it holds
 NUMBERS: dict[str, dict[str, int]] = {
     "origin": {"xyz": 3, "rpy": 3},
     "axis": {"xyz": 3},
     "limit": {"lower": 1, "upper": 1, "effort": 1, "velocity": 1},
-    "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
+    "safety_controller": {
+        "soft_lower_limit": 1,
+        "soft_upper_limit": 1,
+        "k_position": 1,
+        "k_velocity": 1,
+    },
     "calibration": {"rising": 1, "falling": 1, "reference_position": 1},
     "dynamics": {"damping": 1, "friction": 1},
     "mimic": {"multiplier": 1, "offset": 1},
@@ -56,10 +66,19 @@ NUMBERS: dict[str, dict[str, int]] = {
     "color": {"rgba": 4},
 }
 # Sizes and masses: a negative one describes no body (urdfdom and Pinocchio read it without a word).
-NON_NEGATIVE = frozenset({("box", "size"), ("cylinder", "radius"), ("cylinder", "length"), ("sphere", "radius"),
-                          ("mass", "value")})
+NON_NEGATIVE = frozenset(
+    {
+        ("box", "size"),
+        ("cylinder", "radius"),
+        ("cylinder", "length"),
+        ("sphere", "radius"),
+        ("mass", "value"),
+    }
+)
 # The URDF elements below a link, joint or material; others (<gazebo>, ...) are no parser's business here.
-URDF_ELEMENTS = frozenset({"visual", "collision", "inertial", "geometry", "material", "texture", *NUMBERS})
+URDF_ELEMENTS = frozenset(
+    {"visual", "collision", "inertial", "geometry", "material", "texture", *NUMBERS}
+)
 _DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
 
 
@@ -114,14 +133,23 @@ def _parse_xml(text: str) -> _Element:
 
     def entity(name: str, *_: object) -> None:
         # Parsers differ on DTD entities (TinyXML2 ignores them, lxml and expat expand them).
-        raise _Refused(f"declares the XML entity {name!r} (line {parser.CurrentLineNumber}); URDF files use none")
+        raise _Refused(
+            f"declares the XML entity {name!r} (line {parser.CurrentLineNumber}); URDF files use none"
+        )
 
     def instruction(target: str, data: str) -> None:
         # TinyXML2 (urdfdom) reads <?...?> only as the XML declaration.
-        raise _Refused(f"has the processing instruction <?{target} ...?> (line {parser.CurrentLineNumber}); URDF files use none")
+        raise _Refused(
+            f"has the processing instruction <?{target} ...?> (line {parser.CurrentLineNumber}); URDF files use none"
+        )
 
     def declaration(version: str, encoding: str | None, standalone: int) -> None:
-        if encoding is not None and encoding.lower().replace("_", "-") not in ("utf-8", "utf8", "us-ascii", "ascii"):
+        if encoding is not None and encoding.lower().replace("_", "-") not in (
+            "utf-8",
+            "utf8",
+            "us-ascii",
+            "ascii",
+        ):
             raise _Refused(f"declares encoding {encoding!r}; URDF files are read as UTF-8")
 
     parser.StartElementHandler = start
@@ -132,7 +160,9 @@ def _parse_xml(text: str) -> _Element:
     try:
         parser.Parse(text, True)
     except expat.ExpatError as e:
-        raise ValueError(f"not well-formed XML ({expat.ErrorString(e.code)}: line {e.lineno}, column {e.offset})") from None
+        raise ValueError(
+            f"not well-formed XML ({expat.ErrorString(e.code)}: line {e.lineno}, column {e.offset})"
+        ) from None
     except _Refused as e:
         raise ValueError(str(e)) from None
     return root[0]
@@ -156,11 +186,19 @@ class _Checker:
             if attr in el.attrib:
                 found = len(self.problems)
                 self.number(owner, f"{path}{el.tag} {attr}", el.attrib[attr], n, el)
-                if (el.tag, attr) in NON_NEGATIVE and len(self.problems) == found and any(
-                    float(v) < 0 for v in el.attrib[attr].split()
+                if (
+                    (el.tag, attr) in NON_NEGATIVE
+                    and len(self.problems) == found
+                    and any(float(v) < 0 for v in el.attrib[attr].split())
                 ):
-                    self.add(owner, f"{path}{el.tag} {attr} {_quote(el.attrib[attr])} is negative", el)
-        below = f"{path}{el.tag}{' ' + _quote(el.attrib['name']) if 'name' in el.attrib else ''} " if depth else ""
+                    self.add(
+                        owner, f"{path}{el.tag} {attr} {_quote(el.attrib[attr])} is negative", el
+                    )
+        below = (
+            f"{path}{el.tag}{' ' + _quote(el.attrib['name']) if 'name' in el.attrib else ''} "
+            if depth
+            else ""
+        )
         for child in el.children:
             if child.tag in URDF_ELEMENTS:
                 self.numbers(owner, child, below, depth + 1)
@@ -189,7 +227,11 @@ class _Checker:
             self.add("", f"a <{kind}> has no name attribute", el)
             return None
         if name in seen:
-            self.add("", f"{kind} {_quote(name)} is defined twice (lines {seen[name].line} and {el.line})", None)
+            self.add(
+                "",
+                f"{kind} {_quote(name)} is defined twice (lines {seen[name].line} and {el.line})",
+                None,
+            )
             return None
         seen[name] = el
         return name
@@ -201,11 +243,17 @@ class _Checker:
             self.add(owner, f"{what} has no <geometry>", part)
             return
         if not geometry.children:
-            self.add(owner, f"{what} geometry has no shape (box, cylinder, sphere or mesh)", geometry)
+            self.add(
+                owner, f"{what} geometry has no shape (box, cylinder, sphere or mesh)", geometry
+            )
             return
         shape = geometry.children[0]
         if shape.tag not in SHAPES:
-            self.add(owner, f"{what} geometry <{shape.tag}> is not a URDF shape (box, cylinder, sphere or mesh)", shape)
+            self.add(
+                owner,
+                f"{what} geometry <{shape.tag}> is not a URDF shape (box, cylinder, sphere or mesh)",
+                shape,
+            )
             return
         for attr in SHAPES[shape.tag]:
             if attr not in shape.attrib:
@@ -226,23 +274,35 @@ class _Checker:
             inertia = inertial.first("inertia")
             missing = [a for a in NUMBERS["inertia"] if inertia is None or a not in inertia.attrib]
             if missing:
-                self.add(owner, f"inertial has no <inertia> {', '.join(missing)}", inertial if inertia is None else inertia)
+                self.add(
+                    owner,
+                    f"inertial has no <inertia> {', '.join(missing)}",
+                    inertial if inertia is None else inertia,
+                )
         self.numbers(owner, el)
 
-    def joint(self, name: str, el: _Element, links: dict[str, _Element], joints: set[str]) -> tuple[str, str] | None:
+    def joint(
+        self, name: str, el: _Element, links: dict[str, _Element], joints: set[str]
+    ) -> tuple[str, str] | None:
         owner = f"joint {_quote(name)}"
         kind = el.attrib.get("type")
         if kind is None:
             self.add("", f"{owner} has no type attribute", el)
         elif kind not in JOINT_TYPES:
-            self.add(owner, f"type {_quote(kind)} is not a URDF joint type ({', '.join(JOINT_TYPES)})", el)
+            self.add(
+                owner,
+                f"type {_quote(kind)} is not a URDF joint type ({', '.join(JOINT_TYPES)})",
+                el,
+            )
         ends = []
         for end in ("parent", "child"):
             e = el.first(end)
             if e is None or "link" not in e.attrib:
                 self.add("", f"{owner} has no <{end} link=...>", el if e is None else e)
             elif e.attrib["link"] not in links:
-                self.add(owner, f"{end} link {_quote(e.attrib['link'])} is not a link of this URDF", e)
+                self.add(
+                    owner, f"{end} link {_quote(e.attrib['link'])} is not a link of this URDF", e
+                )
             else:
                 ends.append(e.attrib["link"])
         if kind in ("revolute", "prismatic"):
@@ -253,15 +313,28 @@ class _Checker:
                 for attr in ("effort", "velocity"):
                     if attr not in limit.attrib:
                         self.add(owner, f"limit has no {attr} attribute", limit)
-                    elif _DECIMAL.match(limit.attrib[attr].strip()) and float(limit.attrib[attr]) < 0:
-                        self.add(owner, f"limit {attr} {_quote(limit.attrib[attr])} is negative", limit)
+                    elif (
+                        _DECIMAL.match(limit.attrib[attr].strip()) and float(limit.attrib[attr]) < 0
+                    ):
+                        self.add(
+                            owner, f"limit {attr} {_quote(limit.attrib[attr])} is negative", limit
+                        )
         mimic = el.first("mimic")
         if mimic is not None and mimic.attrib.get("joint") not in joints:
-            self.add(owner, f"mimic joint {_quote(mimic.attrib.get('joint', ''))} is not a joint of this URDF", mimic)
+            self.add(
+                owner,
+                f"mimic joint {_quote(mimic.attrib.get('joint', ''))} is not a joint of this URDF",
+                mimic,
+            )
         n_before = len(self.problems)
         self.numbers(owner, el)
         axis = el.first("axis")
-        if kind in MOVING_TYPES and axis is not None and "xyz" in axis.attrib and len(self.problems) == n_before:
+        if (
+            kind in MOVING_TYPES
+            and axis is not None
+            and "xyz" in axis.attrib
+            and len(self.problems) == n_before
+        ):
             xyz = [float(v) for v in axis.attrib["xyz"].split()]
             if not any(xyz):
                 self.add(owner, f"axis xyz {_quote(axis.attrib['xyz'])} is zero", axis)
@@ -270,21 +343,34 @@ class _Checker:
             return None
         return (ends[0], ends[1]) if len(ends) == 2 else None
 
-    def tree(self, links: dict[str, _Element], edges: dict[str, tuple[str, str]], joint_el: dict[str, _Element]) -> None:
+    def tree(
+        self,
+        links: dict[str, _Element],
+        edges: dict[str, tuple[str, str]],
+        joint_el: dict[str, _Element],
+    ) -> None:
         """One tree: each link the child of at most one joint, one root, every link reachable."""
         parent_joint: dict[str, str] = {}
         for joint, (_, child) in edges.items():
             if child in parent_joint:
-                self.add(f"joint {_quote(joint)}", f"link {_quote(child)} is already the child of joint "
-                         f"{_quote(parent_joint[child])}; a link has one parent", joint_el[joint])
+                self.add(
+                    f"joint {_quote(joint)}",
+                    f"link {_quote(child)} is already the child of joint "
+                    f"{_quote(parent_joint[child])}; a link has one parent",
+                    joint_el[joint],
+                )
             else:
                 parent_joint[child] = joint
         if self.problems:
             return
         roots = [n for n in links if n not in parent_joint]
         if len(roots) > 1:
-            self.add("", f"links {', '.join(_quote(r) for r in roots[:4])}{' ...' if len(roots) > 4 else ''} are "
-                     "all roots (the child of no joint); a URDF is one tree", links[roots[1]])
+            self.add(
+                "",
+                f"links {', '.join(_quote(r) for r in roots[:4])}{' ...' if len(roots) > 4 else ''} are "
+                "all roots (the child of no joint); a URDF is one tree",
+                links[roots[1]],
+            )
             return
         children: dict[str, list[str]] = {}
         for parent, child in edges.values():
@@ -298,8 +384,12 @@ class _Checker:
                     todo.append(child)
         cycle = [n for n in links if n not in reached]
         if cycle:
-            self.add("", f"the joints of links {', '.join(_quote(c) for c in cycle[:4])}"
-                     f"{' ...' if len(cycle) > 4 else ''} form a cycle; a URDF is a tree", links[cycle[0]])
+            self.add(
+                "",
+                f"the joints of links {', '.join(_quote(c) for c in cycle[:4])}"
+                f"{' ...' if len(cycle) > 4 else ''} form a cycle; a URDF is a tree",
+                links[cycle[0]],
+            )
 
     def robot(self, root: _Element) -> None:
         if root.tag != "robot":
@@ -309,7 +399,11 @@ class _Checker:
             self.add("", "<robot> has no name attribute", root)
         macro = next((el for el in root.children if el.tag.startswith("xacro:")), None)
         if macro is not None:  # (an expanded file may keep xmlns:xacro on <robot>: not a sign)
-            self.add("", f"is a xacro file (<{macro.tag}>), not a URDF: expand it first (xacro FILE > FILE.urdf)", macro)
+            self.add(
+                "",
+                f"is a xacro file (<{macro.tag}>), not a URDF: expand it first (xacro FILE > FILE.urdf)",
+                macro,
+            )
             return
         if root.attrib.get("version", "1.0") != "1.0":  # urdfdom reads only version 1.0
             self.add("", f"<robot> version {_quote(root.attrib['version'])} is not 1.0", root)
@@ -327,7 +421,9 @@ class _Checker:
             if el.tag == "material" and self.named("material", el, materials) is not None:
                 owner = f"material {_quote(el.attrib['name'])}"
                 color, texture = el.first("color"), el.first("texture")
-                if (color is None or "rgba" not in color.attrib) and (texture is None or "filename" not in texture.attrib):
+                if (color is None or "rgba" not in color.attrib) and (
+                    texture is None or "filename" not in texture.attrib
+                ):
                     self.add("", f"{owner} has no <color rgba> and no <texture filename>", el)
                 self.numbers(owner, el)
             elif el.tag == "link" and links.get(el.attrib.get("name", "")) is el:
@@ -363,7 +459,11 @@ def validate_urdf(text: str, source: object) -> None:
     """
     problems = urdf_problems(text)
     if problems:
-        more = f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})" if len(problems) > 1 else ""
+        more = (
+            f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})"
+            if len(problems) > 1
+            else ""
+        )
         raise InputFileError(source, problems[0] + more)
 
 

@@ -30,7 +30,9 @@ class CapturedOutput:
 
     def error_lines(self) -> list[str]:
         """The lines of :attr:`text` that report an error (urdfdom's ``Error:`` lines), stripped."""
-        return [ln.strip() for ln in self.text.splitlines() if ln.strip().lower().startswith("error")]
+        return [
+            ln.strip() for ln in self.text.splitlines() if ln.strip().lower().startswith("error")
+        ]
 
 
 def _flush_c_stdio() -> None:

@@ -115,8 +115,11 @@ def _check_unchanged(tree: UrdfTree, source: UrdfSource) -> None:
     for name, then in source.kinematics.items():
         j = tree.joints.get(name)
         if j is None:
-            raise InputFileError(tree.source, f"joint {name!r}, which the model was built from, is not in the file; "
-                                 "write back into the URDF the model was identified from")
+            raise InputFileError(
+                tree.source,
+                f"joint {name!r}, which the model was built from, is not in the file; "
+                "write back into the URDF the model was identified from",
+            )
         now = j.kinematics()
         for key, value in then.items():
             if now.get(key) != value:
@@ -142,8 +145,10 @@ def writeback_plan(model: CPCModel, urdf: str | os.PathLike[str] | None = None) 
     """
     source = urdf_source(model)
     if source is None:
-        raise SpecError(f"model {model.structure.name!r} was not built from a URDF (it has no 'urdf' section), "
-                        "so there is no URDF to write back into")
+        raise SpecError(
+            f"model {model.structure.name!r} was not built from a URDF (it has no 'urdf' section), "
+            "so there is no URDF to write back into"
+        )
     tree = read_urdf_tree(urdf if urdf is not None else source.path)
     _check_unchanged(tree, source)
     return plan_for_tree(model, tree, source)
@@ -155,14 +160,19 @@ def plan_for_tree(model: CPCModel, tree: UrdfTree, source: UrdfSource) -> Writeb
     cpc_of_joint = {u: c for c, u in source.joints.items()}
     unknown = [n for n in s.joint_names if n not in source.joints]
     if unknown:
-        raise InputFileError(tree.source, f"the model's joint {unknown[0]!r} is not a joint of this URDF")
+        raise InputFileError(
+            tree.source, f"the model's joint {unknown[0]!r} is not a joint of this URDF"
+        )
     frame_of_link: dict[str, str] = {}
     for f in s.frame_names:
         link = source.urdf_link(f)
         if not tree.has_link(link) or link == tree.root:
             what = "its root link" if tree.has_link(link) else "not a link of it"
-            raise InputFileError(tree.source, f"the model's frame {f!r} is {what}; name a frame after the URDF link "
-                                 "it belongs to (a camera link, a marker link on a fixed joint)")
+            raise InputFileError(
+                tree.source,
+                f"the model's frame {f!r} is {what}; name a frame after the URDF link "
+                "it belongs to (a camera link, a marker link on a fixed joint)",
+            )
         frame_of_link[link] = f
     on_paths: dict[str, UrdfJoint] = {}
     needed_by: dict[str, str] = {}  # joint -> a frame link whose path has it
@@ -178,23 +188,38 @@ def plan_for_tree(model: CPCModel, tree: UrdfTree, source: UrdfSource) -> Writeb
         if j.moving:
             cpc = cpc_of_joint.get(j.name)
             if cpc is None or s.joint(cpc).parent != K:
-                what = "is not a joint of the model" if cpc is None else f"is not on {K!r} in the model"
-                raise InputFileError(tree.source, f"joint {j.name!r} ({j.type}, line {j.line}) on the path to "
-                                     f"link {needed_by[j.name]!r} {what}")
+                what = (
+                    "is not a joint of the model"
+                    if cpc is None
+                    else f"is not on {K!r} in the model"
+                )
+                raise InputFileError(
+                    tree.source,
+                    f"joint {j.name!r} ({j.type}, line {j.line}) on the path to "
+                    f"link {needed_by[j.name]!r} {what}",
+                )
             R = homogeneous(source.axis_rotation(cpc), np.zeros(3))
             T_P_J = inverse(T_K_P) @ model.joints[cpc].matrix() @ R.T
             changes.append(OriginChange(j, "joint", cpc, j.origin, T_P_J, j.unit_axis))
             owner[j.child] = (cpc, R.T)
-            if frame is not None and (s.frame(frame).parent != cpc or not np.allclose(
-                    model.frames[frame].matrix(), R.T, rtol=0.0, atol=ON_AXIS_TOL)):
-                raise InputFileError(tree.source, f"the model's frame {frame!r} is not where joint {j.name!r} "
-                                     f"(line {j.line}) puts link {j.child!r}; a URDF link moved by a joint sits on "
-                                     "its axis (measure a marker link on a fixed joint instead)")
+            if frame is not None and (
+                s.frame(frame).parent != cpc
+                or not np.allclose(model.frames[frame].matrix(), R.T, rtol=0.0, atol=ON_AXIS_TOL)
+            ):
+                raise InputFileError(
+                    tree.source,
+                    f"the model's frame {frame!r} is not where joint {j.name!r} "
+                    f"(line {j.line}) puts link {j.child!r}; a URDF link moved by a joint sits on "
+                    "its axis (measure a marker link on a fixed joint instead)",
+                )
         elif frame is not None:
             fr = s.frame(frame)
             if fr.parent != K:
-                raise InputFileError(tree.source, f"the model's frame {frame!r} hangs on {fr.parent!r}, but link "
-                                     f"{j.child!r} on {K!r} in the URDF")
+                raise InputFileError(
+                    tree.source,
+                    f"the model's frame {frame!r} hangs on {fr.parent!r}, but link "
+                    f"{j.child!r} on {K!r} in the URDF",
+                )
             C = model.frames[frame].matrix()
             role = "camera" if fr.kind == "camera" else "measured link"
             changes.append(OriginChange(j, role, frame, j.origin, inverse(T_K_P) @ C))
@@ -203,7 +228,9 @@ def plan_for_tree(model: CPCModel, tree: UrdfTree, source: UrdfSource) -> Writeb
             owner[j.child] = (K, T_K_P @ j.origin)
     missed = [n for n in s.joint_names if n not in {c.owner for c in changes}]
     if missed:
-        raise InputFileError(tree.source, f"the model's joint {missed[0]!r} leads to none of its frames")
+        raise InputFileError(
+            tree.source, f"the model's joint {missed[0]!r} leads to none of its frames"
+        )
     return WritebackPlan(tree, source, tuple(changes), owner)
 
 

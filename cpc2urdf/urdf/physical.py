@@ -91,7 +91,9 @@ def _up_from_json(value: Any) -> tuple[tuple[float, float, float] | None, str | 
     if isinstance(value, Mapping):
         unknown = set(value) - {"joint", "sign"}
         if unknown:
-            raise ValueError(f"'up' has unknown keys {sorted(unknown)}; expected 'joint' and optionally 'sign'")
+            raise ValueError(
+                f"'up' has unknown keys {sorted(unknown)}; expected 'joint' and optionally 'sign'"
+            )
         joint = value.get("joint")
         if not isinstance(joint, str) or not joint:
             raise ValueError(f"'up.joint' must be a joint name, got {joint!r}")
@@ -102,12 +104,16 @@ def _up_from_json(value: Any) -> tuple[tuple[float, float, float] | None, str | 
     v = np.array(float_list(value, 3, "'up'"))
     n = float(np.linalg.norm(v))
     if n < 1e-9:
-        raise ValueError(f"'up' must be a non-zero direction [x, y, z] in base coordinates, got {value!r}")
+        raise ValueError(
+            f"'up' must be a non-zero direction [x, y, z] in base coordinates, got {value!r}"
+        )
     u = v / n
     return (float(u[0]), float(u[1]), float(u[2])), None, 1.0
 
 
-def physical_from_json(doc: Mapping[str, Any], joint_names: tuple[str, ...] = ()) -> PhysicalProperties:
+def physical_from_json(
+    doc: Mapping[str, Any], joint_names: tuple[str, ...] = ()
+) -> PhysicalProperties:
     """The ``density``, ``masses`` and ``up`` keys of a spec document (all optional).
 
     Args:
@@ -135,7 +141,9 @@ def physical_from_json(doc: Mapping[str, Any], joint_names: tuple[str, ...] = ()
             masses[str(name)] = m
     up, up_joint, sign = (None, None, 1.0) if "up" not in doc else _up_from_json(doc["up"])
     if up_joint is not None and joint_names and up_joint not in joint_names:
-        raise ValueError(f"'up.joint' {up_joint!r} is not a joint of this robot ({', '.join(joint_names)})")
+        raise ValueError(
+            f"'up.joint' {up_joint!r} is not a joint of this robot ({', '.join(joint_names)})"
+        )
     return PhysicalProperties(density, masses, up, up_joint, sign, stated)
 
 
@@ -143,7 +151,9 @@ def check_masses(physical: PhysicalProperties, links: list[str] | tuple[str, ...
     """:class:`SpecError` if ``physical.masses`` names a link not in ``links``."""
     unknown = [n for n in physical.masses if n not in links]
     if unknown:
-        raise SpecError(f"'masses' names links {unknown} the URDF does not have; its links are {list(links)}")
+        raise SpecError(
+            f"'masses' names links {unknown} the URDF does not have; its links are {list(links)}"
+        )
 
 
 __all__ = [

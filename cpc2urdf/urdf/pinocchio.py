@@ -76,7 +76,9 @@ class UnsupportedJointError(InputFileError):
         )
 
 
-def build_pinocchio_model(text: str, label: str, *, visuals: bool = False) -> tuple[pin.Model, pin.GeometryModel | None]:
+def build_pinocchio_model(
+    text: str, label: str, *, visuals: bool = False
+) -> tuple[pin.Model, pin.GeometryModel | None]:
     """Pinocchio's model (and, with ``visuals``, its visual geometry) of URDF text, with urdfdom's
     own complaints captured, never printed.
 
@@ -86,7 +88,11 @@ def build_pinocchio_model(text: str, label: str, *, visuals: bool = False) -> tu
     with captured_output() as out:  # urdfdom's own complaints are not the message
         try:
             model = pin.buildModelFromXML(text)
-            visual = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL) if visuals else None
+            visual = (
+                pin.buildGeomFromUrdfString(model, text, pin.GeometryType.VISUAL)
+                if visuals
+                else None
+            )
         except (RuntimeError, ValueError) as e:
             failure: Exception | None = e
         else:
@@ -94,8 +100,12 @@ def build_pinocchio_model(text: str, label: str, *, visuals: bool = False) -> tu
     # urdfdom can also report an error and go on without the part it could not read.
     said = out.error_lines()
     if failure is not None or said:
-        why = said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
-        raise InputFileError(label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})") from failure
+        why = (
+            said[0] if said else (str(failure).strip().splitlines() or [type(failure).__name__])[0]
+        )
+        raise InputFileError(
+            label, f"not a URDF Pinocchio can read ({why.removeprefix('Error:').strip()})"
+        ) from failure
     return model, visual
 
 
@@ -305,7 +315,6 @@ class PinocchioRobot:
         if frame_type is None:
             return int(self.model.getFrameId(name))
         return int(self.model.getFrameId(name, frame_type))
-
 
     def gravity_torques(self, joints: Sequence[str], Q: ArrayLike) -> Array:
         """What each joint carries at rest under gravity (``-z`` of the URDF's root, 9.81 m/s^2),

@@ -55,7 +55,10 @@ def _deg(v: float | None) -> float | None:
 
 
 def _origin_json(T: Array) -> dict[str, list[float]]:
-    return {"xyz_m": [float(v) for v in T[:3, 3]], "rpy_rad": [float(v) for v in rpy_from_matrix(T[:3, :3])]}
+    return {
+        "xyz_m": [float(v) for v in T[:3, 3]],
+        "rpy_rad": [float(v) for v in rpy_from_matrix(T[:3, :3])],
+    }
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,23 +91,30 @@ class CalibrationReport:
         joints = []
         for c in self.changes:
             std = self.uncertainty.get(c.joint.name)
-            joints.append({
-                "joint": c.joint.name,
-                "type": c.joint.type,
-                "role": c.role,
-                "model_name": c.owner,
-                "parent": c.joint.parent,
-                "child": c.joint.child,
-                "changed": c.changed,
-                "translation_mm": c.translation * 1e3,
-                "rotation_deg": math.degrees(c.rotation),
-                "axis_deg": _deg(c.axis_change),
-                "delta_xyz_mm": [float(v) * 1e3 for v in c.delta_xyz],
-                "nominal": _origin_json(c.nominal),
-                "calibrated": _origin_json(c.calibrated),
-                "std": None if std is None else {"translation_mm": _mm(std.translation),
-                                                 "rotation_deg": _deg(std.rotation), "axis_deg": _deg(std.axis)},
-            })
+            joints.append(
+                {
+                    "joint": c.joint.name,
+                    "type": c.joint.type,
+                    "role": c.role,
+                    "model_name": c.owner,
+                    "parent": c.joint.parent,
+                    "child": c.joint.child,
+                    "changed": c.changed,
+                    "translation_mm": c.translation * 1e3,
+                    "rotation_deg": math.degrees(c.rotation),
+                    "axis_deg": _deg(c.axis_change),
+                    "delta_xyz_mm": [float(v) * 1e3 for v in c.delta_xyz],
+                    "nominal": _origin_json(c.nominal),
+                    "calibrated": _origin_json(c.calibrated),
+                    "std": None
+                    if std is None
+                    else {
+                        "translation_mm": _mm(std.translation),
+                        "rotation_deg": _deg(std.rotation),
+                        "axis_deg": _deg(std.axis),
+                    },
+                }
+            )
         return {
             "format": REPORT_FORMAT,
             "urdf": self.source,
@@ -113,10 +123,12 @@ class CalibrationReport:
             "root": self.root,
             "joints": joints,
             "unchanged": "every other element of the URDF (links, inertials, meshes, collisions, materials, "
-                         "transmissions, gazebo/ros2_control tags, other joints, comments)",
-            "world_to_root": {"xyz_mm": [float(v) * 1e3 for v in self.T_world_root[:3, 3]],
-                              "rpy_deg": [math.degrees(v) for v in rpy_from_matrix(self.T_world_root[:3, :3])],
-                              "note": "pose of the root link in the measuring system; not written into the URDF"},
+            "transmissions, gazebo/ros2_control tags, other joints, comments)",
+            "world_to_root": {
+                "xyz_mm": [float(v) * 1e3 for v in self.T_world_root[:3, 3]],
+                "rpy_deg": [math.degrees(v) for v in rpy_from_matrix(self.T_world_root[:3, :3])],
+                "note": "pose of the root link in the measuring system; not written into the URDF",
+            },
             "notes": list(self.notes),
         }
 
@@ -134,8 +146,10 @@ class CalibrationReport:
         lines.append(head + ("  1-sigma: mm / deg / deg" if has_std else ""))
         for c in self.changes:
             axis = "" if c.axis_change is None else f"{math.degrees(c.axis_change):.4f}"
-            row = (f"  {c.joint.name:<{width}}  {c.role:<13}  {c.translation * 1e3:>10.4f}  "
-                   f"{math.degrees(c.rotation):>12.4f}  {axis:>10}")
+            row = (
+                f"  {c.joint.name:<{width}}  {c.role:<13}  {c.translation * 1e3:>10.4f}  "
+                f"{math.degrees(c.rotation):>12.4f}  {axis:>10}"
+            )
             std = self.uncertainty.get(c.joint.name)
             if std is not None:
                 parts = [_fmt(_mm(std.translation)), _fmt(_deg(std.rotation))]
@@ -144,8 +158,12 @@ class CalibrationReport:
                 row += "  " + " / ".join(parts)
             lines.append(row)
         xyz = ", ".join(f"{v * 1e3:.3f}" for v in self.T_world_root[:3, 3])
-        rpy = ", ".join(f"{math.degrees(v):.3f}" for v in rpy_from_matrix(self.T_world_root[:3, :3]))
-        lines.append(f"root link in the measuring system: xyz [{xyz}] mm, rpy [{rpy}] deg (not in the URDF)")
+        rpy = ", ".join(
+            f"{math.degrees(v):.3f}" for v in rpy_from_matrix(self.T_world_root[:3, :3])
+        )
+        lines.append(
+            f"root link in the measuring system: xyz [{xyz}] mm, rpy [{rpy}] deg (not in the URDF)"
+        )
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines) + "\n"
 
@@ -178,11 +196,17 @@ def calibration_report(
     cov = model.metadata.uncertainty
     if uncertainty:
         scale = cov.scale if cov is not None else "unknown"
-        notes.append(f"1-sigma from the model's covariance (scale {scale}), first order, in the model's gauge")
+        notes.append(
+            f"1-sigma from the model's covariance (scale {scale}), first order, in the model's gauge"
+        )
     elif cov is None:
-        notes.append("no uncertainty: the model carries no covariance (identify with --method refined)")
+        notes.append(
+            "no uncertainty: the model carries no covariance (identify with --method refined)"
+        )
     else:
-        notes.append("the model carries a covariance, not propagated here (cpc2urdf.api.calibration_report does)")
+        notes.append(
+            "the model carries a covariance, not propagated here (cpc2urdf.api.calibration_report does)"
+        )
     return CalibrationReport(
         source=plan.tree.source,
         output=None if output is None else os.fspath(output),

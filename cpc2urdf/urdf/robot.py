@@ -155,8 +155,10 @@ class UrdfSource:
             "robot": self.robot,
             "root": self.root,
             "sha256": self.sha256,
-            "joints": [{"name": c, "urdf": u, "axis_rotation": [list(r) for r in self.axis_rotations[c]]}
-                       for c, u in self.joints.items()],
+            "joints": [
+                {"name": c, "urdf": u, "axis_rotation": [list(r) for r in self.axis_rotations[c]]}
+                for c, u in self.joints.items()
+            ],
             "frames": [{"name": c, "urdf": u} for c, u in self.frames.items()],
             "kinematics": {j: dict(k) for j, k in self.kinematics.items()},
         }
@@ -170,7 +172,9 @@ class UrdfSource:
             for e in d["joints"]:
                 R = np.asarray(e["axis_rotation"], dtype=float)
                 if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
-                    raise ValueError(f"joint {e['name']!r}: axis_rotation must be a 3x3 rotation matrix")
+                    raise ValueError(
+                        f"joint {e['name']!r}: axis_rotation must be a 3x3 rotation matrix"
+                    )
                 rotations[str(e["name"])] = tuple(tuple(float(v) for v in row) for row in R)
             return cls(
                 path=str(d["path"]),
@@ -244,7 +248,9 @@ def _limits(j: UrdfJoint, source: str) -> tuple[str, float, float, float, float]
     kind = "prismatic" if j.type == "prismatic" else "revolute"
     lower, upper = (-math.pi, math.pi) if j.type == "continuous" else (j.lower, j.upper)
     if lower > upper:
-        raise InputFileError(source, f"joint {j.name!r}: limit lower {lower:g} > upper {upper:g} (line {j.line})")
+        raise InputFileError(
+            source, f"joint {j.name!r}: limit lower {lower:g} > upper {upper:g} (line {j.line})"
+        )
     velocity = j.velocity if j.velocity is not None and j.velocity > 0 else DEFAULT_VELOCITY[kind]
     effort = j.effort if j.effort is not None and j.effort > 0 else DEFAULT_EFFORT[kind]
     return kind, lower, upper, velocity, effort
@@ -256,13 +262,16 @@ def _check_measured(tree: UrdfTree, links: list[str]) -> None:
             raise link_error(tree, link, "a measured link")
         parent = tree.parent_joint(link)
         if parent is None:
-            raise InputFileError(tree.source, f"link {link!r} is the root of the tree (the robot's base), "
-                                 "not a measured link; measure a link fixed to it")
+            raise InputFileError(
+                tree.source,
+                f"link {link!r} is the root of the tree (the robot's base), "
+                "not a measured link; measure a link fixed to it",
+            )
         if parent.moving:
             raise InputFileError(
                 tree.source,
                 f"measured link {link!r} is moved by joint {parent.name!r} ({parent.type}, line {parent.line}) "
-                "directly; a measured link must hang on a fixed joint (add <link name=\"marker\"/> with a "
+                'directly; a measured link must hang on a fixed joint (add <link name="marker"/> with a '
                 f"fixed joint to {link!r} where the target is)",
             )
         for j in tree.path(link):
@@ -316,15 +325,20 @@ def urdf_robot(tree: UrdfTree, measured: Iterable[str] | None = None) -> UrdfRob
             kind, lower, upper, velocity, effort = _limits(j, tree.source)
             R = cpc_rotation(j.unit_axis)  # T_joint_axis: z onto the axis, eq. (4)
             joints.append(Joint(name, kind, K, lower, upper, velocity, effort))
-            params[name] = CPCParams.from_matrix(T_K_parent @ j.origin @ homogeneous(R, np.zeros(3)))
+            params[name] = CPCParams.from_matrix(
+                T_K_parent @ j.origin @ homogeneous(R, np.zeros(3))
+            )
             rotations[name] = tuple(tuple(float(v) for v in row) for row in R)
             owner[j.child], T_owner[j.child] = name, homogeneous(R.T, np.zeros(3))
         else:
             owner[j.child], T_owner[j.child] = K, T_K_parent @ j.origin
     if not joints:
         what = f"the measured links {links}" if measured is not None else "its links"
-        raise InputFileError(tree.source, f"no revolute, continuous or prismatic joint between the root link "
-                             f"{tree.root!r} and {what}: nothing to calibrate")
+        raise InputFileError(
+            tree.source,
+            f"no revolute, continuous or prismatic joint between the root link "
+            f"{tree.root!r} and {what}: nothing to calibrate",
+        )
     kind = "plate" if measured is not None else "frame"
     frames = [Frame(names.links[n], owner[n], kind) for n in links]
     frame_params = {names.links[n]: CPCParams.from_matrix(T_owner[n]) for n in links}
@@ -340,14 +354,24 @@ def urdf_robot(tree: UrdfTree, measured: Iterable[str] | None = None) -> UrdfRob
     )
     try:
         structure = RobotStructure(tree.name, joints, frames)
-        nominal = CPCModel(structure, IDENTITY, params, frame_params, UrdfModelMetadata(urdf=source))
+        nominal = CPCModel(
+            structure, IDENTITY, params, frame_params, UrdfModelMetadata(urdf=source)
+        )
     except Cpc2UrdfError as e:  # names are legal by construction; limits were checked above
         raise InputFileError(tree.source, str(e)) from e
-    return UrdfRobot(structure=structure, nominal=nominal, source=tree.source, tree=tree, names=names,
-                     measured=tuple(links) if measured is not None else None)
+    return UrdfRobot(
+        structure=structure,
+        nominal=nominal,
+        source=tree.source,
+        tree=tree,
+        names=names,
+        measured=tuple(links) if measured is not None else None,
+    )
 
 
-def load_urdf_robot(path: str | os.PathLike[str], measured: Iterable[str] | None = None) -> UrdfRobot:
+def load_urdf_robot(
+    path: str | os.PathLike[str], measured: Iterable[str] | None = None
+) -> UrdfRobot:
     """The robot of the URDF file ``path`` (see :func:`urdf_robot`).
 
     Raises:

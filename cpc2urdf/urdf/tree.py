@@ -114,8 +114,14 @@ class UrdfJoint:
 
     def kinematics(self) -> dict[str, object]:
         """What the joint contributes to kinematics, as JSON (type, links, origin, axis)."""
-        return {"type": self.type, "parent": self.parent, "child": self.child,
-                "xyz": list(self.xyz), "rpy": list(self.rpy), "axis": list(self.axis)}
+        return {
+            "type": self.type,
+            "parent": self.parent,
+            "child": self.child,
+            "xyz": list(self.xyz),
+            "rpy": list(self.rpy),
+            "axis": list(self.axis),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,7 +192,9 @@ class UrdfTree:
 
 
 def _numbers(value: str | None, n: int, default: tuple[float, ...]) -> tuple[float, ...]:
-    return default if value is None else tuple(float(v) for v in value.split())  # validated: n numbers
+    return (
+        default if value is None else tuple(float(v) for v in value.split())
+    )  # validated: n numbers
 
 
 def _tag_end(data: bytes, start: int) -> tuple[int, bool]:
@@ -236,8 +244,18 @@ def _tree(text: str, source: str | os.PathLike[str]) -> UrdfTree:
             links[attrib["name"]] = parser.CurrentLineNumber
         elif depth == 1 and tag == "joint":
             end, empty = _tag_end(data, offset)
-            joints.append({"attrib": attrib, "line": parser.CurrentLineNumber, "tag": TagSpan(offset, end, empty)})
-        elif depth == 2 and stack[1] == "joint" and tag in ("origin", "axis", "limit", "parent", "child"):
+            joints.append(
+                {
+                    "attrib": attrib,
+                    "line": parser.CurrentLineNumber,
+                    "tag": TagSpan(offset, end, empty),
+                }
+            )
+        elif (
+            depth == 2
+            and stack[1] == "joint"
+            and tag in ("origin", "axis", "limit", "parent", "child")
+        ):
             end, empty = _tag_end(data, offset)
             joints[-1].setdefault(tag, (attrib, TagSpan(offset, end, empty)))
 

@@ -33,7 +33,9 @@ from cpc2urdf.urdf.origins import WritebackPlan, writeback_plan
 from cpc2urdf.urdf.report import CalibrationReport, OriginStd, calibration_report, report_paths
 from cpc2urdf.urdf.tree import TagSpan
 
-UNIT_AXIS_TOL = 1e-12  # [-]: an <axis> whose length differs from 1 by more is rewritten as a unit vector
+UNIT_AXIS_TOL = (
+    1e-12  # [-]: an <axis> whose length differs from 1 by more is rewritten as a unit vector
+)
 
 
 def _origin_tag(T: Array, empty: bool) -> bytes:
@@ -44,7 +46,7 @@ def _origin_tag(T: Array, empty: bool) -> bytes:
 def _indent(data: bytes, tag: TagSpan) -> bytes:
     """The whitespace before the line of ``tag``, plus two spaces (a child element's indent)."""
     line = data.rfind(b"\n", 0, tag.start) + 1
-    head = data[line:tag.start]
+    head = data[line : tag.start]
     return (head if not head.strip() else b"") + b"  "
 
 
@@ -56,14 +58,39 @@ def calibrated_urdf_text(plan: WritebackPlan) -> str:
         j = c.joint
         if c.changed:
             if j.origin_tag is not None:
-                edits.append((j.origin_tag.start, j.origin_tag.end, _origin_tag(c.calibrated, j.origin_tag.empty)))
-            elif j.tag.empty:  # <joint .../> has no children to keep; validate_urdf refuses it anyway
+                edits.append(
+                    (
+                        j.origin_tag.start,
+                        j.origin_tag.end,
+                        _origin_tag(c.calibrated, j.origin_tag.empty),
+                    )
+                )
+            elif (
+                j.tag.empty
+            ):  # <joint .../> has no children to keep; validate_urdf refuses it anyway
                 raise AssertionError(f"joint {j.name!r} has no <parent>/<child>")
             else:
-                edits.append((j.tag.end, j.tag.end, b"\n" + _indent(data, j.tag) + _origin_tag(c.calibrated, True)))
-        if c.changed and c.axis is not None and j.axis_tag is not None and abs(np.linalg.norm(j.axis) - 1.0) > UNIT_AXIS_TOL:
+                edits.append(
+                    (
+                        j.tag.end,
+                        j.tag.end,
+                        b"\n" + _indent(data, j.tag) + _origin_tag(c.calibrated, True),
+                    )
+                )
+        if (
+            c.changed
+            and c.axis is not None
+            and j.axis_tag is not None
+            and abs(np.linalg.norm(j.axis) - 1.0) > UNIT_AXIS_TOL
+        ):
             end = "/>" if j.axis_tag.empty else ">"
-            edits.append((j.axis_tag.start, j.axis_tag.end, f'<axis xyz="{urdf_vector(c.axis)}"{end}'.encode()))
+            edits.append(
+                (
+                    j.axis_tag.start,
+                    j.axis_tag.end,
+                    f'<axis xyz="{urdf_vector(c.axis)}"{end}'.encode(),
+                )
+            )
     for first, last, new in sorted(edits, reverse=True):
         data = data[:first] + new + data[last:]
     return data.decode("utf-8")

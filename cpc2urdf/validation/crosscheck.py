@@ -126,9 +126,13 @@ class CrossCheckReport:
                     f"worst position {p.max_position_error:.3e} m, rotation "
                     f"{p.max_rotation_error:.3e} rad (at {p.worst_frame})"
                 )
-            lines.append(f"  {p.parser:10s} {'OK  ' if p.ok else 'FAIL'} {err}{'; ' + p.note if p.note else ''}")
+            lines.append(
+                f"  {p.parser:10s} {'OK  ' if p.ok else 'FAIL'} {err}{'; ' + p.note if p.note else ''}"
+            )
             lines.extend(f"             - {msg}" for msg in p.problems)
-        lines.append("result: " + ("all parsers agree with the CPC model" if self.ok else "DISCREPANCY"))
+        lines.append(
+            "result: " + ("all parsers agree with the CPC model" if self.ok else "DISCREPANCY")
+        )
         return "\n".join(lines)
 
 
@@ -143,7 +147,10 @@ def _bodies_in(model: CPCModel, links: object) -> dict[str, str]:
 
 
 def _reference_poses(
-    model: CPCModel, Q: Array, bodies: dict[str, str] | None = None, T_world_base: Array | None = None
+    model: CPCModel,
+    Q: Array,
+    bodies: dict[str, str] | None = None,
+    T_world_base: Array | None = None,
 ) -> dict[str, Array]:
     """CPC poses (N, 4, 4) of every compared frame, keyed by URDF link name, in the model's world
     or, given the URDF's ``T_world_base``, in the URDF's world (the same poses relative to base)."""
@@ -167,7 +174,9 @@ def _mount(model: CPCModel, T_world_base: Array, report: ParserReport) -> Array:
         report.note = "world: the model's world (mount rig)"
         return T_model
     if float(np.linalg.norm(T_world_base[:3, 3])) <= FK_AGREEMENT_TOL:
-        report.note = "world: a rotation at the base origin (mount base); poses compared relative to base"
+        report.note = (
+            "world: a rotation at the base origin (mount base); poses compared relative to base"
+        )
         return T_world_base
     report.problems.append(
         "world -> base is neither the model's T_world_base (mount rig) nor a rotation at the base origin (mount base)"
@@ -214,7 +223,9 @@ def check_pinocchio(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
         robot = PinocchioRobot.from_urdf(Path(urdf_path))
     except UnsupportedJointError as e:  # parses, but has joints the CPC model cannot have
         rep.ok = False
-        rep.problems.extend(f"joint {name!r} is {kind}, expected revolute or prismatic" for name, kind in e.joints)
+        rep.problems.extend(
+            f"joint {name!r} is {kind}, expected revolute or prismatic" for name, kind in e.joints
+        )
         return rep
     pmodel = robot.model
     s = model.structure
@@ -264,7 +275,10 @@ def _load_yourdfpy(urdf_path: str) -> Any:
     with captured_output() as out:  # yourdfpy logs its parse problems; they are not our output
         try:
             robot = yourdfpy.URDF.load(
-                urdf_path, load_meshes=False, build_collision_scene_graph=False, load_collision_meshes=False
+                urdf_path,
+                load_meshes=False,
+                build_collision_scene_graph=False,
+                load_collision_meshes=False,
             )
         except Exception as e:  # lxml/yourdfpy errors have no common base
             failure: Exception | None = e
@@ -321,9 +335,13 @@ def check_yourdfpy(model: CPCModel, urdf_path: str, Q: Array) -> ParserReport:
             uj = robot.joint_map[j.name]
             if uj.type != j.type:
                 rep.problems.append(f"joint {j.name!r} has type {uj.type}, expected {j.type}")
-            elif uj.limit is None or max(
-                abs(_or_zero(uj.limit.lower) - j.lower), abs(_or_zero(uj.limit.upper) - j.upper)
-            ) > LIMIT_TOL:
+            elif (
+                uj.limit is None
+                or max(
+                    abs(_or_zero(uj.limit.lower) - j.lower), abs(_or_zero(uj.limit.upper) - j.upper)
+                )
+                > LIMIT_TOL
+            ):
                 rep.problems.append(f"joint {j.name!r} limits differ")
     bodies = _bodies_in(model, robot.link_map)
     frames = _compared_frames(model, bodies)
@@ -374,11 +392,19 @@ def _urdfdom_edges(urdf_path: str, rep: ParserReport) -> set[tuple[str, str]] | 
         rep.problems.append("check_urdf not found (it ships with the 'pin' package)")
         return None
     proc = subprocess.run(
-        [exe, urdf_path], capture_output=True, text=True, errors="replace", timeout=60,
+        [exe, urdf_path],
+        capture_output=True,
+        text=True,
+        errors="replace",
+        timeout=60,
         env={**os.environ, "LC_ALL": "C"},
     )
     # check_urdf also reports an error and goes on without the part it could not read.
-    said = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip().lower().startswith("error")]
+    said = [
+        ln.strip()
+        for ln in (proc.stderr + proc.stdout).splitlines()
+        if ln.strip().lower().startswith("error")
+    ]
     if proc.returncode != 0 or "Successfully Parsed XML" not in proc.stdout or said:
         why = said[0].removeprefix("Error:").strip() if said else f"exit code {proc.returncode}"
         raise InputFileError(urdf_path, f"urdfdom's check_urdf cannot read it ({why})")
@@ -451,15 +477,21 @@ def _source_problems(tree: UrdfTree, source: UrdfSource, calibrated: set[str]) -
         # write-back changes a calibrated joint's origin, and its <axis> only to the unit vector
         free = ("xyz", "rpy", "axis") if name in calibrated else ()
         changed = [k for k in then if k not in free and now.get(k) != then[k]]
-        if name in calibrated and not np.allclose(_unit(now["axis"]), _unit(then["axis"]), rtol=0.0, atol=LIMIT_TOL):
+        if name in calibrated and not np.allclose(
+            _unit(now["axis"]), _unit(then["axis"]), rtol=0.0, atol=LIMIT_TOL
+        ):
             changed.append("axis")
         if changed:
             k = changed[0]
-            out.append(f"joint {name!r} (line {j.line}): {k} is {now.get(k)}, the model was built from {then[k]}")
+            out.append(
+                f"joint {name!r} (line {j.line}): {k} is {now.get(k)}, the model was built from {then[k]}"
+            )
     return out
 
 
-def _writeback_plan(model: CPCModel, tree: UrdfTree, source: UrdfSource, rep: ParserReport) -> WritebackPlan | None:
+def _writeback_plan(
+    model: CPCModel, tree: UrdfTree, source: UrdfSource, rep: ParserReport
+) -> WritebackPlan | None:
     """The write-back plan of ``model`` on the checked file, or None with the reason in ``rep``."""
     try:
         plan = plan_for_tree(model, tree, source)
@@ -477,7 +509,9 @@ def _urdf_q(model: CPCModel, source: UrdfSource, q: Array) -> dict[str, float]:
     return {source.joints[n]: float(v) for n, v in zip(model.structure.joint_names, q, strict=True)}
 
 
-def _urdf_limit_problems(model: CPCModel, source: UrdfSource, limits: dict[str, tuple[float, float]]) -> list[str]:
+def _urdf_limit_problems(
+    model: CPCModel, source: UrdfSource, limits: dict[str, tuple[float, float]]
+) -> list[str]:
     """The model's joints whose limits in the file (``{URDF joint: (lower, upper)}``, continuous
     joints left out) differ from the model's."""
     out = []
@@ -490,7 +524,9 @@ def _urdf_limit_problems(model: CPCModel, source: UrdfSource, limits: dict[str, 
     return out
 
 
-def _worst_link(rep: ParserReport, plan: WritebackPlan, errors: dict[str, tuple[float, float]]) -> None:
+def _worst_link(
+    rep: ParserReport, plan: WritebackPlan, errors: dict[str, tuple[float, float]]
+) -> None:
     """:func:`_worst`, and the first link from the root that is off, with the joint above it:
     where the file and the model part (every link below it follows)."""
     _worst(rep, errors)
@@ -499,7 +535,9 @@ def _worst_link(rep: ParserReport, plan: WritebackPlan, errors: dict[str, tuple[
         if dp > FK_AGREEMENT_TOL or dr > FK_AGREEMENT_TOL:
             j = plan.tree.parent_joint(link)
             above = f" below joint {j.name!r} (line {j.line})" if j is not None else ""
-            rep.problems.append(f"link {link!r}{above} is {dp:.3e} m, {dr:.3e} rad from where the model puts it")
+            rep.problems.append(
+                f"link {link!r}{above} is {dp:.3e} m, {dr:.3e} rad from where the model puts it"
+            )
             return
 
 
@@ -513,7 +551,9 @@ def _pinocchio_of(urdf_path: str) -> pin.Model:
     return build_pinocchio_model(read_urdf(urdf_path), urdf_path)[0]
 
 
-def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:
+def check_pinocchio_writeback(
+    model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan
+) -> ParserReport:
     """FK by Pinocchio of every link of ``plan`` (the paths from the root to the model's frames)
     in the written-back URDF, against :func:`~cpc2urdf.urdf.origins.urdf_link_poses`; the other
     joints of the file at Pinocchio's neutral configuration.
@@ -521,7 +561,9 @@ def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: W
     Raises:
         InputFileError: Pinocchio cannot read the URDF.
     """
-    rep = ParserReport("pinocchio", True, note="links by the URDF's names, in its root link's frame")
+    rep = ParserReport(
+        "pinocchio", True, note="links by the URDF's names, in its root link's frame"
+    )
     pmodel = _pinocchio_of(urdf_path)
     source = plan.source
     slots: dict[str, tuple[int, bool]] = {}  # URDF joint -> (index in q, continuous: (cos, sin))
@@ -533,14 +575,21 @@ def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: W
         jid = pmodel.getJointId(u)
         joint = pmodel.joints[jid]
         if joint.nv != 1 or joint.nq not in (1, 2):
-            rep.problems.append(f"joint {u!r} is {joint.shortname()}, expected revolute, continuous or prismatic")
+            rep.problems.append(
+                f"joint {u!r} is {joint.shortname()}, expected revolute, continuous or prismatic"
+            )
             continue
         slots[u] = (joint.idx_q, joint.nq == 2)
         if joint.nq == 1:
-            limits[u] = (float(pmodel.lowerPositionLimit[joint.idx_q]), float(pmodel.upperPositionLimit[joint.idx_q]))
+            limits[u] = (
+                float(pmodel.lowerPositionLimit[joint.idx_q]),
+                float(pmodel.upperPositionLimit[joint.idx_q]),
+            )
     rep.problems.extend(_urdf_limit_problems(model, source, limits))
     links = list(plan.placements)
-    rep.problems.extend(f"link {ln!r} missing" for ln in links if not pmodel.existFrame(ln, pin.FrameType.BODY))
+    rep.problems.extend(
+        f"link {ln!r} missing" for ln in links if not pmodel.existFrame(ln, pin.FrameType.BODY)
+    )
     if rep.problems:
         rep.ok = False
         return rep
@@ -558,11 +607,17 @@ def check_pinocchio_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: W
         pin.framesForwardKinematics(pmodel, data, qp)
         for ln in links:
             got[ln][k] = data.oMf[fids[ln]].homogeneous
-    _worst_link(rep, plan, {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()})
+    _worst_link(
+        rep,
+        plan,
+        {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()},
+    )
     return rep
 
 
-def check_yourdfpy_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan) -> ParserReport:
+def check_yourdfpy_writeback(
+    model: CPCModel, urdf_path: str, Q: Array, plan: WritebackPlan
+) -> ParserReport:
     """:func:`check_pinocchio_writeback` with yourdfpy (poses relative to the root link).
 
     Raises:
@@ -571,13 +626,18 @@ def check_yourdfpy_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: Wr
     rep = ParserReport("yourdfpy", True, note="links by the URDF's names, in its root link's frame")
     robot = _load_yourdfpy(urdf_path)
     source = plan.source
-    rep.problems.extend(f"joint {u!r} missing" for u in source.joints.values() if u not in robot.joint_map)
+    rep.problems.extend(
+        f"joint {u!r} missing" for u in source.joints.values() if u not in robot.joint_map
+    )
     limits = {}
     for u in source.joints.values():
         uj = robot.joint_map.get(u)
         if uj is not None and uj.type != "continuous":
             lim = uj.limit
-            limits[u] = (_or_zero(None if lim is None else lim.lower), _or_zero(None if lim is None else lim.upper))
+            limits[u] = (
+                _or_zero(None if lim is None else lim.lower),
+                _or_zero(None if lim is None else lim.upper),
+            )
     rep.problems.extend(_urdf_limit_problems(model, source, limits))
     links = list(plan.placements)
     rep.problems.extend(f"link {ln!r} missing" for ln in links if ln not in robot.link_map)
@@ -590,7 +650,11 @@ def check_yourdfpy_writeback(model: CPCModel, urdf_path: str, Q: Array, plan: Wr
         robot.update_cfg(_urdf_q(model, source, q))
         for ln in links:
             got[ln][k] = yourdfpy_pose(robot, ln, root)
-    _worst_link(rep, plan, {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()})
+    _worst_link(
+        rep,
+        plan,
+        {ln: _compare(ref, got[ln]) for ln, ref in urdf_link_poses(model, plan, Q).items()},
+    )
     return rep
 
 
@@ -631,18 +695,29 @@ def cross_check_writeback(model: CPCModel, path: str, Q: Array) -> CrossCheckRep
     tree = parse_urdf_tree(read_urdf(path), path)
     source = urdf_source(model)
     assert source is not None
-    src = ParserReport("source", True, note=f"the joints {os.path.basename(source.path)} gave the model")
+    src = ParserReport(
+        "source", True, note=f"the joints {os.path.basename(source.path)} gave the model"
+    )
     plan = _writeback_plan(model, tree, source, src)
     if plan is None:
         urdfdom = ParserReport("urdfdom", True, note="check_urdf prints no poses")
         _urdfdom_edges(path, urdfdom)
-        skipped = [ParserReport(p, False, problems=["no reference poses (see 'source')"])
-                   for p in ("pinocchio", "yourdfpy")]
-        return CrossCheckReport(path, len(Q), [], [*skipped, urdfdom, src], compared="links of the written-back URDF")
-    reports = [check_pinocchio_writeback(model, path, Q, plan), check_yourdfpy_writeback(model, path, Q, plan),
-               check_urdfdom_writeback(path, plan), src]
-    return CrossCheckReport(path, len(Q), list(plan.placements), reports, compared="links of the written-back URDF")
-
+        skipped = [
+            ParserReport(p, False, problems=["no reference poses (see 'source')"])
+            for p in ("pinocchio", "yourdfpy")
+        ]
+        return CrossCheckReport(
+            path, len(Q), [], [*skipped, urdfdom, src], compared="links of the written-back URDF"
+        )
+    reports = [
+        check_pinocchio_writeback(model, path, Q, plan),
+        check_yourdfpy_writeback(model, path, Q, plan),
+        check_urdfdom_writeback(path, plan),
+        src,
+    ]
+    return CrossCheckReport(
+        path, len(Q), list(plan.placements), reports, compared="links of the written-back URDF"
+    )
 
 
 def cross_check(
@@ -668,9 +743,15 @@ def cross_check(
     Q = sample_configurations(model, n, seed)
     if urdf_source(model) is not None:
         return cross_check_writeback(model, path, Q)
-    reports = [check_pinocchio(model, path, Q), check_yourdfpy(model, path, Q), check_urdfdom(model, path)]
+    reports = [
+        check_pinocchio(model, path, Q),
+        check_yourdfpy(model, path, Q),
+        check_urdfdom(model, path),
+    ]
     links = {el.get("name") for el in ET.fromstring(text).iter("link")}
-    return CrossCheckReport(path, len(Q), _compared_frames(model, _bodies_in(model, links)), reports)
+    return CrossCheckReport(
+        path, len(Q), _compared_frames(model, _bodies_in(model, links)), reports
+    )
 
 
 __all__ = [

@@ -85,9 +85,18 @@ def _branch(name: str, e: Array, rotation: Array, predicted: float | None) -> Br
     """Table 4 of errors ``e`` (K, 3) [m] and rotation errors (K,) [rad]."""
     a = np.abs(e)
     d = np.linalg.norm(e, axis=1)
-    return BranchAccuracy(name, len(e), a.mean(axis=0), a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
-                          float(d.mean()), float(np.sqrt(np.mean(d**2))), float(d.max()), float(rotation.mean()),
-                          float(rotation.max()), predicted)
+    return BranchAccuracy(
+        name,
+        len(e),
+        a.mean(axis=0),
+        a.std(axis=0, ddof=1) if len(e) > 1 else np.zeros(3),
+        float(d.mean()),
+        float(np.sqrt(np.mean(d**2))),
+        float(d.max()),
+        float(rotation.mean()),
+        float(rotation.max()),
+        predicted,
+    )
 
 
 def position_errors(model: CPCModel, ms: MeasurementSet, frame: str) -> tuple[Array, Array]:
@@ -125,7 +134,9 @@ def predicted_rms(model: CPCModel, ms: MeasurementSet, frame: str) -> float | No
     return float(np.sqrt(np.mean(std**2)))
 
 
-def accuracy(model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool = False) -> dict[str, BranchAccuracy]:
+def accuracy(
+    model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool = False
+) -> dict[str, BranchAccuracy]:
     """Table 4 for every frame that both the model has and ``ms`` measured, and for every marker
     whose position the model identified (point data: its frame at the held-out readings places
     it), with the error the model's covariance predicts next to a frame's when the model has one
@@ -159,7 +170,9 @@ def accuracy(model: CPCModel, ms: MeasurementSet, *, accept_inconsistent: bool =
     out = {}
     for f in frames:
         e, r = position_errors(model, ms, f)
-        out[f] = _branch(f, e, r, predicted_rms(model, ms, f) if model.metadata.uncertainty is not None else None)
+        out[f] = _branch(
+            f, e, r, predicted_rms(model, ms, f) if model.metadata.uncertainty is not None else None
+        )
     for m in markers:  # a marker's identified position on its frame, at the held-out readings
         frame, p = placed[m]
         ok = ms.has_marker(m)
@@ -179,15 +192,23 @@ def format_table(report: dict[str, BranchAccuracy]) -> str:
     for f, b in report.items():
         lines.append(f"{f} ({b.records} held-out records):")
         for k, axis in enumerate("xyz"):
-            lines.append(f"  mu_{axis} = {b.mean_abs[k] * 1e3:7.3f} mm   sigma_{axis} = {b.std_abs[k] * 1e3:7.3f} mm")
-        lines.append(f"  mean |e| = {b.mean * 1e3:.3f} mm   rms {b.rms * 1e3:.3f} mm   max {b.max * 1e3:.3f} mm")
-        lines.append(f"  rotation: mean {np.degrees(b.mean_rotation):.4f} deg   max {np.degrees(b.max_rotation):.4f} deg")
+            lines.append(
+                f"  mu_{axis} = {b.mean_abs[k] * 1e3:7.3f} mm   sigma_{axis} = {b.std_abs[k] * 1e3:7.3f} mm"
+            )
+        lines.append(
+            f"  mean |e| = {b.mean * 1e3:.3f} mm   rms {b.rms * 1e3:.3f} mm   max {b.max * 1e3:.3f} mm"
+        )
+        lines.append(
+            f"  rotation: mean {np.degrees(b.mean_rotation):.4f} deg   max {np.degrees(b.max_rotation):.4f} deg"
+        )
         if b.predicted_rms is not None:
             lines.append(
                 f"  predicted rms {b.predicted_rms * 1e3:.3f} mm (identification covariance) "
                 f"vs observed rms {b.rms * 1e3:.3f} mm"
             )
-    lines.append("(mu, sigma: mean and sample standard deviation of the absolute error components in world)")
+    lines.append(
+        "(mu, sigma: mean and sample standard deviation of the absolute error components in world)"
+    )
     return "\n".join(lines)
 
 
@@ -225,12 +246,16 @@ class PredictionCheck:
         """The mismatch and its likely cause, one line (without the file name)."""
         r = self.observed_rms / self.predicted_rms
         how = f"{r:.3g}x" if r >= 0.5 else f"1/{1 / max(r, 1e-300):.3g} of"
-        return (f"held-out errors are {how} what the model predicts (observed {self.observed_rms * 1e3:.3g} mm vs "
-                f"predicted {self.predicted_rms * 1e3:.3g} mm RMS, p < {max(2 * min(self.p_low, self.p_high), 1e-300):.1g}): "
-                f"{self.cause}")
+        return (
+            f"held-out errors are {how} what the model predicts (observed {self.observed_rms * 1e3:.3g} mm vs "
+            f"predicted {self.predicted_rms * 1e3:.3g} mm RMS, p < {max(2 * min(self.p_low, self.p_high), 1e-300):.1g}): "
+            f"{self.cause}"
+        )
 
     def error(self) -> InconsistentDataError:
-        return InconsistentDataError(f"{self.source}: {self.line()}, or pass --accept-inconsistent", self)
+        return InconsistentDataError(
+            f"{self.source}: {self.line()}, or pass --accept-inconsistent", self
+        )
 
 
 def _chernoff(lam: Array, x: float) -> tuple[float, float]:
@@ -250,7 +275,11 @@ def _chernoff(lam: Array, x: float) -> tuple[float, float]:
         t = v / (2.0 * top)
         return float(-t * x - 0.5 * np.sum(np.log1p(-2.0 * t * lam)))
 
-    lo = minimize_scalar(low, bounds=(np.log(1e-6 / top), np.log(1e12 / top)), method="bounded").fun if x > 0 else -np.inf
+    lo = (
+        minimize_scalar(low, bounds=(np.log(1e-6 / top), np.log(1e12 / top)), method="bounded").fun
+        if x > 0
+        else -np.inf
+    )
     hi = minimize_scalar(high, bounds=(0.0, 1.0 - 1e-12), method="bounded").fun
     # Both exponents are <= 0 at t -> 0 (the trivial bound 1); a bounded search may stop short.
     return float(np.exp(min(lo, 0.0))), float(np.exp(min(hi, 0.0)))
@@ -273,14 +302,17 @@ def _stacked_test(model: CPCModel, ms: MeasurementSet) -> tuple[float, float, fl
     _, D = chart.pose_jacobian(np.zeros(chart.n_params), np.atleast_2d(ms.q))
     G = np.concatenate([D[f][ms.has_pose(f), :3, :].reshape(-1, chart.n_params) for f in frames])
     E = np.concatenate([position_errors(model, ms, f)[0].ravel() for f in frames])
-    noise = 0.0 if held_out_poses_are_true(ms) else cov.sigma_t**2 * (
-        cov.variance_factor if cov.scale == "a_posteriori" else 1.0)
+    noise = (
+        0.0
+        if held_out_poses_are_true(ms)
+        else cov.sigma_t**2 * (cov.variance_factor if cov.scale == "a_posteriori" else 1.0)
+    )
     c, V = np.linalg.eigh(cov.matrix)
     L = V * np.sqrt(np.clip(c, 0.0, None))
     GL = G @ L
     mu = np.clip(np.linalg.eigvalsh(GL.T @ GL), 0.0, None)
     m = len(E)
-    lam = np.concatenate([mu[-min(m, len(mu)):] + noise, np.full(max(m - len(mu), 0), noise)])
+    lam = np.concatenate([mu[-min(m, len(mu)) :] + noise, np.full(max(m - len(mu), 0), noise)])
     x = float(E @ E)
     p_low, p_high = _chernoff(lam, x)
     return float(np.sqrt(x * 3.0 / m)), float(np.sqrt(lam.sum() * 3.0 / m)), p_low, p_high
@@ -313,25 +345,42 @@ def prediction_check(model: CPCModel, ms: MeasurementSet) -> PredictionCheck | N
                 continue
             # A fix counts when it makes the errors what the model predicts at about the same
             # level (not by moving the readings where the model's prediction is vague).
-            if (fixed is not None and min(fixed[2], fixed[3]) >= PREDICTION_FALSE_ALARM / 2
-                    and abs(np.log(fixed[1] / pred)) < np.log(3.0)):
-                return PredictionCheck(ms.source, obs, pred, p_low, p_high,
-                                       f"in the held-out file, {alt.cause} (with {alt.key}: {fixed[0] * 1e3:.3g} mm RMS, "
-                                       f"as predicted) — {alt.remedy}")
-        cause = ("the held-out data do not fit this model: another robot or placement (did the rig move?), a "
-                 "different measuring setup, or a model identified from inconsistent data")
+            if (
+                fixed is not None
+                and min(fixed[2], fixed[3]) >= PREDICTION_FALSE_ALARM / 2
+                and abs(np.log(fixed[1] / pred)) < np.log(3.0)
+            ):
+                return PredictionCheck(
+                    ms.source,
+                    obs,
+                    pred,
+                    p_low,
+                    p_high,
+                    f"in the held-out file, {alt.cause} (with {alt.key}: {fixed[0] * 1e3:.3g} mm RMS, "
+                    f"as predicted) — {alt.remedy}",
+                )
+        cause = (
+            "the held-out data do not fit this model: another robot or placement (did the rig move?), a "
+            "different measuring setup, or a model identified from inconsistent data"
+        )
         return PredictionCheck(ms.source, obs, pred, p_low, p_high, cause)
     # Errors far below the prediction: no mistake of the held-out file alone does that.
     shared = [f for f in LENGTH_FACTORS if f < 1 and abs(np.log(ratio / f)) < np.log(3.0)]
     if shared:
         f = shared[0]
-        story = LENGTH_FACTORS[min(LENGTH_FACTORS, key=lambda g: abs(g * f - 1.0))]  # the factor undoing f
-        cause = (f"about {1 / f:.0f}x smaller than predicted, as when both the model's data and the held-out file hold "
-                 f"lengths in a unit {1 / f:.0f}x larger than they state ({story}) while the noise "
-                 "statement is in SI — check both files' 'units' and identify again")
+        story = LENGTH_FACTORS[
+            min(LENGTH_FACTORS, key=lambda g: abs(g * f - 1.0))
+        ]  # the factor undoing f
+        cause = (
+            f"about {1 / f:.0f}x smaller than predicted, as when both the model's data and the held-out file hold "
+            f"lengths in a unit {1 / f:.0f}x larger than they state ({story}) while the noise "
+            "statement is in SI — check both files' 'units' and identify again"
+        )
     else:
-        cause = ("the held-out poses agree with the model far better than its own data did: are they the model's "
-                 "own predictions, or is the model's noise statement too large?")
+        cause = (
+            "the held-out poses agree with the model far better than its own data did: are they the model's "
+            "own predictions, or is the model's noise statement too large?"
+        )
     return PredictionCheck(ms.source, obs, pred, p_low, p_high, cause)
 
 

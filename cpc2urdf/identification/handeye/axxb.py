@@ -84,7 +84,9 @@ def as_pose_stack(poses: ArrayLike | Sequence[ArrayLike], name: str) -> Array:
         np.linalg.det(R) < 0
     )
     bad_row = np.max(np.abs(T[:, 3] - [0.0, 0.0, 0.0, 1.0]), axis=1) > 1e-12
-    for k in np.flatnonzero(~finite | not_rotation | bad_row)[:1]:  # the first bad pose, as a loop would
+    for k in np.flatnonzero(~finite | not_rotation | bad_row)[
+        :1
+    ]:  # the first bad pose, as a loop would
         if not finite[k]:
             raise ValueError(f"{name}[{k}] contains NaN or inf")
         if not_rotation[k]:
@@ -93,7 +95,9 @@ def as_pose_stack(poses: ArrayLike | Sequence[ArrayLike], name: str) -> Array:
     return T
 
 
-def motion_pairs(n: int, per_pose: int = MAX_PAIRS_PER_POSE) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+def motion_pairs(
+    n: int, per_pose: int = MAX_PAIRS_PER_POSE
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Index arrays ``(i, j)`` of the pose pairs whose relative motions an ``A X = X B`` solve uses.
 
     Up to ``2 per_pose + 1`` poses: every pair ``i < j`` (``np.triu_indices`` order). Beyond: pose
@@ -137,8 +141,12 @@ def _fit_cost(T_base_hand: Array, T_camera_target: Array) -> float:
     """Residual level of a quick Park-Martin fit, in units of 1 mm / 0.1 deg (the larger)."""
     A, B = relative_motions(T_base_hand, T_camera_target)
     X = solve_park_martin(A, B)
-    dt, dr = residuals(T_base_hand, T_camera_target, X, target_from_x(T_base_hand, T_camera_target, X))
-    return max(float(np.sqrt(np.mean(dt**2))) / 1e-3, float(np.sqrt(np.mean(dr**2))) / math.radians(0.1))
+    dt, dr = residuals(
+        T_base_hand, T_camera_target, X, target_from_x(T_base_hand, T_camera_target, X)
+    )
+    return max(
+        float(np.sqrt(np.mean(dt**2))) / 1e-3, float(np.sqrt(np.mean(dr**2))) / math.radians(0.1)
+    )
 
 
 def check_directions(T_base_hand: Array, T_camera_target: Array) -> list[str]:
@@ -277,10 +285,14 @@ class HandEyeResult:
         """Plain JSON (metres, radians, plus mm/deg residuals for reading)."""
         return {
             "method": self.method,
-            "X": {"direction": "T_hand_camera (camera pose in the hand frame)",
-                  "matrix": self.X.tolist()},
-            "Z": {"direction": "T_base_target (target pose in the robot base frame)",
-                  "matrix": self.Z.tolist()},
+            "X": {
+                "direction": "T_hand_camera (camera pose in the hand frame)",
+                "matrix": self.X.tolist(),
+            },
+            "Z": {
+                "direction": "T_base_target (target pose in the robot base frame)",
+                "matrix": self.Z.tolist(),
+            },
             "residual_translation_mm": (self.residual_translation * 1e3).tolist(),
             "residual_rotation_deg": np.degrees(self.residual_rotation).tolist(),
             "rms_translation_mm": self.rms_translation() * 1e3,
@@ -290,7 +302,9 @@ class HandEyeResult:
         }
 
 
-def residuals(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> tuple[Array, Array]:
+def residuals(
+    T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array
+) -> tuple[Array, Array]:
     """Per-pose residuals of ``A_k X = Z B_k``: (translation [m], rotation [rad]), each (N,)."""
     AX = T_base_hand @ X
     ZB = Z @ inverse(T_camera_target)
@@ -336,7 +350,9 @@ def target_from_x(T_base_hand: Array, T_camera_target: Array, X: Array) -> Array
 
 
 def relative_motions(
-    T_base_hand: Array, T_camera_target: Array, pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+    T_base_hand: Array,
+    T_camera_target: Array,
+    pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None,
 ) -> tuple[Array, Array]:
     """Relative motions ``(A_ij, B_ij)`` with ``A_ij X = X B_ij`` (Shih et al. eq. (71)) over
     ``pairs`` (default :func:`motion_pairs`: all pairs up to 31 poses, 15 per pose beyond), each
@@ -368,7 +384,11 @@ def _align_axis_signs(VA: Array, VB: Array, solve: Callable[[Array, Array], Arra
     on all motions. Returns the rotation (3, 3).
     """
     th = np.linalg.norm(VA, axis=-1)
-    ok = th < 2.0 * math.sin(AMBIGUOUS_AXIS_ANGLE / 2.0) if solve is _tsai_rotation else th < AMBIGUOUS_AXIS_ANGLE
+    ok = (
+        th < 2.0 * math.sin(AMBIGUOUS_AXIS_ANGLE / 2.0)
+        if solve is _tsai_rotation
+        else th < AMBIGUOUS_AXIS_ANGLE
+    )
     if ok.all() or ok.sum() < 2:
         return solve(VA, VB)
     R1 = solve(VA[ok], VB[ok])
@@ -399,7 +419,9 @@ def _tsai_rotation(PA: Array, PB: Array) -> Array:
     Pp = np.linalg.lstsq(M, (PB - PA).reshape(-1), rcond=None)[0]
     P = 2.0 * Pp / math.sqrt(1.0 + Pp @ Pp)
     n2 = float(P @ P)
-    R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * skew(P))
+    R = (1.0 - n2 / 2.0) * np.eye(3) + 0.5 * (
+        np.outer(P, P) + math.sqrt(max(4.0 - n2, 0.0)) * skew(P)
+    )
     return project_to_rotation(R)
 
 
@@ -410,7 +432,9 @@ def solve_tsai(A: Array, B: Array) -> Array:
     with axis signs of near-180-deg motions aligned (:func:`_align_axis_signs`); then the
     translation by least squares. Returns X, shape (4, 4).
     """
-    R = _align_axis_signs(_modified_rodrigues(A[:, :3, :3]), _modified_rodrigues(B[:, :3, :3]), _tsai_rotation)
+    R = _align_axis_signs(
+        _modified_rodrigues(A[:, :3, :3]), _modified_rodrigues(B[:, :3, :3]), _tsai_rotation
+    )
     return homogeneous(R, _translation_given_rotation(A, B, R))
 
 
@@ -516,7 +540,9 @@ def null_space_combination(blocks: list[tuple[Array, Array, Array, Array]]) -> A
                 N[p, q] += R_[p] @ R_[q]
     e, V = np.linalg.eigh(Q)
     if e[0] * e[1] < 0:
-        cands = [V @ np.array([math.sqrt(abs(e[1])), s * math.sqrt(abs(e[0]))]) for s in (1.0, -1.0)]
+        cands = [
+            V @ np.array([math.sqrt(abs(e[1])), s * math.sqrt(abs(e[0]))]) for s in (1.0, -1.0)
+        ]
     else:  # noise made Q definite: the direction of least violation
         cands = [V[:, int(np.argmin(np.abs(e)))]]
     u = max(cands, key=lambda c: float(c @ N @ c))

@@ -181,10 +181,14 @@ def zhuang_a0_check(A: Array) -> list[str]:
 
 def solve_zhuang(A: Array, B: Array) -> tuple[Array, Array]:
     """Zhuang et al.'s two-stage quaternion method: returns ``(X, Z)``; shape (N, 4, 4) each."""
-    qa, qb = align_quaternion_signs(quat_wxyz_from_matrix(A[:, :3, :3]), quat_wxyz_from_matrix(B[:, :3, :3]))
+    qa, qb = align_quaternion_signs(
+        quat_wxyz_from_matrix(A[:, :3, :3]), quat_wxyz_from_matrix(B[:, :3, :3])
+    )
     G, r0s, a0s = [], [], []
     for a, b in zip(qa, qb, strict=True):
-        M = np.hstack([quat_left_matrix(a), -quat_right_matrix(b)])  # a x - z b = 0, unknowns [x0..3, z0..3]
+        M = np.hstack(
+            [quat_left_matrix(a), -quat_right_matrix(b)]
+        )  # a x - z b = 0, unknowns [x0..3, z0..3]
         others = M[:, 1:]  # [x1..3, z0..3]
         # scalar row: a0 x0 + others[0] u = 0  ->  x0 = -others[0] u / a0, into the vector rows
         G.append(others[1:] - np.outer(M[1:, 0], others[0]) / a[0])
@@ -219,6 +223,7 @@ def refine(
     ``s = rotation_scale`` [m/rad] (scipy ``least_squares``, Levenberg-Marquardt). X and Z are
     updated as ``X0 exp(dx)``, so rotations stay rotations.
     """
+
     def unpack(p: Array) -> tuple[Array, Array]:
         dX = homogeneous(Rotation.from_rotvec(p[0:3]).as_matrix(), p[3:6])
         dZ = homogeneous(Rotation.from_rotvec(p[6:9]).as_matrix(), p[9:12])

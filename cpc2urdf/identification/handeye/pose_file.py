@@ -80,23 +80,31 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
         d = require_format(doc, HANDEYE_POSES_FORMAT, source)
         unknown = set(d) - _TOP_KEYS
         if unknown:
-            raise ValueError(f"unknown keys {sorted(unknown)}; expected some of {sorted(_TOP_KEYS)}")
+            raise ValueError(
+                f"unknown keys {sorted(unknown)}; expected some of {sorted(_TOP_KEYS)}"
+            )
         units = Units.from_json(d.get("units"))
         noise = PoseNoise.from_json(d["noise"], units) if "noise" in d else None
         records = d.get("records")
         if not isinstance(records, list) or not records:
-            raise ValueError("'records' must be a non-empty list of {T_base_hand, T_camera_target} records")
+            raise ValueError(
+                "'records' must be a non-empty list of {T_base_hand, T_camera_target} records"
+            )
         H, C, labels = [], [], []
         for i, rec in enumerate(records):
             where = f"records[{i}]"
             if not isinstance(rec, Mapping):
-                raise ValueError(f"{where} must be an object with 'T_base_hand' and 'T_camera_target'")
+                raise ValueError(
+                    f"{where} must be an object with 'T_base_hand' and 'T_camera_target'"
+                )
             extra = set(rec) - _RECORD_KEYS
             if extra:
                 hint = ""
                 if extra & {"T_target_camera", "T_hand_base", "T_camera_hand", "T_hand_camera"}:
                     hint = " (give T_base_hand and T_camera_target; invert the poses you have)"
-                raise ValueError(f"{where} has unknown keys {sorted(extra)}; expected {sorted(_RECORD_KEYS)}{hint}")
+                raise ValueError(
+                    f"{where} has unknown keys {sorted(extra)}; expected {sorted(_RECORD_KEYS)}{hint}"
+                )
             for key in ("T_base_hand", "T_camera_target"):
                 if key not in rec:
                     raise ValueError(f"{where} lacks {key!r}")
@@ -107,8 +115,15 @@ def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEy
             if key in d and not isinstance(d[key], str):
                 raise ValueError(f"'{key}' must be a string, got {d[key]!r}")
         _refuse_copies(H, C)
-        return HandEyePoses(np.array(H), np.array(C), tuple(labels), d.get("camera", ""), d.get("hand", ""), source,
-                            noise)
+        return HandEyePoses(
+            np.array(H),
+            np.array(C),
+            tuple(labels),
+            d.get("camera", ""),
+            d.get("hand", ""),
+            source,
+            noise,
+        )
     except InputFileError:
         raise
     except ValueError as e:
@@ -130,9 +145,11 @@ def _refuse_copies(H: list[Array], C: list[Array]) -> None:
     if copies:
         i, j = copies[0]
         more = f" (and {len(copies) - 1} more copies)" if len(copies) > 1 else ""
-        raise ValueError(f"records[{i}] repeats records[{j}] to the last digit (T_base_hand and T_camera_target)"
-                         f"{more}: a copied record, not a new measurement; remove the "
-                         f"{len(copies)} {'copy' if len(copies) == 1 else 'copies'}")
+        raise ValueError(
+            f"records[{i}] repeats records[{j}] to the last digit (T_base_hand and T_camera_target)"
+            f"{more}: a copied record, not a new measurement; remove the "
+            f"{len(copies)} {'copy' if len(copies) == 1 else 'copies'}"
+        )
 
 
 def load_handeye_poses(path: str | os.PathLike[str]) -> HandEyePoses:
@@ -165,8 +182,11 @@ def handeye_poses_to_json(
     if noise is not None:
         doc["noise"] = noise.to_json(u)
     doc["records"] = [
-        {"label": labels[k] if labels else f"pose {k}",
-         "T_base_hand": pose_to_json(H[k], u), "T_camera_target": pose_to_json(C[k], u)}
+        {
+            "label": labels[k] if labels else f"pose {k}",
+            "T_base_hand": pose_to_json(H[k], u),
+            "T_camera_target": pose_to_json(C[k], u),
+        }
         for k in range(len(H))
     ]
     return doc
@@ -185,10 +205,19 @@ def save_handeye_poses(
     noise: PoseNoise | None = None,
 ) -> Path:
     """Write a pose file atomically; keyword arguments as :func:`handeye_poses_to_json`."""
-    return write_json(path, handeye_poses_to_json(
-        T_base_hand, T_camera_target, labels=labels, camera=camera, hand=hand, units=units, description=description,
-        noise=noise,
-    ))
+    return write_json(
+        path,
+        handeye_poses_to_json(
+            T_base_hand,
+            T_camera_target,
+            labels=labels,
+            camera=camera,
+            hand=hand,
+            units=units,
+            description=description,
+            noise=noise,
+        ),
+    )
 
 
 __all__ = [

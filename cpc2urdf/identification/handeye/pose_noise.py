@@ -60,8 +60,13 @@ class PoseNoise:
     camera_angle_per_metre: float = 0.0
 
     def __post_init__(self) -> None:
-        values = (self.hand_position, self.hand_angle, self.camera_position, self.camera_angle,
-                  self.camera_angle_per_metre)
+        values = (
+            self.hand_position,
+            self.hand_angle,
+            self.camera_position,
+            self.camera_angle,
+            self.camera_angle_per_metre,
+        )
         if not all(np.isfinite(v) and v >= 0.0 for v in values):
             raise ValueError(f"noise standard deviations must be finite and >= 0, got {values}")
         angle = self.hand_angle + self.camera_angle + self.camera_angle_per_metre
@@ -82,20 +87,30 @@ class PoseNoise:
         if not isinstance(obj, Mapping):
             raise ValueError(f"{where} must be an object with {list(NOISE_STREAMS)}, got {obj!r}")
         if set(obj) != set(NOISE_STREAMS):
-            raise ValueError(f"{where} must have exactly the keys {list(NOISE_STREAMS)}, got {sorted(obj)}")
+            raise ValueError(
+                f"{where} must have exactly the keys {list(NOISE_STREAMS)}, got {sorted(obj)}"
+            )
         values: dict[str, float] = {}
         for stream in NOISE_STREAMS:
             s = obj[stream]
             if not isinstance(s, Mapping) or set(s) != set(_NOISE_KEYS):
-                raise ValueError(f"{where}.{stream} must be {{'position': std, 'angle': std}}, got {s!r}")
+                raise ValueError(
+                    f"{where}.{stream} must be {{'position': std, 'angle': std}}, got {s!r}"
+                )
             for key in _NOISE_KEYS:
                 v = finite_float(s[key], f"{where}.{stream}.{key}")
                 if v < 0.0:
-                    raise ValueError(f"{where}.{stream}.{key} must be >= 0 (a standard deviation), got {v}")
+                    raise ValueError(
+                        f"{where}.{stream}.{key} must be >= 0 (a standard deviation), got {v}"
+                    )
                 values[f"{stream}.{key}"] = v * (units.length if key == "position" else units.angle)
         try:
-            return cls(values["T_base_hand.position"], values["T_base_hand.angle"],
-                       values["T_camera_target.position"], values["T_camera_target.angle"])
+            return cls(
+                values["T_base_hand.position"],
+                values["T_base_hand.angle"],
+                values["T_camera_target.position"],
+                values["T_camera_target.angle"],
+            )
         except ValueError as e:
             raise ValueError(f"{where}: {str(e).removeprefix('noise: ')}") from e
 
@@ -103,8 +118,14 @@ class PoseNoise:
         """The ``noise`` section in ``units`` (default SI)."""
         u = units or Units()
         return {
-            "T_base_hand": {"position": self.hand_position / u.length, "angle": self.hand_angle / u.angle},
-            "T_camera_target": {"position": self.camera_position / u.length, "angle": self.camera_angle / u.angle},
+            "T_base_hand": {
+                "position": self.hand_position / u.length,
+                "angle": self.hand_angle / u.angle,
+            },
+            "T_camera_target": {
+                "position": self.camera_position / u.length,
+                "angle": self.camera_angle / u.angle,
+            },
         }
 
 
@@ -138,11 +159,17 @@ def _covariance_terms(T_base_hand: Array, T_camera_target: Array, X: Array, Z: A
     """The residual covariance per unit variance of each noise source: shape (4, N, 6, 6) for
     hand position, hand angle, camera position, camera angle."""
     J = _noise_jacobian(T_base_hand, T_camera_target, X, Z)
-    return np.stack([np.einsum("nij,nkj->nik", J[..., 3 * i : 3 * i + 3], J[..., 3 * i : 3 * i + 3])
-                     for i in range(4)])
+    return np.stack(
+        [
+            np.einsum("nij,nkj->nik", J[..., 3 * i : 3 * i + 3], J[..., 3 * i : 3 * i + 3])
+            for i in range(4)
+        ]
+    )
 
 
-def residual_covariance(noise: PoseNoise, T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> Array:
+def residual_covariance(
+    noise: PoseNoise, T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array
+) -> Array:
     """First-order covariance of each pose's residual ``[e_t; e_r]`` under ``noise``.
 
     With ``u = R_A t_X`` (hand-to-camera lever arm, base frame) and ``M = R_Z R_C^T`` (camera frame
@@ -159,7 +186,10 @@ def residual_covariance(noise: PoseNoise, T_base_hand: Array, T_camera_target: A
     Returns:
         Shape (N, 6, 6): rows/columns position [m] then rotation [rad].
     """
-    v = np.array([noise.hand_position, noise.hand_angle, noise.camera_position, noise.camera_angle]) ** 2
+    v = (
+        np.array([noise.hand_position, noise.hand_angle, noise.camera_position, noise.camera_angle])
+        ** 2
+    )
     terms = _covariance_terms(T_base_hand, T_camera_target, X, Z)
     S = np.einsum("i,injk->njk", v, terms)
     if noise.camera_angle_per_metre > 0.0:
@@ -200,12 +230,19 @@ def estimate_noise(
     terms = _covariance_terms(T_base_hand, T_camera_target, X, Z)
     d2 = np.sum(T_camera_target[:, :3, 3] ** 2, axis=-1)[:, None, None]
     # position, hand angle, camera angle, camera angle growing with the distance (solvePnP)
-    K = np.stack([terms[2], terms[1], terms[3], d2 * terms[3]])  # terms[0] == terms[2] (both isotropic)
-    floor = np.array([MIN_POSITION_NOISE**2, MIN_ANGLE_NOISE**2, MIN_ANGLE_NOISE**2, MIN_ANGLE_NOISE**2])
+    K = np.stack(
+        [terms[2], terms[1], terms[3], d2 * terms[3]]
+    )  # terms[0] == terms[2] (both isotropic)
+    floor = np.array(
+        [MIN_POSITION_NOISE**2, MIN_ANGLE_NOISE**2, MIN_ANGLE_NOISE**2, MIN_ANGLE_NOISE**2]
+    )
 
     def nll(v: Array, Kk: Array, ek: Array) -> float:
         S = np.einsum("i,injk->njk", v, Kk)
-        return float(np.sum(np.linalg.slogdet(S)[1]) + np.einsum("nj,nj->", ek, np.linalg.solve(S, ek[..., None])[..., 0]))
+        return float(
+            np.sum(np.linalg.slogdet(S)[1])
+            + np.einsum("nj,nj->", ek, np.linalg.solve(S, ek[..., None])[..., 0])
+        )
 
     def fit(keep: NDArray[np.intp], v: Array) -> Array:
         # Fisher scoring for variance components, with step halving (the likelihood never rises).
@@ -250,7 +287,9 @@ def estimate_noise(
     if len(keep) >= min(n, 4):
         v = fit(keep, v)
     v = v * 6.0 * len(e) / max(dof, 1)
-    return PoseNoise(0.0, float(np.sqrt(v[1])), float(np.sqrt(v[0])), float(np.sqrt(v[2])), float(np.sqrt(v[3])))
+    return PoseNoise(
+        0.0, float(np.sqrt(v[1])), float(np.sqrt(v[0])), float(np.sqrt(v[2])), float(np.sqrt(v[3]))
+    )
 
 
 __all__ = [

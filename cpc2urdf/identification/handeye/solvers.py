@@ -85,7 +85,9 @@ class HandEyeSolver:
     check: Callable[[Array], list[str]] | None = None
 
 
-def _from_relative_motions(solve_x: Callable[[Array, Array], Array]) -> Callable[[Array, Array], tuple[Array, Array]]:
+def _from_relative_motions(
+    solve_x: Callable[[Array, Array], Array],
+) -> Callable[[Array, Array], tuple[Array, Array]]:
     """An ``A X = X B`` solver of relative motions as a solver of absolute poses: X, then Z."""
 
     def solve(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
@@ -96,7 +98,9 @@ def _from_relative_motions(solve_x: Callable[[Array, Array], Array]) -> Callable
     return solve
 
 
-def _from_absolute_poses(solve_xz: Callable[[Array, Array], tuple[Array, Array]]) -> Callable[[Array, Array], tuple[Array, Array]]:
+def _from_absolute_poses(
+    solve_xz: Callable[[Array, Array], tuple[Array, Array]],
+) -> Callable[[Array, Array], tuple[Array, Array]]:
     """An ``A X = Z B`` solver as a solver of ``(T_base_hand, T_camera_target)``: ``B = inv(C)``."""
 
     def solve(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
@@ -108,18 +112,46 @@ def _from_absolute_poses(solve_xz: Callable[[Array, Array], tuple[Array, Array]]
 SOLVERS: dict[str, HandEyeSolver] = {
     s.name: s
     for s in (
-        HandEyeSolver("tsai", AX_XB, "AX = XB, Tsai & Lenz 1989", _from_relative_motions(solve_tsai)),
-        HandEyeSolver("park_martin", AX_XB, "AX = XB, Park & Martin 1994", _from_relative_motions(solve_park_martin)),
-        HandEyeSolver("daniilidis", AX_XB, "AX = XB, Daniilidis 1999 (dual quaternions)",
-                      _from_relative_motions(solve_daniilidis)),
-        HandEyeSolver("kronecker", AX_ZB, "AX = ZB, Li et al. 2010 (Kronecker product)",
-                      _from_absolute_poses(solve_kronecker)),
-        HandEyeSolver("dual_quaternion", AX_ZB, "AX = ZB, Li et al. 2010 (dual quaternions)",
-                      _from_absolute_poses(solve_dual_quaternion)),
-        HandEyeSolver("zhuang", AX_ZB, "AX = ZB, Zhuang et al. 1994 (quaternions, two stages)",
-                      _from_absolute_poses(solve_zhuang), zhuang_a0_check),
-        HandEyeSolver("refined", AX_ZB, "AX = ZB, Kronecker start + joint nonlinear least squares",
-                      _from_absolute_poses(solve_refined)),
+        HandEyeSolver(
+            "tsai", AX_XB, "AX = XB, Tsai & Lenz 1989", _from_relative_motions(solve_tsai)
+        ),
+        HandEyeSolver(
+            "park_martin",
+            AX_XB,
+            "AX = XB, Park & Martin 1994",
+            _from_relative_motions(solve_park_martin),
+        ),
+        HandEyeSolver(
+            "daniilidis",
+            AX_XB,
+            "AX = XB, Daniilidis 1999 (dual quaternions)",
+            _from_relative_motions(solve_daniilidis),
+        ),
+        HandEyeSolver(
+            "kronecker",
+            AX_ZB,
+            "AX = ZB, Li et al. 2010 (Kronecker product)",
+            _from_absolute_poses(solve_kronecker),
+        ),
+        HandEyeSolver(
+            "dual_quaternion",
+            AX_ZB,
+            "AX = ZB, Li et al. 2010 (dual quaternions)",
+            _from_absolute_poses(solve_dual_quaternion),
+        ),
+        HandEyeSolver(
+            "zhuang",
+            AX_ZB,
+            "AX = ZB, Zhuang et al. 1994 (quaternions, two stages)",
+            _from_absolute_poses(solve_zhuang),
+            zhuang_a0_check,
+        ),
+        HandEyeSolver(
+            "refined",
+            AX_ZB,
+            "AX = ZB, Kronecker start + joint nonlinear least squares",
+            _from_absolute_poses(solve_refined),
+        ),
     )
 }
 HAND_EYE_METHODS = tuple(n for n, s in SOLVERS.items() if s.equation == AX_XB)
@@ -148,14 +180,20 @@ class Gate:
 _last_verdict: list[tuple[tuple[object, ...], ConsistencyReport]] = []
 
 
-def _gate_verdict(H: Array, C: Array, noise: PoseNoise | None, labels: Sequence[str] | None) -> ConsistencyReport:
+def _gate_verdict(
+    H: Array, C: Array, noise: PoseNoise | None, labels: Sequence[str] | None
+) -> ConsistencyReport:
     """The gate's verdict on these poses, computed once for the same poses, noise and labels.
 
     The verdict does not depend on the solver, and ``--method all`` asks it for the same poses
     seven times (1,000 poses: ~1.4 s each); the last one is kept (frozen, one entry).
     """
-    key = (hashlib.sha256(H.tobytes() + C.tobytes()).hexdigest(), H.shape, noise,
-           None if labels is None else tuple(labels))
+    key = (
+        hashlib.sha256(H.tobytes() + C.tobytes()).hexdigest(),
+        H.shape,
+        noise,
+        None if labels is None else tuple(labels),
+    )
     if _last_verdict and _last_verdict[0][0] == key:
         return _last_verdict[0][1]
     report = check_consistency(H, C, noise=noise, labels=labels)
@@ -164,7 +202,11 @@ def _gate_verdict(H: Array, C: Array, noise: PoseNoise | None, labels: Sequence[
 
 
 def _run(
-    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str, methods: Sequence[str], kind: str,
+    T_base_hand: ArrayLike,
+    T_camera_target: ArrayLike,
+    method: str,
+    methods: Sequence[str],
+    kind: str,
     gate: Gate | bool,
 ) -> HandEyeResult:
     """Validate, diagnose (or gate) and solve with ``SOLVERS[method]``, which must be one of ``methods``."""
@@ -216,7 +258,9 @@ def calibrate(
     return _run(T_base_hand, T_camera_target, method, ALL_METHODS, "", gate)
 
 
-def calibrate_poses(poses: HandEyePoses, method: str, *, accept_inconsistent: bool = False) -> HandEyeResult:
+def calibrate_poses(
+    poses: HandEyePoses, method: str, *, accept_inconsistent: bool = False
+) -> HandEyeResult:
     """:func:`calibrate` of a pose file's poses through the consistency gate (the API and the CLI).
 
     The gate uses the file's ``noise`` (if stated) and names outliers by the records' labels.

@@ -75,7 +75,10 @@ class CameraIntrinsics:
 
 DEFAULT_INTRINSICS = CameraIntrinsics()
 # Which hand (end-effector plate frame) carries which camera.
-HAND_OF_CAMERA: dict[str, str] = {"camera_left_optical": "plate_left", "camera_right_optical": "plate_right"}
+HAND_OF_CAMERA: dict[str, str] = {
+    "camera_left_optical": "plate_left",
+    "camera_right_optical": "plate_right",
+}
 IMAGE_MARGIN = 10.0  # [px] every disk centre must be this far inside the image
 DEFAULT_TARGET_DISTANCE = 0.4  # [m]
 
@@ -91,7 +94,9 @@ def home_configuration(model: CPCModel) -> Array:
 
 
 def default_target_placement(
-    model: CPCModel, cameras: Sequence[str] = tuple(HAND_OF_CAMERA), distance: float = DEFAULT_TARGET_DISTANCE
+    model: CPCModel,
+    cameras: Sequence[str] = tuple(HAND_OF_CAMERA),
+    distance: float = DEFAULT_TARGET_DISTANCE,
 ) -> Array:
     """``T_base_target``: the target ``distance`` [m] ahead of the cameras at the home
     configuration, on their mean optical axis, its disks facing them (target z = -optical axis,
@@ -108,18 +113,24 @@ def default_target_placement(
     return homogeneous(np.column_stack([x, y, z]), T[:, :3, 3].mean(axis=0) + distance * d)
 
 
-def project_target(T_camera_target: Array, intrinsics: CameraIntrinsics = DEFAULT_INTRINSICS) -> tuple[Array, bool]:
+def project_target(
+    T_camera_target: Array, intrinsics: CameraIntrinsics = DEFAULT_INTRINSICS
+) -> tuple[Array, bool]:
     """Image points of the disk centres, shape (25, 2) [px], and whether all are usable: in
     front of the camera, inside the image (margin :data:`IMAGE_MARGIN`), printed face towards it."""
     p_cam = TARGET_LAYOUT @ T_camera_target[:3, :3].T + T_camera_target[:3, 3]
     rvec, _ = cv2.Rodrigues(T_camera_target[:3, :3])
-    projected, _ = cv2.projectPoints(TARGET_LAYOUT, rvec, T_camera_target[:3, 3], intrinsics.K, intrinsics.D)
+    projected, _ = cv2.projectPoints(
+        TARGET_LAYOUT, rvec, T_camera_target[:3, 3], intrinsics.K, intrinsics.D
+    )
     uv: Array = np.asarray(projected, dtype=float).reshape(-1, 2)
     facing = T_camera_target[:3, 2] @ T_camera_target[:3, 3] < 0  # normal points back at the camera
     inside = (
         np.all(p_cam[:, 2] > 0.05)
-        and np.all(uv[:, 0] > IMAGE_MARGIN) and np.all(uv[:, 0] < intrinsics.width - 1 - IMAGE_MARGIN)
-        and np.all(uv[:, 1] > IMAGE_MARGIN) and np.all(uv[:, 1] < intrinsics.height - 1 - IMAGE_MARGIN)
+        and np.all(uv[:, 0] > IMAGE_MARGIN)
+        and np.all(uv[:, 0] < intrinsics.width - 1 - IMAGE_MARGIN)
+        and np.all(uv[:, 1] > IMAGE_MARGIN)
+        and np.all(uv[:, 1] < intrinsics.height - 1 - IMAGE_MARGIN)
     )
     return uv, bool(facing and inside)
 
@@ -133,7 +144,9 @@ def pose_from_image_points(uv: Array, intrinsics: CameraIntrinsics = DEFAULT_INT
     if not ok:
         raise DegenerateDataError("solvePnP failed on the target's disk centres")
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-15)
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, intrinsics.K, intrinsics.D, rvec, tvec, criteria=crit)
+    rvec, tvec = cv2.solvePnPRefineLM(
+        obj, img, intrinsics.K, intrinsics.D, rvec, tvec, criteria=crit
+    )
     R, _ = cv2.Rodrigues(rvec)
     return homogeneous(R, tvec.ravel())
 
@@ -226,7 +239,9 @@ def simulate_observations(
             uvs.append(uv)
             Ts.append(pose_from_image_points(uv, intrinsics))
         poses[c], points[c] = np.array(Ts), np.array(uvs)
-    return Stage2Observations(np.asarray(q, dtype=float), poses, points, intrinsics, pixel_noise, T_base_target)
+    return Stage2Observations(
+        np.asarray(q, dtype=float), poses, points, intrinsics, pixel_noise, T_base_target
+    )
 
 
 # ---- calibration -------------------------------------------------------------------------------
@@ -238,7 +253,11 @@ def hand_poses(model: CPCModel, camera: str, q: Array) -> Array:
 
 
 def calibrate_cameras(
-    model: CPCModel, obs: Stage2Observations, method: str = "tsai", *, accept_inconsistent: bool = False
+    model: CPCModel,
+    obs: Stage2Observations,
+    method: str = "tsai",
+    *,
+    accept_inconsistent: bool = False,
 ) -> tuple[CPCModel, dict[str, HandEyeResult]]:
     """Solve X = T_plate_camera for every observed camera and set the camera frames.
 
@@ -279,7 +298,11 @@ def calibrate_cameras(
 
 
 def with_camera_frame(
-    model: CPCModel, camera: str, hand: str, result: HandEyeResult, extra: dict[str, Any] | None = None
+    model: CPCModel,
+    camera: str,
+    hand: str,
+    result: HandEyeResult,
+    extra: dict[str, Any] | None = None,
 ) -> CPCModel:
     """A copy of ``model`` with frame ``camera`` (kind ``camera``) on the link carrying ``hand``,
     at ``T_link_hand @ X``, and the solution recorded in ``metadata.handeye[camera]`` (a :class:`~cpc2urdf.model_metadata.HandEyeRecord`;
@@ -299,8 +322,14 @@ def with_camera_frame(
         residual_translation_mm=result.residual_translation * 1e3,
         residual_rotation_deg=np.degrees(result.residual_rotation),
         warnings=tuple(result.warnings),
-        details={**(extra or {}),
-                 **({"consistency": result.consistency.to_json()} if result.consistency is not None else {})},
+        details={
+            **(extra or {}),
+            **(
+                {"consistency": result.consistency.to_json()}
+                if result.consistency is not None
+                else {}
+            ),
+        },
     )
     handeye = {**out.metadata.handeye, camera: record}
     return out.with_params(metadata=out.metadata.replace(handeye=handeye))
@@ -327,8 +356,10 @@ class Stage2Result:
         """A few lines for people: residuals and errors per camera in mm/deg."""
         lines = []
         for c, r in self.results.items():
-            line = (f"{c}: X = T_{HAND_OF_CAMERA[c]}_{c} by {r.method} from {len(r.residual_translation)} "
-                    f"poses, residual RMS {r.rms_translation() * 1e3:.3f} mm / {math.degrees(r.rms_rotation()):.4f} deg")
+            line = (
+                f"{c}: X = T_{HAND_OF_CAMERA[c]}_{c} by {r.method} from {len(r.residual_translation)} "
+                f"poses, residual RMS {r.rms_translation() * 1e3:.3f} mm / {math.degrees(r.rms_rotation()):.4f} deg"
+            )
             if c in self.errors:
                 et, er = self.errors[c]
                 line += f"; error vs truth {et * 1e3:.3f} mm / {math.degrees(er):.4f} deg"
@@ -337,7 +368,9 @@ class Stage2Result:
         return "\n".join(lines)
 
 
-def camera_errors(estimate: CPCModel, truth: CPCModel, cameras: Sequence[str]) -> dict[str, tuple[float, float]]:
+def camera_errors(
+    estimate: CPCModel, truth: CPCModel, cameras: Sequence[str]
+) -> dict[str, tuple[float, float]]:
     """Per camera, the translation [m] and rotation [rad] error of ``X = T_hand_camera``.
 
     Compared relative to the hand (the plate on the same link), not to the link frame: an
@@ -349,7 +382,10 @@ def camera_errors(estimate: CPCModel, truth: CPCModel, cameras: Sequence[str]) -
         hand = HAND_OF_CAMERA[c]
         Te = np.linalg.solve(estimate.frames[hand].matrix(), estimate.frames[c].matrix())
         Tt = np.linalg.solve(truth.frames[hand].matrix(), truth.frames[c].matrix())
-        out[c] = (float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])), float(rotation_error(Te[:3, :3], Tt[:3, :3])))
+        out[c] = (
+            float(np.linalg.norm(Te[:3, 3] - Tt[:3, 3])),
+            float(rotation_error(Te[:3, :3], Tt[:3, :3])),
+        )
     return out
 
 
@@ -389,15 +425,28 @@ def run_stage2(
     rng = np.random.default_rng(seed)
     if T_base_target is None:
         T_base_target = default_target_placement(truth, cameras)
-    q = sample_configurations(truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intrinsics)
-    obs = simulate_observations(truth, q, T_base_target, rng, cameras=cameras, intrinsics=intrinsics,
-                                pixel_noise=pixel_noise)
+    q = sample_configurations(
+        truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intrinsics
+    )
+    obs = simulate_observations(
+        truth,
+        q,
+        T_base_target,
+        rng,
+        cameras=cameras,
+        intrinsics=intrinsics,
+        pixel_noise=pixel_noise,
+    )
     model, results = calibrate_cameras(identified, obs, method)
     return Stage2Result(model, results, obs, camera_errors(model, truth, cameras))
 
 
-def perturb_cameras(model: CPCModel, rng: np.random.Generator, translation: float = 0.005,
-                    rotation: float = math.radians(3.0)) -> CPCModel:
+def perturb_cameras(
+    model: CPCModel,
+    rng: np.random.Generator,
+    translation: float = 0.005,
+    rotation: float = math.radians(3.0),
+) -> CPCModel:
     """A copy with every camera frame moved by up to ``translation`` [m] per axis and rotated by
     ``rotation`` [rad] about a random axis (a "true" head whose cameras differ from the nominal)."""
     from scipy.spatial.transform import Rotation
@@ -407,13 +456,17 @@ def perturb_cameras(model: CPCModel, rng: np.random.Generator, translation: floa
         if f.kind != "camera":
             continue
         axis = rng.normal(size=3)
-        dT = homogeneous(Rotation.from_rotvec(axis / np.linalg.norm(axis) * rotation).as_matrix(),
-                         rng.uniform(-translation, translation, 3))
+        dT = homogeneous(
+            Rotation.from_rotvec(axis / np.linalg.norm(axis) * rotation).as_matrix(),
+            rng.uniform(-translation, translation, 3),
+        )
         out = out.with_frame(f, CPCParams.from_matrix(model.frames[f.name].matrix() @ dT))
     return out
 
 
-def write_pose_files(result: Stage2Result, folder: str | Path, model: CPCModel | None = None) -> dict[str, Path]:
+def write_pose_files(
+    result: Stage2Result, folder: str | Path, model: CPCModel | None = None
+) -> dict[str, Path]:
     """Write one ``cpc2urdf/handeye-poses@1`` file per camera (``handeye_<camera>.json``, mm/deg),
     hand poses from ``model`` (default: the identified model of the result), so that
     ``cpc2urdf handeye`` can be run on them."""
@@ -424,8 +477,12 @@ def write_pose_files(result: Stage2Result, folder: str | Path, model: CPCModel |
     paths = {}
     for c, C in obs.T_camera_target.items():
         paths[c] = save_handeye_poses(
-            Path(folder) / f"handeye_{c}.json", hand_poses(m, c, obs.q), C,
-            labels=[f"config {k}" for k in range(len(C))], camera=c, hand=HAND_OF_CAMERA[c],
+            Path(folder) / f"handeye_{c}.json",
+            hand_poses(m, c, obs.q),
+            C,
+            labels=[f"config {k}" for k in range(len(C))],
+            camera=c,
+            hand=HAND_OF_CAMERA[c],
             units=Units("mm", "deg"),
             description=f"stage-2 simulation: {len(C)} head configurations, pixel noise {obs.pixel_noise} px",
         )

@@ -77,7 +77,10 @@ RANK_TOL = 1e-9
 
 def _vee(S: Array) -> Array:
     """``vee(S - S^T)`` of (..., 3, 3): twice the axis times the sine of a rotation's angle."""
-    return np.stack([S[..., 2, 1] - S[..., 1, 2], S[..., 0, 2] - S[..., 2, 0], S[..., 1, 0] - S[..., 0, 1]], axis=-1)
+    return np.stack(
+        [S[..., 2, 1] - S[..., 1, 2], S[..., 0, 2] - S[..., 2, 0], S[..., 1, 0] - S[..., 0, 1]],
+        axis=-1,
+    )
 
 
 def _t(R: Array) -> Array:
@@ -146,7 +149,11 @@ class _Solver:
 
     def _elements_of(self, node: str) -> list[_Element]:
         measured = set(self.p.frames)
-        out = [_Element(f.name, True, (f.name,)) for f in self.s.frames if f.parent == node and f.name in measured]
+        out = [
+            _Element(f.name, True, (f.name,))
+            for f in self.s.frames
+            if f.parent == node and f.name in measured
+        ]
         out += [_Element(c.name, False, self.p.frames_below[c.name]) for c in self.s.children(node)]
         return out
 
@@ -196,8 +203,16 @@ class _Solver:
             )
         return d if score > 0 else -d
 
-    def _beta(self, joint: str, e0: _Element, R0: Array, e: _Element, Re: Array,
-              WA0: dict[str, Array], WA: dict[str, Array]) -> float:
+    def _beta(
+        self,
+        joint: str,
+        e0: _Element,
+        R0: Array,
+        e: _Element,
+        Re: Array,
+        WA0: dict[str, Array],
+        WA: dict[str, Array],
+    ) -> float:
         """Eqs. (42)-(45): ``^{L0}R_w = Rot(z, beta) ^{Le}R_w`` over all records both branches saw.
 
         The columns of eq. (45)'s matrix are orthogonal with equal norms, so the least-squares
@@ -222,8 +237,9 @@ class _Solver:
             )
         return math.atan2(num_s, num_c)
 
-    def _relative_rotation(self, node: str, e0: _Element, e: _Element,
-                           WA0: dict[str, Array], WA: dict[str, Array]) -> Array:
+    def _relative_rotation(
+        self, node: str, e0: _Element, e: _Element, WA0: dict[str, Array], WA: dict[str, Array]
+    ) -> Array:
         """``^{A_e0}R_{A_e}`` of two elements on one non-rotating link: chordal mean over records."""
         acc = np.zeros((3, 3))
         seen = False
@@ -264,7 +280,9 @@ class _Solver:
             else:
                 self.rot_in_parent[e0.name] = np.eye(3)
                 for e in elems[1:]:
-                    self.rot_in_parent[e.name] = self._relative_rotation(node, e0, e, WA[e0.name], WA[e.name])
+                    self.rot_in_parent[e.name] = self._relative_rotation(
+                        node, e0, e, WA[e0.name], WA[e.name]
+                    )
             # ^wR_L = ^wR_{A_e} (^{L}R_{A_e})^T, through every measured frame below.
             self.W_link[node] = {
                 f: W @ self.rot_in_parent[e.name].T for e in elems for f, W in WA[e.name].items()
@@ -296,8 +314,11 @@ class _Solver:
     def _split(self, joint: str) -> bool:
         """The paper's eq. (11)/(15): a revolute joint carrying several branches gets one axis
         frame, hence one offset, per branch (``l_3L``, ``l_3R``) unless axes are shared."""
-        return (not self.shared_axes and self.s.joint(joint).type == "revolute"
-                and len(self.elements[joint]) > 1)
+        return (
+            not self.shared_axes
+            and self.s.joint(joint).type == "revolute"
+            and len(self.elements[joint]) > 1
+        )
 
     def _key(self, joint: str, frame: str | None = None) -> str:
         """Column block of ``joint``'s unknowns as seen from ``frame`` (default: its first branch)."""
@@ -318,7 +339,9 @@ class _Solver:
         cols += [(f, 3) for f in self.p.frames]
         return cols
 
-    def _system(self, R_axis: dict[str, Array], R_frame: dict[str, Array]) -> tuple[Array, Array, dict[str, slice]]:
+    def _system(
+        self, R_axis: dict[str, Array], R_frame: dict[str, Array]
+    ) -> tuple[Array, Array, dict[str, slice]]:
         """Eqs. (61)-(64): ``y = G x`` over every record and measured frame."""
         cols = self._columns()
         where: dict[str, slice] = {}
@@ -333,7 +356,9 @@ class _Solver:
             for j in self.s.path_to(f):
                 ji = self.s.joint_index(j)
                 if self.s.joint(j).type == "revolute":
-                    G[:, :, where[self._key(j, f)]] = R_axis[j][idx][:, :, :2]  # ^w R-bar of eq. (62)
+                    G[:, :, where[self._key(j, f)]] = R_axis[j][idx][
+                        :, :, :2
+                    ]  # ^w R-bar of eq. (62)
                 else:
                     # q_i ^w r_{i-1,z} u: a prismatic joint moves along its axis frame's z. Typo in
                     # the paper: eqs. (27), (28) print q_1 r_{0,x} + q_2 r_{1,x}; eq. (58) has r_z.
@@ -362,9 +387,14 @@ class _Solver:
         for name, sl in where.items():
             for c in range(sl.start, sl.stop):
                 joint = name.split("@")[0]
-                labels[c] = f"the offset of {name!r}" if name in self.p.frames else (
-                    f"the axis line of joint {joint!r}" if self.s.joint(joint).type == "revolute"
-                    else f"the direction of prismatic joint {joint!r}"
+                labels[c] = (
+                    f"the offset of {name!r}"
+                    if name in self.p.frames
+                    else (
+                        f"the axis line of joint {joint!r}"
+                        if self.s.joint(joint).type == "revolute"
+                        else f"the direction of prismatic joint {joint!r}"
+                    )
                 )
         x = self._lstsq(G, y, labels)
         # |u| = 1 (the paper's constraint on ^w r_{0,z}, ^w r_{1,z}); re-solve the rest with u fixed.
@@ -374,7 +404,9 @@ class _Solver:
                 u = x[where[j.name]]
                 n = float(np.linalg.norm(u))
                 if n < RANK_TOL:
-                    raise DegenerateDataError(f"prismatic joint {j.name!r}: its sweep moved no measured frame")
+                    raise DegenerateDataError(
+                        f"prismatic joint {j.name!r}: its sweep moved no measured frame"
+                    )
                 self.details.prismatic_norm[j.name] = n
                 self.u[j.name] = u / n
         origin = self._base_origin(x, where, R_axis, R_frame)
@@ -383,13 +415,16 @@ class _Solver:
             fixed[where[name]] = True
             x[where[name]] = u
         y2 = y - G[:, fixed] @ x[fixed] - np.tile(origin, len(y) // 3)
-        x[~fixed] = self._lstsq(G[:, ~fixed], y2, [lb for lb, f in zip(labels, fixed, strict=True) if not f])
+        x[~fixed] = self._lstsq(
+            G[:, ~fixed], y2, [lb for lb, f in zip(labels, fixed, strict=True) if not f]
+        )
         r = y2 - G[:, ~fixed] @ x[~fixed]
         self.details.translation_rms = float(np.sqrt(np.mean(r**2))) if len(r) else 0.0
         self.x, self.where, self.origin = x, where, origin
 
-    def _base_origin(self, x: Array, where: dict[str, slice], R_axis: dict[str, Array],
-                     R_frame: dict[str, Array]) -> Array:
+    def _base_origin(
+        self, x: Array, where: dict[str, slice], R_axis: dict[str, Array], R_frame: dict[str, Array]
+    ) -> Array:
         """Eq. (58)'s choice: the base origin on the first revolute axis below the base.
 
         Follow the first element from the base through prismatic joints; at zero prismatic
@@ -454,8 +489,11 @@ class _Solver:
             if carried is None:
                 self.details.notes.append(
                     f"frame {fr.name!r} was not measured and "
-                    + ("the robot has no nominal geometry" if nominal is None else
-                       f"no measured frame shares its link ({fr.parent!r})")
+                    + (
+                        "the robot has no nominal geometry"
+                        if nominal is None
+                        else f"no measured frame shares its link ({fr.parent!r})"
+                    )
                     + ": dropped from the identified model"
                 )
                 continue
@@ -470,8 +508,9 @@ class _Solver:
         w2b = CPCParams.from_matrix(homogeneous(R_world_base, self.origin))
         return CPCModel(structure, w2b, joints, {f.name: frames[f.name] for f in kept})
 
-    def _carry_over(self, name: str, identified: dict[str, CPCParams],
-                    nominal: CPCModel | None) -> tuple[str, CPCParams] | None:
+    def _carry_over(
+        self, name: str, identified: dict[str, CPCParams], nominal: CPCModel | None
+    ) -> tuple[str, CPCParams] | None:
         if nominal is None or name not in nominal.frames:
             return None
         parent = self.s.frame(name).parent
@@ -482,7 +521,9 @@ class _Solver:
         return None
 
 
-def count_parameters(structure: RobotStructure, frames: tuple[str, ...] | list[str]) -> dict[str, int]:
+def count_parameters(
+    structure: RobotStructure, frames: tuple[str, ...] | list[str]
+) -> dict[str, int]:
     """Independent parameters identified from the poses of ``frames``.
 
     Each revolute joint's axis is a line (4: direction 2, position 2), each prismatic joint's a
@@ -493,7 +534,12 @@ def count_parameters(structure: RobotStructure, frames: tuple[str, ...] | list[s
     used = {j for f in frames for j in structure.path_to(f)}
     n_r = sum(1 for j in structure.joints if j.name in used and j.type == "revolute")
     n_p = sum(1 for j in structure.joints if j.name in used and j.type == "prismatic")
-    return {"revolute": n_r, "prismatic": n_p, "frames": len(frames), "total": 4 * n_r + 2 * n_p + 6 * len(frames)}
+    return {
+        "revolute": n_r,
+        "prismatic": n_p,
+        "frames": len(frames),
+        "total": 4 * n_r + 2 * n_p + 6 * len(frames),
+    }
 
 
 def identify_closed_form(
@@ -522,7 +568,9 @@ def identify_closed_form(
     return model, solver.details
 
 
-def identify_paper_branches(ms: MeasurementSet, *, protocol: Protocol | None = None) -> dict[str, CPCModel]:
+def identify_paper_branches(
+    ms: MeasurementSet, *, protocol: Protocol | None = None
+) -> dict[str, CPCModel]:
     """The paper's own model, eq. (15): a joint carrying several branches (the head's tilt) has
     one axis frame *per branch* (``l_3L``, ``l_3R``), i.e. one more axis-line offset (2
     parameters) per extra branch: 34 parameters for the IIS-head instead of 32.
@@ -560,4 +608,11 @@ def provenance(ms: MeasurementSet, protocol: Protocol, details: ClosedFormDetail
     )
 
 
-__all__ = ["METHOD", "ClosedFormDetails", "b_from_direction", "count_parameters", "identify_closed_form", "provenance"]
+__all__ = [
+    "METHOD",
+    "ClosedFormDetails",
+    "b_from_direction",
+    "count_parameters",
+    "identify_closed_form",
+    "provenance",
+]

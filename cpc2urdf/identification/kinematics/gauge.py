@@ -33,7 +33,9 @@ from cpc2urdf.model import BASE, CPCModel, CPCParams
 from cpc2urdf.transforms import Array, inverse
 
 ROTATION_LENGTH = 0.1  # [m]: a link frame turned by 1 rad counts as 0.1 m off
-ALIGN_CONFIGURATIONS = 8  # configurations compared: the middle of the calibration box and 7 seeded draws
+ALIGN_CONFIGURATIONS = (
+    8  # configurations compared: the middle of the calibration box and 7 seeded draws
+)
 # Residual evaluations the alignment may take. A model of consistent data converges in a few dozen
 # (IIS-head: 22-34); a model far from every gauge of the nominal one (data read in the wrong unit,
 # which the consistency gate then refuses) creeps on for thousands without converging (scipy's
@@ -43,7 +45,9 @@ ALIGN_MAX_EVALUATIONS = 400
 
 def _rz(a: float) -> Array:
     c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    return np.array(
+        [[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    )
 
 
 def _trans(x: float, y: float, z: float) -> Array:
@@ -87,11 +91,14 @@ def apply_gauge(model: CPCModel, g: ArrayLike) -> CPCModel:
         return G_base if parent == BASE else G[parent]
 
     joints = {
-        j.name: CPCParams.from_matrix(inverse(parent_g(j.parent)) @ model.joints[j.name].matrix() @ G[j.name])
+        j.name: CPCParams.from_matrix(
+            inverse(parent_g(j.parent)) @ model.joints[j.name].matrix() @ G[j.name]
+        )
         for j in s.joints
     }
     frames = {
-        f.name: CPCParams.from_matrix(inverse(parent_g(f.parent)) @ model.frames[f.name].matrix()) for f in s.frames
+        f.name: CPCParams.from_matrix(inverse(parent_g(f.parent)) @ model.frames[f.name].matrix())
+        for f in s.frames
     }
     world_to_base = CPCParams.from_matrix(model.world_to_base.matrix() @ G_base)
     return model.with_params(world_to_base=world_to_base, joints=joints, frames=frames)
@@ -139,11 +146,17 @@ def align_to_nominal(
         G_base_inv[:, :3, :3] = np.swapaxes(R, -1, -2)
         G_base_inv[:, :3, 3] = -np.einsum("mji,mj->mi", R, g[:, 3:6])
         G_base_inv[:, 3, 3] = 1.0
-        Gj = np.zeros((m, len(kinds), 4, 4))  # Rot(z, a) Trans(x, y, s) (x = y = 0 for a revolute joint)
+        Gj = np.zeros(
+            (m, len(kinds), 4, 4)
+        )  # Rot(z, a) Trans(x, y, s) (x = y = 0 for a revolute joint)
         k = 6
         for i, revolute in enumerate(kinds):
             a = g[:, k]
-            x, y, z = (np.zeros(m), np.zeros(m), g[:, k + 1]) if revolute else (g[:, k + 1], g[:, k + 2], g[:, k + 3])
+            x, y, z = (
+                (np.zeros(m), np.zeros(m), g[:, k + 1])
+                if revolute
+                else (g[:, k + 1], g[:, k + 2], g[:, k + 3])
+            )
             c, sn = np.cos(a), np.sin(a)
             Gj[:, i, 0, 0], Gj[:, i, 0, 1], Gj[:, i, 1, 0], Gj[:, i, 1, 1] = c, -sn, sn, c
             Gj[:, i, 0, 3], Gj[:, i, 1, 3], Gj[:, i, 2, 3] = c * x - sn * y, sn * x + c * y, z
@@ -167,9 +180,24 @@ def align_to_nominal(
         F = residuals_of(np.vstack([g[None], X]))
         return ((F[1:] - F[0]) / dx[:, None]).T
 
-    sol = least_squares(residuals, np.zeros(gauge_size(model)), jac=jacobian, method="lm", xtol=1e-14, ftol=1e-14,
-                        max_nfev=ALIGN_MAX_EVALUATIONS)
+    sol = least_squares(
+        residuals,
+        np.zeros(gauge_size(model)),
+        jac=jacobian,
+        method="lm",
+        xtol=1e-14,
+        ftol=1e-14,
+        max_nfev=ALIGN_MAX_EVALUATIONS,
+    )
     return apply_gauge(model, sol.x)
 
 
-__all__ = ["ALIGN_CONFIGURATIONS", "ALIGN_MAX_EVALUATIONS", "ROTATION_LENGTH", "align_to_nominal", "apply_gauge", "gauge_size", "gauge_transforms"]
+__all__ = [
+    "ALIGN_CONFIGURATIONS",
+    "ALIGN_MAX_EVALUATIONS",
+    "ROTATION_LENGTH",
+    "align_to_nominal",
+    "apply_gauge",
+    "gauge_size",
+    "gauge_transforms",
+]

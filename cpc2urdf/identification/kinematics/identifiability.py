@@ -87,7 +87,9 @@ class IdentifiabilityReport:
         return {
             "n_params": self.n_params,
             "rank": self.rank,
-            "condition_number": None if not np.isfinite(self.condition_number) else self.condition_number,
+            "condition_number": None
+            if not np.isfinite(self.condition_number)
+            else self.condition_number,
             "singular_values": [float(v) for v in self.singular_values],
             "undetermined": list(self.undetermined),
             "warnings": list(self.warnings),
@@ -156,7 +158,9 @@ def analyze_jacobian(
             f"combination is {_describe(weakest, names)}"
         )
     if rank == P:  # the data look thin for an owner, yet the Jacobian sees it: say so
-        findings += [f"{owner}: {why} (yet the Jacobian has full rank)" for owner, why in reasons.items()]
+        findings += [
+            f"{owner}: {why} (yet the Jacobian has full rank)" for owner, why in reasons.items()
+        ]
     if warn:
         for f in findings:
             warnings.warn(f, IdentifiabilityWarning, stacklevel=2)
@@ -205,7 +209,9 @@ def _describe(v: Array, names: Sequence[str], keep: float = 0.1) -> str:
     return " ".join(terms) + (f" (+{more} smaller terms)" if more > 0 else "")
 
 
-def data_reasons(parametrization: object, q: ArrayLike, has_pose: Mapping[str, ArrayLike]) -> dict[str, str]:
+def data_reasons(
+    parametrization: object, q: ArrayLike, has_pose: Mapping[str, ArrayLike]
+) -> dict[str, str]:
     """Plain reasons, read off the data, why some joints or frames cannot be identified.
 
     Args:

@@ -63,8 +63,10 @@ PARALLEL_COS = 0.999
 # Undoing a likely mistake must lower the residual noise this many fold to name it.
 COUPLED_GAIN = 3.0
 
-NOT_BETTER = ("no calibration predicts left-out records better than the URDF as it is: its joints are kept, "
-              "only the measuring frame{what} fitted")
+NOT_BETTER = (
+    "no calibration predicts left-out records better than the URDF as it is: its joints are kept, "
+    "only the measuring frame{what} fitted"
+)
 
 
 def _details(sel: Selection, ms: MeasurementSet) -> dict[str, object]:
@@ -72,30 +74,49 @@ def _details(sel: Selection, ms: MeasurementSet) -> dict[str, object]:
     markers = {m: (ms.markers[m].frame, p) for m, p in fit.markers.items()}
     return {
         "reference": "maximum a posteriori about the URDF (prior: manufacturing tolerances), level chosen by "
-                     "leave-one-record-out cross-validation",
+        "leave-one-record-out cross-validation",
         "chosen_level": fit.level,
         "cross_validation_rms_m": {lv: sel.fits[lv].loo_rms_m for lv in LEVELS if lv in sel.fits},
         "fit_rms_m": fit.rms_m,
-        "noise_residuals": {"position_m": fit.residual_noise.position_m, "rotation_rad": fit.residual_noise.rotation_rad},
+        "noise_residuals": {
+            "position_m": fit.residual_noise.position_m,
+            "rotation_rad": fit.residual_noise.rotation_rad,
+        },
         "effective_parameters": fit.dof,
         "calibrated_joints": list(fit.joints),
         "data_share": fit.data_share,
-        "offsets_rad_or_m": {j: float(xi[5] if fit.model.structure.joint(j).type == "revolute" else xi[2])
-                             for j, xi in fit.perturbations.items()},
+        "offsets_rad_or_m": {
+            j: float(xi[5] if fit.model.structure.joint(j).type == "revolute" else xi[2])
+            for j, xi in fit.perturbations.items()
+        },
         "compliance": fit.compliance,
-        "markers": {m: {"frame": frame, "position_m": [float(v) for v in p]}
-                    for m, (frame, p) in markers.items()},
+        "markers": {
+            m: {"frame": frame, "position_m": [float(v) for v in p]}
+            for m, (frame, p) in markers.items()
+        },
     }
 
 
-def _gate(sel: Selection, nominal: CPCModel, ms: MeasurementSet, loads: Array | None, tolerances: Tolerances | None,
-          noise: Noise | None) -> GateReport:
+def _gate(
+    sel: Selection,
+    nominal: CPCModel,
+    ms: MeasurementSet,
+    loads: Array | None,
+    tolerances: Tolerances | None,
+    noise: Noise | None,
+) -> GateReport:
     """:func:`map_gate.check` on the chosen fit (noise estimated), refitting its level on the
     records kept; ``noise`` is the stated noise it is checked against."""
 
     def refit(kept: np.ndarray) -> MapFit:
-        return fit_map(nominal, ms.subset(kept), sel.chosen, sel.fit.joints, tolerances,
-                       loads=None if loads is None else loads[kept])
+        return fit_map(
+            nominal,
+            ms.subset(kept),
+            sel.chosen,
+            sel.fit.joints,
+            tolerances,
+            loads=None if loads is None else loads[kept],
+        )
 
     return check(sel.fit, refit, noise, ms.labels)
 
@@ -124,8 +145,9 @@ def _parallel_pairs(nominal: CPCModel, joints: Sequence[str]) -> list[tuple[str,
     return out
 
 
-def _coupled_reading(sel: Selection, nominal: CPCModel, ms: MeasurementSet,
-                     tolerances: Tolerances | None) -> str | None:
+def _coupled_reading(
+    sel: Selection, nominal: CPCModel, ms: MeasurementSet, tolerances: Tolerances | None
+) -> str | None:
     """The failed fit explained by a joint read relative to its parallel parent (``q_j + q_p`` or
     ``q_j - q_p``), or None: the chosen level refitted with each reading undone must lower the
     residual noise :data:`COUPLED_GAIN` fold."""
@@ -135,13 +157,17 @@ def _coupled_reading(sel: Selection, nominal: CPCModel, ms: MeasurementSet,
         for sign, how in ((1.0, "+"), (-1.0, "-")):
             q = ms.q.copy()
             q[:, s.joint_index(j)] -= sign * ms.q[:, s.joint_index(parent)]
-            after = fit_map(nominal, replace(ms, q=q), sel.chosen, sel.fit.joints, tolerances).residual_noise.position_m
+            after = fit_map(
+                nominal, replace(ms, q=q), sel.chosen, sel.fit.joints, tolerances
+            ).residual_noise.position_m
             if after * COUPLED_GAIN < before:
                 a, b = _shown(ms, j), _shown(ms, parent)
-                return (f"joint {a!r} seems read relative to joint {b!r} (the reading is {a} {how} {b}, as a "
-                        f"controller reporting the angle from the horizontal gives): with {a} "
-                        f"{'-' if sign > 0 else '+'} {b} the fit's residuals fall from {before * 1e3:.3g} mm to "
-                        f"{after * 1e3:.3g} mm")
+                return (
+                    f"joint {a!r} seems read relative to joint {b!r} (the reading is {a} {how} {b}, as a "
+                    f"controller reporting the angle from the horizontal gives): with {a} "
+                    f"{'-' if sign > 0 else '+'} {b} the fit's residuals fall from {before * 1e3:.3g} mm to "
+                    f"{after * 1e3:.3g} mm"
+                )
     return None
 
 
@@ -164,11 +190,20 @@ def range_report(fit: MapFit, urdf: MapFit, ms: MeasurementSet, seed: int = 0) -
         sweep[:, k] = np.linspace(lo[k], hi[k], SWEEP_SAMPLES)
         dj = np.linalg.norm(first_point(fit, ms, sweep) - first_point(urdf, ms, sweep), axis=1)
         inside = (sweep[:, k] >= ms.q[:, k].min()) & (sweep[:, k] <= ms.q[:, k].max())
-        joints[j] = {"data_span": float(np.ptp(ms.q[:, k])), "range": float(hi[k] - lo[k]),
-                     "within_data_m": float(dj[inside].max()) if inside.any() else 0.0,
-                     "whole_range_m": float(dj.max())}
-    return {"whole_range_m": {"median": float(np.median(d)), "p95": float(np.percentile(d, 95)),
-                              "max": float(d.max())}, "joints": joints}
+        joints[j] = {
+            "data_span": float(np.ptp(ms.q[:, k])),
+            "range": float(hi[k] - lo[k]),
+            "within_data_m": float(dj[inside].max()) if inside.any() else 0.0,
+            "whole_range_m": float(dj.max()),
+        }
+    return {
+        "whole_range_m": {
+            "median": float(np.median(d)),
+            "p95": float(np.percentile(d, 95)),
+            "max": float(d.max()),
+        },
+        "joints": joints,
+    }
 
 
 def _wild(report: dict[str, object], fit: MapFit) -> list[str]:
@@ -202,9 +237,17 @@ class Calibration:
         return self.selection.fit
 
 
-def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = None,
-              joints: Sequence[str] | None = None, tolerances: Tolerances | None = None,
-              noise: Noise | None = None, accept_inconsistent: bool = False, level: str | None = None) -> Calibration:
+def calibrate(
+    ms: MeasurementSet,
+    nominal: CPCModel,
+    *,
+    loads: Array | None = None,
+    joints: Sequence[str] | None = None,
+    tolerances: Tolerances | None = None,
+    noise: Noise | None = None,
+    accept_inconsistent: bool = False,
+    level: str | None = None,
+) -> Calibration:
     """Choose and fit the level (module docstring), through the gate (:mod:`map_gate`); joints
     the data cannot vouch for over their whole range keep the URDF's values.
 
@@ -222,15 +265,23 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
     def choose(m: MeasurementSet, L: Array | None, noise: Noise | None = None) -> Selection:
         if level is None:
             return select_model(nominal, m, joints, tolerances, L, noise=noise)
-        fits = {lv: fit_map(nominal, m, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=L)
-                for lv in dict.fromkeys(("frames", level))}  # the URDF as it is: the whole-range yardstick
+        fits = {
+            lv: fit_map(
+                nominal, m, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=L
+            )
+            for lv in dict.fromkeys(("frames", level))
+        }  # the URDF as it is: the whole-range yardstick
         return Selection(fits[level], fits)
 
     sel = choose(ms, loads)  # the gate judges with the noise the data show
     gate = _gate(sel, nominal, ms, loads, tolerances, noise)
-    failed = (not gate.consistent and not gate.outliers) or sel.fit.residual_noise.position_m > FAILED_FIT_M
+    failed = (
+        not gate.consistent and not gate.outliers
+    ) or sel.fit.residual_noise.position_m > FAILED_FIT_M
     coupled = _coupled_reading(sel, nominal, ms, tolerances) if failed else None
-    if coupled is not None:  # a likely mistake explains the data: name it, whatever accept_inconsistent says
+    if (
+        coupled is not None
+    ):  # a likely mistake explains the data: name it, whatever accept_inconsistent says
         raise InconsistentDataError(f"{ms.source}: {coupled}", gate)
     if not gate.consistent and not accept_inconsistent:
         raise InconsistentDataError(f"{ms.source}: {gate.cause}", gate)
@@ -245,22 +296,40 @@ def calibrate(ms: MeasurementSet, nominal: CPCModel, *, loads: Array | None = No
     wild = _wild(report, sel.fit) if sel.beats_urdf else []
     if wild:  # the data cannot vouch for these joints over their range: keep them at the URDF
         vouched = [j for j in sel.fit.joints if j not in wild]
-        fit = sel.fits["frames"] if not vouched else fit_map(
-            nominal, used, sel.chosen, vouched, tolerances, noise, estimate_noise=noise is None, loads=used_loads)
+        fit = (
+            sel.fits["frames"]
+            if not vouched
+            else fit_map(
+                nominal,
+                used,
+                sel.chosen,
+                vouched,
+                tolerances,
+                noise,
+                estimate_noise=noise is None,
+                loads=used_loads,
+            )
+        )
         sel = Selection(fit, {**sel.fits, sel.chosen: fit})
-        notes.append(f"kept at the URDF's values: {', '.join(_shown(ms, j) for j in wild)} (over their whole range the calibrated "
-                     "prediction would leave the URDF's far beyond what the data cover)")
+        notes.append(
+            f"kept at the URDF's values: {', '.join(_shown(ms, j) for j in wild)} (over their whole range the calibrated "
+            "prediction would leave the URDF's far beyond what the data cover)"
+        )
         report = range_report(sel.fit, sel.fits["frames"], used)
     if level is None and not sel.beats_urdf:
         what = " and the markers were" if ms.marker_points else " and the measured frame were"
         notes.append(NOT_BETTER.format(what=what))
     weak = [j for j, s in sel.fit.data_share.items() if s < BARELY]
     if weak and sel.beats_urdf:
-        notes.append(f"the data barely determine {', '.join(_shown(ms, j) for j in weak)}: kept near the URDF by the prior "
-                     f"(data share {', '.join(f'{sel.fit.data_share[j]:.2f}' for j in weak)})")
+        notes.append(
+            f"the data barely determine {', '.join(_shown(ms, j) for j in weak)}: kept near the URDF by the prior "
+            f"(data share {', '.join(f'{sel.fit.data_share[j]:.2f}' for j in weak)})"
+        )
     n = sel.fit.residual_noise
-    notes.append(f"noise {'the residuals show' if noise else 'estimated from the data'}: {n.position_m * 1e3:.3f} mm"
-                 + (f", {math.degrees(n.rotation_rad):.3f} deg" if ms.frames else ""))
+    notes.append(
+        f"noise {'the residuals show' if noise else 'estimated from the data'}: {n.position_m * 1e3:.3f} mm"
+        + (f", {math.degrees(n.rotation_rad):.3f} deg" if ms.frames else "")
+    )
     return Calibration(sel, gate, report, tuple(notes), level is None)
 
 
@@ -273,17 +342,32 @@ def identify_map(ms: MeasurementSet, nominal: CPCModel | None, **options: Any) -
         InconsistentDataError: As :func:`calibrate`.
     """
     if nominal is None:
-        raise DegenerateDataError(f"{ms.source}: --method map calibrates about a nominal model; the robot "
-                                  "has no geometry (give its URDF)")
+        raise DegenerateDataError(
+            f"{ms.source}: --method map calibrates about a nominal model; the robot "
+            "has no geometry (give its URDF)"
+        )
     cal = calibrate(ms, nominal, **options)
     gate = cal.gate
-    details = {**_details(cal.selection, ms), "whole_range": cal.whole_range,
-               "beats_urdf": cal.selection.beats_urdf if cal.chosen_by_cv else None,
-               "consistency": {"consistent": gate.consistent, "cause": gate.cause,
-                               "outlier_records": [ms.labels[i] for i in gate.outliers]}}
+    details = {
+        **_details(cal.selection, ms),
+        "whole_range": cal.whole_range,
+        "beats_urdf": cal.selection.beats_urdf if cal.chosen_by_cv else None,
+        "consistency": {
+            "consistent": gate.consistent,
+            "cause": gate.cause,
+            "outlier_records": [ms.labels[i] for i in gate.outliers],
+        },
+    }
     prov = Provenance(method="map", measurements=ms.source, robot=ms.robot, details=details)
     model = cal.fit.model
     return model.with_params(metadata=model.metadata.replace(provenance=prov, notes=cal.notes))
 
 
-__all__ = ["DIVERGENCE_FACTOR", "NOT_BETTER", "Calibration", "calibrate", "identify_map", "range_report"]
+__all__ = [
+    "DIVERGENCE_FACTOR",
+    "NOT_BETTER",
+    "Calibration",
+    "calibrate",
+    "identify_map",
+    "range_report",
+]

@@ -80,7 +80,9 @@ def _carry_frames(refined: CPCModel, start: CPCModel, fitted: list[str]) -> CPCM
     return refined.with_params(frames=moved) if moved else refined
 
 
-def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, robust: bool = False) -> CPCModel:
+def identify_refined(
+    ms: MeasurementSet, nominal: CPCModel | None = None, *, robust: bool = False
+) -> CPCModel:
     """``cpc2urdf identify --method refined``: closed form, then :func:`refine.refine` on every record.
 
     Starts from the closed form (one-joint-at-a-time data); if the records do not follow that
@@ -101,8 +103,16 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
     notes: list[str] = [note] if note else []
     sigma_t, sigma_r, known = noise_from_metadata(ms.metadata)
     fitted = [f for f in start.structure.frame_names if f in ms.poses and ms.has_pose(f).any()]
-    res = refine(start, ms, sigma_t, sigma_r, robust=robust, frames=fitted,
-                 covariance_scale="known" if known else "a_posteriori", warn=False)
+    res = refine(
+        start,
+        ms,
+        sigma_t,
+        sigma_r,
+        robust=robust,
+        frames=fitted,
+        covariance_scale="known" if known else "a_posteriori",
+        warn=False,
+    )
     model = _carry_frames(res.model, start, fitted)
     start_prov = start.metadata.provenance if start_method == "closed-form" else None
     prov = Provenance(
@@ -116,7 +126,9 @@ def identify_refined(ms: MeasurementSet, nominal: CPCModel | None = None, *, rob
             "start": start_method,
             "sigma_t_m": sigma_t,
             "sigma_r_rad": sigma_r,
-            "sigma_source": "measurement file noise section" if known else "default (paper's 0.5 mm / 0.5 deg)",
+            "sigma_source": "measurement file noise section"
+            if known
+            else "default (paper's 0.5 mm / 0.5 deg)",
             "identified_parameters": res.parametrization.counts(),
             "refinement_time_s": res.seconds,
             "outlier_records": res.outlier_records,
@@ -182,7 +194,10 @@ def residuals(model: CPCModel, ms: MeasurementSet) -> Residuals:
         )
         for i, a, b in zip(np.flatnonzero(ok), dt, dr, strict=True):
             per_record[int(i)][f] = (float(a), float(b))
-    return Residuals(per_frame, tuple(RecordResiduals(lb, r) for lb, r in zip(ms.labels, per_record, strict=True)))
+    return Residuals(
+        per_frame,
+        tuple(RecordResiduals(lb, r) for lb, r in zip(ms.labels, per_record, strict=True)),
+    )
 
 
 DEFAULT_METHOD = "refined"
@@ -239,7 +254,9 @@ def identify(
     from cpc2urdf.identification.kinematics.sufficiency import check_data_suffice
 
     if method not in METHODS:
-        raise Cpc2UrdfError(f"unknown identification method {method!r}; known: {', '.join(METHODS)}")
+        raise Cpc2UrdfError(
+            f"unknown identification method {method!r}; known: {', '.join(METHODS)}"
+        )
     if nominal is None and ms.spec is not None and ms.spec.nominal is not None:
         nominal = ms.spec.nominal_model()
     if method == "map":
@@ -247,10 +264,20 @@ def identify(
         from cpc2urdf.identification.kinematics.prior_fit import Noise as StatedNoise
 
         st, sr, known = noise_from_metadata(ms.metadata)  # sr: the rotation error's angle (Fig. 10)
-        model = identify_map(ms, nominal, loads=loads, noise=StatedNoise(st, sr / np.sqrt(3.0)) if known else None,
-                             accept_inconsistent=accept_inconsistent, level=level, joints=joints)
-        return model if ms.has_points else model.with_params(
-            metadata=model.metadata.replace(residuals=residuals(model, ms)))
+        model = identify_map(
+            ms,
+            nominal,
+            loads=loads,
+            noise=StatedNoise(st, sr / np.sqrt(3.0)) if known else None,
+            accept_inconsistent=accept_inconsistent,
+            level=level,
+            joints=joints,
+        )
+        return (
+            model
+            if ms.has_points
+            else model.with_params(metadata=model.metadata.replace(residuals=residuals(model, ms)))
+        )
     if ms.has_points:  # position-only data (cpc2urdf/measurements@2 markers)
         from cpc2urdf.identification.kinematics.points.point_identify import identify_points
 
@@ -272,7 +299,12 @@ def identify(
     consistency = {**report.to_json(), **({} if report.consistent else {"accepted": True})}
     meta = meta.replace(provenance=prov.with_details(consistency=consistency))
     if not report.consistent:
-        meta = meta.replace(notes=(*meta.notes, f"INCONSISTENT DATA, kept with --accept-inconsistent: {report.line()}"))
+        meta = meta.replace(
+            notes=(
+                *meta.notes,
+                f"INCONSISTENT DATA, kept with --accept-inconsistent: {report.line()}",
+            )
+        )
     return model.with_params(metadata=meta.replace(residuals=residuals(model, ms)))
 
 

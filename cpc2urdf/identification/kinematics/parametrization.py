@@ -120,8 +120,16 @@ def _local_twists(full: Array) -> Array:
         dc = dbz
         dR = np.array(  # derivative of eq. (4) with b_z = sqrt(1 - b_x^2 - b_y^2)
             [
-                [-2 * bx * dbx / c + bx * bx * dc / c**2, -(dbx * by + bx * dby) / c + bx * by * dc / c**2, dbx],
-                [-(dbx * by + bx * dby) / c + bx * by * dc / c**2, -2 * by * dby / c + by * by * dc / c**2, dby],
+                [
+                    -2 * bx * dbx / c + bx * bx * dc / c**2,
+                    -(dbx * by + bx * dby) / c + bx * by * dc / c**2,
+                    dbx,
+                ],
+                [
+                    -(dbx * by + bx * dby) / c + bx * by * dc / c**2,
+                    -2 * by * dby / c + by * by * dc / c**2,
+                    dby,
+                ],
                 [-dbx, -dby, dbz],
             ]
         )

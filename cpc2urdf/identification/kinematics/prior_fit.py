@@ -117,14 +117,28 @@ class MapFit:
 
 
 def _solve(problem: MapProblem, x0: Array) -> Array:
-    sol = least_squares(lambda x: problem.evaluate(x, False)[0], x0,
-                        jac=lambda x: problem.evaluate(x, True)[1], method="lm", xtol=1e-12, ftol=1e-12)
+    sol = least_squares(
+        lambda x: problem.evaluate(x, False)[0],
+        x0,
+        jac=lambda x: problem.evaluate(x, True)[1],
+        method="lm",
+        xtol=1e-12,
+        ftol=1e-12,
+    )
     return np.asarray(sol.x)
 
 
-def fit_map(nominal: CPCModel, ms: MeasurementSet, level: str = "geometry", joints: Sequence[str] | None = None,
-            tolerances: Tolerances | None = None, noise: Noise | None = None, *,
-            estimate_noise: bool = True, loads: Array | None = None) -> MapFit:
+def fit_map(
+    nominal: CPCModel,
+    ms: MeasurementSet,
+    level: str = "geometry",
+    joints: Sequence[str] | None = None,
+    tolerances: Tolerances | None = None,
+    noise: Noise | None = None,
+    *,
+    estimate_noise: bool = True,
+    loads: Array | None = None,
+) -> MapFit:
     """Fit one level about ``nominal`` (module docstring).
 
     Args:
@@ -152,8 +166,10 @@ def fit_map(nominal: CPCModel, ms: MeasurementSet, level: str = "geometry", join
     x = _solve(problem, start_point(problem))
     for _ in range(NOISE_ITERATIONS if estimate_noise else 0):
         new = _estimate_noise(problem, x)
-        if abs(new.position_m / problem.noise.position_m - 1) < 0.01 and \
-                abs(new.rotation_rad / problem.noise.rotation_rad - 1) < 0.01:
+        if (
+            abs(new.position_m / problem.noise.position_m - 1) < 0.01
+            and abs(new.rotation_rad / problem.noise.rotation_rad - 1) < 0.01
+        ):
             problem.noise = new
             break
         problem.noise = new
@@ -166,7 +182,7 @@ def _hat_traces(problem: MapProblem, J: Array) -> tuple[Array, float, float]:
     (the parameters each kind of measurement used up)."""
     cov = np.linalg.pinv(J.T @ J)
     _, point = problem.row_records()
-    Jm = J[:len(point)]
+    Jm = J[: len(point)]
     Jp, Jr = Jm[point], Jm[~point]
     return cov, float(np.sum(cov * (Jp.T @ Jp))), float(np.sum(cov * (Jr.T @ Jr)))
 
@@ -175,10 +191,14 @@ def _noise_shown(problem: MapProblem, r: Array, hp: float, hr: float) -> Noise:
     """The noise the weighted residuals ``r`` show, the hat matrix's traces ``hp``, ``hr``
     counting the parameters the position and rotation rows used up."""
     _, point = problem.row_records()
-    rm = r[:len(point)]
+    rm = r[: len(point)]
     rp, rr = rm[point] * problem.noise.position_m, rm[~point] * problem.noise.rotation_rad
     sp = math.sqrt(float(rp @ rp) / max(len(rp) - hp, 1.0))
-    sr = math.sqrt(float(rr @ rr) / max(len(rr) - hr, 1.0)) if len(rr) else problem.noise.rotation_rad
+    sr = (
+        math.sqrt(float(rr @ rr) / max(len(rr) - hr, 1.0))
+        if len(rr)
+        else problem.noise.rotation_rad
+    )
     return Noise(max(sp, NOISE_FLOOR), max(sr, NOISE_FLOOR))
 
 
@@ -193,17 +213,23 @@ def _result(problem: MapProblem, x: Array) -> MapFit:
     r, J = problem.evaluate(x)
     assert J is not None
     cov, hp, hr = _hat_traces(problem, J)
-    loo_sq, loo_count, loo_rot, loo_stat, loo_stat_rot, loo_frames = _leave_one_out(problem, r, J, cov)
+    loo_sq, loo_count, loo_rot, loo_stat, loo_stat_rot, loo_frames = _leave_one_out(
+        problem, r, J, cov
+    )
     model = problem.model(x)
     _, point = problem.row_records()
-    point_rows = r[:len(point)][point] * problem.noise.position_m  # the points' fit residuals [m]
-    share: dict[str, float] = {}  # 1 - posterior / prior variance, mean over the joint's free components
+    point_rows = r[: len(point)][point] * problem.noise.position_m  # the points' fit residuals [m]
+    share: dict[
+        str, float
+    ] = {}  # 1 - posterior / prior variance, mean over the joint's free components
     for j in problem.joints:
         if j not in problem.slots:
             continue
         first, comps = problem.slots[j]
         idx = np.arange(first, first + len(comps))
-        share[j] = float(np.mean(np.clip(1.0 - np.diag(cov)[idx] / problem.prior[idx] ** 2, 0.0, 1.0)))
+        share[j] = float(
+            np.mean(np.clip(1.0 - np.diag(cov)[idx] / problem.prior[idx] ** 2, 0.0, 1.0))
+        )
     return MapFit(
         model=model,
         level=problem.level,
@@ -273,8 +299,9 @@ def _leave_one_out(problem: MapProblem, r: Array, J: Array, cov: Array) -> tuple
     return sq, count, rot, stat, stat_rot, frames
 
 
-def point_errors(model: CPCModel, ms: MeasurementSet, markers: dict[str, Array],
-                 q: Array | None = None) -> dict[str, Array]:
+def point_errors(
+    model: CPCModel, ms: MeasurementSet, markers: dict[str, Array], q: Array | None = None
+) -> dict[str, Array]:
     """Distance [m] from each measured point (marker, or measured frame's origin) to the model's
     prediction at readings ``q`` (default ``ms.q``), per marker / frame, over the records that
     measured it."""
@@ -316,8 +343,12 @@ def folds(n: int, k: int = CV_FOLDS, seed: int = 0) -> list[Array]:
     return list(np.array_split(np.random.default_rng(seed).permutation(n), k))
 
 
-def cross_validate(ms: MeasurementSet, fit: Callable[[MeasurementSet, Array | None], MapFit],
-                   loads: Array | None = None, k: int = CV_FOLDS) -> Array:
+def cross_validate(
+    ms: MeasurementSet,
+    fit: Callable[[MeasurementSet, Array | None], MapFit],
+    loads: Array | None = None,
+    k: int = CV_FOLDS,
+) -> Array:
     """Every held-out distance [m] of ``k``-fold cross-validation: each fold's records predicted by
     ``fit(training records, their loads)``."""
     errs: list[Array] = []
@@ -353,9 +384,15 @@ class Selection:
         return self.chosen != "frames"
 
 
-def select_model(nominal: CPCModel, ms: MeasurementSet, joints: Sequence[str] | None = None,
-                 tolerances: Tolerances | None = None, loads: Array | None = None,
-                 margin: float = SELECTION_MARGIN, noise: Noise | None = None) -> Selection:
+def select_model(
+    nominal: CPCModel,
+    ms: MeasurementSet,
+    joints: Sequence[str] | None = None,
+    tolerances: Tolerances | None = None,
+    loads: Array | None = None,
+    margin: float = SELECTION_MARGIN,
+    noise: Noise | None = None,
+) -> Selection:
     """Fit every level and keep the one that predicts left-out records best.
 
     Each level is scored by its leave-one-record-out residuals (:attr:`MapFit.loo_sq_m2`, and for
@@ -368,8 +405,12 @@ def select_model(nominal: CPCModel, ms: MeasurementSet, joints: Sequence[str] | 
     ``noise`` is used as it is; without one the noise is estimated.
     """
     levels = [lv for lv in LEVELS if lv != "compliance" or loads is not None]
-    fits = {lv: fit_map(nominal, ms, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=loads)
-            for lv in levels}
+    fits = {
+        lv: fit_map(
+            nominal, ms, lv, joints, tolerances, noise, estimate_noise=noise is None, loads=loads
+        )
+        for lv in levels
+    }
     base = fits["frames"].noise
     weight = (base.position_m / base.rotation_rad) ** 2 if ms.frames else 0.0  # [m^2 / rad^2]
 

@@ -114,7 +114,9 @@ def _upstream(s: RobotStructure, frame: str) -> list[int]:
 
 def default_joints(ms: MeasurementSet) -> tuple[str, ...]:
     """The joints the data move, on the paths to the measured frames and markers."""
-    frames = set(ms.frames) | {ms.markers[m].frame for m in ms.marker_points if ms.has_marker(m).any()}
+    frames = set(ms.frames) | {
+        ms.markers[m].frame for m in ms.marker_points if ms.has_marker(m).any()
+    }
     on_paths = {i for f in frames for i in _upstream(ms.structure, f)}
     span = np.ptp(ms.q, axis=0)
     return tuple(ms.structure.joint_names[i] for i in sorted(on_paths) if span[i] > 0)
@@ -123,8 +125,16 @@ def default_joints(ms: MeasurementSet) -> tuple[str, ...]:
 class MapProblem:
     """The residuals and their Jacobian for one level, joint set, prior and noise."""
 
-    def __init__(self, nominal: CPCModel, ms: MeasurementSet, level: str, joints: Sequence[str],
-                 tol: Tolerances, noise: Noise, loads: Array | None = None) -> None:
+    def __init__(
+        self,
+        nominal: CPCModel,
+        ms: MeasurementSet,
+        level: str,
+        joints: Sequence[str],
+        tol: Tolerances,
+        noise: Noise,
+        loads: Array | None = None,
+    ) -> None:
         self.nominal, self.ms, self.level, self.tol, self.noise = nominal, ms, level, tol, noise
         self.loads = loads
         self._cache: tuple[bytes, tuple[CPCModel, Array, Array, Array]] | None = None
@@ -153,16 +163,24 @@ class MapProblem:
                     prior.append(tol.translation_m if c < 3 else tol.rotation_rad)
         # A measured frame is a link of the URDF, placed within the tolerances, unless the set says
         # its mount is unknown (a tool or camera whose pose on the link nobody measured).
-        self.unknown_mounts = [f for f in self.pose_frames if f in ms.metadata.get(UNKNOWN_MOUNTS, ())]
+        self.unknown_mounts = [
+            f for f in self.pose_frames if f in ms.metadata.get(UNKNOWN_MOUNTS, ())
+        ]
         for f in self.pose_frames:
             self.slots["frame:" + f] = (len(names), list(range(6)))
             names += [f"{f}.{k}" for k in ("x", "y", "z", "rx", "ry", "rz")]
-            prior += [0.0] * 6 if f in self.unknown_mounts else [tol.translation_m] * 3 + [tol.rotation_rad] * 3
+            prior += (
+                [0.0] * 6
+                if f in self.unknown_mounts
+                else [tol.translation_m] * 3 + [tol.rotation_rad] * 3
+            )
         self.compliance: dict[str, int] = {}
         if level == "compliance":
             if loads is None:
-                raise DegenerateDataError(f"{ms.source}: the compliance level needs the joints' gravity loads "
-                                          "(the URDF has no inertials on the measured paths)")
+                raise DegenerateDataError(
+                    f"{ms.source}: the compliance level needs the joints' gravity loads "
+                    "(the URDF has no inertials on the measured paths)"
+                )
             for j in self.joints:
                 self.compliance[j] = len(names)
                 names.append(f"{j}.compliance")
@@ -175,22 +193,32 @@ class MapProblem:
         self.names = tuple(names)
         self.prior = np.array(prior)
         self.has_prior = self.prior > 0
-        self.upstream = {f: _upstream(s, f) for f in {*self.pose_frames, *(ms.markers[m].frame for m in self.markers)}}
+        self.upstream = {
+            f: _upstream(s, f)
+            for f in {*self.pose_frames, *(ms.markers[m].frame for m in self.markers)}
+        }
 
     # ---- the model at a parameter vector --------------------------------------------------------
 
     def xi(self, x: Array, block: str) -> Array:
         first, comps = self.slots[block]
         out = np.zeros(6)
-        out[comps] = x[first:first + len(comps)]
+        out[comps] = x[first : first + len(comps)]
         return out
 
     def model(self, x: Array) -> CPCModel:
         nom = self.nominal
-        joints = {j: CPCParams.from_matrix(nom.joints[j].matrix() @ perturbation(self.xi(x, j)))
-                  for j in self.joints if j in self.slots}
-        frames = {f: CPCParams.from_matrix(nom.frames[f].matrix() @ perturbation(self.xi(x, "frame:" + f)))
-                  for f in self.pose_frames}
+        joints = {
+            j: CPCParams.from_matrix(nom.joints[j].matrix() @ perturbation(self.xi(x, j)))
+            for j in self.joints
+            if j in self.slots
+        }
+        frames = {
+            f: CPCParams.from_matrix(
+                nom.frames[f].matrix() @ perturbation(self.xi(x, "frame:" + f))
+            )
+            for f in self.pose_frames
+        }
         W = nom.T_world_base() @ perturbation(self.xi(x, "world"))
         return nom.with_params(world_to_base=CPCParams.from_matrix(W), joints=joints, frames=frames)
 
@@ -207,13 +235,22 @@ class MapProblem:
     def marker_position(self, x: Array, m: str) -> Array:
         if m in self.marker_slot:
             i = self.marker_slot[m]
-            return x[i:i + 3]
+            return x[i : i + 3]
         return np.asarray(self.ms.markers[m].position, dtype=float)
 
     # ---- residuals and Jacobian -----------------------------------------------------------------
 
-    def _local(self, J: Array, cols: int, A: Array, R_omega: Array, Jr: Array, y: Array, comps: list[int],
-               rot: bool = False) -> None:
+    def _local(
+        self,
+        J: Array,
+        cols: int,
+        A: Array,
+        R_omega: Array,
+        Jr: Array,
+        y: Array,
+        comps: list[int],
+        rot: bool = False,
+    ) -> None:
         """Add the effect of a local perturbation of frame ``A`` (N, 4, 4) on points ``y`` (N, 3)
         (or, with ``rot``, on orientations) to ``J[:, :, cols:]``."""
         R = A[:, :3, :3]
@@ -224,9 +261,11 @@ class MapProblem:
             x_local = np.einsum("nji,nj->ni", R, y - A[:, :3, 3])
             full[:, :, :3] = R @ R_omega.T
             full[:, :, 3:] = -R @ (_skews(x_local) @ Jr)
-        J[:, :, cols:cols + len(comps)] += full[:, :, comps]
+        J[:, :, cols : cols + len(comps)] += full[:, :, comps]
 
-    def _block_local(self, J: Array, block: str, A: Array, x: Array, y: Array, rot: bool = False) -> None:
+    def _block_local(
+        self, J: Array, block: str, A: Array, x: Array, y: Array, rot: bool = False
+    ) -> None:
         if block not in self.slots:
             return
         first, comps = self.slots[block]
@@ -276,8 +315,9 @@ class MapProblem:
             mk = ms.markers[m]
             rows = np.flatnonzero(ms.has_marker(m))
             p = s.frame(mk.frame).parent
-            T = (link[rows, s.joint_index(p)] if p != BASE else np.broadcast_to(W, (len(rows), 4, 4))) \
-                @ model.frames[mk.frame].matrix()
+            T = (
+                link[rows, s.joint_index(p)] if p != BASE else np.broadcast_to(W, (len(rows), 4, 4))
+            ) @ model.frames[mk.frame].matrix()
             pos = self.marker_position(x, m)
             y = T[:, :3, :3] @ pos + T[:, :3, 3]
             res.append(((y - ms.marker_points[m][rows]) / self.noise.position_m).ravel())
@@ -285,7 +325,7 @@ class MapProblem:
                 J = chain(T, y, mk.frame, rows, False)
                 if m in self.marker_slot:
                     i = self.marker_slot[m]
-                    J[:, :, i:i + 3] += T[:, :3, :3]
+                    J[:, :, i : i + 3] += T[:, :3, :3]
                 jac.append(J.reshape(-1, n) / self.noise.position_m)
         for f in self.pose_frames:
             rows = np.flatnonzero(ms.has_pose(f))
@@ -293,7 +333,9 @@ class MapProblem:
             Tm = ms.poses[f][rows]
             y = T[:, :3, 3]
             res.append(((y - Tm[:, :3, 3]) / self.noise.position_m).ravel())
-            dr = Rotation.from_matrix(T[:, :3, :3] @ np.transpose(Tm[:, :3, :3], (0, 2, 1))).as_rotvec()
+            dr = Rotation.from_matrix(
+                T[:, :3, :3] @ np.transpose(Tm[:, :3, :3], (0, 2, 1))
+            ).as_rotvec()
             res.append((dr / self.noise.rotation_rad).ravel())
             if jacobian:
                 jac.append(chain(T, y, f, rows, False).reshape(-1, n) / self.noise.position_m)
@@ -347,7 +389,10 @@ def start_point(problem: MapProblem) -> Array:
     W_inv = inverse(nom.T_world_base())
     base = {f: W_inv @ T for f, T in base.items()}  # T_base_frame
     C = {f: np.eye(4) for f in problem.pose_frames}  # measured frame correction on its link
-    p = {m: (np.zeros(3) if m in problem.marker_slot else problem.marker_position(x, m)) for m in problem.markers}
+    p = {
+        m: (np.zeros(3) if m in problem.marker_slot else problem.marker_position(x, m))
+        for m in problem.markers
+    }
     W = np.eye(4)
     for _ in range(30):
         P, Y = [], []
@@ -370,23 +415,24 @@ def start_point(problem: MapProblem) -> Array:
             p[m] = np.einsum("nji,nj->ni", T[:, :3, :3], y_b - T[:, :3, 3]).mean(0)
         for f in problem.unknown_mounts:
             rows = ms.has_pose(f)
-            D = np.linalg.solve(base[f][rows], Wi @ ms.poses[f][rows])  # T_frame_measured, per record
+            D = np.linalg.solve(
+                base[f][rows], Wi @ ms.poses[f][rows]
+            )  # T_frame_measured, per record
             R = Rotation.from_matrix(D[:, :3, :3]).mean().as_matrix()
             C[f] = homogeneous(R, D[:, :3, 3].mean(0))
     x[:6] = _xi_of(W_inv @ W)
     for f in problem.pose_frames:
         first, _ = problem.slots["frame:" + f]
-        x[first:first + 6] = _xi_of(C[f])
+        x[first : first + 6] = _xi_of(C[f])
     for m in problem.unknown:
         i = problem.marker_slot[m]
-        x[i:i + 3] = p[m]
+        x[i : i + 3] = p[m]
     return x
 
 
 def _xi_of(P: Array) -> Array:
     """The inverse of :func:`perturbation`."""
     return np.concatenate([P[:3, 3], Rotation.from_matrix(P[:3, :3]).as_rotvec()])
-
 
 
 __all__ = ["MapProblem", "Noise", "Tolerances", "default_joints", "perturbation", "start_point"]

@@ -50,7 +50,9 @@ def _so3_log_and_jr_inv(E: Array) -> tuple[Array, Array]:
     small = th < 1e-4
     ths = np.where(small, 1.0, th)
     # J_r^-1(phi) = I + K/2 + (1/th^2 - (1 + cos th) / (2 th sin th)) K^2; series below 1e-4.
-    coef = np.where(small, 1.0 / 12.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    coef = np.where(
+        small, 1.0 / 12.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths))
+    )
     return phi, np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
 
 
@@ -168,7 +170,10 @@ class IdentificationProblem:
         Jb = J.reshape(-1, 6, self.chart.n_params)
         g, dg = _robust_gain(self.loss, (r**2).sum(1) / self.scale**2)
         rJ = np.einsum("bi,bip->bp", r, Jb)
-        Jb = g[:, None, None] * Jb + (2.0 * dg / self.scale**2)[:, None, None] * r[:, :, None] * rJ[:, None, :]
+        Jb = (
+            g[:, None, None] * Jb
+            + (2.0 * dg / self.scale**2)[:, None, None] * r[:, :, None] * rJ[:, None, :]
+        )
         return Jb.reshape(-1, self.chart.n_params)
 
     def pose_p_values(self, x: Array) -> dict[str, Array]:

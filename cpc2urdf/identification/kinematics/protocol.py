@@ -64,14 +64,18 @@ def _fmt(v: float) -> str:
     return f"{v:.9g}"
 
 
-def joint_tolerances(structure: RobotStructure, tol: ArrayLike | None = None) -> NDArray[np.float64]:
+def joint_tolerances(
+    structure: RobotStructure, tol: ArrayLike | None = None
+) -> NDArray[np.float64]:
     """Per joint reading tolerance, shape (n,): ``tol`` (scalar or (n,)), else :data:`READING_TOL`."""
     if tol is None:
         return np.array([READING_TOL[j.type] for j in structure.joints])
     return np.broadcast_to(np.asarray(tol, dtype=float), (structure.n_joints,)).copy()
 
 
-def _differing(q: NDArray[np.float64], q0: NDArray[np.float64], tol: ArrayLike) -> NDArray[np.bool_]:
+def _differing(
+    q: NDArray[np.float64], q0: NDArray[np.float64], tol: ArrayLike
+) -> NDArray[np.bool_]:
     return np.abs(q - q0) > tol
 
 
@@ -80,14 +84,22 @@ def _mode_configuration(q: NDArray[np.float64], tol: NDArray[np.float64]) -> NDA
     q0 = np.empty(q.shape[1])
     for i in range(q.shape[1]):
         col = q[:, i]
-        s = np.sort(col)  # readings within tol of each one: a window of the sorted column, O(N log N)
-        counts = np.searchsorted(s, col + tol[i], side="right") - np.searchsorted(s, col - tol[i], side="left")
+        s = np.sort(
+            col
+        )  # readings within tol of each one: a window of the sorted column, O(N log N)
+        counts = np.searchsorted(s, col + tol[i], side="right") - np.searchsorted(
+            s, col - tol[i], side="left"
+        )
         q0[i] = col[int(np.argmax(counts))]  # argmax returns the first maximum
     return q0
 
 
-def find_reference(q: NDArray[np.float64], joint_names: tuple[str, ...], labels: list[str] | None = None,
-                   tol: ArrayLike = 1e-9) -> NDArray[np.float64]:
+def find_reference(
+    q: NDArray[np.float64],
+    joint_names: tuple[str, ...],
+    labels: list[str] | None = None,
+    tol: ArrayLike = 1e-9,
+) -> NDArray[np.float64]:
     """The reference configuration ``q0`` of one-joint-at-a-time data.
 
     ``q0`` is the configuration every record differs from in at most one joint. It is found as
@@ -193,7 +205,9 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
     q0 = find_reference(q, s.joint_names, ms.labels, tol)
     diff = _differing(q, q0, tol)
     reference = tuple(int(i) for i in np.flatnonzero(~diff.any(axis=1)))
-    sweeps = {n: tuple(int(r) for r in np.flatnonzero(diff[:, i])) for i, n in enumerate(s.joint_names)}
+    sweeps = {
+        n: tuple(int(r) for r in np.flatnonzero(diff[:, i])) for i, n in enumerate(s.joint_names)
+    }
     for name, idx in sweeps.items():
         if not idx:
             raise DegenerateDataError(
@@ -225,5 +239,12 @@ def recognise_protocol(ms: MeasurementSet, tol: ArrayLike | None = None) -> Prot
     return Protocol(q0, reference, sweeps, frames, below)
 
 
-__all__ = ["READING_TOL", "Protocol", "find_reference", "frame_seen", "joint_tolerances", "seen_frames",
-           "recognise_protocol"]
+__all__ = [
+    "READING_TOL",
+    "Protocol",
+    "find_reference",
+    "frame_seen",
+    "joint_tolerances",
+    "seen_frames",
+    "recognise_protocol",
+]

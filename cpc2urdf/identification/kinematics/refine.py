@@ -163,7 +163,9 @@ class RefinementResult:
             f"{self.sigma_t * 1e3:g} mm, sigma_r = {np.degrees(self.sigma_r):g} deg are right)",
         ]
         if self.outliers:
-            lines.append(f"outliers ({len(self.outliers)} poses in records {self.outlier_records}):")
+            lines.append(
+                f"outliers ({len(self.outliers)} poses in records {self.outlier_records}):"
+            )
             lines += ["  " + o.describe() for o in self.outliers]
         if self.identifiability.warnings:
             lines += ["warning: " + w for w in self.identifiability.warnings]
@@ -224,6 +226,7 @@ def _solve(problem: LeastSquaresProblem, x0: Array, max_nfev: int | None) -> Opt
 # The solver, for the other problems of the package (position-only data, :mod:`point_refine`).
 solve_least_squares = _solve
 
+
 def _drop_outliers(
     problem_for: Callable[[dict[str, NDArray[np.bool_]]], IdentificationProblem],
     seen: dict[str, NDArray[np.bool_]],
@@ -240,7 +243,11 @@ def _drop_outliers(
     use, sol, nfev = dict(seen), OptimizeResult(success=True, message=""), 0
     for it in range(5):
         pv = all_poses.pose_p_values(x)
-        now = {(f, int(all_poses.rows[f][i])) for f in pv for i in np.flatnonzero(pv[f] < outlier_alpha)}
+        now = {
+            (f, int(all_poses.rows[f][i]))
+            for f in pv
+            for i in np.flatnonzero(pv[f] < outlier_alpha)
+        }
         if now == rejected and it > 0:
             break
         rejected = now
@@ -248,7 +255,9 @@ def _drop_outliers(
         for f, k in rejected:
             use[f][k] = False
         if not any(u.any() for u in use.values()):
-            raise DegenerateDataError("robust mode rejected every pose: are sigma_t/sigma_r far too small?")
+            raise DegenerateDataError(
+                "robust mode rejected every pose: are sigma_t/sigma_r far too small?"
+            )
         sol = _solve(problem_for(use), x, max_nfev)
         x, nfev = sol.x, nfev + sol.nfev
     blocks = all_poses.residual_blocks(x)
@@ -258,7 +267,14 @@ def _drop_outliers(
         i = int(np.searchsorted(all_poses.rows[f], k))
         dp, dr = blocks[f]
         outliers.append(
-            Outlier(k, str(labels[k]), f, float(np.linalg.norm(dp[i])), float(np.linalg.norm(dr[i])), float(pv[f][i]))
+            Outlier(
+                k,
+                str(labels[k]),
+                f,
+                float(np.linalg.norm(dp[i])),
+                float(np.linalg.norm(dr[i])),
+                float(pv[f][i]),
+            )
         )
     return x, sol, use, outliers, nfev
 
@@ -305,12 +321,16 @@ def refine(
     """
     t0 = time.perf_counter()
     if not (sigma_t > 0 and sigma_r > 0 and np.isfinite(sigma_t) and np.isfinite(sigma_r)):
-        raise DegenerateDataError(f"noise sigmas must be positive, got sigma_t={sigma_t}, sigma_r={sigma_r}")
+        raise DegenerateDataError(
+            f"noise sigmas must be positive, got sigma_t={sigma_t}, sigma_r={sigma_r}"
+        )
     s = model.structure
     q = s.check_q(measurements.q)
     q = np.atleast_2d(q)
     if frames is None:
-        frames = [f for f in s.frame_names if f in measurements.poses and measurements.has_pose(f).any()]
+        frames = [
+            f for f in s.frame_names if f in measurements.poses and measurements.has_pose(f).any()
+        ]
     frames = list(frames)
     if not frames:
         raise DegenerateDataError("no measured poses to refine against")
@@ -337,7 +357,9 @@ def refine(
         x = np.zeros(chart.n_params)
     if robust:
         labels = measurements.labels or [f"record {i}" for i in range(len(q))]
-        x, sol, use, outliers, more = _drop_outliers(problem_for, seen, x, max_nfev, outlier_alpha, labels)
+        x, sol, use, outliers, more = _drop_outliers(
+            problem_for, seen, x, max_nfev, outlier_alpha, labels
+        )
         nfev += more
 
     refined = chart.model_from_vector(x)
@@ -349,7 +371,9 @@ def refine(
     J = final.jacobian(x0)
     reasons = data_reasons(final_chart, q, use)
     ident = analyze_jacobian(J, final_chart.names, reasons=reasons, warn=warn)
-    cov = covariance_from_jacobian(J, final_chart, residuals=r, sigma_t=sigma_t, sigma_r=sigma_r, scale=covariance_scale)
+    cov = covariance_from_jacobian(
+        J, final_chart, residuals=r, sigma_t=sigma_t, sigma_r=sigma_r, scale=covariance_scale
+    )
     blocks = problem_for(seen).residual_blocks(x)
     res_table: dict[str, Array] = {}
     dps, drs = [], []
@@ -366,9 +390,12 @@ def refine(
     dp_all, dr_all = np.concatenate(dps), np.concatenate(drs)
     seconds = time.perf_counter() - t0
     # Model files keep only known sections: the refinement's report travels with the covariance.
-    cov = replace(cov, details={
+    cov = replace(
+        cov,
+        details={
             "refinement": {
-                "method": "weighted least squares (scipy least_squares, Levenberg-Marquardt)" + (", robust" if robust else ""),
+                "method": "weighted least squares (scipy least_squares, Levenberg-Marquardt)"
+                + (", robust" if robust else ""),
                 "parameters": final_chart.n_params,
                 "gauge": final_chart.gauge_description(),
                 "poses_used": final.n_poses,
@@ -376,7 +403,8 @@ def refine(
             },
             "identifiability": ident.to_json(),
             "outliers": [o.__dict__ for o in outliers],
-    })
+        },
+    )
     refined = with_uncertainty(refined, cov)
     if not sol.success and warn:
         warnings.warn(f"refinement did not converge: {sol.message}", RuntimeWarning, stacklevel=2)

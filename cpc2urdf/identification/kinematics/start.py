@@ -29,7 +29,9 @@ def closed_form_model(ms: MeasurementSet, nominal: CPCModel | None) -> CPCModel:
 
     protocol = recognise_protocol(ms)
     model, details = identify_closed_form(ms, nominal, protocol=protocol)
-    meta = model.metadata.replace(provenance=provenance(ms, protocol, details), notes=tuple(details.notes))
+    meta = model.metadata.replace(
+        provenance=provenance(ms, protocol, details), notes=tuple(details.notes)
+    )
     return model.with_params(metadata=meta)
 
 
@@ -57,7 +59,9 @@ def align_base(model: CPCModel, ms: MeasurementSet, frames: list[str]) -> CPCMod
         ok = ms.has_pose(f)
         a.append(T_pred[f][ok, :3, 3])
         b.append(ms.poses[f][ok, :3, 3])
-    G = transforms_from_point_pairs(np.concatenate(a), np.concatenate(b), what="measured frame origins")
+    G = transforms_from_point_pairs(
+        np.concatenate(a), np.concatenate(b), what="measured frame origins"
+    )
     return model.with_params(world_to_base=CPCParams.from_matrix(G @ model.T_world_base()))
 
 
@@ -73,7 +77,9 @@ def on_the_parts(model: CPCModel, nominal: CPCModel | None) -> CPCModel:
     return align_to_nominal(model, nominal)
 
 
-def refinement_start(ms: MeasurementSet, nominal: CPCModel | None) -> tuple[CPCModel, str, str | None]:
+def refinement_start(
+    ms: MeasurementSet, nominal: CPCModel | None
+) -> tuple[CPCModel, str, str | None]:
     """The model a refinement of ``ms`` starts from.
 
     Returns:

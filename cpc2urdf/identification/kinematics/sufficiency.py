@@ -107,8 +107,10 @@ def check_data_suffice(ms: MeasurementSet, tol: ArrayLike | None = None) -> None
         below = [f for f in frames if j.name in s.path_to(f)]
         if not below:
             downstream = [f.name for f in s.frames if j.name in s.path_to(f.name)]
-            unseen.append(f"joint {j.name!r} moves no measured frame (no pose of "
-                          f"{', '.join(downstream) or 'any frame'} in any record)")
+            unseen.append(
+                f"joint {j.name!r} moves no measured frame (no pose of "
+                f"{', '.join(downstream) or 'any frame'} in any record)"
+            )
             continue
         rows = np.zeros(ms.n_records, dtype=bool)
         for f in below:
@@ -116,8 +118,11 @@ def check_data_suffice(ms: MeasurementSet, tol: ArrayLike | None = None) -> None
         if _count_distinct(ms.q[rows, k], float(tols[k])) < 2:
             still.append((j.name, k, int(rows.sum()), below))
     if unseen:
-        raise DegenerateDataError(f"{src}: {unseen[0]}" + (f" (and {len(unseen) - 1} more joints)" if len(unseen) > 1 else "")
-                                  + "; measure a frame that it moves")
+        raise DegenerateDataError(
+            f"{src}: {unseen[0]}"
+            + (f" (and {len(unseen) - 1} more joints)" if len(unseen) > 1 else "")
+            + "; measure a frame that it moves"
+        )
     if still:
         copies = ms.n_records - n_configs
         at_one = f"all {ms.n_records} records are at {'one configuration' if n_configs == 1 else f'{n_configs} configurations'}"
@@ -125,15 +130,21 @@ def check_data_suffice(ms: MeasurementSet, tol: ArrayLike | None = None) -> None
             at_one += f" ({copies} repeat another record's readings)"
         if len(still) == 1:
             name, k, n, below = still[0]
-            msg = (f"joint {name!r} has fewer than two distinct readings (all {n} records that measure "
-                   f"{', '.join(below)} read {_reading(ms, k, ms.q[np.argmax(ms.has_pose(below[0])), k])}): it "
-                   f"never moves, so its axis cannot be identified; measure it at >= 1 more reading ({PROTOCOL_HINT})")
+            msg = (
+                f"joint {name!r} has fewer than two distinct readings (all {n} records that measure "
+                f"{', '.join(below)} read {_reading(ms, k, ms.q[np.argmax(ms.has_pose(below[0])), k])}): it "
+                f"never moves, so its axis cannot be identified; measure it at >= 1 more reading ({PROTOCOL_HINT})"
+            )
         elif len(still) == s.n_joints:
-            msg = (f"no joint moves: {at_one}; the {s.n_joints} joints ({', '.join(n for n, *_ in still)}) each have fewer "
-                   f"than two distinct readings: measure each at >= 1 more reading ({PROTOCOL_HINT})")
+            msg = (
+                f"no joint moves: {at_one}; the {s.n_joints} joints ({', '.join(n for n, *_ in still)}) each have fewer "
+                f"than two distinct readings: measure each at >= 1 more reading ({PROTOCOL_HINT})"
+            )
         else:
-            msg = (f"joints {', '.join(repr(n) for n, *_ in still)} have fewer than two distinct readings in the records "
-                   f"that measure their frames: they never move; measure each at >= 1 more reading ({PROTOCOL_HINT})")
+            msg = (
+                f"joints {', '.join(repr(n) for n, *_ in still)} have fewer than two distinct readings in the records "
+                f"that measure their frames: they never move; measure each at >= 1 more reading ({PROTOCOL_HINT})"
+            )
         raise DegenerateDataError(f"{src}: {msg}")
     # As many equations (6 per distinct measured pose) as parameters.
     P = count_parameters(s, frames)["total"]
@@ -182,6 +193,7 @@ def check_no_copies(ms: MeasurementSet) -> None:
             f"a copied record, not a new measurement, would make the fit over-confident; remove the "
             f"{len(copies_of)} {'copy' if len(copies_of) == 1 else 'copies'} (to repeat a configuration, measure it again)"
         )
+
 
 __all__ = [
     "PROTOCOL_HINT",

@@ -125,7 +125,9 @@ def cramer_rao_covariance(
     q_arr = np.asarray(q, dtype=float)
     poses = truth.fk(q_arr, frames)
     use = {f: np.ones(len(q_arr), dtype=bool) for f in frames}
-    J = IdentificationProblem(chart, q_arr, poses, use, sigma_t, sigma_r).jacobian(np.zeros(chart.n_params))
+    J = IdentificationProblem(chart, q_arr, poses, use, sigma_t, sigma_r).jacobian(
+        np.zeros(chart.n_params)
+    )
     return chart, np.linalg.inv(J.T @ J)
 
 
@@ -169,7 +171,9 @@ def position_covariance(
     names = list(frames) if frames is not None else list(cov.frames)
     for f in names:
         if f not in cov.frames:
-            raise NoUncertaintyError(f"frame {f!r} was not identified; uncertainty covers {list(cov.frames)}")
+            raise NoUncertaintyError(
+                f"frame {f!r} was not identified; uncertainty covers {list(cov.frames)}"
+            )
     qq = model.structure.check_q(q)
     qq = np.atleast_2d(qq)
     _, D = p.pose_jacobian(np.zeros(p.n_params), qq)
@@ -188,7 +192,11 @@ def position_covariance(
 
 
 def predicted_position_std(
-    model: CPCModel, q: ArrayLike, frames: Sequence[str] | None = None, *, measurement_noise: bool = False
+    model: CPCModel,
+    q: ArrayLike,
+    frames: Sequence[str] | None = None,
+    *,
+    measurement_noise: bool = False,
 ) -> dict[str, Array]:
     """Predicted standard deviation of each identified frame's origin at configurations ``q``.
 
@@ -211,9 +219,17 @@ def predicted_position_std(
     """
     cov = covariance_of_model(model)
     Sigma, determined = position_covariance(model, cov, q, frames)
-    extra = 3.0 * cov.sigma_t**2 * (cov.variance_factor if cov.scale == "a_posteriori" else 1.0) if measurement_noise else 0.0
+    extra = (
+        3.0 * cov.sigma_t**2 * (cov.variance_factor if cov.scale == "a_posteriori" else 1.0)
+        if measurement_noise
+        else 0.0
+    )
     return {
-        f: np.where(determined[f], np.sqrt(np.clip(np.trace(S, axis1=1, axis2=2), 0.0, None) + extra), np.inf)
+        f: np.where(
+            determined[f],
+            np.sqrt(np.clip(np.trace(S, axis1=1, axis2=2), 0.0, None) + extra),
+            np.inf,
+        )
         for f, S in Sigma.items()
     }
 

@@ -94,21 +94,36 @@ def simulate_plan(
     s = nominal.structure
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     if qq.shape[1] != s.n_joints or not np.all(np.isfinite(qq)):
-        raise ConfigurationError(f"plan: expected finite configurations of {s.n_joints} joint values, got shape {qq.shape}")
+        raise ConfigurationError(
+            f"plan: expected finite configurations of {s.n_joints} joint values, got shape {qq.shape}"
+        )
     labs = list(labels) if labels is not None else [f"plan {i}" for i in range(len(qq))]
     frames = list(setup.frames)
-    rng_geometry, rng_noise, _ = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
+    rng_geometry, rng_noise, _ = (
+        np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3)
+    )
     truth = perturbed_model(nominal, rng_geometry, geometry_error_t, geometry_error_r)
     problems = setup.problems(qq, labs, model=truth)  # the simulator's own limits, on the truth
     if require_view and problems:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
         raise ConfigurationError(f"the rig does not see {problems[0]}{more}")
-    poses, _ = measure_poses(truth, qq, frames, rng_noise, noise=noise, sigma_t=setup.sigma_t, sigma_r=setup.sigma_r,
-                             rig=setup.rig, pixel_sigma=setup.pixel_sigma)
+    poses, _ = measure_poses(
+        truth,
+        qq,
+        frames,
+        rng_noise,
+        noise=noise,
+        sigma_t=setup.sigma_t,
+        sigma_r=setup.sigma_r,
+        rig=setup.rig,
+        pixel_sigma=setup.pixel_sigma,
+    )
     noise_doc: dict[str, Any] = {"model": noise}
     if noise == "fig10":
         noise_doc.update(sigma_t_m=setup.sigma_t, sigma_r_rad=setup.sigma_r)
-    elif noise == "stereo":  # as simulate_experiment: no pose sigma stated (the identification's defaults)
+    elif (
+        noise == "stereo"
+    ):  # as simulate_experiment: no pose sigma stated (the identification's defaults)
         noise_doc.update(pixel_sigma_px=setup.pixel_sigma)
     provenance = {
         "simulator": "cpc2urdf.identification.planning.experiment",
@@ -119,15 +134,37 @@ def simulate_plan(
         "view": {"problems": problems[:10]},
     }
     ref = robot_ref or s.name
-    measured = MeasurementSet.from_arrays(s, qq, poses, robot=ref, labels=labs, source="<simulated plan>",
-                                          metadata={"description": f"simulated measurements of a plan for {s.name}",
-                                                    "noise": noise_doc, "provenance": provenance})
-    qh = np.zeros((0, s.n_joints)) if q_heldout is None else np.atleast_2d(np.asarray(q_heldout, dtype=float))
+    measured = MeasurementSet.from_arrays(
+        s,
+        qq,
+        poses,
+        robot=ref,
+        labels=labs,
+        source="<simulated plan>",
+        metadata={
+            "description": f"simulated measurements of a plan for {s.name}",
+            "noise": noise_doc,
+            "provenance": provenance,
+        },
+    )
+    qh = (
+        np.zeros((0, s.n_joints))
+        if q_heldout is None
+        else np.atleast_2d(np.asarray(q_heldout, dtype=float))
+    )
     held_true = truth.fk(qh, frames) if len(qh) else {f: np.empty((0, 4, 4)) for f in frames}
-    heldout = MeasurementSet.from_arrays(s, qh, held_true, robot=ref, labels=[f"heldout {i}" for i in range(len(qh))],
-                                         source="<simulated heldout>",
-                                         metadata={"description": f"held-out configurations of {s.name} with TRUE poses",
-                                                   "noise": {"model": "none"}})
+    heldout = MeasurementSet.from_arrays(
+        s,
+        qh,
+        held_true,
+        robot=ref,
+        labels=[f"heldout {i}" for i in range(len(qh))],
+        source="<simulated heldout>",
+        metadata={
+            "description": f"held-out configurations of {s.name} with TRUE poses",
+            "noise": {"model": "none"},
+        },
+    )
     return Experiment(truth, measured, heldout)
 
 
@@ -165,18 +202,39 @@ def simulate_from_plan(
         require_view: Refuse a plan the rig does not see completely on the true robot.
         robot_ref: Robot reference written into the measurement sets.
     """
-    setup = measuring_setup(nominal, rig=plan.rig, ranges=plan.ranges, sigma_t=plan.sigma_t if sigma_t is None else sigma_t,
-                            sigma_r=plan.sigma_r if sigma_r is None else sigma_r, frames=plan.measured_frames,
-                            world_to_base=CPCParams.from_matrix(plan.T_world_base),
-                            noise="stereo" if (noise or plan.noise) == "stereo" else "fig10",
-                            pixel_sigma=plan.pixel_sigma if pixel_sigma is None else pixel_sigma)
-    truth = perturbed_model(setup.nominal, np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[0]),
-                            geometry_error_t, geometry_error_r)
+    setup = measuring_setup(
+        nominal,
+        rig=plan.rig,
+        ranges=plan.ranges,
+        sigma_t=plan.sigma_t if sigma_t is None else sigma_t,
+        sigma_r=plan.sigma_r if sigma_r is None else sigma_r,
+        frames=plan.measured_frames,
+        world_to_base=CPCParams.from_matrix(plan.T_world_base),
+        noise="stereo" if (noise or plan.noise) == "stereo" else "fig10",
+        pixel_sigma=plan.pixel_sigma if pixel_sigma is None else pixel_sigma,
+    )
+    truth = perturbed_model(
+        setup.nominal,
+        np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[0]),
+        geometry_error_t,
+        geometry_error_r,
+    )
     rng_heldout = np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[2])
-    q_held, _ = visible_heldout(truth, setup.rig, setup.ranges, n_heldout, setup.frames, rng_heldout)
-    return simulate_plan(setup, plan.q, plan.labels, seed=seed, noise=noise or plan.noise, geometry_error_t=geometry_error_t,
-                         geometry_error_r=geometry_error_r, q_heldout=q_held, require_view=require_view,
-                         robot_ref=robot_ref or plan.robot)
+    q_held, _ = visible_heldout(
+        truth, setup.rig, setup.ranges, n_heldout, setup.frames, rng_heldout
+    )
+    return simulate_plan(
+        setup,
+        plan.q,
+        plan.labels,
+        seed=seed,
+        noise=noise or plan.noise,
+        geometry_error_t=geometry_error_t,
+        geometry_error_r=geometry_error_r,
+        q_heldout=q_held,
+        require_view=require_view,
+        robot_ref=robot_ref or plan.robot,
+    )
 
 
 @dataclass
@@ -196,10 +254,16 @@ class MarkerExperiment:
     q_heldout: Array
 
 
-def simulate_plan_markers(setup: MeasuringSetup, q: ArrayLike, labels: Sequence[str] | None = None, *,
-                          seed: int = 0, q_heldout: ArrayLike | None = None,
-                          geometry_error_t: float = DEFAULT_GEOMETRY_ERROR_T,
-                          geometry_error_r: float = DEFAULT_GEOMETRY_ERROR_R) -> MarkerExperiment:
+def simulate_plan_markers(
+    setup: MeasuringSetup,
+    q: ArrayLike,
+    labels: Sequence[str] | None = None,
+    *,
+    seed: int = 0,
+    q_heldout: ArrayLike | None = None,
+    geometry_error_t: float = DEFAULT_GEOMETRY_ERROR_T,
+    geometry_error_r: float = DEFAULT_GEOMETRY_ERROR_R,
+) -> MarkerExperiment:
     """Measure a marker plan: the setup's markers (``setup.markers`` per frame, placed with its
     ``marker_seed``, fixed to the robot like a real setup's) on the true robot of ``seed`` (the same
     true robot as :func:`simulate_plan`'s), their points with ``setup.marker_sigma`` noise from the
@@ -210,17 +274,29 @@ def simulate_plan_markers(setup: MeasuringSetup, q: ArrayLike, labels: Sequence[
     """
     meas = setup.measurement()
     if not isinstance(meas, MarkerMeasurement):
-        raise ConfigurationError("the measuring setup has no markers (markers per frame must be >= 1)")
+        raise ConfigurationError(
+            "the measuring setup has no markers (markers per frame must be >= 1)"
+        )
     s = setup.nominal.structure
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     if qq.shape[1] != s.n_joints or not np.all(np.isfinite(qq)):
-        raise ConfigurationError(f"plan: expected finite configurations of {s.n_joints} joint values, got shape {qq.shape}")
-    rng_geometry, rng_noise, _ = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
+        raise ConfigurationError(
+            f"plan: expected finite configurations of {s.n_joints} joint values, got shape {qq.shape}"
+        )
+    rng_geometry, rng_noise, _ = (
+        np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3)
+    )
     truth = perturbed_model(setup.nominal, rng_geometry, geometry_error_t, geometry_error_r)
-    ms = simulate_markers(truth, meas.markers, qq, sigma_p=setup.marker_sigma, rng=rng_noise, robot=s.name)
+    ms = simulate_markers(
+        truth, meas.markers, qq, sigma_p=setup.marker_sigma, rng=rng_noise, robot=s.name
+    )
     labs = list(labels) if labels is not None else [f"plan {i}" for i in range(len(qq))]
     ms = dataclasses.replace(ms, labels=labs, source="<simulated marker plan>")
-    qh = np.zeros((0, s.n_joints)) if q_heldout is None else np.atleast_2d(np.asarray(q_heldout, dtype=float))
+    qh = (
+        np.zeros((0, s.n_joints))
+        if q_heldout is None
+        else np.atleast_2d(np.asarray(q_heldout, dtype=float))
+    )
     return MarkerExperiment(truth, ms, meas.markers, qh)
 
 
@@ -277,12 +353,25 @@ def heldout_errors(exp: Experiment, nominal: CPCModel | None) -> HeldoutErrors:
     model = identify_refined(exp.measured, nominal)
     frames = list(exp.heldout.poses)
     T = model.fk(exp.heldout.q, frames)
-    pos = np.stack([np.linalg.norm(T[f][:, :3, 3] - exp.heldout.poses[f][:, :3, 3], axis=1) for f in frames], axis=1)
-    ang = np.stack([rotation_error(T[f][:, :3, :3], exp.heldout.poses[f][:, :3, :3]) for f in frames], axis=1)
+    pos = np.stack(
+        [np.linalg.norm(T[f][:, :3, 3] - exp.heldout.poses[f][:, :3, 3], axis=1) for f in frames],
+        axis=1,
+    )
+    ang = np.stack(
+        [rotation_error(T[f][:, :3, :3], exp.heldout.poses[f][:, :3, :3]) for f in frames], axis=1
+    )
     prov = model.metadata.provenance
     start = str(prov.details.get("start", "?")) if prov is not None else "?"
     return HeldoutErrors(pos, ang, start)
 
 
-__all__ = ["PLAN_NOISE_MODELS", "HeldoutErrors", "MarkerExperiment", "heldout_errors", "heldout_point_errors",
-           "simulate_from_plan", "simulate_plan", "simulate_plan_markers"]
+__all__ = [
+    "PLAN_NOISE_MODELS",
+    "HeldoutErrors",
+    "MarkerExperiment",
+    "heldout_errors",
+    "heldout_point_errors",
+    "simulate_from_plan",
+    "simulate_plan",
+    "simulate_plan_markers",
+]

@@ -45,13 +45,16 @@ from cpc2urdf.identification.vision.stereo import StereoRig
 Array = NDArray[np.float64]
 
 
-def _problem_jacobian(chart: Parametrization, qq: Array, frames: Sequence[str], sigma_t: float,
-                      sigma_r: float) -> Array:
+def _problem_jacobian(
+    chart: Parametrization, qq: Array, frames: Sequence[str], sigma_t: float, sigma_r: float
+) -> Array:
     """The :class:`IdentificationProblem`'s Jacobian at the chart's centre on its own noise-free
     poses at ``qq`` (N, n), in its order (frame after frame, 6 rows per pose): shape (6 N F, P)."""
     poses = chart.reference.fk(qq, frames)
     use = {f: np.ones(len(qq), dtype=bool) for f in frames}
-    return IdentificationProblem(chart, qq, poses, use, sigma_t, sigma_r).jacobian(np.zeros(chart.n_params))
+    return IdentificationProblem(chart, qq, poses, use, sigma_t, sigma_r).jacobian(
+        np.zeros(chart.n_params)
+    )
 
 
 def _pose_weights(sigma_t: float, sigma_r: float) -> Array:
@@ -118,8 +121,13 @@ class StereoPoseMeasurement:
         """Each view's pose-error covariance at the chart's centre, shape (N, F, 6, 6)."""
         qq = np.atleast_2d(np.asarray(q, dtype=float))
         T = chart.reference.fk(qq, self.frames)
-        return np.stack([stereo_pose_covariance(T[f], lay, self.rig, self.pixel_sigma)
-                         for f, lay in zip(self.frames, self.layouts, strict=True)], axis=1)
+        return np.stack(
+            [
+                stereo_pose_covariance(T[f], lay, self.rig, self.pixel_sigma)
+                for f, lay in zip(self.frames, self.layouts, strict=True)
+            ],
+            axis=1,
+        )
 
     def _unweighted(self, chart: Parametrization, q: Array) -> Array:
         """Jacobian of the unweighted residuals (dp, dtheta), shape (N, F, 6, P)."""
@@ -137,7 +145,9 @@ class StereoPoseMeasurement:
         D = self._unweighted(chart, q)
         S = self.covariances(chart, q)
         if not np.all(np.isfinite(S)):
-            raise ValueError("stereo measurement: a plate shows fewer than 3 circles at a configuration")
+            raise ValueError(
+                "stereo measurement: a plate shows fewer than 3 circles at a configuration"
+            )
         L = np.linalg.cholesky(S)
         Jw = np.linalg.solve(L, D)  # (N, F, 6, P)
         return Jw.reshape(D.shape[0], -1, chart.n_params)
@@ -170,7 +180,9 @@ class TaskSensitivity:
     G_r: Array
 
 
-def task_sensitivity(chart: Parametrization, q_task: ArrayLike, frames: Sequence[str]) -> TaskSensitivity:
+def task_sensitivity(
+    chart: Parametrization, q_task: ArrayLike, frames: Sequence[str]
+) -> TaskSensitivity:
     """:class:`TaskSensitivity` of ``frames`` at the task configurations ``q_task`` (N, n)."""
     qq = np.atleast_2d(np.asarray(q_task, dtype=float))
     _, D = chart.pose_jacobian(np.zeros(chart.n_params), qq)
@@ -182,4 +194,10 @@ def task_sensitivity(chart: Parametrization, q_task: ArrayLike, frames: Sequence
     return TaskSensitivity(0.5 * (A_p + A_p.T), 0.5 * (A_r + A_r.T), Gp, Gr)
 
 
-__all__ = ["Measurement", "PoseMeasurement", "StereoPoseMeasurement", "TaskSensitivity", "task_sensitivity"]
+__all__ = [
+    "Measurement",
+    "PoseMeasurement",
+    "StereoPoseMeasurement",
+    "TaskSensitivity",
+    "task_sensitivity",
+]

@@ -36,7 +36,9 @@ Array = NDArray[np.float64]
 DEFAULT_MARKER_SIGMA = 0.1e-3  # [m]: as simulate --marker-sigma-mm's default
 
 
-def plan_markers(model: CPCModel, frames: Sequence[str], per_frame: int, seed: int) -> dict[str, tuple[str, Array]]:
+def plan_markers(
+    model: CPCModel, frames: Sequence[str], per_frame: int, seed: int
+) -> dict[str, tuple[str, Array]]:
     """The markers ``simulate --markers per_frame --seed seed`` puts on ``frames`` (module docstring)."""
     order = [f for f in model.structure.frame_names if f in frames]
     return place_markers_on(model, {f: per_frame for f in order}, np.random.default_rng([seed, 1]))
@@ -68,7 +70,9 @@ class MarkerMeasurement:
         use = {m: np.ones(n, dtype=bool) for m in names}
         J = PointProblem(chart, qq, points, use, self.sigma_p).jacobian(np.zeros(chart.n_params))
         # Markers in chart order, records ascending, 3 rows per point: regroup per configuration.
-        return np.swapaxes(J.reshape(len(names), n, 3, chart.n_params), 0, 1).reshape(n, -1, chart.n_params)
+        return np.swapaxes(J.reshape(len(names), n, 3, chart.n_params), 0, 1).reshape(
+            n, -1, chart.n_params
+        )
 
     def weighted_jacobian(self, chart: PointChart, q: Array) -> Array:
         """Rows of the weighted point residuals' Jacobian per configuration, (N, 3 * n_markers, P)."""

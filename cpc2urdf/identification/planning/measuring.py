@@ -101,8 +101,10 @@ class MeasuringSetup:
         :class:`StereoPoseMeasurement` (the frames' circle layouts through the rig) or
         :class:`MarkerMeasurement` (marker points)."""
         if self.markers > 0:
-            return MarkerMeasurement(plan_markers(self.nominal, self.frames, self.markers, self.marker_seed),
-                                     self.marker_sigma)
+            return MarkerMeasurement(
+                plan_markers(self.nominal, self.frames, self.markers, self.marker_seed),
+                self.marker_sigma,
+            )
         if self.noise == "stereo":
             s = self.nominal.structure
             layouts = tuple(np.array(s.frame(f).layout, dtype=float) for f in self.frames)
@@ -113,16 +115,30 @@ class MeasuringSetup:
         """Which configurations ``q`` (N, n) [m]/[rad] a plan may use: every frame of the nominal
         robot seen with the planning limits (module docstring), shape (N,)."""
         qq = np.atleast_2d(np.asarray(q, dtype=float))
-        view = check_view(self.nominal, self.rig, qq, self.frames, [str(i) for i in range(len(qq))],
-                          margin_px=PLAN_VIEW_MARGIN_PX, max_angle=PLAN_MAX_VIEW_ANGLE,
-                          occlusion_margin_px=PLAN_OCCLUSION_MARGIN_PX)
+        view = check_view(
+            self.nominal,
+            self.rig,
+            qq,
+            self.frames,
+            [str(i) for i in range(len(qq))],
+            margin_px=PLAN_VIEW_MARGIN_PX,
+            max_angle=PLAN_MAX_VIEW_ANGLE,
+            occlusion_margin_px=PLAN_OCCLUSION_MARGIN_PX,
+        )
         return (view.hidden_per_config == 0) & (view.unseen_per_config == 0)
 
-    def problems(self, q: ArrayLike, labels: Sequence[str], model: CPCModel | None = None) -> list[str]:
+    def problems(
+        self, q: ArrayLike, labels: Sequence[str], model: CPCModel | None = None
+    ) -> list[str]:
         """What the rig fails to see at ``q`` (one line per configuration and frame), with the
         simulator's own clearance (:func:`check_view`'s defaults)."""
-        return check_view(model or self.nominal, self.rig, np.atleast_2d(np.asarray(q, dtype=float)),
-                          self.frames, labels).problems
+        return check_view(
+            model or self.nominal,
+            self.rig,
+            np.atleast_2d(np.asarray(q, dtype=float)),
+            self.frames,
+            labels,
+        ).problems
 
 
 def measuring_setup(
@@ -165,8 +181,12 @@ def measuring_setup(
         raise ConfigurationError(f"noise model must be one of {SETUP_NOISE_MODELS}, got {noise!r}")
     if markers < 0:
         raise ConfigurationError(f"markers must be >= 0 per measured frame, got {markers}")
-    for name, v in (("sigma_t", sigma_t), ("sigma_r", sigma_r), ("pixel_sigma", pixel_sigma),
-                    ("marker_sigma", marker_sigma)):
+    for name, v in (
+        ("sigma_t", sigma_t),
+        ("sigma_r", sigma_r),
+        ("pixel_sigma", pixel_sigma),
+        ("marker_sigma", marker_sigma),
+    ):
         if not (math.isfinite(v) and v > 0):
             raise ConfigurationError(f"{name} must be a finite number > 0, got {v}")
     fr = list(frames) if frames is not None else measured_frames(s)
@@ -174,17 +194,31 @@ def measuring_setup(
         raise ConfigurationError(f"robot {s.name!r} has no frame of kind 'plate' to measure")
     for f in fr:
         if f not in s.frame_names:
-            raise ConfigurationError(f"measured frame {f!r} is not a frame of robot {s.name!r} ({list(s.frame_names)})")
+            raise ConfigurationError(
+                f"measured frame {f!r} is not a frame of robot {s.name!r} ({list(s.frame_names)})"
+            )
         if noise == "stereo" and not markers and s.frame(f).layout is None:
-            raise ConfigurationError(f"stereo noise needs the circle layout of measured frame {f!r}, and it has none")
+            raise ConfigurationError(
+                f"stereo noise needs the circle layout of measured frame {f!r}, and it has none"
+            )
     rig = rig or StereoRig.verged()
     r = calibration_ranges(s, ranges)
     if world_to_base is None:
         q, _ = protocol_configurations(r, DEFAULT_M, s.joint_names)
         world_to_base = experiment_placement(nominal, rig, q, fr, r)  # as simulate_experiment
-    return MeasuringSetup(nominal.with_params(world_to_base=world_to_base), rig, tuple(fr), r,
-                          float(sigma_t), float(sigma_r), noise, float(pixel_sigma), int(markers),
-                          float(marker_sigma), int(marker_seed))
+    return MeasuringSetup(
+        nominal.with_params(world_to_base=world_to_base),
+        rig,
+        tuple(fr),
+        r,
+        float(sigma_t),
+        float(sigma_r),
+        noise,
+        float(pixel_sigma),
+        int(markers),
+        float(marker_sigma),
+        int(marker_seed),
+    )
 
 
 __all__ = [
@@ -192,4 +226,6 @@ __all__ = [
     "PLAN_OCCLUSION_MARGIN_PX",
     "PLAN_VIEW_MARGIN_PX",
     "SETUP_NOISE_MODELS",
-    "MeasuringSetup", "measuring_setup"]
+    "MeasuringSetup",
+    "measuring_setup",
+]

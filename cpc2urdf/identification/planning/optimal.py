@@ -119,14 +119,18 @@ def select(
     K, _, P = Jc.shape
     req = [int(i) for i in dict.fromkeys(required)]
     if not len(req) <= n <= K:
-        raise ConfigurationError(f"cannot choose {n} configurations from {K} candidates with {len(req)} required")
+        raise ConfigurationError(
+            f"cannot choose {n} configurations from {K} candidates with {len(req)} required"
+        )
     info = np.einsum("kmp,kmq->kpq", Jc, Jc)
     delta = RIDGE * float(np.trace(info.mean(axis=0))) / P
     chosen = list(req)
     if start is not None:
         chosen += [int(i) for i in dict.fromkeys(start) if int(i) not in req]
         if len(chosen) != n:
-            raise ConfigurationError(f"the start design has {len(chosen)} distinct configurations, not {n}")
+            raise ConfigurationError(
+                f"the start design has {len(chosen)} distinct configurations, not {n}"
+            )
     M = delta * np.eye(P) + info[chosen].sum(axis=0)
     taken = np.zeros(K, dtype=bool)
     taken[chosen] = True

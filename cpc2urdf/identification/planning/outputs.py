@@ -71,13 +71,16 @@ def robot_for_plan(spec: RobotSpec, measured: Sequence[str] | None) -> RobotSpec
     if isinstance(spec, UrdfRobot):
         if not measured:
             raise ConfigurationError(
-                f"{spec.source}: a URDF robot needs the measured links (--measure LINK, e.g. the link of a calibration plate)")
+                f"{spec.source}: a URDF robot needs the measured links (--measure LINK, e.g. the link of a calibration plate)"
+            )
         return spec.restricted(measured)
     if measured:
         unknown = [m for m in measured if m not in spec.structure.frame_names]
         if unknown:
-            raise ConfigurationError(f"--measure {unknown[0]!r} is not a frame of robot {spec.structure.name!r} "
-                                     f"({list(spec.structure.frame_names)})")
+            raise ConfigurationError(
+                f"--measure {unknown[0]!r} is not a frame of robot {spec.structure.name!r} "
+                f"({list(spec.structure.frame_names)})"
+            )
     return spec
 
 
@@ -138,42 +141,86 @@ def plan_robot(
     is_urdf = isinstance(spec, UrdfRobot)
     spec = robot_for_plan(spec, measured)
     nominal = spec.nominal_model()
-    frames = list(measured) if measured and not is_urdf else [f.name for f in nominal.structure.frames if f.kind == "plate"]
-    setup = measuring_setup(nominal, rig=rig, sigma_t=sigma_t, sigma_r=sigma_r, ranges=ranges, frames=frames or None,
-                            noise=noise, pixel_sigma=pixel_sigma, markers=markers, marker_sigma=marker_sigma,
-                            marker_seed=marker_seed)
+    frames = (
+        list(measured)
+        if measured and not is_urdf
+        else [f.name for f in nominal.structure.frames if f.kind == "plate"]
+    )
+    setup = measuring_setup(
+        nominal,
+        rig=rig,
+        sigma_t=sigma_t,
+        sigma_r=sigma_r,
+        ranges=ranges,
+        frames=frames or None,
+        noise=noise,
+        pixel_sigma=pixel_sigma,
+        markers=markers,
+        marker_sigma=marker_sigma,
+        marker_seed=marker_seed,
+    )
     if isinstance(task_region, str):
         q_task = task_configurations(setup, task_region, n=n_task)
         task_doc: dict[str, Any] = {"kind": task_region, "n": int(len(q_task))}
     else:
         q_task = task_configurations(setup, task_region)
         task_doc = {"kind": "configurations", "n": int(len(q_task))}
-    result = make_plan(setup, n=n, target_error=target_error, q_task=q_task, one_joint=one_joint,
-                       n_candidates=n_candidates, seed=seed, grid=grid, curve_ns=curve_ns)
+    result = make_plan(
+        setup,
+        n=n,
+        target_error=target_error,
+        q_task=q_task,
+        one_joint=one_joint,
+        n_candidates=n_candidates,
+        seed=seed,
+        grid=grid,
+        curve_ns=curve_ns,
+    )
     assert result.candidates is not None
-    cand_doc = {"kind": "one-joint" if one_joint else ("grid" if grid else "random"),
-                "n": int(len(result.candidates.q)), "dropped_unmeasurable": result.candidates.dropped, "seed": seed}
+    cand_doc = {
+        "kind": "one-joint" if one_joint else ("grid" if grid else "random"),
+        "n": int(len(result.candidates.q)),
+        "dropped_unmeasurable": result.candidates.dropped,
+        "seed": seed,
+    }
     doc = plan_to_json(result, setup, robot=robot_ref, task_region=task_doc, candidates=cand_doc)
     # The CSV goes to the robot: a URDF robot's joints by the URDF's names (its /joint_states names).
     columns = {c: u for u, c in urdf_joint_columns(nominal).items()}
     csv_text = joints_csv_text(nominal.structure, result.q, result.labels, columns)
-    png = curve_png(result.curve, f"{nominal.structure.name}: predicted held-out error vs N", result)
+    png = curve_png(
+        result.curve, f"{nominal.structure.name}: predicted held-out error vs N", result
+    )
     return PlanOutputs(result, setup, doc, csv_text, png)
 
 
-def joints_csv_text(structure: RobotStructure, q: ArrayLike, labels: Sequence[str],
-                    columns: Mapping[str, str] | None = None) -> str:
+def joints_csv_text(
+    structure: RobotStructure,
+    q: ArrayLike,
+    labels: Sequence[str],
+    columns: Mapping[str, str] | None = None,
+) -> str:
     """A ``joints.csv`` (records ``0000``, ``0001``, ...; lengths in mm, angles in deg; ``columns``:
     joint name -> column name, e.g. a URDF's joint names)."""
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     col = columns or {}
-    w.writerow(["record", "label"] + [f"{col.get(j.name, j.name)}[{'mm' if j.type == 'prismatic' else 'deg'}]"
-                                      for j in structure.joints])
-    scale = [LENGTH_UNITS["mm"] if j.type == "prismatic" else ANGLE_UNITS["deg"] for j in structure.joints]
+    w.writerow(
+        ["record", "label"]
+        + [
+            f"{col.get(j.name, j.name)}[{'mm' if j.type == 'prismatic' else 'deg'}]"
+            for j in structure.joints
+        ]
+    )
+    scale = [
+        LENGTH_UNITS["mm"] if j.type == "prismatic" else ANGLE_UNITS["deg"]
+        for j in structure.joints
+    ]
     for i, (lab, row) in enumerate(zip(labels, qq, strict=True)):
-        w.writerow([f"{i:04d}", lab] + [repr(round(float(v / s), 9)) for v, s in zip(row, scale, strict=True)])
+        w.writerow(
+            [f"{i:04d}", lab]
+            + [repr(round(float(v / s), 9)) for v, s in zip(row, scale, strict=True)]
+        )
     return buf.getvalue()
 
 
@@ -186,12 +233,24 @@ def curve_png(curve: Sequence[CurvePoint], title: str, result: PlanResult | None
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for strategy, style in (("I-optimal", "o-"), ("D-optimal", "s--"), ("protocol", "^:")):
-        pts = sorted((c.n, c.position_rms * 1e3) for c in curve if c.strategy == strategy and math.isfinite(c.position_rms))
+        pts = sorted(
+            (c.n, c.position_rms * 1e3)
+            for c in curve
+            if c.strategy == strategy and math.isfinite(c.position_rms)
+        )
         if pts:
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], style, label=strategy if strategy != "protocol"
-                    else "paper's protocol (one joint at a time)")
+            ax.plot(
+                [p[0] for p in pts],
+                [p[1] for p in pts],
+                style,
+                label=strategy
+                if strategy != "protocol"
+                else "paper's protocol (one joint at a time)",
+            )
     if result is not None and math.isfinite(result.prediction.position_rms):
-        ax.plot([len(result.q)], [result.prediction.position_rms * 1e3], "k*", ms=12, label="this plan")
+        ax.plot(
+            [len(result.q)], [result.prediction.position_rms * 1e3], "k*", ms=12, label="this plan"
+        )
     if result is not None and result.target_error is not None:
         ax.axhline(result.target_error * 1e3, color="k", lw=1, ls="--", label="target")
     ax.set_xlabel("configurations measured N")
@@ -214,16 +273,22 @@ def output_paths(plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
     """
     p = Path(plan_path)
     if p.name in ("", ".", "..") or p.is_dir():
-        raise OutputError(f"{p}: a folder; the plan needs a file name (PLAN.json, with PLAN.csv and PLAN.png next to it)")
+        raise OutputError(
+            f"{p}: a folder; the plan needs a file name (PLAN.json, with PLAN.csv and PLAN.png next to it)"
+        )
     if p.suffix.lower() in (".csv", ".png"):
-        raise OutputError(f"{p}: the plan file needs another name than its .csv and .png companions")
+        raise OutputError(
+            f"{p}: the plan file needs another name than its .csv and .png companions"
+        )
     paths = (p, p.with_suffix(".csv"), p.with_suffix(".png"))
     for q in paths:
         check_output_path(q)
     return paths
 
 
-def write_plan_outputs(out: PlanOutputs, plan_path: str | os.PathLike[str]) -> tuple[Path, Path, Path]:
+def write_plan_outputs(
+    out: PlanOutputs, plan_path: str | os.PathLike[str]
+) -> tuple[Path, Path, Path]:
     """Write ``plan.json``, ``plan.csv`` and ``plan.png``, all or nothing
     (:func:`~cpc2urdf.files.jsonio.write_all_atomic`)."""
     json_path, csv_path, png_path = output_paths(plan_path)
@@ -235,5 +300,12 @@ def write_plan_outputs(out: PlanOutputs, plan_path: str | os.PathLike[str]) -> t
     return json_path, csv_path, png_path
 
 
-__all__ = ["PlanOutputs", "curve_png", "joints_csv_text", "output_paths", "plan_robot", "robot_for_plan",
-           "write_plan_outputs"]
+__all__ = [
+    "PlanOutputs",
+    "curve_png",
+    "joints_csv_text",
+    "output_paths",
+    "plan_robot",
+    "robot_for_plan",
+    "write_plan_outputs",
+]

@@ -66,8 +66,15 @@ Array = NDArray[np.float64]
 PLAN_FORMAT = "cpc2urdf/plan@1"
 
 
-def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_region: dict[str, Any],
-                 candidates: dict[str, Any], units: Units | None = None) -> dict[str, Any]:
+def plan_to_json(
+    result: PlanResult,
+    setup: MeasuringSetup,
+    *,
+    robot: str,
+    task_region: dict[str, Any],
+    candidates: dict[str, Any],
+    units: Units | None = None,
+) -> dict[str, Any]:
     """The plan file's content (SI inside, ``units`` in the file; default mm / deg).
 
     ``units`` applies to the joints, the configurations and ``T_world_base``; the accuracy
@@ -83,7 +90,9 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
     T = setup.nominal.T_world_base().copy()
     T[:3, 3] /= u.length
 
-    def mm(v: float) -> float | None:  # the curve, like the prediction, is in mm / deg whatever the units
+    def mm(
+        v: float,
+    ) -> float | None:  # the curve, like the prediction, is in mm / deg whatever the units
         return v * 1e3 if math.isfinite(v) else None
 
     def deg(v: float) -> float | None:
@@ -93,47 +102,90 @@ def plan_to_json(result: PlanResult, setup: MeasuringSetup, *, robot: str, task_
         "format": PLAN_FORMAT,
         "robot": robot,
         "units": u.to_json(),
-        "joints": [{"name": j.name, "type": j.type,
-                    "unit": u.length_name if j.type == "prismatic" else u.angle_name,
-                    **({"urdf_joint": src.joints[j.name]} if src is not None and j.name in src.joints else {})}
-                   for j in s.joints],
+        "joints": [
+            {
+                "name": j.name,
+                "type": j.type,
+                "unit": u.length_name if j.type == "prismatic" else u.angle_name,
+                **(
+                    {"urdf_joint": src.joints[j.name]}
+                    if src is not None and j.name in src.joints
+                    else {}
+                ),
+            }
+            for j in s.joints
+        ],
         "measured_frames": list(setup.frames),
-        **({"urdf": {"path": src.path, "measured_links": [src.frames.get(f, f) for f in setup.frames]}}
-           if src is not None else {}),
+        **(
+            {
+                "urdf": {
+                    "path": src.path,
+                    "measured_links": [src.frames.get(f, f) for f in setup.frames],
+                }
+            }
+            if src is not None
+            else {}
+        ),
         "strategy": result.strategy,
         "one_joint": result.one_joint,
-        "configurations": [{"label": lab, "q": [float(v) for v in q / scale]}
-                           for lab, q in zip(result.labels, result.q, strict=True)],
+        "configurations": [
+            {"label": lab, "q": [float(v) for v in q / scale]}
+            for lab, q in zip(result.labels, result.q, strict=True)
+        ],
         "setup": {
             "noise": _noise_doc(setup),
             **({"markers": _markers_doc(setup)} if setup.markers else {}),
             "rig": setup.rig.to_json(),
             "T_world_base": T.tolist(),
-            "ranges": {j.name: [float(v) for v in setup.ranges[i] / scale[i]] for i, j in enumerate(s.joints)},
+            "ranges": {
+                j.name: [float(v) for v in setup.ranges[i] / scale[i]]
+                for i, j in enumerate(s.joints)
+            },
         },
         "task_region": task_region,
         "candidates": candidates,
         "prediction": result.prediction.to_json(),
         "target_error_mm": None if result.target_error is None else result.target_error * 1e3,
-        "curve": [{"strategy": c.strategy, "n": c.n, "position_rms_mm": mm(c.position_rms),
-                   "orientation_rms_deg": deg(c.orientation_rms)} for c in result.curve],
+        "curve": [
+            {
+                "strategy": c.strategy,
+                "n": c.n,
+                "position_rms_mm": mm(c.position_rms),
+                "orientation_rms_deg": deg(c.orientation_rms),
+            }
+            for c in result.curve
+        ],
     }
 
 
 def _markers_doc(setup: MeasuringSetup) -> dict[str, Any]:
     m = setup.measurement()
     assert isinstance(m, MarkerMeasurement)
-    return {"per_frame": setup.markers, "sigma_p_mm": setup.marker_sigma * 1e3, "seed": setup.marker_seed,
-            "positions": {name: {"frame": f, "position_mm": [float(v) * 1e3 for v in p]}
-                          for name, (f, p) in m.markers.items()}}
+    return {
+        "per_frame": setup.markers,
+        "sigma_p_mm": setup.marker_sigma * 1e3,
+        "seed": setup.marker_seed,
+        "positions": {
+            name: {"frame": f, "position_mm": [float(v) * 1e3 for v in p]}
+            for name, (f, p) in m.markers.items()
+        },
+    }
 
 
 def _noise_doc(setup: MeasuringSetup) -> dict[str, Any]:
     m = setup.measurement()
     if isinstance(m, StereoPoseMeasurement):  # the pose sigmas are the identification's weights
-        return {"model": "stereo", "pixel_sigma_px": setup.pixel_sigma, "sigma_t_mm": m.sigma_t * 1e3,
-                "sigma_r_deg": math.degrees(m.sigma_r)}
-    return {"model": "fig10", "sigma_t_mm": setup.sigma_t * 1e3, "sigma_r_deg": math.degrees(setup.sigma_r)}
+        return {
+            "model": "stereo",
+            "pixel_sigma_px": setup.pixel_sigma,
+            "sigma_t_mm": m.sigma_t * 1e3,
+            "sigma_r_deg": math.degrees(m.sigma_r),
+        }
+    return {
+        "model": "fig10",
+        "sigma_t_mm": setup.sigma_t * 1e3,
+        "sigma_r_deg": math.degrees(setup.sigma_r),
+    }
 
 
 @dataclass
@@ -209,8 +261,14 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
         raise ValueError("joints must be a non-empty list of {name, type, unit}")
     names, scale = [], []
     for i, j in enumerate(joints):
-        if not isinstance(j, dict) or not isinstance(j.get("name"), str) or j.get("type") not in ("revolute", "prismatic"):
-            raise ValueError(f"joints[{i}] must be {{\"name\": ..., \"type\": \"revolute\" or \"prismatic\"}}")
+        if (
+            not isinstance(j, dict)
+            or not isinstance(j.get("name"), str)
+            or j.get("type") not in ("revolute", "prismatic")
+        ):
+            raise ValueError(
+                f'joints[{i}] must be {{"name": ..., "type": "revolute" or "prismatic"}}'
+            )
         names.append(j["name"])
         scale.append(u.joint_scale(j["type"]))
     if len(set(names)) != len(names):
@@ -229,8 +287,10 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
         missing = [n for n in structure.joint_names if n not in names]
         extra = [n for n in names if n not in structure.joint_names]
         if missing or extra:
-            raise ValueError(f"joints {names} do not match robot {structure.name!r}'s "
-                             f"{list(structure.joint_names)} (missing {missing}, unknown {extra})")
+            raise ValueError(
+                f"joints {names} do not match robot {structure.name!r}'s "
+                f"{list(structure.joint_names)} (missing {missing}, unknown {extra})"
+            )
         q = q[:, [names.index(n) for n in structure.joint_names]]
         names = list(structure.joint_names)
         for i, j in enumerate(structure.joints):
@@ -238,8 +298,10 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
             if bad.size:
                 k, sc = int(bad[0]), u.joint_scale(j.type)
                 unit = u.length_name if j.type == "prismatic" else u.angle_name
-                raise ValueError(f"configurations[{k}].q: joint {j.name!r} reads {q[k, i] / sc:g} {unit}, "
-                                 f"outside its limits [{j.lower / sc:g}, {j.upper / sc:g}] {unit}")
+                raise ValueError(
+                    f"configurations[{k}].q: joint {j.name!r} reads {q[k, i] / sc:g} {unit}, "
+                    f"outside its limits [{j.lower / sc:g}, {j.upper / sc:g}] {unit}"
+                )
     setup = doc.get("setup")
     if not isinstance(setup, dict):
         raise ValueError("setup must be an object with noise, rig and T_world_base")
@@ -252,7 +314,9 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
         raise ValueError("setup.noise sigmas must be > 0")
     model = noise.get("model", "fig10")
     if model not in SETUP_NOISE_MODELS:
-        raise ValueError(f"setup.noise.model must be one of {list(SETUP_NOISE_MODELS)}, got {model!r}")
+        raise ValueError(
+            f"setup.noise.model must be one of {list(SETUP_NOISE_MODELS)}, got {model!r}"
+        )
     pixel_sigma = DEFAULT_PIXEL_SIGMA
     if model == "stereo":
         pixel_sigma = finite_float(noise.get("pixel_sigma_px"), "setup.noise.pixel_sigma_px")
@@ -282,7 +346,11 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     T = np.array([float_list(r, 4, f"setup.T_world_base[{i}]") for i, r in enumerate(rows)])
     T[:3, 3] *= u.length
     R = T[:3, :3]
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) <= 0 or np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-12:
+    if (
+        np.abs(R.T @ R - np.eye(3)).max() > 1e-6
+        or np.linalg.det(R) <= 0
+        or np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-12
+    ):
         raise ValueError("setup.T_world_base is not a rigid transform")
     frames = doc.get("measured_frames")
     if not isinstance(frames, list) or not frames or not all(isinstance(f, str) for f in frames):
@@ -290,7 +358,9 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     if structure is not None:
         unknown = [f for f in frames if f not in structure.frame_names]
         if unknown:
-            raise ValueError(f"measured_frames {unknown} are not frames of robot {structure.name!r}")
+            raise ValueError(
+                f"measured_frames {unknown} are not frames of robot {structure.name!r}"
+            )
     robot = doc.get("robot")
     if not isinstance(robot, str) or not robot:
         raise ValueError("robot must be the robot reference the plan was made for")
@@ -307,9 +377,25 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
             if lo > hi:
                 raise ValueError(f"setup.ranges.{n}: lower {lo:g} > upper {hi:g}")
             ranges[n] = (lo * factor[n], hi * factor[n])
-    return LoadedPlan(q, labels, tuple(names), robot, tuple(frames), T, rig, sigma_t, sigma_r,
-                      bool(doc.get("one_joint", False)), pred if isinstance(pred, dict) else {}, str(model),
-                      pixel_sigma, markers, marker_sigma, marker_seed, ranges)
+    return LoadedPlan(
+        q,
+        labels,
+        tuple(names),
+        robot,
+        tuple(frames),
+        T,
+        rig,
+        sigma_t,
+        sigma_r,
+        bool(doc.get("one_joint", False)),
+        pred if isinstance(pred, dict) else {},
+        str(model),
+        pixel_sigma,
+        markers,
+        marker_sigma,
+        marker_seed,
+        ranges,
+    )
 
 
 __all__ = ["PLAN_FORMAT", "LoadedPlan", "load_plan", "plan_to_json"]

@@ -52,7 +52,12 @@ DEFAULT_CANDIDATES = 500
 DEFAULT_TASK = 200
 TASK_SEED = 1  # the task sample's own stream (the candidates use the plan's seed)
 MAX_TARGET_N = 400
-CURVE_M = (2, 3, 5, 9)  # protocol sizes the curve compares at (M = 9: the paper's choice)  # largest plan --target-error searches
+CURVE_M = (
+    2,
+    3,
+    5,
+    9,
+)  # protocol sizes the curve compares at (M = 9: the paper's choice)  # largest plan --target-error searches
 
 
 @dataclass
@@ -107,8 +112,13 @@ class PlanResult:
     target_error: float | None = None
 
 
-def task_configurations(setup: MeasuringSetup, region: str | ArrayLike = "calibration", *,
-                        n: int = DEFAULT_TASK, seed: int = TASK_SEED) -> Array:
+def task_configurations(
+    setup: MeasuringSetup,
+    region: str | ArrayLike = "calibration",
+    *,
+    n: int = DEFAULT_TASK,
+    seed: int = TASK_SEED,
+) -> Array:
     """The task region's configurations: ``"calibration"`` (uniform in the calibration ranges),
     ``"limits"`` (uniform within the joint limits), or explicit configurations (K, n) [m]/[rad]."""
     s = setup.nominal.structure
@@ -118,16 +128,26 @@ def task_configurations(setup: MeasuringSetup, region: str | ArrayLike = "calibr
         elif region == "limits":
             r = np.column_stack([s.lower, s.upper])
         else:
-            raise ConfigurationError(f"task region must be 'calibration', 'limits' or configurations, got {region!r}")
+            raise ConfigurationError(
+                f"task region must be 'calibration', 'limits' or configurations, got {region!r}"
+            )
         return random_configurations(r, n, np.random.default_rng(seed))
     q = np.atleast_2d(np.asarray(region, dtype=float))
     if q.shape[1] != s.n_joints or not np.all(np.isfinite(q)):
-        raise ConfigurationError(f"task configurations must be finite, {s.n_joints} values each; got shape {q.shape}")
+        raise ConfigurationError(
+            f"task configurations must be finite, {s.n_joints} values each; got shape {q.shape}"
+        )
     return q
 
 
-def candidate_configurations(setup: MeasuringSetup, n: int = DEFAULT_CANDIDATES, *, seed: int = 0,
-                             one_joint: bool = False, grid: bool = False) -> Candidates:
+def candidate_configurations(
+    setup: MeasuringSetup,
+    n: int = DEFAULT_CANDIDATES,
+    *,
+    seed: int = 0,
+    one_joint: bool = False,
+    grid: bool = False,
+) -> Candidates:
     """The candidate set, without the configurations the rig cannot measure.
 
     Args:
@@ -164,7 +184,9 @@ def candidate_configurations(setup: MeasuringSetup, n: int = DEFAULT_CANDIDATES,
             + "; ".join(setup.problems(q[:1], ["q0"])[:2])
         )
     keep = np.flatnonzero(ok)
-    return Candidates(q[keep], [labels[i] for i in keep], [0] if one_joint else [], int(len(q) - len(keep)))
+    return Candidates(
+        q[keep], [labels[i] for i in keep], [0] if one_joint else [], int(len(q) - len(keep))
+    )
 
 
 class Planner:
@@ -187,10 +209,14 @@ class Planner:
         qq = np.atleast_2d(np.asarray(q, dtype=float))
         J = self._jacobian(qq).reshape(-1, self.chart.n_params)
         m, chart = self.measurement, self.chart
-        pipe = m.pipeline(chart, qq) if isinstance(m, StereoPoseMeasurement) and isinstance(chart, Parametrization) \
+        pipe = (
+            m.pipeline(chart, qq)
+            if isinstance(m, StereoPoseMeasurement) and isinstance(chart, Parametrization)
             else None
-        p = predict_from_jacobian(J, chart, self.task, self.targets, self.setup.sigma_t, self.setup.sigma_r,
-                                  pipeline=pipe)
+        )
+        p = predict_from_jacobian(
+            J, chart, self.task, self.targets, self.setup.sigma_t, self.setup.sigma_r, pipeline=pipe
+        )
         p.n_configurations = len(qq)
         return p
 
@@ -206,17 +232,21 @@ class Planner:
             M, rest = divmod(n - 1, s.n_joints)
             if rest or M < 2:
                 raise ConfigurationError(
-                    f"the paper's protocol has {s.n_joints} M + 1 configurations (M >= 2), not {n}")
+                    f"the paper's protocol has {s.n_joints} M + 1 configurations (M >= 2), not {n}"
+                )
             return protocol_configurations(self.setup.ranges, M, s.joint_names)
         if strategy not in STRATEGIES:
             raise ConfigurationError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
         if n > len(self.candidates.q):
             raise ConfigurationError(
                 f"{n} configurations asked for, but the rig measures only {len(self.candidates.q)} candidates "
-                "(ask for more candidates)")
+                "(ask for more candidates)"
+            )
         criterion = "I" if strategy == "I-optimal" else "D"
         req = self.candidates.required
-        sel = select(self.Jc, n, criterion=criterion, A=self.task.A_p, required=req, exchange=exchange)
+        sel = select(
+            self.Jc, n, criterion=criterion, A=self.task.A_p, required=req, exchange=exchange
+        )
         q_all, labels_all = self.candidates.q, self.candidates.labels
         # Exchange is a local search: also start it from the paper's protocol (added to the
         # candidates) where N = joints M + 1, and keep the better, so that an optimal plan is never
@@ -229,8 +259,14 @@ class Planner:
             if self.setup.measurable(q_p).all():
                 Jc = np.concatenate([self.Jc, self._jacobian(q_p)])
                 first = len(self.Jc)
-                alt = select(Jc, n, criterion=criterion, A=self.task.A_p, required=req,
-                             start=[*req, *range(first, first + len(q_p))])
+                alt = select(
+                    Jc,
+                    n,
+                    criterion=criterion,
+                    A=self.task.A_p,
+                    required=req,
+                    start=[*req, *range(first, first + len(q_p))],
+                )
                 if alt.value < sel.value:
                     sel = alt
                     q_all = np.vstack([q_all, q_p])
@@ -246,14 +282,22 @@ class Planner:
         """
         n_max = min(n_max, len(self.candidates.q))
         n0 = len(self.candidates.required)
-        sel = select(self.Jc, n_max, criterion="I", A=self.task.A_p, required=self.candidates.required,
-                     exchange=False, stop_below=target**2)
+        sel = select(
+            self.Jc,
+            n_max,
+            criterion="I",
+            A=self.task.A_p,
+            required=self.candidates.required,
+            exchange=False,
+            stop_below=target**2,
+        )
         values = np.sqrt(np.maximum(sel.greedy_values, 0.0))
         hit = np.flatnonzero(values <= target)
         if hit.size == 0:
             raise ConfigurationError(
                 f"a predicted RMS position error of {target * 1e3:.4g} mm is not reached with {n_max} configurations "
-                f"(best {values[-1] * 1e3:.4g} mm): lower the noise, widen the ranges or ask for less")
+                f"(best {values[-1] * 1e3:.4g} mm): lower the noise, widen the ranges or ask for less"
+            )
         n = n0 + int(hit[0]) + 1  # greedy is an upper bound; the exchange may do with fewer
         while n - 1 > max(n0, 1):
             q, _ = self.design("I-optimal", n - 1)
@@ -309,7 +353,9 @@ def make_plan(
             unreachable target.
     """
     if (n is None) == (target_error is None):
-        raise ConfigurationError("give either the number of configurations or the target error, not both")
+        raise ConfigurationError(
+            "give either the number of configurations or the target error, not both"
+        )
     if n is not None and n < 1:
         raise ConfigurationError(f"the number of configurations must be >= 1, got {n}")
     if target_error is not None and not (math.isfinite(target_error) and target_error > 0):
@@ -323,7 +369,16 @@ def make_plan(
     q, labels = planner.design("I-optimal", n)
     nj = setup.nominal.structure.n_joints
     ns = sorted(set(curve_ns if curve_ns is not None else [nj * M + 1 for M in CURVE_M]) | {n})
-    return PlanResult(q, labels, "I-optimal", one_joint, planner.predict(q), planner.curve(ns), cands, target_error)
+    return PlanResult(
+        q,
+        labels,
+        "I-optimal",
+        one_joint,
+        planner.predict(q),
+        planner.curve(ns),
+        cands,
+        target_error,
+    )
 
 
 __all__ = [

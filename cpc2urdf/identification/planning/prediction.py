@@ -121,7 +121,9 @@ class Prediction:
         return {
             "position_rms_mm": num(self.position_rms, 1e3),
             "orientation_rms_deg": num(self.orientation_rms, 180.0 / math.pi),
-            "position_rms_per_frame_mm": {f: num(v, 1e3) for f, v in self.position_rms_per_frame.items()},
+            "position_rms_per_frame_mm": {
+                f: num(v, 1e3) for f, v in self.position_rms_per_frame.items()
+            },
             "position_max_mm": num(self.position_max, 1e3),
             "n_configurations": self.n_configurations,
             "n_params": self.n_params,
@@ -147,8 +149,9 @@ class _Labels:
 Chart = Parametrization | PointChart
 
 
-def chart_and_task(setup: MeasuringSetup, measurement: Measurement | MarkerMeasurement, q_task: Array) -> tuple[Chart, TaskSensitivity,
-                                                                                          tuple[str, ...]]:
+def chart_and_task(
+    setup: MeasuringSetup, measurement: Measurement | MarkerMeasurement, q_task: Array
+) -> tuple[Chart, TaskSensitivity, tuple[str, ...]]:
     """The parameter chart of ``measurement`` at the nominal model, the task region's sensitivity and
     its targets (the measured frames; the markers of a marker setup)."""
     if isinstance(measurement, MarkerMeasurement):
@@ -161,13 +164,26 @@ def chart_and_task(setup: MeasuringSetup, measurement: Measurement | MarkerMeasu
 def _labels(chart: Chart) -> Parametrization:
     if isinstance(chart, Parametrization):
         return chart
-    return cast(Parametrization, _Labels(tuple(chart.names), tuple(chart.units),
-                                         tuple(dict.fromkeys(m.frame for m in chart.markers))))
+    return cast(
+        Parametrization,
+        _Labels(
+            tuple(chart.names),
+            tuple(chart.units),
+            tuple(dict.fromkeys(m.frame for m in chart.markers)),
+        ),
+    )
 
 
-def predict_from_jacobian(J: Array, chart: Chart, task: TaskSensitivity, frames: Sequence[str],
-                          sigma_t: float, sigma_r: float, *,
-                          pipeline: tuple[Array, Array] | None = None) -> Prediction:
+def predict_from_jacobian(
+    J: Array,
+    chart: Chart,
+    task: TaskSensitivity,
+    frames: Sequence[str],
+    sigma_t: float,
+    sigma_r: float,
+    *,
+    pipeline: tuple[Array, Array] | None = None,
+) -> Prediction:
     """:class:`Prediction` from a plan's weighted Jacobian ``J`` (rows of every configuration,
     whitened by their noise, shape (m, P)) and the task region's sensitivity.
 
@@ -177,12 +193,15 @@ def predict_from_jacobian(J: Array, chart: Chart, task: TaskSensitivity, frames:
     P = chart.n_params
     report = analyze_jacobian(J, chart.names, warn=False)
     labels = _labels(chart)
-    cov = covariance_from_jacobian(J, labels, residuals=np.zeros(J.shape[0]), sigma_t=sigma_t, sigma_r=sigma_r)
+    cov = covariance_from_jacobian(
+        J, labels, residuals=np.zeros(J.shape[0]), sigma_t=sigma_t, sigma_r=sigma_r
+    )
     C = C_bound = cov.matrix
     if pipeline is not None:
         Jw, S = pipeline
-        Cw = covariance_from_jacobian(Jw, labels, residuals=np.zeros(Jw.shape[0]), sigma_t=sigma_t,
-                                      sigma_r=sigma_r).matrix
+        Cw = covariance_from_jacobian(
+            Jw, labels, residuals=np.zeros(Jw.shape[0]), sigma_t=sigma_t, sigma_r=sigma_r
+        ).matrix
         Jb = Jw.reshape(-1, 6, P)
         B = np.einsum("bip,bij,bjq->pq", Jb, S, Jb)
         C = Cw @ B @ Cw
@@ -203,8 +222,14 @@ def predict_from_jacobian(J: Array, chart: Chart, task: TaskSensitivity, frames:
         return np.where(determined, np.clip(ms, 0.0, None), np.inf)
 
     ms_p, ms_r = mean_square(Gp, C), mean_square(Gr, C)
-    bound_p, bound_r = (ms_p, ms_r) if pipeline is None else (mean_square(Gp, C_bound), mean_square(Gr, C_bound))
-    free = [w.removeprefix("free combination: ") for w in report.warnings if w.startswith("free combination: ")]
+    bound_p, bound_r = (
+        (ms_p, ms_r) if pipeline is None else (mean_square(Gp, C_bound), mean_square(Gr, C_bound))
+    )
+    free = [
+        w.removeprefix("free combination: ")
+        for w in report.warnings
+        if w.startswith("free combination: ")
+    ]
     return Prediction(
         n_configurations=0,
         n_params=P,
@@ -248,9 +273,14 @@ def predict_plan(
     meas = measurement or setup.measurement()
     chart, task, targets = chart_and_task(setup, meas, qt)
     J = meas.weighted_jacobian(chart, qp).reshape(-1, chart.n_params)  # type: ignore[arg-type]
-    pipe = meas.pipeline(chart, qp) if isinstance(meas, StereoPoseMeasurement) and isinstance(chart, Parametrization) \
+    pipe = (
+        meas.pipeline(chart, qp)
+        if isinstance(meas, StereoPoseMeasurement) and isinstance(chart, Parametrization)
         else None
-    pred = predict_from_jacobian(J, chart, task, targets, setup.sigma_t, setup.sigma_r, pipeline=pipe)
+    )
+    pred = predict_from_jacobian(
+        J, chart, task, targets, setup.sigma_t, setup.sigma_r, pipeline=pipe
+    )
     pred.n_configurations = len(qp)
     return pred
 
@@ -258,7 +288,9 @@ def predict_plan(
 def _configurations(q: ArrayLike, n: int, what: str) -> Array:
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     if qq.ndim != 2 or qq.shape[1] != n or len(qq) == 0:
-        raise ConfigurationError(f"{what}: expected configurations of {n} joint values each, got shape {qq.shape}")
+        raise ConfigurationError(
+            f"{what}: expected configurations of {n} joint values each, got shape {qq.shape}"
+        )
     if not np.all(np.isfinite(qq)):
         raise ConfigurationError(f"{what}: configurations must be finite numbers")
     return qq

@@ -91,7 +91,9 @@ def stereo_pose_covariance(
                 up[cam, :, c, a] += PIXEL_STEP
                 um[cam, :, c, a] -= PIXEL_STEP
                 # Both differences against the same reference pose, so their difference is exact.
-                H[:, :, col] = (pose_error(measure(up), T[ok]) - pose_error(measure(um), T[ok])) / (2 * PIXEL_STEP)
+                H[:, :, col] = (pose_error(measure(up), T[ok]) - pose_error(measure(um), T[ok])) / (
+                    2 * PIXEL_STEP
+                )
                 col += 1
     out[ok] = pixel_sigma**2 * H @ np.swapaxes(H, 1, 2)
     return out

@@ -36,7 +36,9 @@ from cpc2urdf.model import DEFAULT_RANGE_SHARE, CPCModel, RobotStructure
 Array = NDArray[np.float64]
 
 DEFAULT_M = 9  # sec. 6: "we choose to use nine measurements for each joint"
-PROTOCOL_JITTER = 0.2  # [-]: largest random shift of a protocol value, as a share of the value spacing
+PROTOCOL_JITTER = (
+    0.2  # [-]: largest random shift of a protocol value, as a share of the value spacing
+)
 
 
 def calibration_ranges(
@@ -84,7 +86,9 @@ def protocol_configurations(
     for i, name in enumerate(joint_names):
         values = np.linspace(r[i, 0], r[i, 1], M)
         if rng is not None:
-            values = values + rng.uniform(-PROTOCOL_JITTER, PROTOCOL_JITTER, M) * (r[i, 1] - r[i, 0]) / M
+            values = (
+                values + rng.uniform(-PROTOCOL_JITTER, PROTOCOL_JITTER, M) * (r[i, 1] - r[i, 0]) / M
+            )
             values = np.clip(values, lim[i, 0], lim[i, 1])
         for k, v in enumerate(values):
             q = q0.copy()
@@ -94,7 +98,9 @@ def protocol_configurations(
     return np.array(qs), labels
 
 
-def protocol_q(robot: CPCModel | RobotStructure, M: int, rng: np.random.Generator | None = None) -> Array:
+def protocol_q(
+    robot: CPCModel | RobotStructure, M: int, rng: np.random.Generator | None = None
+) -> Array:
     """The protocol's configurations for a robot: :func:`protocol_configurations` over its
     :func:`calibration_ranges`, jittered values (``rng``) clipped to the joint limits.
 
@@ -108,7 +114,9 @@ def protocol_q(robot: CPCModel | RobotStructure, M: int, rng: np.random.Generato
     """
     s = robot.structure if isinstance(robot, CPCModel) else robot
     limits = np.column_stack([s.lower, s.upper])
-    return protocol_configurations(calibration_ranges(s), M, s.joint_names, rng=rng, limits=limits)[0]
+    return protocol_configurations(calibration_ranges(s), M, s.joint_names, rng=rng, limits=limits)[
+        0
+    ]
 
 
 def random_configurations(ranges: ArrayLike, n: int, rng: np.random.Generator) -> Array:

@@ -243,7 +243,9 @@ def unreachable_targets(model: CPCModel, n: int, seed: int = 0) -> Array:
     return np.concatenate([behind, far])
 
 
-def too_close_targets(model: CPCModel, q: Array, n: int, seed: int = 0, radius: float = 0.04) -> Array:
+def too_close_targets(
+    model: CPCModel, q: Array, n: int, seed: int = 0, radius: float = 0.04
+) -> Array:
     """Targets the eyes alone cannot fixate at readings ``q``: inside the cameras' orbit.
 
     Each camera orbits its vergence axis (radius ~60 mm on the IIS-head) with its optical axis

@@ -73,7 +73,9 @@ class RenderedExperiment:
     hidden: list[int]
 
 
-def clear_image_placement(spec: RobotSpec, rig: StereoRig, q: Array, designs: Sequence[PlateDesign]) -> CPCParams:
+def clear_image_placement(
+    spec: RobotSpec, rig: StereoRig, q: Array, designs: Sequence[PlateDesign]
+) -> CPCParams:
     """A ``world_to_base`` (CPC constants) that shows both cameras every circle of every plate.
 
     The simulator's search (:func:`cpc2urdf.identification.simulation.placement.clear_placement`) for the
@@ -83,8 +85,14 @@ def clear_image_placement(spec: RobotSpec, rig: StereoRig, q: Array, designs: Se
     nominal = spec.nominal_model()
     frames = [d.name for d in designs]
     w2b = clear_placement(nominal, rig, q, frames, designs=designs)
-    view = check_view(nominal.with_params(world_to_base=w2b), rig, q, frames, [str(i) for i in range(len(q))],
-                      designs=designs)
+    view = check_view(
+        nominal.with_params(world_to_base=w2b),
+        rig,
+        q,
+        frames,
+        [str(i) for i in range(len(q))],
+        designs=designs,
+    )
     if view.unseen:
         raise ConfigurationError("no placement of the robot lets both rig cameras see every plate")
     return w2b
@@ -125,19 +133,33 @@ def render_experiment(
     s = spec.structure
     designs = robot_plate_designs(s.frames)
     # The simulator's default placement: no circle hidden over the protocol and the held-out box.
-    truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
-                                                robot_ref=robot)
-    views = [PinholeView(K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
-             for w, K, D in zip(STEREO_FOLDERS, (rig.K1, rig.K2), (rig.D1, rig.D2), strict=True)]
+    truth, exact, heldout = simulate_experiment(
+        spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig, robot_ref=robot
+    )
+    views = [
+        PinholeView(
+            K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64)
+        )
+        for w, K, D in zip(STEREO_FOLDERS, (rig.K1, rig.K2), (rig.D1, rig.D2), strict=True)
+    ]
     fk = truth.fk(exact.q, [d.name for d in designs])
 
     def plates(i: int) -> list[tuple[PlateDesign, Array]]:
         return [(d, fk[d.name][i]) for d in designs]
 
     def image(v: PinholeView, i: int, rng: np.random.Generator) -> NDArray[np.uint8]:
-        return render_view(v, plates(i), blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
+        return render_view(
+            v,
+            plates(i),
+            blur_sigma=blur_sigma,
+            noise_sigma=noise_sigma,
+            rng=rng,
+            supersample=supersample,
+        )
 
-    return _write_experiment(out, truth, exact, heldout, rig, views, seed, plates, image, show_progress)
+    return _write_experiment(
+        out, truth, exact, heldout, rig, views, seed, plates, image, show_progress
+    )
 
 
 def render_head_experiment(
@@ -165,12 +187,20 @@ def render_head_experiment(
     cameras = list(stage2.HAND_OF_CAMERA)
     rng = np.random.default_rng(seed)
     T_base_target = stage2.default_target_placement(truth, cameras)
-    q = stage2.sample_configurations(truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intr)
+    q = stage2.sample_configurations(
+        truth, n_poses, rng, T_base_target, cameras=cameras, intrinsics=intr
+    )
     design = target_design()
     T_world_target = truth.T_world_base() @ T_base_target
 
     def image(view: PinholeView) -> NDArray[np.uint8]:
-        return render_view(view, [(design, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+        return render_view(
+            view,
+            [(design, T_world_target)],
+            blur_sigma=blur_sigma,
+            noise_sigma=noise_sigma,
+            rng=rng,
+        )
 
     return _write_head_images(out, truth, intr, cameras, q, T_base_target, image, "target")
 
@@ -178,7 +208,9 @@ def render_head_experiment(
 # ---- standard boards: calibration views and stage-2 board images -------------------------------------
 
 
-def _board_in_view(view: PinholeView, board: Board, T_world_board: Array, margin_px: float = 10.0) -> bool:
+def _board_in_view(
+    view: PinholeView, board: Board, T_world_board: Array, margin_px: float = 10.0
+) -> bool:
     """The whole board (outline) in front of the camera, inside the image by ``margin_px``, face towards it."""
     T = view.T_camera_world @ T_world_board
     c = board.outline_corners() @ T[:3, :3].T + T[:3, 3]
@@ -186,7 +218,11 @@ def _board_in_view(view: PinholeView, board: Board, T_world_board: Array, margin
         return False
     uv = PinholeView(view.K, view.D, view.image_size).project(c)
     w, h = view.image_size
-    return bool(np.all(uv >= margin_px) and np.all(uv[:, 0] <= w - 1 - margin_px) and np.all(uv[:, 1] <= h - 1 - margin_px))
+    return bool(
+        np.all(uv >= margin_px)
+        and np.all(uv[:, 0] <= w - 1 - margin_px)
+        and np.all(uv[:, 1] <= h - 1 - margin_px)
+    )
 
 
 def random_board_poses(
@@ -215,15 +251,21 @@ def random_board_poses(
         d = rng.uniform(*distance)
         ray = np.array([rng.uniform(-0.25, 0.25), rng.uniform(-0.2, 0.2), 1.0])
         axis = np.array([*rng.normal(size=2), 0.0])
-        tilt = Rotation.from_rotvec(np.radians(rng.uniform(0, max_tilt_deg)) * axis / np.linalg.norm(axis)).as_matrix()
+        tilt = Rotation.from_rotvec(
+            np.radians(rng.uniform(0, max_tilt_deg)) * axis / np.linalg.norm(axis)
+        ).as_matrix()
         roll = Rotation.from_euler("z", rng.uniform(-180, 180), degrees=True).as_matrix()
-        R_cam_board = tilt @ np.diag([1.0, -1.0, -1.0]) @ roll  # board z towards the camera, then tilted
+        R_cam_board = (
+            tilt @ np.diag([1.0, -1.0, -1.0]) @ roll
+        )  # board z towards the camera, then tilted
         T = T_world_cam0 @ homogeneous(R_cam_board, d * ray / ray[2])
         if all(_board_in_view(v, board, T) for v in views):
             out.append(T)
     if len(out) < n:
-        raise ConfigurationError(f"{board.name}: only {len(out)} of {n} random poses keep the whole board in view; "
-                                 "use a smaller board or a larger distance")
+        raise ConfigurationError(
+            f"{board.name}: only {len(out)} of {n} random poses keep the whole board in view; "
+            "use a smaller board or a larger distance"
+        )
     return np.array(out)
 
 
@@ -246,8 +288,12 @@ def render_board_calibration(
     out = _output_folder(folder)
     rng = np.random.default_rng(seed)
     if rig is not None:
-        views = [PinholeView(K, D, rig.image_size, np.asarray(inverse(rig.T_world_camera(w)), dtype=np.float64))
-                 for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))]
+        views = [
+            PinholeView(
+                K, D, rig.image_size, np.asarray(inverse(rig.T_world_camera(w)), dtype=np.float64)
+            )
+            for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))
+        ]
         subs = [out / "left", out / "right"]
         distance = distance or (1.2, 1.8)
     else:
@@ -259,13 +305,25 @@ def render_board_calibration(
     for sub, view in zip(subs, views, strict=True):
         sub.mkdir(parents=True, exist_ok=True)
         for i in range(n_views):
-            img = render_board_view(view, [(board, T[i])], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+            img = render_board_view(
+                view, [(board, T[i])], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng
+            )
             write_image(sub / f"{i:04d}.png", img)
-    truth: dict[str, object] = {"description": "true board poses (world = the (left) camera) and cameras, for scoring",
-                                "board": board.to_json(), "T_world_board": T.tolist(), "units": {"length": "m"}}
-    truth.update({"rig": rig.to_json()} if rig is not None else
-                 {"K": views[0].K.tolist(), "D": np.asarray(views[0].D, dtype=float).tolist(),
-                  "image_size": list(views[0].image_size)})
+    truth: dict[str, object] = {
+        "description": "true board poses (world = the (left) camera) and cameras, for scoring",
+        "board": board.to_json(),
+        "T_world_board": T.tolist(),
+        "units": {"length": "m"},
+    }
+    truth.update(
+        {"rig": rig.to_json()}
+        if rig is not None
+        else {
+            "K": views[0].K.tolist(),
+            "D": np.asarray(views[0].D, dtype=float).tolist(),
+            "image_size": list(views[0].image_size),
+        }
+    )
     write_json(out / "board_truth.json", truth)
     return T
 
@@ -295,15 +353,27 @@ def render_head_board_experiment(
     for _ in range(200 * n_poses):
         if len(q) == n_poses:
             break
-        qi = stage2.sample_configurations(truth, 1, rng, T_base_target, cameras=cameras, intrinsics=intr)[0]
-        if all(_board_in_view(PinholeView(intr.K, intr.D, size, inverse(truth.fk_frame(c, qi[None])[0])), board, T_world_target)
-               for c in cameras):
+        qi = stage2.sample_configurations(
+            truth, 1, rng, T_base_target, cameras=cameras, intrinsics=intr
+        )[0]
+        if all(
+            _board_in_view(
+                PinholeView(intr.K, intr.D, size, inverse(truth.fk_frame(c, qi[None])[0])),
+                board,
+                T_world_target,
+            )
+            for c in cameras
+        ):
             q.append(qi)
     if len(q) < n_poses:
-        raise ConfigurationError(f"{board.name}: only {len(q)} of {n_poses} configurations show both cameras the whole board")
+        raise ConfigurationError(
+            f"{board.name}: only {len(q)} of {n_poses} configurations show both cameras the whole board"
+        )
 
     def image(view: PinholeView) -> NDArray[np.uint8]:
-        return render_board_view(view, [(board, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
+        return render_board_view(
+            view, [(board, T_world_target)], blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng
+        )
 
     return _write_head_images(out, truth, intr, cameras, np.array(q), T_base_target, image, "board")
 
@@ -330,11 +400,19 @@ def _write_head_images(
         paths[c] = save_camera(intr.K, intr.D, size, out / f"{c}.yaml")
         T_world_cam = truth.fk_frame(c, q)
         for i, rec in enumerate(records):
-            write_image(out / c / f"{rec}.png", image(PinholeView(intr.K, intr.D, size, inverse(T_world_cam[i]))))
+            write_image(
+                out / c / f"{rec}.png",
+                image(PinholeView(intr.K, intr.D, size, inverse(T_world_cam[i]))),
+            )
     paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, q)
-    paths["target_truth"] = write_json(out / "target_truth.json", {
-        "description": f"true pose of the stage-2 {target} in the robot base frame (for scoring)",
-        "T_base_target": T_base_target.tolist(), "units": {"length": "m"}})
+    paths["target_truth"] = write_json(
+        out / "target_truth.json",
+        {
+            "description": f"true pose of the stage-2 {target} in the robot base frame (for scoring)",
+            "T_base_target": T_base_target.tolist(),
+            "units": {"length": "m"},
+        },
+    )
     return paths
 
 
@@ -349,8 +427,12 @@ def _output_folder(folder: str | Path) -> Path:
 def board_proxy_designs(boards: Mapping[str, Board]) -> list[PlateDesign]:
     """Boards as :class:`PlateDesign` outlines for the placement search and the occlusion tests:
     their detectable points as the "circles" (radius a quarter of the point spacing)."""
-    return [PlateDesign(frame, b.object_points(), np.full(b.n_points, 0.25 * b.point_spacing), b.outline)
-            for frame, b in boards.items()]
+    return [
+        PlateDesign(
+            frame, b.object_points(), np.full(b.n_points, 0.25 * b.point_spacing), b.outline
+        )
+        for frame, b in boards.items()
+    ]
 
 
 def render_board_experiment(
@@ -379,16 +461,38 @@ def render_board_experiment(
     s = spec.structure
     proxies = board_proxy_designs(boards)
     frames = [d.name for d in proxies]
-    first = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=1, rig=rig, robot_ref=robot)[1]
+    first = simulate_experiment(
+        spec, seed=seed, M=M, noise="none", n_heldout=1, rig=rig, robot_ref=robot
+    )[1]
     w2b = clear_placement(spec.nominal_model(), rig, first.q, frames, designs=proxies)
-    truth, exact, heldout = simulate_experiment(spec, seed=seed, M=M, noise="none", n_heldout=n_heldout, rig=rig,
-                                                robot_ref=robot, world_to_base=w2b, require_view=False)
+    truth, exact, heldout = simulate_experiment(
+        spec,
+        seed=seed,
+        M=M,
+        noise="none",
+        n_heldout=n_heldout,
+        rig=rig,
+        robot_ref=robot,
+        world_to_base=w2b,
+        require_view=False,
+    )
     if only is not None:
         keep = np.asarray(only, dtype=int)
-        exact = MeasurementSet(s, exact.q[keep], {f: P[keep] for f, P in exact.poses.items()}, exact.source, exact.robot,
-                               [exact.labels[i] for i in keep], metadata=exact.metadata)
-    views = [PinholeView(K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64))
-             for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))]
+        exact = MeasurementSet(
+            s,
+            exact.q[keep],
+            {f: P[keep] for f, P in exact.poses.items()},
+            exact.source,
+            exact.robot,
+            [exact.labels[i] for i in keep],
+            metadata=exact.metadata,
+        )
+    views = [
+        PinholeView(
+            K, D, rig.image_size, np.asarray(np.linalg.inv(rig.T_world_camera(w)), dtype=np.float64)
+        )
+        for w, K, D in (("left", rig.K1, rig.D1), ("right", rig.K2, rig.D2))
+    ]
     fk = truth.fk(exact.q, frames)
 
     def outlines(i: int) -> list[tuple[PlateDesign, Array]]:
@@ -396,12 +500,23 @@ def render_board_experiment(
 
     def image(v: PinholeView, i: int, rng: np.random.Generator) -> NDArray[np.uint8]:
         placed = [(b, fk[frame][i]) for frame, b in boards.items()]
-        return render_board_view(v, placed, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng, supersample=supersample)
+        return render_board_view(
+            v,
+            placed,
+            blur_sigma=blur_sigma,
+            noise_sigma=noise_sigma,
+            rng=rng,
+            supersample=supersample,
+        )
 
-    return _write_experiment(out, truth, exact, heldout, rig, views, seed, outlines, image, show_progress)
+    return _write_experiment(
+        out, truth, exact, heldout, rig, views, seed, outlines, image, show_progress
+    )
 
 
-def _experiment_inputs(folder: str | Path, robot: str, rig: StereoRig | None) -> tuple[Path, RobotSpec, StereoRig]:
+def _experiment_inputs(
+    folder: str | Path, robot: str, rig: StereoRig | None
+) -> tuple[Path, RobotSpec, StereoRig]:
     """The output folder (its parent must exist), the robot and the rig (default the paper's)."""
     out = _output_folder(folder)
     return out, load_robot(robot), rig or StereoRig.verged()
@@ -434,7 +549,9 @@ def _write_experiment(
         for sub, v in zip(STEREO_FOLDERS, views, strict=True):
             write_image(out / sub / f"{records[i]}.png", image(v, i, rng))
     paths = {
-        "joints": write_joints_csv(out / "joints.csv", exact.structure, records, exact.q, exact.labels),
+        "joints": write_joints_csv(
+            out / "joints.csv", exact.structure, records, exact.q, exact.labels
+        ),
         "rig": save_rig(rig, out / "rig.yaml", units="mm"),
         "truth": save_model(truth, out / "truth.json"),
         "heldout": save_measurements(heldout, out / "heldout.json"),

@@ -26,8 +26,12 @@ from cpc2urdf.model import CPCModel
 MARKER_DISTANCE = (0.05, 0.15)
 
 
-def place_markers_on(model: CPCModel, counts: Mapping[str, int], rng: np.random.Generator,
-                     distance: tuple[float, float] = MARKER_DISTANCE) -> dict[str, tuple[str, np.ndarray]]:
+def place_markers_on(
+    model: CPCModel,
+    counts: Mapping[str, int],
+    rng: np.random.Generator,
+    distance: tuple[float, float] = MARKER_DISTANCE,
+) -> dict[str, tuple[str, np.ndarray]]:
     """Seeded random marker positions: ``counts[frame]`` markers on each frame.
 
     Returns:
@@ -86,9 +90,12 @@ def simulate_markers(
         if seen is not None and name in seen:
             Y = np.where(np.asarray(seen[name], dtype=bool)[:, None], Y, np.nan)
         points[name] = Y
-    metadata = {"noise": {"model": "isotropic points", "sigma_p_m": float(sigma_p)}} if sigma_p > 0 else {}
-    return MeasurementSet.from_arrays(truth.structure, qq, {}, robot=robot, metadata=metadata,
-                                      markers=defs, marker_points=points)
+    metadata = (
+        {"noise": {"model": "isotropic points", "sigma_p_m": float(sigma_p)}} if sigma_p > 0 else {}
+    )
+    return MeasurementSet.from_arrays(
+        truth.structure, qq, {}, robot=robot, metadata=metadata, markers=defs, marker_points=points
+    )
 
 
 __all__ = ["MARKER_DISTANCE", "place_markers_on", "simulate_markers"]

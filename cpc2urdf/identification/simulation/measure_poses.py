@@ -29,7 +29,9 @@ NOISE_MODELS = ("fig10", "stereo", "none")
 # Defaults (SI). The paper's Fig. 11 uses one sigma_O for both: sigma_O mm and sigma_O degrees.
 DEFAULT_SIGMA_T = 0.5e-3  # [m]: the paper's rig accuracy (sec. 6)
 DEFAULT_SIGMA_R = math.radians(0.5)  # [rad]
-DEFAULT_PIXEL_SIGMA = 0.15  # [px]: ~0.5 mm per circle centre with the default rig (docs/measurements.md)
+DEFAULT_PIXEL_SIGMA = (
+    0.15  # [px]: ~0.5 mm per circle centre with the default rig (docs/measurements.md)
+)
 
 
 def measure_poses(
@@ -80,4 +82,10 @@ def measure_poses(
     return poses, points
 
 
-__all__ = ["DEFAULT_PIXEL_SIGMA", "DEFAULT_SIGMA_R", "DEFAULT_SIGMA_T", "NOISE_MODELS", "measure_poses"]
+__all__ = [
+    "DEFAULT_PIXEL_SIGMA",
+    "DEFAULT_SIGMA_R",
+    "DEFAULT_SIGMA_T",
+    "NOISE_MODELS",
+    "measure_poses",
+]

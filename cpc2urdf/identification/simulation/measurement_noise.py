@@ -47,7 +47,9 @@ def random_rotations(rng: np.random.Generator, sigma_rad: float, size: int) -> A
     return Rotation.from_rotvec(axis * angle[:, None]).as_matrix()
 
 
-def fig10_noise(T_world_frame: ArrayLike, sigma_t: float, sigma_r: float, rng: np.random.Generator) -> Array:
+def fig10_noise(
+    T_world_frame: ArrayLike, sigma_t: float, sigma_r: float, rng: np.random.Generator
+) -> Array:
     """The noise model of Shih et al. Fig. 10 applied to poses.
 
     Args:
@@ -110,7 +112,9 @@ def stereo_noise(
     enough = seen.sum(axis=1) >= 3
     if enough.any():
         try:
-            T_meas[enough] = plate_pose_from_points(layout, p_meas[enough], what="stereo measurement")
+            T_meas[enough] = plate_pose_from_points(
+                layout, p_meas[enough], what="stereo measurement"
+            )
         except DegenerateDataError:
             for i in np.flatnonzero(enough):  # rare: the seen circles of one plate are collinear
                 try:

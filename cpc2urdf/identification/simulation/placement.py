@@ -38,7 +38,12 @@ PLACEMENT_SAMPLE = 256
 
 
 def place_in_front_of_rig(
-    model: CPCModel, rig: StereoRig, q: ArrayLike, frames: Sequence[str], *, up_base: ArrayLike | None = None
+    model: CPCModel,
+    rig: StereoRig,
+    q: ArrayLike,
+    frames: Sequence[str],
+    *,
+    up_base: ArrayLike | None = None,
 ) -> CPCParams:
     """A ``world_to_base`` that shows the plates to the rig face-on, centred and ~at its distance.
 
@@ -60,10 +65,15 @@ def place_in_front_of_rig(
     at_base = model.with_params(world_to_base=CPCParams())
     qq = np.atleast_2d(np.asarray(q, dtype=float))
     fk = at_base.fk(qq, frames)
-    P = np.concatenate([
-        (np.einsum("nij,kj->nki", fk[f][:, :3, :3], frame_points(model.structure, f)) + fk[f][:, None, :3, 3])
-        .reshape(-1, 3) for f in frames
-    ])
+    P = np.concatenate(
+        [
+            (
+                np.einsum("nij,kj->nki", fk[f][:, :3, :3], frame_points(model.structure, f))
+                + fk[f][:, None, :3, 3]
+            ).reshape(-1, 3)
+            for f in frames
+        ]
+    )
     n_mean, up = _mean_normal_and_up(at_base, qq, frames)
     view_b = -n_mean  # rig looks against the plate normals
     if up_base is not None:
@@ -122,7 +132,11 @@ _PLACEMENTS: dict[bytes, CPCParams] = {}
 
 
 def cached_clear_placement(
-    model: CPCModel, rig: StereoRig, q: NDArray[np.float64], frames: Sequence[str], q_sample: NDArray[np.float64]
+    model: CPCModel,
+    rig: StereoRig,
+    q: NDArray[np.float64],
+    frames: Sequence[str],
+    q_sample: NDArray[np.float64],
 ) -> CPCParams:
     """:func:`clear_placement` with ``q_sample``, remembered per (robot geometry, rig,
     configurations): the search takes about a second and studies simulate hundreds of
@@ -136,10 +150,21 @@ def cached_clear_placement(
         q_sample: Further configurations in which as few circles as possible should be hidden,
             shape (M, n).
     """
-    parts = [np.asarray(v, dtype=float).tobytes() for v in (rig.K1, rig.D1, rig.K2, rig.D2, rig.R, rig.T, rig.image_size, q, q_sample)]
+    parts = [
+        np.asarray(v, dtype=float).tobytes()
+        for v in (rig.K1, rig.D1, rig.K2, rig.D2, rig.R, rig.T, rig.image_size, q, q_sample)
+    ]
     parts += [model.joints[n].to_vector().tobytes() for n in model.structure.joint_names]
     parts += [model.frames[n].to_vector().tobytes() for n in model.structure.frame_names]
-    parts += [repr((model.structure.joint_names, [(f.name, f.layout) for f in model.structure.frames], tuple(frames))).encode()]
+    parts += [
+        repr(
+            (
+                model.structure.joint_names,
+                [(f.name, f.layout) for f in model.structure.frames],
+                tuple(frames),
+            )
+        ).encode()
+    ]
     key = b"|".join(parts)
     if key not in _PLACEMENTS:
         if len(_PLACEMENTS) > 64:
@@ -149,7 +174,11 @@ def cached_clear_placement(
 
 
 def experiment_placement(
-    model: CPCModel, rig: StereoRig, q: NDArray[np.float64], frames: Sequence[str], ranges: ArrayLike
+    model: CPCModel,
+    rig: StereoRig,
+    q: NDArray[np.float64],
+    frames: Sequence[str],
+    ranges: ArrayLike,
 ) -> CPCParams:
     """Where the simulator places ``model`` for the protocol configurations ``q`` (N, n):
     :func:`cached_clear_placement` with a fixed sample of ``PLACEMENT_SAMPLE`` configurations drawn
@@ -222,8 +251,15 @@ def clear_placement(
                 R = Rotation.from_euler(axis, ang, degrees=True).as_matrix()
                 w2b = CPCParams.from_matrix(homogeneous(R, fix - R @ fix) @ T0)
                 face_on = face_on or w2b
-                view = check_view(model.with_params(world_to_base=w2b), rig, qq, frames, labels,
-                                  occlusion_margin_px=occlusion_margin_px, designs=designs)
+                view = check_view(
+                    model.with_params(world_to_base=w2b),
+                    rig,
+                    qq,
+                    frames,
+                    labels,
+                    occlusion_margin_px=occlusion_margin_px,
+                    designs=designs,
+                )
                 if view.unseen:
                     continue
                 h = view.hidden_per_config
@@ -236,5 +272,11 @@ def clear_placement(
     return face_on if best is None else best[1]
 
 
-__all__ = ["PLACEMENT_MARGIN_PX", "PLACEMENT_SAMPLE", "cached_clear_placement", "clear_placement", "experiment_placement",
-           "place_in_front_of_rig"]
+__all__ = [
+    "PLACEMENT_MARGIN_PX",
+    "PLACEMENT_SAMPLE",
+    "cached_clear_placement",
+    "clear_placement",
+    "experiment_placement",
+    "place_in_front_of_rig",
+]

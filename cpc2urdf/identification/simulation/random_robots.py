@@ -39,7 +39,9 @@ def random_unit(rng: np.random.Generator) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-def random_params(rng: np.random.Generator, *, scale: float = 0.2, p_parallel: float = 0.2) -> CPCParams:
+def random_params(
+    rng: np.random.Generator, *, scale: float = 0.2, p_parallel: float = 0.2
+) -> CPCParams:
     """Random CPC constants (eq. (3)): an axis in any direction (parallel to the parent's with
     probability ``p_parallel``), any ``beta``, offsets up to ``scale`` [m] per component."""
     b = (0.0, 0.0, 1.0) if rng.random() < p_parallel else random_unit(rng)
@@ -96,7 +98,9 @@ def random_model(
     leaves = [j.name for j in joints if j.name not in parents]
     frames = [Frame(f"plate{k}", leaf, "plate") for k, leaf in enumerate(leaves)]
     for k in range(extra_plates):
-        frames.append(Frame(f"plate{len(leaves) + k}", f"j{int(rng.integers(0, n_joints))}", "plate"))
+        frames.append(
+            Frame(f"plate{len(leaves) + k}", f"j{int(rng.integers(0, n_joints))}", "plate")
+        )
     for k in range(cameras):
         frames.append(Frame(f"camera{k}", f"j{int(rng.integers(0, n_joints))}", "camera"))
     structure = RobotStructure(name, joints, frames)

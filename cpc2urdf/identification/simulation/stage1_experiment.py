@@ -65,7 +65,9 @@ from cpc2urdf.progress import progress
 from cpc2urdf.urdf.robot import UrdfRobot
 
 DEFAULT_HELDOUT = 50
-OCCLUDED_VIEWS_MAX = 0.05  # [-]: share of (configuration, plate) views with a hidden circle tolerated
+OCCLUDED_VIEWS_MAX = (
+    0.05  # [-]: share of (configuration, plate) views with a hidden circle tolerated
+)
 
 
 class Experiment(NamedTuple):
@@ -141,8 +143,15 @@ def simulate_experiment(
             configuration (the message names the plate and configuration), or bad arguments.
         SpecError: The robot has no nominal geometry.
     """
-    _check_arguments(noise, n_heldout, sigma_t=sigma_t, sigma_r=sigma_r, pixel_sigma=pixel_sigma,
-                     geometry_error_t=geometry_error_t, geometry_error_r=geometry_error_r)
+    _check_arguments(
+        noise,
+        n_heldout,
+        sigma_t=sigma_t,
+        sigma_r=sigma_r,
+        pixel_sigma=pixel_sigma,
+        geometry_error_t=geometry_error_t,
+        geometry_error_r=geometry_error_r,
+    )
     spec, ref = _as_spec(robot)
     ref = robot_ref or ref
     nominal = spec.nominal_model()
@@ -152,23 +161,40 @@ def simulate_experiment(
         raise ConfigurationError(f"robot {s.name!r} has no frame of kind 'plate' to measure")
     no_layout = [f for f in frames if s.frame(f).layout is None]
     if noise == "stereo" and no_layout:  # refused before the placement search, in the file's names
-        name = spec.names.urdf_link(no_layout[0]) if isinstance(spec, UrdfRobot) and spec.names else no_layout[0]
-        raise ConfigurationError(f"stereo noise needs the circle layout of each measured plate, and {name!r} has none "
-                                 "(a URDF link carries no layout); use fig10 or no noise")
+        name = (
+            spec.names.urdf_link(no_layout[0])
+            if isinstance(spec, UrdfRobot) and spec.names
+            else no_layout[0]
+        )
+        raise ConfigurationError(
+            f"stereo noise needs the circle layout of each measured plate, and {name!r} has none "
+            "(a URDF link carries no layout); use fig10 or no noise"
+        )
     rig = rig or StereoRig.verged()
     r = calibration_ranges(s, ranges)
     # Files about a URDF robot name its joints as the URDF does (labels, provenance).
-    file_names = [spec.names.urdf_joint(n) if isinstance(spec, UrdfRobot) and spec.names else n
-                  for n in s.joint_names]
+    file_names = [
+        spec.names.urdf_joint(n) if isinstance(spec, UrdfRobot) and spec.names else n
+        for n in s.joint_names
+    ]
     q, labels = protocol_configurations(r, M, file_names)
-    rng_geometry, rng_noise, rng_heldout = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3))
+    rng_geometry, rng_noise, rng_heldout = (
+        np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3)
+    )
 
     # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
     w2b = world_to_base or experiment_placement(nominal, rig, q, frames, r)
-    truth = perturbed_model(nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r)
+    truth = perturbed_model(
+        nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r
+    )
     q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
-    view = check_view(truth, rig, np.vstack([q, q_held]), frames,
-                      labels + [f"heldout {i}" for i in range(n_heldout)])
+    view = check_view(
+        truth,
+        rig,
+        np.vstack([q, q_held]),
+        frames,
+        labels + [f"heldout {i}" for i in range(n_heldout)],
+    )
     unmeasurable = _unmeasurable(view, len(q) + n_heldout, len(frames))
     if require_view and unmeasurable:
         more = f" (and {len(unmeasurable) - 1} more)" if len(unmeasurable) > 1 else ""
@@ -180,8 +206,20 @@ def simulate_experiment(
     # Measure joint by joint so that a long run shows progress (the protocol's blocks).
     blocks = [np.arange(1)] + [1 + i * M + np.arange(M) for i in range(s.n_joints)]
     items = progress(blocks, "simulate") if show_progress else blocks
-    parts = [measure_poses(truth, q[b], frames, rng_noise, noise=noise, sigma_t=sigma_t, sigma_r=sigma_r,
-                           rig=rig, pixel_sigma=pixel_sigma) for b in items]
+    parts = [
+        measure_poses(
+            truth,
+            q[b],
+            frames,
+            rng_noise,
+            noise=noise,
+            sigma_t=sigma_t,
+            sigma_r=sigma_r,
+            rig=rig,
+            pixel_sigma=pixel_sigma,
+        )
+        for b in items
+    ]
     poses = {f: np.concatenate([p[0][f] for p in parts]) for f in frames}
     points = {f: np.concatenate([p[1][f] for p in parts]) for f in parts[0][1]}
 
@@ -191,13 +229,19 @@ def simulate_experiment(
         "seed": seed,
         "M": M,
         "protocol": "one joint at a time from q0 (Shih et al. sec. 4.1)",
-        "calibration_ranges": {n: [float(a), float(b)] for n, (a, b) in zip(file_names, r, strict=True)},
+        "calibration_ranges": {
+            n: [float(a), float(b)] for n, (a, b) in zip(file_names, r, strict=True)
+        },
         "geometry_error": {"sigma_t_m": geometry_error_t, "sigma_r_rad": geometry_error_r},
         "rig": rig.to_json(),
-        "view": {"min_margin_px": view.min_margin_px, "max_view_angle_rad": view.max_view_angle,
-                 "distance_range_m": list(view.distance_range), "problems": view.problems[:10],
-                 "hidden_circle_sightings": view.hidden,
-                 "heldout_redrawn_unmeasurable": redrawn},
+        "view": {
+            "min_margin_px": view.min_margin_px,
+            "max_view_angle_rad": view.max_view_angle,
+            "distance_range_m": list(view.distance_range),
+            "problems": view.problems[:10],
+            "hidden_circle_sightings": view.hidden,
+            "heldout_redrawn_unmeasurable": redrawn,
+        },
     }
     fit_rms = {}
     if points:
@@ -209,23 +253,52 @@ def simulate_experiment(
     # identification starts from (and writes back into) that URDF. A spec robot's sets stay as
     # they were (its names are the file's; identify's nominal is the caller's choice).
     keep = spec if isinstance(spec, UrdfRobot) else None
-    measured = MeasurementSet(s, q, poses, "<simulated>", ref, labels, points, fit_rms,
-                              {"description": f"simulated stage-1 measurements of {s.name}",
-                               "noise": noise_doc, "provenance": provenance}, keep)
+    measured = MeasurementSet(
+        s,
+        q,
+        poses,
+        "<simulated>",
+        ref,
+        labels,
+        points,
+        fit_rms,
+        {
+            "description": f"simulated stage-1 measurements of {s.name}",
+            "noise": noise_doc,
+            "provenance": provenance,
+        },
+        keep,
+    )
     held_true = truth.fk(q_held, frames) if n_heldout else {f: np.empty((0, 4, 4)) for f in frames}
     heldout = MeasurementSet(
-        s, q_held.reshape(-1, s.n_joints), held_true, "<simulated heldout>", ref,
+        s,
+        q_held.reshape(-1, s.n_joints),
+        held_true,
+        "<simulated heldout>",
+        ref,
         [f"heldout {i}" for i in range(n_heldout)],
-        metadata={"description": f"held-out configurations of {s.name} with TRUE poses (no noise)",
-                  "noise": {"model": "none"}, "provenance": {**provenance, "seed_stream": "heldout"}},
+        metadata={
+            "description": f"held-out configurations of {s.name} with TRUE poses (no noise)",
+            "noise": {"model": "none"},
+            "provenance": {**provenance, "seed_stream": "heldout"},
+        },
         spec=keep,
     )
-    truth = truth.with_params(metadata=nominal.metadata.replace(provenance=Provenance(
-        method="simulated truth", robot=ref,
-        details={"simulated_truth": True, "seed": seed, "nominal": ref,
-                 "geometry_error": provenance["geometry_error"],
-                 "nominal_world_to_base": {"b": list(w2b.b), "beta": w2b.beta, "l": list(w2b.l)}},
-    )))
+    truth = truth.with_params(
+        metadata=nominal.metadata.replace(
+            provenance=Provenance(
+                method="simulated truth",
+                robot=ref,
+                details={
+                    "simulated_truth": True,
+                    "seed": seed,
+                    "nominal": ref,
+                    "geometry_error": provenance["geometry_error"],
+                    "nominal_world_to_base": {"b": list(w2b.b), "beta": w2b.beta, "l": list(w2b.l)},
+                },
+            )
+        )
+    )
     return Experiment(truth, measured, heldout)
 
 
@@ -242,7 +315,9 @@ def _check_arguments(noise: str, n_heldout: int, **sigmas: float) -> None:
 def _noise_doc(noise: str, sigma_t: float, sigma_r: float, pixel_sigma: float) -> dict[str, Any]:
     """The measurement file's ``noise`` section. A file states a noise as a positive number (a
     zero one is no noise in that part: not stated)."""
-    doc: dict[str, Any] = {"model": noise if noise != "fig10" or sigma_t > 0 or sigma_r > 0 else "none"}
+    doc: dict[str, Any] = {
+        "model": noise if noise != "fig10" or sigma_t > 0 or sigma_r > 0 else "none"
+    }
     if noise == "fig10":
         doc.update({k: v for k, v in (("sigma_t_m", sigma_t), ("sigma_r_rad", sigma_r)) if v > 0})
     elif noise == "stereo":
@@ -261,7 +336,7 @@ def _unmeasurable(view: ViewReport, n_configurations: int, n_frames: int) -> lis
     bad experiment design: refused too.
     """
     unmeasurable = view.problems[: view.unseen]
-    occluded = view.problems[view.unseen:]
+    occluded = view.problems[view.unseen :]
     if len(occluded) > OCCLUDED_VIEWS_MAX * n_configurations * n_frames:
         unmeasurable += occluded
     return unmeasurable

@@ -26,7 +26,9 @@ DEFAULT_GEOMETRY_ERROR_T = 1e-3  # [m], per CPC offset component
 DEFAULT_GEOMETRY_ERROR_R = math.radians(0.5)  # [rad], about a random axis
 
 
-def perturb_params(p: CPCParams, rng: np.random.Generator, sigma_t: float, sigma_r: float) -> CPCParams:
+def perturb_params(
+    p: CPCParams, rng: np.random.Generator, sigma_t: float, sigma_r: float
+) -> CPCParams:
     """``p`` with its rotation pre-multiplied by a random small rotation and ``l`` offset.
 
     Args:
@@ -42,7 +44,9 @@ def perturb_params(p: CPCParams, rng: np.random.Generator, sigma_t: float, sigma
     return CPCParams.from_matrix(homogeneous(R, R @ l))
 
 
-def perturbed_model(nominal: CPCModel, rng: np.random.Generator, sigma_t: float, sigma_r: float) -> CPCModel:
+def perturbed_model(
+    nominal: CPCModel, rng: np.random.Generator, sigma_t: float, sigma_r: float
+) -> CPCModel:
     """A "true" robot: every joint's and frame's CPC constants and ``world_to_base`` perturbed
     (:func:`perturb_params`, in that order: joints, frames, then ``world_to_base``).
 
@@ -59,4 +63,9 @@ def perturbed_model(nominal: CPCModel, rng: np.random.Generator, sigma_t: float,
     return nominal.with_params(world_to_base=w2b, joints=joints, frames=frames)
 
 
-__all__ = ["DEFAULT_GEOMETRY_ERROR_T", "DEFAULT_GEOMETRY_ERROR_R", "perturb_params", "perturbed_model"]
+__all__ = [
+    "DEFAULT_GEOMETRY_ERROR_T",
+    "DEFAULT_GEOMETRY_ERROR_R",
+    "perturb_params",
+    "perturbed_model",
+]

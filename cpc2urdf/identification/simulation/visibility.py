@@ -70,8 +70,12 @@ class ViewReport:
     distance_range: tuple[float, float]
     unseen: int = 0
     hidden: int = 0
-    hidden_per_config: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    unseen_per_config: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    hidden_per_config: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
+    unseen_per_config: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
 
 
 def check_view(
@@ -112,21 +116,31 @@ def check_view(
     problems: list[str] = []
     hidden_problems: list[str] = []  # listed after the out-of-view ones
     min_margin, max_ang, dists = math.inf, 0.0, []
-    cameras = [("left", rig.T_world_camera("left")[:3, 3], float(rig.K1[0, 0])),
-               ("right", rig.T_world_camera("right")[:3, 3], float(rig.K2[0, 0]))]
+    cameras = [
+        ("left", rig.T_world_camera("left")[:3, 3], float(rig.K1[0, 0])),
+        ("right", rig.T_world_camera("right")[:3, 3], float(rig.K2[0, 0])),
+    ]
     occluded: dict[str, list[NDArray[np.bool_]]] = {}
     if occlusion_margin_px is not None:
-        by_name = {d.name: d for d in (robot_plate_designs(model.structure.frames) if designs is None else designs)}
+        by_name = {
+            d.name: d
+            for d in (robot_plate_designs(model.structure.frames) if designs is None else designs)
+        }
         plates = [(by_name[f], fk[f]) for f in frames if f in by_name]
         for _, centre, focal in cameras:
-            for f, mask in occluded_circles(centre, focal, plates, margin_px=occlusion_margin_px).items():
+            for f, mask in occluded_circles(
+                centre, focal, plates, margin_px=occlusion_margin_px
+            ).items():
                 occluded.setdefault(f, []).append(mask)
     unseen = 0
     per_config = np.zeros(len(qq), dtype=np.int64)
     unseen_per_config = np.zeros(len(qq), dtype=np.int64)
     for f in frames:
         T = fk[f]
-        pts = np.einsum("nij,kj->nki", T[:, :3, :3], frame_points(model.structure, f)) + T[:, None, :3, 3]
+        pts = (
+            np.einsum("nij,kj->nki", T[:, :3, :3], frame_points(model.structure, f))
+            + T[:, None, :3, 3]
+        )
         seen = rig.in_view(pts, margin_px=margin_px)
         uv1, uv2 = rig.project(pts)
         for uv in (uv1, uv2):
@@ -136,7 +150,9 @@ def check_view(
         for _, c, _ in cameras:
             los = c - T[:, :3, 3]
             los /= np.linalg.norm(los, axis=1, keepdims=True)
-            ang = np.maximum(ang, np.arccos(np.clip(np.einsum("ni,ni->n", los, T[:, :3, 2]), -1, 1)))
+            ang = np.maximum(
+                ang, np.arccos(np.clip(np.einsum("ni,ni->n", los, T[:, :3, 2]), -1, 1))
+            )
         max_ang = max(max_ang, float(ang.max()))
         dists.append(np.linalg.norm(T[:, :3, 3], axis=1))
         blocked = occluded.get(f, [np.zeros(seen.shape, dtype=bool)] * 2)
@@ -153,15 +169,25 @@ def check_view(
                 why = "; ".join(
                     f"{int(b[i].sum())} of {b.shape[1]} circles hidden from the {cam} camera by another plate "
                     f"or its own back (clearance {occlusion_margin_px:g} px)"
-                    for (cam, _, _), b in zip(cameras, blocked, strict=True) if b[i].any()
+                    for (cam, _, _), b in zip(cameras, blocked, strict=True)
+                    if b[i].any()
                 )
                 hidden_problems.append(f"{f} at {labels[int(i)]}: {why}")
                 continue
             problems.append(f"{f} at {labels[int(i)]}: {why}")
     problems += hidden_problems
     d = np.concatenate(dists)
-    return ViewReport(not problems, problems, min_margin, max_ang, (float(d.min()), float(d.max())), unseen,
-                      int(per_config.sum()), per_config, unseen_per_config)
+    return ViewReport(
+        not problems,
+        problems,
+        min_margin,
+        max_ang,
+        (float(d.min()), float(d.max())),
+        unseen,
+        int(per_config.sum()),
+        per_config,
+        unseen_per_config,
+    )
 
 
 def visible_heldout(

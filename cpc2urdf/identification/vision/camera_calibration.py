@@ -112,13 +112,19 @@ def list_images(folder: str | Path) -> list[Path]:
     root = Path(folder)
     if not root.is_dir():
         raise InputFileError(root, "no such images folder")
-    files = sorted(p for p in root.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
+    files = sorted(
+        p for p in root.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS
+    )
     if not files:
-        raise InputFileError(root, f"no images in the folder (looked for {', '.join(IMAGE_EXTENSIONS)})")
+        raise InputFileError(
+            root, f"no images in the folder (looked for {', '.join(IMAGE_EXTENSIONS)})"
+        )
     return files
 
 
-def _read_same_size(paths: Sequence[Path], size: tuple[int, int] | None) -> tuple[list[NDArray[np.uint8]], tuple[int, int]]:
+def _read_same_size(
+    paths: Sequence[Path], size: tuple[int, int] | None
+) -> tuple[list[NDArray[np.uint8]], tuple[int, int]]:
     imgs = []
     for p in paths:
         img = read_grey(p)
@@ -126,8 +132,11 @@ def _read_same_size(paths: Sequence[Path], size: tuple[int, int] | None) -> tupl
         if size is None:
             size = this
         elif this != size:
-            raise InputFileError(p, f"image is {this[0]} x {this[1]} px, the first image is {size[0]} x {size[1]} px "
-                                    "(all views of one camera must have one size)")
+            raise InputFileError(
+                p,
+                f"image is {this[0]} x {this[1]} px, the first image is {size[0]} x {size[1]} px "
+                "(all views of one camera must have one size)",
+            )
         imgs.append(img)
     assert size is not None
     return imgs, size
@@ -135,16 +144,25 @@ def _read_same_size(paths: Sequence[Path], size: tuple[int, int] | None) -> tupl
 
 def _outliers(view_rms: dict[str, float]) -> list[str]:
     med = float(np.median(list(view_rms.values())))
-    return [f"{name}: reprojection error {e:.3f} px RMS > {OUTLIER_FACTOR:g} x the median view ({med:.3f} px)"
-            for name, e in view_rms.items() if e > OUTLIER_FACTOR * med]
+    return [
+        f"{name}: reprojection error {e:.3f} px RMS > {OUTLIER_FACTOR:g} x the median view ({med:.3f} px)"
+        for name, e in view_rms.items()
+        if e > OUTLIER_FACTOR * med
+    ]
 
 
 def _flags(fix_k3: bool) -> int:
     return cv2.CALIB_FIX_K3 if fix_k3 else 0
 
 
-def _detect_views(board: Board, paths: Sequence[Path], names: Sequence[str], imgs: Sequence[NDArray[np.uint8]],
-                  on_error: str, problems: list[str]) -> tuple[list[Array], list[Array], list[str]]:
+def _detect_views(
+    board: Board,
+    paths: Sequence[Path],
+    names: Sequence[str],
+    imgs: Sequence[NDArray[np.uint8]],
+    on_error: str,
+    problems: list[str],
+) -> tuple[list[Array], list[Array], list[str]]:
     """The board's points in each view (object points, pixels, the view's name), for every view
     where it is found; the others go to :func:`report_problem` (raised or listed in ``problems``)."""
     obj: list[Array] = []
@@ -161,20 +179,37 @@ def _detect_views(board: Board, paths: Sequence[Path], names: Sequence[str], img
     return obj, pts, found_in
 
 
-def _calibrate(obj: list[Array], img: list[Array], size: tuple[int, int], names: list[str], fix_k3: bool,
-               problems: list[str]) -> CameraCalibration:
+def _calibrate(
+    obj: list[Array],
+    img: list[Array],
+    size: tuple[int, int],
+    names: list[str],
+    fix_k3: bool,
+    problems: list[str],
+) -> CameraCalibration:
     if len(obj) < MIN_VIEWS:
-        raise DegenerateDataError(f"the board was found in {len(obj)} views; camera calibration needs at least {MIN_VIEWS}"
-                                  + (f"; first problem: {problems[0]}" if problems else ""))
+        raise DegenerateDataError(
+            f"the board was found in {len(obj)} views; camera calibration needs at least {MIN_VIEWS}"
+            + (f"; first problem: {problems[0]}" if problems else "")
+        )
     o = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 3) for x in obj]
     p = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 2) for x in img]
-    rms, K, D, _, _, std_i, _, per_view = cv2.calibrateCameraExtended(o, p, size, np.eye(3), np.zeros(5), flags=_flags(fix_k3),
-                                                                     criteria=_CRITERIA)
+    rms, K, D, _, _, std_i, _, per_view = cv2.calibrateCameraExtended(
+        o, p, size, np.eye(3), np.zeros(5), flags=_flags(fix_k3), criteria=_CRITERIA
+    )
     view_rms = {n: float(e) for n, e in zip(names, np.asarray(per_view).ravel(), strict=True)}
     D5 = np.zeros(5)
     D5[: min(5, np.asarray(D).size)] = np.asarray(D, dtype=float).ravel()[:5]
-    return CameraCalibration(np.asarray(K, dtype=float), D5, size, float(rms), view_rms,
-                             np.asarray(std_i, dtype=float).ravel()[:9], _outliers(view_rms), list(problems))
+    return CameraCalibration(
+        np.asarray(K, dtype=float),
+        D5,
+        size,
+        float(rms),
+        view_rms,
+        np.asarray(std_i, dtype=float).ravel()[:9],
+        _outliers(view_rms),
+        list(problems),
+    )
 
 
 def calibrate_camera_images(
@@ -230,20 +265,27 @@ def calibrate_rig_images(
     """
     check_on_error(on_error)
     if board.pose_ambiguity:
-        raise ConfigurationError(f"{board.name}: {board.pose_ambiguity}, so the two cameras' points cannot be matched; "
-                                 "calibrate a rig with a ChArUco board, an asymmetric circle grid or an odd x even chessboard")
+        raise ConfigurationError(
+            f"{board.name}: {board.pose_ambiguity}, so the two cameras' points cannot be matched; "
+            "calibrate a rig with a ChArUco board, an asymmetric circle grid or an odd x even chessboard"
+        )
     root = Path(folder)
     if not root.is_dir():
         raise InputFileError(root, "no such images folder")
     sides = {}
     for sub in ("left", "right"):
         if not (root / sub).is_dir():
-            raise InputFileError(root, f"missing sub-folder {sub}/ (expected left/<view>.png and right/<view>.png)")
+            raise InputFileError(
+                root, f"missing sub-folder {sub}/ (expected left/<view>.png and right/<view>.png)"
+            )
         sides[sub] = {p.stem: p for p in list_images(root / sub)}
     for one, other in (("left", "right"), ("right", "left")):
         lone = sorted(set(sides[one]) - set(sides[other]))
         if lone:
-            raise InputFileError(sides[one][lone[0]], f"no {other}/ image of view {lone[0]!r} (every view needs both images)")
+            raise InputFileError(
+                sides[one][lone[0]],
+                f"no {other}/ image of view {lone[0]!r} (every view needs both images)",
+            )
     views = sorted(sides["left"])
     imgs_l, size = _read_same_size([sides["left"][v] for v in views], None)
     imgs_r, _ = _read_same_size([sides["right"][v] for v in views], size)
@@ -251,14 +293,20 @@ def calibrate_rig_images(
     # 1. each camera alone, from every view where it finds the board
     mono = []
     for side, imgs in (("left", imgs_l), ("right", imgs_r)):
-        obj, pts, names = _detect_views(board, [sides[side][v] for v in views], views, imgs, on_error, problems)
+        obj, pts, names = _detect_views(
+            board, [sides[side][v] for v in views], views, imgs, on_error, problems
+        )
         mono.append(_calibrate(obj, pts, size, names, fix_k3, []))
     left, right = mono
     # 2. point ids fixed by each view's pose; 3. stereoCalibrate from the single-camera intrinsics
     obj_s, pl_s, pr_s, names_s = [], [], [], []
     for v, il, ir in zip(views, imgs_l, imgs_r, strict=True):
-        a = board_pose(il, left.K, left.D, board, image_name=str(sides["left"][v]), max_rms_px=np.inf)
-        b = board_pose(ir, right.K, right.D, board, image_name=str(sides["right"][v]), max_rms_px=np.inf)
+        a = board_pose(
+            il, left.K, left.D, board, image_name=str(sides["left"][v]), max_rms_px=np.inf
+        )
+        b = board_pose(
+            ir, right.K, right.D, board, image_name=str(sides["right"][v]), max_rms_px=np.inf
+        )
         bad = [r for r in (a, b) if isinstance(r, DetectionError)]
         if bad:
             if str(bad[0]) not in problems:
@@ -267,28 +315,64 @@ def calibrate_rig_images(
         assert not isinstance(a, DetectionError) and not isinstance(b, DetectionError)
         both, uv_l, uv_r = common_points(a, b)
         if len(both) < MIN_BOARD_POINTS:
-            report_problem(DetectionError(f"{sides['left'][v]} + {sides['right'][v]}", board.name,
-                                          f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})"),
-                           on_error, problems)
+            report_problem(
+                DetectionError(
+                    f"{sides['left'][v]} + {sides['right'][v]}",
+                    board.name,
+                    f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})",
+                ),
+                on_error,
+                problems,
+            )
             continue
-        obj_s.append(np.ascontiguousarray(board.object_points()[both], dtype=np.float32).reshape(-1, 1, 3))
+        obj_s.append(
+            np.ascontiguousarray(board.object_points()[both], dtype=np.float32).reshape(-1, 1, 3)
+        )
         pl_s.append(np.ascontiguousarray(uv_l, dtype=np.float32).reshape(-1, 1, 2))
         pr_s.append(np.ascontiguousarray(uv_r, dtype=np.float32).reshape(-1, 1, 2))
         names_s.append(v)
     if len(obj_s) < MIN_VIEWS:
-        raise DegenerateDataError(f"{root}: both cameras saw the board in {len(obj_s)} views; rig calibration needs at least "
-                                  f"{MIN_VIEWS}" + (f"; first problem: {problems[0]}" if problems else ""))
+        raise DegenerateDataError(
+            f"{root}: both cameras saw the board in {len(obj_s)} views; rig calibration needs at least "
+            f"{MIN_VIEWS}" + (f"; first problem: {problems[0]}" if problems else "")
+        )
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | _flags(fix_k3)
-    res = cv2.stereoCalibrateExtended(obj_s, pl_s, pr_s, left.K.copy(), left.D.copy(), right.K.copy(), right.D.copy(),
-                                      size, np.eye(3), np.zeros((3, 1)), flags=flags, criteria=_CRITERIA)
+    res = cv2.stereoCalibrateExtended(
+        obj_s,
+        pl_s,
+        pr_s,
+        left.K.copy(),
+        left.D.copy(),
+        right.K.copy(),
+        right.D.copy(),
+        size,
+        np.eye(3),
+        np.zeros((3, 1)),
+        flags=flags,
+        criteria=_CRITERIA,
+    )
     rms, K1, D1, K2, D2, R, T = res[:7]
     per_view = np.asarray(res[-1], dtype=float).reshape(-1, 2)
     view_rms = {v: (float(e[0]), float(e[1])) for v, e in zip(names_s, per_view, strict=True)}
-    rig = StereoRig(np.asarray(K1, dtype=float), np.asarray(D1, dtype=float).ravel()[:5], np.asarray(K2, dtype=float),
-                    np.asarray(D2, dtype=float).ravel()[:5], np.asarray(R, dtype=float), np.asarray(T, dtype=float).ravel(), size)
+    rig = StereoRig(
+        np.asarray(K1, dtype=float),
+        np.asarray(D1, dtype=float).ravel()[:5],
+        np.asarray(K2, dtype=float),
+        np.asarray(D2, dtype=float).ravel()[:5],
+        np.asarray(R, dtype=float),
+        np.asarray(T, dtype=float).ravel(),
+        size,
+    )
     outliers = _outliers({v: max(e) for v, e in view_rms.items()})
     return RigCalibration(rig, float(rms), view_rms, left, right, outliers, problems)
 
 
-__all__ = ["MIN_VIEWS", "OUTLIER_FACTOR", "CameraCalibration", "RigCalibration", "calibrate_camera_images",
-           "calibrate_rig_images", "list_images"]
+__all__ = [
+    "MIN_VIEWS",
+    "OUTLIER_FACTOR",
+    "CameraCalibration",
+    "RigCalibration",
+    "calibrate_camera_images",
+    "calibrate_rig_images",
+    "list_images",
+]

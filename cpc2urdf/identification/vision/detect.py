@@ -117,17 +117,23 @@ def find_blobs(image: ArrayLike, *, dark: bool) -> list[Blob]:
     img = np.asarray(image)
     h, w = img.shape
     imgf = img.astype(float)
-    _, mask = cv2.threshold(img, 0, 255, (cv2.THRESH_BINARY_INV if dark else cv2.THRESH_BINARY) | cv2.THRESH_OTSU)
+    _, mask = cv2.threshold(
+        img, 0, 255, (cv2.THRESH_BINARY_INV if dark else cv2.THRESH_BINARY) | cv2.THRESH_OTSU
+    )
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n <= 1:
         return []
     # Nearest foreground component of every pixel: a blob's window never takes pixels that are
     # closer to another component (a neighbouring circle, the background around the plate).
     inv = np.where(mask > 0, 0, 255).astype(np.uint8)
-    _, voronoi = cv2.distanceTransformWithLabels(inv, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_CCOMP)
+    _, voronoi = cv2.distanceTransformWithLabels(
+        inv, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_CCOMP
+    )
     area_px = stats[1:, cv2.CC_STAT_AREA]
     max_area = 0.05 * h * w
-    candidates = np.flatnonzero((area_px >= math.pi * MIN_BLOB_RADIUS**2) & (area_px <= max_area)) + 1
+    candidates = (
+        np.flatnonzero((area_px >= math.pi * MIN_BLOB_RADIUS**2) & (area_px <= max_area)) + 1
+    )
     kernel_in = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * WINDOW_MARGIN + 1,) * 2)
     kernel_out = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * WINDOW_MARGIN + 5,) * 2)
     pad = WINDOW_MARGIN + 3
@@ -154,7 +160,9 @@ def find_blobs(image: ArrayLike, *, dark: bool) -> list[Blob]:
         cell = voronoi[y0:y1, x0:x1] == voronoi[y0 + iy, x0 + ix]
         others = (labels[y0:y1, x0:x1] != 0) & (own == 0)
         win = (cv2.dilate(own, kernel_in) > 0) & cell & ~others
-        ring = (cv2.dilate(own, kernel_out) > 0) & ~(cv2.dilate(own, kernel_in) > 0) & cell & ~others
+        ring = (
+            (cv2.dilate(own, kernel_out) > 0) & ~(cv2.dilate(own, kernel_in) > 0) & cell & ~others
+        )
         patch = imgf[y0:y1, x0:x1]
         if ring.sum() < 8:
             continue
@@ -233,7 +241,9 @@ def _split(uv: Array, group: list[int], k: int, size: int) -> list[list[int]]:
 
 def _strict_hull(pts: Array, min_turn_deg: float = 12.0) -> list[int]:
     """Indices of the convex-hull corners of ``pts`` (N, 2), dropping near-collinear ones."""
-    hull: list[int] = [int(i) for i in cv2.convexHull(pts.astype(np.float32), returnPoints=False).ravel()]
+    hull: list[int] = [
+        int(i) for i in cv2.convexHull(pts.astype(np.float32), returnPoints=False).ravel()
+    ]
     changed = True
     while changed and len(hull) > 3:
         changed = False
@@ -281,7 +291,9 @@ class PlateMatch:
     size_score: float
 
 
-def _match_design(design: PlateDesign, uv_ideal: Array, area: Array) -> tuple[list[tuple[float, Array, Array, float]], str]:
+def _match_design(
+    design: PlateDesign, uv_ideal: Array, area: Array
+) -> tuple[list[tuple[float, Array, Array, float]], str]:
     """Every ordering of the detected points that fits the design: (size score, perm, H, rms)."""
     L = design.layout[:, :2]
     iL = _strict_hull(L)
@@ -328,7 +340,9 @@ def _match_design(design: PlateDesign, uv_ideal: Array, area: Array) -> tuple[li
     return fits, ""
 
 
-def _unique(fits: list[tuple[float, Array, Array, float]]) -> tuple[tuple[float, Array, Array, float] | None, int]:
+def _unique(
+    fits: list[tuple[float, Array, Array, float]],
+) -> tuple[tuple[float, Array, Array, float] | None, int]:
     ok = [f for f in fits if f[0] <= MARKER_TOL]
     distinct = {tuple(f[1].tolist()) for f in ok}
     if len(distinct) == 1:
@@ -360,13 +374,17 @@ def detect_plates(
     out: dict[str, PlateMatch | DetectionError] = {}
     if img.ndim != 2 or img.dtype != np.uint8:
         for d in designs:
-            out[d.name] = PlateNotFoundError(image_name, d.name, f"expected an 8-bit grey image, got {img.dtype} {img.shape}")
+            out[d.name] = PlateNotFoundError(
+                image_name, d.name, f"expected an 8-bit grey image, got {img.dtype} {img.shape}"
+            )
         return out
     contrast = image_contrast(img)
     if contrast < MIN_CONTRAST:
         for d in designs:
             out[d.name] = PlateNotFoundError(
-                image_name, d.name, f"blank image (grey-level range {contrast:.0f} < {MIN_CONTRAST:.0f})"
+                image_name,
+                d.name,
+                f"blank image (grey-level range {contrast:.0f} < {MIN_CONTRAST:.0f})",
             )
         return out
     Km = np.asarray(K, dtype=float)
@@ -399,7 +417,9 @@ def detect_plates(
                     groups.extend(_split(ideal, grp, k, n))
         groups = [list(t) for t in dict.fromkeys(tuple(sorted(g)) for g in groups)]  # no duplicates
         # Notes per (plate, group): a group that turns out to be another plate is no news.
-        group_notes: dict[str, list[tuple[frozenset[int], str]]] = {d.name: [] for d in group_designs}
+        group_notes: dict[str, list[tuple[frozenset[int], str]]] = {
+            d.name: [] for d in group_designs
+        }
         claimed: dict[frozenset[int], str] = {}
         for grp in groups:
             g = np.array(grp)
@@ -412,11 +432,18 @@ def detect_plates(
                 at = f"group of {len(g)} circles near ({uv[g, 0].mean():.0f}, {uv[g, 1].mean():.0f}) px"
                 if best is None:
                     if n_ok > 1:
-                        group_notes[d.name].append((key, f"{at}: {n_ok} {_AMBIGUOUS} (marker circle not distinguishable)"))
+                        group_notes[d.name].append(
+                            (key, f"{at}: {n_ok} {_AMBIGUOUS} (marker circle not distinguishable)")
+                        )
                     elif why:
                         group_notes[d.name].append((key, f"{at}: {why}"))
                     elif fits:
-                        group_notes[d.name].append((key, f"{at}: circle sizes do not match the plate's marker (score {min(f[0] for f in fits):.2f})"))
+                        group_notes[d.name].append(
+                            (
+                                key,
+                                f"{at}: circle sizes do not match the plate's marker (score {min(f[0] for f in fits):.2f})",
+                            )
+                        )
                     continue
                 score, perm, H, rms = best
                 idx = g[perm]
@@ -424,7 +451,9 @@ def detect_plates(
                     group_notes[d.name].append((key, f"{at}: a circle touches the image border"))
                     continue
                 claimed[key] = d.name
-                candidates[d.name].append((PlateMatch(d.name, uv[idx], ideal[idx], H, rms, score), score))
+                candidates[d.name].append(
+                    (PlateMatch(d.name, uv[idx], ideal[idx], H, rms, score), score)
+                )
         sizes = [len(c) for c in clusters]
         for d in group_designs:
             if candidates[d.name]:
@@ -440,18 +469,26 @@ def detect_plates(
                         f"found groups of {partial} circles, fewer than {d.n_circles} (plate partly outside the image or occluded?)"
                     )
                 elif others:
-                    notes[d.name].append(f"not in the image (the circles found are {', '.join(others)})")
+                    notes[d.name].append(
+                        f"not in the image (the circles found are {', '.join(others)})"
+                    )
                 else:
-                    notes[d.name].append(f"no group of {d.n_circles} circles (groups found: {sizes or 'none'})")
+                    notes[d.name].append(
+                        f"no group of {d.n_circles} circles (groups found: {sizes or 'none'})"
+                    )
     for d in designs:
         c = candidates[d.name]
         if len(c) == 1:
             out[d.name] = c[0][0]
         elif len(c) > 1:
-            out[d.name] = PlateAmbiguousError(image_name, d.name, f"{len(c)} groups of circles match this plate")
+            out[d.name] = PlateAmbiguousError(
+                image_name, d.name, f"{len(c)} groups of circles match this plate"
+            )
         else:
             kind = PlateAmbiguousError if d.name in ambiguous else PlateNotFoundError
-            out[d.name] = kind(image_name, d.name, "; ".join(dict.fromkeys(notes[d.name])) or "not found")
+            out[d.name] = kind(
+                image_name, d.name, "; ".join(dict.fromkeys(notes[d.name])) or "not found"
+            )
     return out
 
 

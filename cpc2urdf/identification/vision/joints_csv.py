@@ -54,8 +54,9 @@ class JointTable:
     q: Array
 
 
-def read_joints_csv(path: str | Path, structure: RobotStructure, *,
-                    aliases: Mapping[str, str] | None = None) -> JointTable:
+def read_joints_csv(
+    path: str | Path, structure: RobotStructure, *, aliases: Mapping[str, str] | None = None
+) -> JointTable:
     """Read a ``joints.csv`` (see the module docstring); joint values in SI ([m], [rad]).
 
     Args:
@@ -70,17 +71,28 @@ def read_joints_csv(path: str | Path, structure: RobotStructure, *,
             joint's limits, a duplicate record.
     """
     p = Path(path)
-    alias = {a: j for a, j in (aliases or {}).items() if j in structure.joint_names and a not in structure.joint_names}
+    alias = {
+        a: j
+        for a, j in (aliases or {}).items()
+        if j in structure.joint_names and a not in structure.joint_names
+    }
     text = read_text_file(p, "a CSV file", encoding="utf-8-sig")
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and not (len(r) == 1 and not r[0].strip())]
+    rows = [
+        r for r in csv.reader(io.StringIO(text)) if r and not (len(r) == 1 and not r[0].strip())
+    ]
     rows = [r for r in rows if not r[0].lstrip().startswith("#")]
     if not rows:
-        raise InputFileError(p, "empty; expected a header 'record,<joint>[unit],...' and one row per record")
+        raise InputFileError(
+            p, "empty; expected a header 'record,<joint>[unit],...' and one row per record"
+        )
     names, scales = [], []
     for col, h in enumerate(rows[0]):
         m = _HEADER.match(h)
         if not m:
-            raise InputFileError(p, f"column {col + 1} header {h!r} must be a name, optionally with a unit like pan[deg]")
+            raise InputFileError(
+                p,
+                f"column {col + 1} header {h!r} must be a name, optionally with a unit like pan[deg]",
+            )
         names.append(m.group(1))
         scales.append(m.group(2))
     if len(set(names)) != len(names):
@@ -91,17 +103,26 @@ def read_joints_csv(path: str | Path, structure: RobotStructure, *,
     unknown = [n for n in joint_cols if n not in structure.joint_names and n not in alias]
     if unknown:
         also = f" (or {', '.join(alias)})" if alias else ""
-        raise InputFileError(p, f"unknown joint column {unknown[0]!r}; joints of {structure.name}: "
-                                f"{', '.join(structure.joint_names)}{also}")
+        raise InputFileError(
+            p,
+            f"unknown joint column {unknown[0]!r}; joints of {structure.name}: "
+            f"{', '.join(structure.joint_names)}{also}",
+        )
     column = {alias.get(n, n): n for n in joint_cols}  # joint -> its column
     if len(column) != len(joint_cols):
         twice = next(j for j in column if sum(alias.get(n, n) == j for n in joint_cols) > 1)
-        raise InputFileError(p, f"joint {twice!r} has two columns: "
-                                f"{' and '.join(n for n in joint_cols if alias.get(n, n) == twice)}")
+        raise InputFileError(
+            p,
+            f"joint {twice!r} has two columns: "
+            f"{' and '.join(n for n in joint_cols if alias.get(n, n) == twice)}",
+        )
     missing = [n for n in structure.joint_names if n not in column]
     if missing:
-        raise InputFileError(p, f"missing joint column {next((a for a, j in alias.items() if j == missing[0]), missing[0])!r} "
-                                "(every joint needs a reading)")
+        raise InputFileError(
+            p,
+            f"missing joint column {next((a for a, j in alias.items() if j == missing[0]), missing[0])!r} "
+            "(every joint needs a reading)",
+        )
     factor = {}
     for n, unit in zip(names, scales, strict=True):
         if n in ("record", "label"):
@@ -111,17 +132,24 @@ def read_joints_csv(path: str | Path, structure: RobotStructure, *,
         if unit is None:
             factor[n] = 1.0
         elif unit not in table:
-            raise InputFileError(p, f"column {n}: unit [{unit}] does not fit a {jt} joint; use one of {sorted(table)}")
+            raise InputFileError(
+                p,
+                f"column {n}: unit [{unit}] does not fit a {jt} joint; use one of {sorted(table)}",
+            )
         else:
             factor[n] = table[unit]
     records, labels, qs = [], [], []
     for k, row in enumerate(rows[1:], start=2):
         if len(row) != len(names):
-            raise InputFileError(p, f"row {k}: {len(row)} values, the header has {len(names)} columns")
+            raise InputFileError(
+                p, f"row {k}: {len(row)} values, the header has {len(names)} columns"
+            )
         d = dict(zip(names, (v.strip() for v in row), strict=True))
         rec = d["record"]
         if not rec or "/" in rec or "\\" in rec:
-            raise InputFileError(p, f"row {k}: record must be a file name without folders, got {rec!r}")
+            raise InputFileError(
+                p, f"row {k}: record must be a file name without folders, got {rec!r}"
+            )
         if rec in records:
             raise InputFileError(p, f"row {k}: record {rec!r} appears twice")
         q = []
@@ -130,14 +158,19 @@ def read_joints_csv(path: str | Path, structure: RobotStructure, *,
             try:
                 v = float(d[n])
             except ValueError:
-                raise InputFileError(p, f"row {k} (record {rec}): {n} must be a number, got {d[n]!r}") from None
+                raise InputFileError(
+                    p, f"row {k} (record {rec}): {n} must be a number, got {d[n]!r}"
+                ) from None
             if not math.isfinite(v):
                 raise InputFileError(p, f"row {k} (record {rec}): {n} must be finite, got {d[n]!r}")
             if not (j.lower - LIMIT_SLACK <= v * factor[n] <= j.upper + LIMIT_SLACK):
                 unit = scales[names.index(n)] or ("m" if j.type == "prismatic" else "rad")
                 lo, hi = j.lower / factor[n], j.upper / factor[n]
-                raise InputFileError(p, f"row {k} (record {rec}): {n} = {d[n]} {unit} is outside the joint limits "
-                                        f"[{lo:.6g}, {hi:.6g}] {unit} (wrong units?)")
+                raise InputFileError(
+                    p,
+                    f"row {k} (record {rec}): {n} = {d[n]} {unit} is outside the joint limits "
+                    f"[{lo:.6g}, {hi:.6g}] {unit} (wrong units?)",
+                )
             q.append(v * factor[n])
         records.append(rec)
         labels.append(d.get("label") or rec)
@@ -148,8 +181,14 @@ def read_joints_csv(path: str | Path, structure: RobotStructure, *,
 
 
 def write_joints_csv(
-    path: str | Path, structure: RobotStructure, records: Sequence[str], q: ArrayLike,
-    labels: Sequence[str] | None = None, *, length: str = "mm", angle: str = "deg",
+    path: str | Path,
+    structure: RobotStructure,
+    records: Sequence[str],
+    q: ArrayLike,
+    labels: Sequence[str] | None = None,
+    *,
+    length: str = "mm",
+    angle: str = "deg",
     columns: Mapping[str, str] | None = None,
 ) -> Path:
     """Write a ``joints.csv`` atomically (lengths in ``length``, angles in ``angle``; ``columns``:
@@ -157,9 +196,13 @@ def write_joints_csv(
     qq = np.asarray(q, dtype=float)
     col = columns or {}
     head = ["record", "label"] + [
-        f"{col.get(j.name, j.name)}[{length if j.type == 'prismatic' else angle}]" for j in structure.joints
+        f"{col.get(j.name, j.name)}[{length if j.type == 'prismatic' else angle}]"
+        for j in structure.joints
     ]
-    scale = [LENGTH_UNITS[length] if j.type == "prismatic" else ANGLE_UNITS[angle] for j in structure.joints]
+    scale = [
+        LENGTH_UNITS[length] if j.type == "prismatic" else ANGLE_UNITS[angle]
+        for j in structure.joints
+    ]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
@@ -177,7 +220,9 @@ def urdf_joint_columns(robot: RobotSpec | CPCModel) -> dict[str, str]:
     if isinstance(robot, UrdfRobot) and robot.names is not None:
         return {u: c for u, c in robot.names.joints.items() if c in joints and u != c}
     src = urdf_source(robot) if isinstance(robot, CPCModel) else None
-    return {u: c for c, u in src.joints.items() if c in joints and u != c} if src is not None else {}
+    return (
+        {u: c for c, u in src.joints.items() if c in joints and u != c} if src is not None else {}
+    )
 
 
 __all__ = ["JointTable", "read_joints_csv", "urdf_joint_columns", "write_joints_csv"]

@@ -117,8 +117,10 @@ def measure_head_images(
     """
     check_on_error(on_error)
     if board is not None and board.pose_ambiguity:
-        raise ConfigurationError(f"{board.name}: {board.pose_ambiguity}, so it gives no unique target pose; "
-                                 "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard")
+        raise ConfigurationError(
+            f"{board.name}: {board.pose_ambiguity}, so it gives no unique target pose; "
+            "use a ChArUco board, an asymmetric circle grid or an odd x even chessboard"
+        )
     root = Path(images_dir)
     if not root.is_dir():
         raise InputFileError(root, "no such images folder")
@@ -153,14 +155,24 @@ def measure_head_images(
                 report_problem(e, on_error, problems)
                 continue
             if (img.shape[1], img.shape[0]) != tuple(cam.image_size):
-                report_problem(RecordError(str(path), target, f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
-                                      f"{cam.image_size[0]} x {cam.image_size[1]}"), on_error, problems)
+                report_problem(
+                    RecordError(
+                        str(path),
+                        target,
+                        f"image is {img.shape[1]} x {img.shape[0]} px, the camera file says "
+                        f"{cam.image_size[0]} x {cam.image_size[1]}",
+                    ),
+                    on_error,
+                    problems,
+                )
                 continue
             r: TargetPose | BoardPose | DetectionError
             if board is not None:
                 r = board_pose(img, cam.K, cam.D, board, image_name=str(path))
             else:
-                r = target_pose(img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias)
+                r = target_pose(
+                    img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias
+                )
             if isinstance(r, DetectionError):
                 report_problem(r, on_error, problems)
                 continue
@@ -175,8 +187,11 @@ def measure_head_images(
                     + (f"; first problem: {problems[0]}" if problems else "")
                 )
     return HeadImageMeasurement(
-        out_l, {c: np.array(v) for c, v in out_q.items()}, {c: np.array(v) for c, v in out_T.items()},
-        {c: np.array(v) for c, v in out_r.items()}, problems,
+        out_l,
+        {c: np.array(v) for c, v in out_q.items()},
+        {c: np.array(v) for c, v in out_T.items()},
+        {c: np.array(v) for c, v in out_r.items()},
+        problems,
     )
 
 

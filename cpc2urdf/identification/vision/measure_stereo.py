@@ -109,12 +109,17 @@ def measure_stereo_images(
         raise InputFileError(root, "no such images folder")
     for sub in STEREO_FOLDERS:
         if not (root / sub).is_dir():
-            raise InputFileError(root, f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)")
+            raise InputFileError(
+                root,
+                f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)",
+            )
     table = read_joints_csv(joints or root / "joints.csv", structure, aliases=joint_aliases)
     plate_boards = check_plate_boards(boards, structure) if boards else None
     designs = [] if plate_boards else list(designs or robot_plate_designs(structure.frames))
     if not designs and not plate_boards:
-        raise ConfigurationError(f"robot {structure.name!r} has no plate frames with a circle layout")
+        raise ConfigurationError(
+            f"robot {structure.name!r} has no plate frames with a circle layout"
+        )
     if tuple(rig.image_size) == (0, 0):
         raise ConfigurationError("the rig has no image size")
     names = list(plate_boards) if plate_boards else [d.name for d in designs]
@@ -133,11 +138,16 @@ def measure_stereo_images(
                 path = find_image(root / sub, rec)
                 try:
                     if path is None:
-                        raise RecordError(f"{sub}/{rec}.*", "all plates", f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})")
+                        raise RecordError(
+                            f"{sub}/{rec}.*",
+                            "all plates",
+                            f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})",
+                        )
                     img = read_grey(path)
                     if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
                         raise RecordError(
-                            str(path), "all plates",
+                            str(path),
+                            "all plates",
                             f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
                         )
                     imgs.append((img, str(path)))
@@ -151,11 +161,21 @@ def measure_stereo_images(
                 continue
             result: dict[str, StereoPlatePose | DetectionError]
             if plate_boards:
-                result = {n: stereo_board_pose(imgs[0][0], imgs[1][0], rig, b, names=(imgs[0][1], imgs[1][1]))
-                          for n, b in plate_boards.items()}
+                result = {
+                    n: stereo_board_pose(
+                        imgs[0][0], imgs[1][0], rig, b, names=(imgs[0][1], imgs[1][1])
+                    )
+                    for n, b in plate_boards.items()
+                }
             else:
-                result = stereo_plate_poses(imgs[0][0], imgs[1][0], rig, designs, names=(imgs[0][1], imgs[1][1]),
-                                            correct_bias=correct_bias)
+                result = stereo_plate_poses(
+                    imgs[0][0],
+                    imgs[1][0],
+                    rig,
+                    designs,
+                    names=(imgs[0][1], imgs[1][1]),
+                    correct_bias=correct_bias,
+                )
             failed = [r for r in result.values() if isinstance(r, DetectionError)]
             for err in failed:
                 report_problem(err, on_error, problems)
@@ -170,7 +190,9 @@ def measure_stereo_images(
                     points[n][i] = r.p_world
                 fit[n][i] = r.fit_rms
                 details[(rec, n)] = r
-        keep = np.array([any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool)
+        keep = np.array(
+            [any(np.isfinite(poses[n][i]).all() for n in names) for i in range(N)], dtype=bool
+        )
         if not keep.any():
             raise DegenerateDataError(
                 f"{root}: no plate could be measured in any of the {N} records"
@@ -178,8 +200,14 @@ def measure_stereo_images(
             )
     idx = np.flatnonzero(keep)
     ms = MeasurementSet(
-        structure, table.q[idx], {n: poses[n][idx] for n in names}, str(root), robot_ref,
-        [table.labels[i] for i in idx], {n: p[idx] for n, p in points.items()}, {n: fit[n][idx] for n in names},
+        structure,
+        table.q[idx],
+        {n: poses[n][idx] for n in names},
+        str(root),
+        robot_ref,
+        [table.labels[i] for i in idx],
+        {n: p[idx] for n, p in points.items()},
+        {n: fit[n][idx] for n in names},
         {
             "description": f"stage-1 measurements of {structure.name} from stereo images in {root}",
             "provenance": {
@@ -188,8 +216,15 @@ def measure_stereo_images(
                 "records_in_joints_csv": N,
                 "records_measured": int(keep.sum()),
                 "ellipse_bias_corrected": bool(correct_bias),
-                "plate_designs": {d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index} for d in designs},
-                **({"plate_boards": {n: b.to_json() for n, b in plate_boards.items()}} if plate_boards else {}),
+                "plate_designs": {
+                    d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index}
+                    for d in designs
+                },
+                **(
+                    {"plate_boards": {n: b.to_json() for n, b in plate_boards.items()}}
+                    if plate_boards
+                    else {}
+                ),
                 "rig": rig.to_json(),
                 "skipped": problems[:200],
             },
@@ -218,25 +253,47 @@ def check_plate_boards(boards: Mapping[str, Board], structure: RobotStructure) -
     out: dict[str, Board] = {}
     for frame, b in boards.items():
         if frame not in known:
-            raise ConfigurationError(f"board {b.name}: robot {structure.name!r} has no frame {frame!r} (frames: {', '.join(known)})")
+            raise ConfigurationError(
+                f"board {b.name}: robot {structure.name!r} has no frame {frame!r} (frames: {', '.join(known)})"
+            )
         if b.pose_ambiguity:
-            raise ConfigurationError(f"board {b.name} for {frame}: {b.pose_ambiguity}, so it gives no unique plate pose")
+            raise ConfigurationError(
+                f"board {b.name} for {frame}: {b.pose_ambiguity}, so it gives no unique plate pose"
+            )
         out[frame] = replace(b, name=frame)
     if len(out) > 1:
         items = list(boards.values())
         if any(b.kind != "charuco" for b in items):
-            raise ConfigurationError("several plates need boards the detector can tell apart in one image: ChArUco boards "
-                                     "with disjoint marker ids (first_marker_id); chessboards and circle grids all look alike")
+            raise ConfigurationError(
+                "several plates need boards the detector can tell apart in one image: ChArUco boards "
+                "with disjoint marker ids (first_marker_id); chessboards and circle grids all look alike"
+            )
         # OpenCV's DICT_NxN_50/100/250/1000 share their first markers (the smaller is a prefix of
         # the larger): ids overlap within a marker size, whatever the dictionary's length
-        spans = sorted((dictionary_family(b.dictionary), b.first_marker_id, b.first_marker_id + b.n_markers, b.name,
-                        b.dictionary) for b in items)
+        spans = sorted(
+            (
+                dictionary_family(b.dictionary),
+                b.first_marker_id,
+                b.first_marker_id + b.n_markers,
+                b.name,
+                b.dictionary,
+            )
+            for b in items
+        )
         for a, c in zip(spans, spans[1:], strict=False):
             if a[0] == c[0] and c[1] < a[2]:
                 same = a[4] if a[4] == c[4] else f"{a[4]} and {c[4]}"
-                raise ConfigurationError(f"boards {a[3]} and {c[3]} share marker ids of {same} ({c[1]}..{min(a[2], c[2]) - 1}); "
-                                         "give each plate's board its own first_marker_id")
+                raise ConfigurationError(
+                    f"boards {a[3]} and {c[3]} share marker ids of {same} ({c[1]}..{min(a[2], c[2]) - 1}); "
+                    "give each plate's board its own first_marker_id"
+                )
     return out
 
 
-__all__ = ["STEREO_FOLDERS", "ImageMeasurement", "check_plate_boards", "dictionary_family", "measure_stereo_images"]
+__all__ = [
+    "STEREO_FOLDERS",
+    "ImageMeasurement",
+    "check_plate_boards",
+    "dictionary_family",
+    "measure_stereo_images",
+]

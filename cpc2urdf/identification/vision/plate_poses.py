@@ -94,7 +94,9 @@ class StereoPlatePose:
     bias_px: float = 0.0
 
 
-def _pose_from_uv(rig: StereoRig, design: PlateDesign, uv_l: Array, uv_r: Array) -> tuple[Array, Array, float]:
+def _pose_from_uv(
+    rig: StereoRig, design: PlateDesign, uv_l: Array, uv_r: Array
+) -> tuple[Array, Array, float]:
     p = rig.triangulate(uv_l, uv_r)
     T = plate_pose_from_points(design.layout, p, what=design.name)
     return T, p, float(registration_rms(T, design.layout, p))
@@ -155,7 +157,11 @@ def stereo_plate_poses(
             uv_l, uv_r = uv_l - off_l, uv_r - off_r
             T, p, rms = _pose_from_uv(rig, d, uv_l, uv_r)
         pl, pr = rig.project(p)
-        epi = float(np.sqrt(np.mean(np.concatenate([np.sum((pl - uv_l) ** 2, 1), np.sum((pr - uv_r) ** 2, 1)]))))
+        epi = float(
+            np.sqrt(
+                np.mean(np.concatenate([np.sum((pl - uv_l) ** 2, 1), np.sum((pr - uv_r) ** 2, 1)]))
+            )
+        )
         if epi > max_epipolar_px:
             out[d.name] = InconsistentDetectionError(
                 f"{names[0]} + {names[1]}",
@@ -175,7 +181,9 @@ def stereo_plate_poses(
         # The printed face must point towards the left camera (origin of world).
         if -T[:3, 3] @ T[:3, 2] <= 0:
             out[d.name] = InconsistentDetectionError(
-                f"{names[0]} + {names[1]}", d.name, "the estimated plate faces away from the cameras"
+                f"{names[0]} + {names[1]}",
+                d.name,
+                "the estimated plate faces away from the cameras",
             )
             continue
         out[d.name] = StereoPlatePose(d.name, T, p, uv_l, uv_r, rms, epi, bias)
@@ -208,7 +216,9 @@ def _solve_pnp(layout: Array, uv: Array, K: Array, D: Array) -> tuple[Array, flo
     ok, rvec, tvec = cv2.solvePnP(obj, img, K, D, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         raise ValueError("solvePnP failed")
-    ok, rvec, tvec = cv2.solvePnP(obj, img, K, D, rvec, tvec, useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+    ok, rvec, tvec = cv2.solvePnP(
+        obj, img, K, D, rvec, tvec, useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE
+    )
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.ravel()
@@ -256,7 +266,9 @@ def target_pose(
         T, rms = _solve_pnp(design.layout, uv, Km, Dm)
     if rms > max_rms_px:
         return InconsistentDetectionError(
-            image_name, design.name, f"reprojection error {rms:.2f} px RMS > {max_rms_px} px (wrong intrinsics?)"
+            image_name,
+            design.name,
+            f"reprojection error {rms:.2f} px RMS > {max_rms_px} px (wrong intrinsics?)",
         )
     return TargetPose(T, uv, rms, bias)
 

@@ -95,7 +95,9 @@ def _dist(D: Array) -> Array:
 # ---- rendering ----------------------------------------------------------------------------------
 
 
-def _plane_coords(view: PinholeView, T_camera_plate: Array, uv: Array) -> tuple[Array, NDArray[np.bool_]]:
+def _plane_coords(
+    view: PinholeView, T_camera_plate: Array, uv: Array
+) -> tuple[Array, NDArray[np.bool_]]:
     """Plate-frame (x, y) [m] of the points seen at pixels ``uv`` (N, 2), and a validity mask."""
     xn = view.undistort_pixels(uv)
     d = np.concatenate([xn, np.ones((xn.shape[0], 1))], axis=1)  # rays in camera frame
@@ -171,7 +173,9 @@ def _plane_patch(view: PinholeView, T_camera_plane: Array, corners: Array) -> _P
     front = bool(-T_cp[:3, 3] @ T_cp[:3, 2] > 0)  # camera on the +z side of the plane
     # Bounding box of the projected outline (densely sampled edges, for distortion), padded.
     s = np.linspace(0.0, 1.0, 33)[:, None]
-    edges = np.concatenate([corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0)
+    edges = np.concatenate(
+        [corners_c[i] * (1 - s) + corners_c[(i + 1) % 4] * s for i in range(4)], axis=0
+    )
     uv_edges = PinholeView(view.K, view.D, view.image_size).project(edges)
     u0 = max(int(np.floor(uv_edges[:, 0].min())) - 3, 0)
     u1 = min(int(np.ceil(uv_edges[:, 0].max())) + 3, w - 1)
@@ -204,7 +208,9 @@ def _render(
     """Draw ``items`` far to near with ``draw``, then blur, add noise and quantise to 8 bits."""
     w, h = view.image_size
     img = np.full((h, w), float(background))
-    order = sorted(items, key=lambda p: -float((view.T_camera_world @ np.asarray(p[1], dtype=float))[2, 3]))
+    order = sorted(
+        items, key=lambda p: -float((view.T_camera_world @ np.asarray(p[1], dtype=float))[2, 3])
+    )
     for item, T in order:
         draw(img, view, item, np.asarray(T, dtype=float), supersample)
     img *= 255.0
@@ -281,11 +287,21 @@ def render_view(
         Image, shape (height, width), dtype uint8.
     """
     return _render(
-        view, plates, _draw_plate, background, supersample, blur_sigma, noise_sigma, rng, "render_view"
+        view,
+        plates,
+        _draw_plate,
+        background,
+        supersample,
+        blur_sigma,
+        noise_sigma,
+        rng,
+        "render_view",
     )
 
 
-def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Array, supersample: int) -> None:
+def _draw_board(
+    img: Array, view: PinholeView, board: Board, T_world_board: Array, supersample: int
+) -> None:
     """Composite one standard board (:mod:`~cpc2urdf.identification.vision.boards.board`) into ``img``
     in place. Pixels where the board's texture changes (its centre and four corners disagree) are
     supersampled (``supersample`` x ``supersample`` samples from the local Jacobian of the plane
@@ -302,10 +318,14 @@ def _draw_board(img: Array, view: PinholeView, board: Board, T_world_board: Arra
         for c0 in range(0, len(idx), 8192):  # chunks keep the (n, S) samples small
             sl = idx[c0 : c0 + 8192]
             Js = J[sl]
-            sx = xy[sl, 0:1] + Js[:, 0, 0:1] * duv[:, 0] + Js[:, 0, 1:2] * duv[:, 1]  # (n, S); einsum is 5x slower
+            sx = (
+                xy[sl, 0:1] + Js[:, 0, 0:1] * duv[:, 0] + Js[:, 0, 1:2] * duv[:, 1]
+            )  # (n, S); einsum is 5x slower
             sy = xy[sl, 1:2] + Js[:, 1, 0:1] * duv[:, 0] + Js[:, 1, 1:2] * duv[:, 1]
             flat = np.stack([sx.ravel(), sy.ravel()], axis=1)
-            inside = ((flat[:, 0] >= x0) & (flat[:, 0] <= x1) & (flat[:, 1] >= y0) & (flat[:, 1] <= y1)).astype(float)
+            inside = (
+                (flat[:, 0] >= x0) & (flat[:, 0] <= x1) & (flat[:, 1] >= y0) & (flat[:, 1] <= y1)
+            ).astype(float)
             level = board.reflectance(flat) if front else np.full(len(flat), PLATE_BACK_LEVEL)
             a_out[c0 : c0 + 8192] = inside.reshape(sx.shape).mean(axis=1)
             p_out[c0 : c0 + 8192] = (inside * level).reshape(sx.shape).mean(axis=1)
@@ -355,7 +375,15 @@ def render_board_view(
         Image, shape (height, width), dtype uint8.
     """
     return _render(
-        view, boards, _draw_board, background, supersample, blur_sigma, noise_sigma, rng, "render_board_view"
+        view,
+        boards,
+        _draw_board,
+        background,
+        supersample,
+        blur_sigma,
+        noise_sigma,
+        rng,
+        "render_board_view",
     )
 
 
@@ -393,7 +421,11 @@ def hidden_circles(
         s = np.linspace(0.0, 1.0, 17)[:, None]
         edge = np.concatenate([c[i] * (1 - s) + c[(i + 1) % 4] * s for i in range(4)])
         ok = bool(np.all(edge[:, 2] > NEAR_CLIP))
-        polys.append(PinholeView(view.K, view.D, view.image_size).project(edge).astype(np.float32) if ok else None)
+        polys.append(
+            PinholeView(view.K, view.D, view.image_size).project(edge).astype(np.float32)
+            if ok
+            else None
+        )
     out: dict[str, int] = {}
     for a, (d, T) in enumerate(items):
         T_cp = view.T_camera_world @ T
@@ -404,7 +436,12 @@ def hidden_circles(
         uv = view.project(d.layout @ T[:3, :3].T + T[:3, 3])
         r_px = d.radii * view.K[0, 0] / pc[:, 2]
         clear = r_px + margin_px
-        hidden = (uv[:, 0] < clear) | (uv[:, 0] > w - 1 - clear) | (uv[:, 1] < clear) | (uv[:, 1] > h - 1 - clear)
+        hidden = (
+            (uv[:, 0] < clear)
+            | (uv[:, 0] > w - 1 - clear)
+            | (uv[:, 1] < clear)
+            | (uv[:, 1] > h - 1 - clear)
+        )
         for b, poly in enumerate(polys):
             if b == a or poly is None or depth[b] >= depth[a]:
                 continue
@@ -465,8 +502,10 @@ def occluded_circles(
             clear = s * (d.radii[None, :] + margin_px * length / focal_px)
             x0, x1, y0, y1 = db.outline
             inside = (
-                (local[..., 0] > x0 - clear) & (local[..., 0] < x1 + clear)
-                & (local[..., 1] > y0 - clear) & (local[..., 1] < y1 + clear)
+                (local[..., 0] > x0 - clear)
+                & (local[..., 0] < x1 + clear)
+                & (local[..., 1] > y0 - clear)
+                & (local[..., 1] < y1 + clear)
             )
             hidden |= crosses & inside
         out[d.name] = hidden

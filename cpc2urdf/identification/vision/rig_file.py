@@ -92,8 +92,9 @@ def _open(path: Path) -> cv2.FileStorage:
     text = read_text_file(path, "an OpenCV FileStorage YAML rig file")
     if _nesting_depth(text) > RIG_MAX_DEPTH:
         raise InputFileError(
-            path, f"nested more than {RIG_MAX_DEPTH} levels deep; a rig file holds matrices "
-            "(K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)"
+            path,
+            f"nested more than {RIG_MAX_DEPTH} levels deep; a rig file holds matrices "
+            "(K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)",
         )
     _refuse_duplicate_keys(text, path)
     # OpenCV's YAML parser insists on the "%YAML:1.0" header; hand-written files often lack it.
@@ -126,14 +127,19 @@ def _refuse_duplicate_keys(text: str, path: Path) -> None:
         seen[key] = number
 
 
-def _node(fs: cv2.FileStorage, key: str, path: Path, *, required: bool = True) -> tuple[str, cv2.FileNode | None]:
+def _node(
+    fs: cv2.FileStorage, key: str, path: Path, *, required: bool = True
+) -> tuple[str, cv2.FileNode | None]:
     for name in ALIASES.get(key, (key,)):
         n = fs.getNode(name)
         if not n.empty() and not n.isNone():
             return name, n
     if required:
         names = " or ".join(ALIASES.get(key, (key,)))
-        raise InputFileError(path, f"missing key {names} (expected K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)")
+        raise InputFileError(
+            path,
+            f"missing key {names} (expected K1, D1, K2, D2, R, T as written by cv2.stereoCalibrate)",
+        )
     return key, None
 
 
@@ -149,7 +155,9 @@ def _matrix(node: cv2.FileNode, name: str, path: Path) -> Array:
         except cv2.error:
             mat = None
         if mat is None:
-            raise InputFileError(path, f"{name} is not a matrix (expected !!opencv-matrix or a list of numbers)")
+            raise InputFileError(
+                path, f"{name} is not a matrix (expected !!opencv-matrix or a list of numbers)"
+            )
         m = np.asarray(mat, dtype=float)
     if not np.all(np.isfinite(m)):
         raise InputFileError(path, f"{name} contains NaN or infinite values")
@@ -158,7 +166,9 @@ def _matrix(node: cv2.FileNode, name: str, path: Path) -> Array:
 
 def _shaped(m: Array, name: str, shape: tuple[int, ...], path: Path) -> Array:
     if m.size != int(np.prod(shape)):
-        raise InputFileError(path, f"{name} must have {' x '.join(map(str, shape))} values, got shape {m.shape}")
+        raise InputFileError(
+            path, f"{name} must have {' x '.join(map(str, shape))} values, got shape {m.shape}"
+        )
     return m.reshape(shape)
 
 
@@ -183,7 +193,9 @@ def _image_size(fs: cv2.FileStorage, path: Path) -> tuple[int, int] | None:
         if not n.empty() and not n.isNone():
             v = _matrix(n, name, path).ravel()
             if v.size != 2 or np.any(v <= 0) or np.any(v != np.round(v)):
-                raise InputFileError(path, f"{name} must be [width, height] in pixels, got {v.tolist()}")
+                raise InputFileError(
+                    path, f"{name} must be [width, height] in pixels, got {v.tolist()}"
+                )
             return int(v[0]), int(v[1])
     w, h = fs.getNode("image_width"), fs.getNode("image_height")
     if not w.empty() and not h.empty():
@@ -193,7 +205,9 @@ def _image_size(fs: cv2.FileStorage, path: Path) -> tuple[int, int] | None:
     return None
 
 
-def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None = None) -> StereoRig:
+def load_rig(
+    path: str | os.PathLike[str], *, image_size: tuple[int, int] | None = None
+) -> StereoRig:
     """Read a stereo rig from an OpenCV FileStorage file (see the module docstring).
 
     Args:
@@ -220,7 +234,8 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
                 K = _shaped(m, name, (3, 3), p)
                 if K[0, 0] <= 0 or K[1, 1] <= 0 or np.any(K[2] != [0.0, 0.0, 1.0]) or K[1, 0] != 0:
                     raise InputFileError(
-                        p, f"{name} is not a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0"
+                        p,
+                        f"{name} is not a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
                     )
                 arrays[key] = K
             elif key.startswith("D"):
@@ -232,7 +247,8 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
                 defect = float(np.max(np.abs(R.T @ R - np.eye(3))))
                 if defect > RIG_ROTATION_TOL or np.linalg.det(R) <= 0:
                     raise InputFileError(
-                        p, f"R is not a rotation matrix (max |R^T R - I| = {defect:.3g}, det = {np.linalg.det(R):.6g})"
+                        p,
+                        f"R is not a rotation matrix (max |R^T R - I| = {defect:.3g}, det = {np.linalg.det(R):.6g})",
                     )
                 U, _, Vt = np.linalg.svd(R)
                 arrays[key] = U @ Vt
@@ -244,7 +260,9 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
         else:
             unit = unit_node.string() if unit_node.isString() else ""
             if unit not in LENGTH_UNITS:
-                raise InputFileError(p, f"units must be one of {sorted(LENGTH_UNITS)} (the unit of T), got {unit!r}")
+                raise InputFileError(
+                    p, f"units must be one of {sorted(LENGTH_UNITS)} (the unit of T), got {unit!r}"
+                )
         size = _image_size(fs, p)
     finally:
         fs.release()
@@ -263,14 +281,20 @@ def load_rig(path: str | os.PathLike[str], *, image_size: tuple[int, int] | None
     if size is None:
         size = image_size
     elif image_size is not None and tuple(image_size) != size:
-        raise InputFileError(p, f"image_size {list(size)} differs from the images' size {list(image_size)}")
+        raise InputFileError(
+            p, f"image_size {list(size)} differs from the images' size {list(image_size)}"
+        )
     if size is None:
         raise InputFileError(p, "missing key image_size ([width, height] in pixels)")
     return StereoRig(arrays["K1"], arrays["D1"], arrays["K2"], arrays["D2"], arrays["R"], T, size)
 
 
 def save_rig(
-    rig: StereoRig, path: str | os.PathLike[str], *, units: str = "m", extra: Sequence[tuple[str, Any]] = ()
+    rig: StereoRig,
+    path: str | os.PathLike[str],
+    *,
+    units: str = "m",
+    extra: Sequence[tuple[str, Any]] = (),
 ) -> Path:
     """Write ``rig`` as an OpenCV FileStorage YAML file, atomically.
 
@@ -285,17 +309,20 @@ def save_rig(
     """
     if units not in LENGTH_UNITS:
         raise ValueError(f"units must be one of {sorted(LENGTH_UNITS)}, got {units!r}")
-    return _write_filestorage(path, [
-        ("K1", np.asarray(rig.K1, dtype=np.float64)),
-        ("D1", np.asarray(rig.D1, dtype=np.float64).reshape(1, -1)),
-        ("K2", np.asarray(rig.K2, dtype=np.float64)),
-        ("D2", np.asarray(rig.D2, dtype=np.float64).reshape(1, -1)),
-        ("R", np.asarray(rig.R, dtype=np.float64)),
-        ("T", (np.asarray(rig.T, dtype=np.float64) / LENGTH_UNITS[units]).reshape(3, 1)),
-        ("image_size", np.array([[rig.image_size[0], rig.image_size[1]]], dtype=np.int32)),
-        ("units", units),
-        *extra,
-    ])
+    return _write_filestorage(
+        path,
+        [
+            ("K1", np.asarray(rig.K1, dtype=np.float64)),
+            ("D1", np.asarray(rig.D1, dtype=np.float64).reshape(1, -1)),
+            ("K2", np.asarray(rig.K2, dtype=np.float64)),
+            ("D2", np.asarray(rig.D2, dtype=np.float64).reshape(1, -1)),
+            ("R", np.asarray(rig.R, dtype=np.float64)),
+            ("T", (np.asarray(rig.T, dtype=np.float64) / LENGTH_UNITS[units]).reshape(3, 1)),
+            ("image_size", np.array([[rig.image_size[0], rig.image_size[1]]], dtype=np.int32)),
+            ("units", units),
+            *extra,
+        ],
+    )
 
 
 def _write_filestorage(path: str | os.PathLike[str], entries: list[tuple[str, Any]]) -> Path:
@@ -349,27 +376,40 @@ def load_camera(path: str | os.PathLike[str]) -> tuple[Array, Array, tuple[int, 
         kname, K = found["K"]
         K = _shaped(K, kname, (3, 3), p)
         if K[0, 0] <= 0 or K[1, 1] <= 0 or np.any(K[2] != [0.0, 0.0, 1.0]) or K[1, 0] != 0:
-            raise InputFileError(p, f"{kname} is not a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+            raise InputFileError(
+                p,
+                f"{kname} is not a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
+            )
         D = _distortion(found["D"][1], found["D"][0], p)
         size = _image_size(fs, p)
     finally:
         fs.release()
     if size is None:
-        raise InputFileError(p, "missing key image_size ([width, height] in pixels) or image_width + image_height")
+        raise InputFileError(
+            p, "missing key image_size ([width, height] in pixels) or image_width + image_height"
+        )
     return K, D, size
 
 
 def save_camera(
-    K: Array, D: Array, image_size: tuple[int, int], path: str | os.PathLike[str], *, extra: Sequence[tuple[str, Any]] = ()
+    K: Array,
+    D: Array,
+    image_size: tuple[int, int],
+    path: str | os.PathLike[str],
+    *,
+    extra: Sequence[tuple[str, Any]] = (),
 ) -> Path:
     """Write one camera's intrinsics (``K``, ``D``, ``image_size``) as FileStorage YAML, atomically;
     ``extra`` (name, matrix or string) entries follow (e.g. the calibration's ``rms``)."""
-    return _write_filestorage(path, [
-        ("K", np.asarray(K, dtype=np.float64)),
-        ("D", np.asarray(D, dtype=np.float64).reshape(1, -1)),
-        ("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32)),
-        *extra,
-    ])
+    return _write_filestorage(
+        path,
+        [
+            ("K", np.asarray(K, dtype=np.float64)),
+            ("D", np.asarray(D, dtype=np.float64).reshape(1, -1)),
+            ("image_size", np.array([[image_size[0], image_size[1]]], dtype=np.int32)),
+            *extra,
+        ],
+    )
 
 
 __all__ = ["ALIASES", "CAMERA_ALIASES", "load_camera", "load_rig", "save_camera", "save_rig"]

@@ -64,7 +64,14 @@ class StereoRig:
     image_size: tuple[int, int] = (1280, 1024)
 
     def __post_init__(self) -> None:
-        for name, shape in (("K1", (3, 3)), ("K2", (3, 3)), ("D1", (5,)), ("D2", (5,)), ("R", (3, 3)), ("T", (3,))):
+        for name, shape in (
+            ("K1", (3, 3)),
+            ("K2", (3, 3)),
+            ("D1", (5,)),
+            ("D2", (5,)),
+            ("R", (3, 3)),
+            ("T", (3,)),
+        ):
             a = np.array(getattr(self, name), dtype=float).reshape(shape)
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"stereo rig {name} must be finite")
@@ -165,7 +172,9 @@ class StereoRig:
         a = np.asarray(uv_left, dtype=float)
         b = np.asarray(uv_right, dtype=float)
         if a.shape != b.shape or a.shape[-1] != 2:
-            raise ValueError(f"pixel arrays must both have shape (..., 2), got {a.shape} and {b.shape}")
+            raise ValueError(
+                f"pixel arrays must both have shape (..., 2), got {a.shape} and {b.shape}"
+            )
         out = np.full((*a.shape[:-1], 3), np.nan)
         fa, fb = a.reshape(-1, 2), b.reshape(-1, 2)
         ok = np.all(np.isfinite(fa), axis=1) & np.all(np.isfinite(fb), axis=1)
@@ -197,7 +206,10 @@ class StereoRig:
         ok = np.ones(p.shape[:-1], dtype=bool)
         uvs = self.project(p)
         w, h = self.image_size
-        for which, uv, K, D in (("left", uvs[0], self.K1, self.D1), ("right", uvs[1], self.K2, self.D2)):
+        for which, uv, K, D in (
+            ("left", uvs[0], self.K1, self.D1),
+            ("right", uvs[1], self.K2, self.D2),
+        ):
             T = inverse(self.T_world_camera(which))
             pc = p @ T[:3, :3].T + T[:3, 3]
             z = pc[..., 2]
@@ -211,7 +223,9 @@ class StereoRig:
 
     def _max_r2(self, K: Array, D: Array) -> float:
         w, h = self.image_size
-        corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], dtype=float).reshape(-1, 1, 2)
+        corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], dtype=float).reshape(
+            -1, 1, 2
+        )
         n = cv2.undistortPoints(corners, K, D).reshape(-1, 2)
         return float(np.max(np.sum(n**2, axis=1))) * 1.0001
 

@@ -157,8 +157,15 @@ TARGET_MARKER_INDEX = 0  # the corner disk at row 0, column 0 is the larger orie
 TARGET_MARKER_RADIUS = 0.014  # [m]
 TARGET_SIZE = (0.240, 0.240)  # [m] plate outline (x, y), centred on the target origin
 TARGET_LAYOUT: Array = np.array(
-    [((c - (TARGET_COLS - 1) / 2) * TARGET_PITCH, (r - (TARGET_ROWS - 1) / 2) * TARGET_PITCH, 0.0)
-     for r in range(TARGET_ROWS) for c in range(TARGET_COLS)]
+    [
+        (
+            (c - (TARGET_COLS - 1) / 2) * TARGET_PITCH,
+            (r - (TARGET_ROWS - 1) / 2) * TARGET_PITCH,
+            0.0,
+        )
+        for r in range(TARGET_ROWS)
+        for c in range(TARGET_COLS)
+    ]
 )  # (25, 3) [m], disk k at row k // 5, column k % 5
 
 

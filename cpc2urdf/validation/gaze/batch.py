@@ -46,14 +46,18 @@ from cpc2urdf.validation.gaze.result import STATUSES
 BATCH_STATUSES = STATUSES  # indexed by the kernels' status codes (kernels.S_FIXATED, ...)
 TABLE_SIZE = 256  # starts in the table
 TABLE_SEED = 0
-TABLE_TARGET_DISTANCE = 1.0  # [m]: each table entry is the policy's answer for a target this far along its axis
+TABLE_TARGET_DISTANCE = (
+    1.0  # [m]: each table entry is the policy's answer for a target this far along its axis
+)
 N_STARTS = 3  # starts tried per target at most (a further one only if undecided)
 BATCH_MAX_ITERATIONS = 60
 # most iterations one solve_point reports: its starts, each a policy phase and a polish, twice
 # with the zero-version fallback
 MAX_SOLVE_ITERATIONS = 2 * N_STARTS * (BATCH_MAX_ITERATIONS + kernels.POLISH_ITERATIONS)
 EXACT_NULL = 1e-12  # [-]: null_rel on heads that can fixate exactly
-VERSION_WEIGHT = 1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
+VERSION_WEIGHT = (
+    1e8  # [-]: zero-version task vs the weighted home (scaled unknowns; effectively a constraint)
+)
 # [-]: largest weak eigenvalue ratio (4th / 1st of the pointing task at home) of a binocular head
 # that cannot fixate exactly: above it, the 4th direction is the head's to point with
 WEAK_RATIO = 1e-4
@@ -166,7 +170,9 @@ class CompiledGaze:
         self.exact = exact
         self.min_distance = MIN_VIEWING_DISTANCE if min_distance is None else float(min_distance)
         if not (math.isfinite(self.min_distance) and self.min_distance >= 0.0):
-            raise ConfigurationError(f"min_distance must be a finite distance >= 0 [m], got {min_distance!r}")
+            raise ConfigurationError(
+                f"min_distance must be a finite distance >= 0 [m], got {min_distance!r}"
+            )
         self.ch = kernels.pack(chain, version_row, VERSION_WEIGHT, self.min_distance)
         self.version_row = version_row
         self.tolerance = GAZE_POINTING_TOL if tolerance is None else float(tolerance)
@@ -191,16 +197,27 @@ class CompiledGaze:
             if self.disparity_head and not exact:
                 self.null_rel = NEAR_NULL
         self.n = len(robot.joint_names)
-        self.threads = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        self._qin = np.zeros(2 * self.n)  # never written: the kernel's q_current/q_start when neither is given
+        self.threads = max(
+            1,
+            len(os.sched_getaffinity(0))
+            if hasattr(os, "sched_getaffinity")
+            else os.cpu_count() or 1,
+        )
+        self._qin = np.zeros(
+            2 * self.n
+        )  # never written: the kernel's q_current/q_start when neither is given
         self._out_size = kernels.out_size(self.n, self.S)
         self._home_centre = self._centre()
         self._pack()
-        self.table_targets = np.full((TABLE_SIZE, 3), np.nan)  # the policy table's targets (NaN: a seeded entry)
+        self.table_targets = np.full(
+            (TABLE_SIZE, 3), np.nan
+        )  # the policy table's targets (NaN: a seeded entry)
         if policy_table:
             self._policy_table()
         self.structural_null = self._structural_null()
-        if self.structural_null:  # the kernels' null cut near a fixating posture (kernels.BINOCULAR_NULL)
+        if (
+            self.structural_null
+        ):  # the kernels' null cut near a fixating posture (kernels.BINOCULAR_NULL)
             self.ch[13][3] = kernels.BINOCULAR_NULL
         if policy_table or self.structural_null:
             self._pack()  # the kernels' copy of the head: the new table and null cut
@@ -211,10 +228,22 @@ class CompiledGaze:
         chain = self.chain
         robot = chain.robot
         self.F, self.I = kernels.pack_flat(
-            self.ch, chain.lower, chain.upper, self.sw, self._table_T,
+            self.ch,
+            chain.lower,
+            chain.upper,
+            self.sw,
+            self._table_T,
             (chain.robot_A, chain.robot_b, robot.lower, robot.upper, chain.robot_pinv),
-            chain.joint_index, self._held, self._still, N_STARTS, BATCH_MAX_ITERATIONS, self.null_rel,
-            self.tolerance, self.baseline, self.disparity_head and not self.exact, self._home_centre,
+            chain.joint_index,
+            self._held,
+            self._still,
+            N_STARTS,
+            BATCH_MAX_ITERATIONS,
+            self.null_rel,
+            self.tolerance,
+            self.baseline,
+            self.disparity_head and not self.exact,
+            self._home_centre,
         )
         # per thread, its solve_flat workspace (see _scratch), made again with the head: the
         # reference posture's cached scores are of the table packed here
@@ -222,7 +251,9 @@ class CompiledGaze:
 
     def _fk(self, u: Array, b: Array | None = None) -> tuple[Array, Array]:
         ws = self._ws
-        kernels.fk(self.ch, np.ascontiguousarray(u, dtype=float), self.chain.b if b is None else b, *ws[:5])
+        kernels.fk(
+            self.ch, np.ascontiguousarray(u, dtype=float), self.chain.b if b is None else b, *ws[:5]
+        )
         return ws[3].copy(), ws[4].copy()
 
     def _baseline(self) -> float:
@@ -250,7 +281,9 @@ class CompiledGaze:
         rng = np.random.default_rng(TABLE_SEED)
         U = np.tile(self.home_u, (TABLE_SIZE, 1))
         revolute = [v for v in range(ch.m) if ch.weight[v] < 10.0]
-        spread = [v for v in revolute if not ch.eye[v]] or [v for v in revolute if ch.lower[v] < ch.upper[v]]
+        spread = [v for v in revolute if not ch.eye[v]] or [
+            v for v in revolute if ch.lower[v] < ch.upper[v]
+        ]
         for v in spread:
             U[:, v] = rng.uniform(ch.lower[v], ch.upper[v], TABLE_SIZE)
         self._set_table(U)
@@ -268,7 +301,11 @@ class CompiledGaze:
             Z[g] = z / max(float(np.linalg.norm(z)), 1e-300)
         self.table_u, self.table_o, self.table_z = U, O, Z
         # the kernels' layout: one column per entry
-        self._table_T = (np.ascontiguousarray(U.T), np.ascontiguousarray(O.T), np.ascontiguousarray(Z.T))
+        self._table_T = (
+            np.ascontiguousarray(U.T),
+            np.ascontiguousarray(O.T),
+            np.ascontiguousarray(Z.T),
+        )
 
     def _policy_table(self) -> None:
         """Each seeded entry replaced by the policy's own answer (from the middle of the limits)
@@ -421,7 +458,9 @@ class CompiledGaze:
         warm-started at readings ``q_start`` (shape (n,)) when given: a new array, the output of
         :func:`~cpc2urdf.validation.gaze.kernels.solve_flat` (status, iterations, readings,
         errors, misses, fixation point, vergence, limit flags, the target)."""
-        if not p.flags.carray:  # a view, read-only: the kernel takes (and is compiled for) a plain array
+        if (
+            not p.flags.carray
+        ):  # a view, read-only: the kernel takes (and is compiled for) a plain array
             p = np.array(p, dtype=float)
         if q_current is None and q_start is None:
             return self.solve_target(p)
@@ -472,7 +511,9 @@ class CompiledGaze:
         if q_current is not None:
             Q = np.asarray(q_current, dtype=float)
             if Q.shape != (n,) or not np.all(np.isfinite(Q)):
-                raise ConfigurationError(f"q_current must be {n} finite readings, got shape {Q.shape}")
+                raise ConfigurationError(
+                    f"q_current must be {n} finite readings, got shape {Q.shape}"
+                )
             qin[:n] = Q
             mode |= 1
         OUT = np.empty((N, kernels.out_size(n, self.S)))
@@ -490,8 +531,14 @@ class CompiledGaze:
             shares = list(zip([0, *ends[:-1]], ends, strict=True))
             T = np.ascontiguousarray(P[order])
             OUT_dealt = np.empty_like(OUT)
-            list(_pool(threads).map(lambda ab: kernels.solve_flat_many(
-                self.F, self.I, T[ab[0]:ab[1]], qin, mode, OUT_dealt[ab[0]:ab[1]]), shares))
+            list(
+                _pool(threads).map(
+                    lambda ab: kernels.solve_flat_many(
+                        self.F, self.I, T[ab[0] : ab[1]], qin, mode, OUT_dealt[ab[0] : ab[1]]
+                    ),
+                    shares,
+                )
+            )
             OUT[order] = OUT_dealt
         elif N:
             kernels.solve_flat_many(self.F, self.I, P, qin, mode, OUT)
@@ -525,7 +572,9 @@ class CompiledGaze:
         ang = np.radians(30.0) * np.sqrt(rng.uniform(0, 1, n))
         phi = rng.uniform(0, 2 * math.pi, n)
         dist = rng.uniform(0.4, 3.0, n)
-        d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y)
+        d = np.cos(ang)[:, None] * z + np.sin(ang)[:, None] * (
+            np.cos(phi)[:, None] * x + np.sin(phi)[:, None] * y
+        )
         return c + dist[:, None] * d  # type: ignore[no-any-return]
 
     def disparity_report(self, n: int = 400, seed: int = 0) -> dict[str, Any]:

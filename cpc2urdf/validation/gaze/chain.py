@@ -207,10 +207,14 @@ def build_chain(
     if len(cameras) not in (1, 2):
         raise ConfigurationError(f"need one or two camera frames, got {list(cameras)}")
     if len(cameras) == 2 and cameras[0] == cameras[1]:
-        raise ConfigurationError(f"camera frame {cameras[0]!r} is named twice; give two different "
-                                 "frames, or one for a single camera")
+        raise ConfigurationError(
+            f"camera frame {cameras[0]!r} is named twice; give two different "
+            "frames, or one for a single camera"
+        )
     if rigid not in RIGID_MODES:
-        raise ConfigurationError(f"unknown rigid-stereo mode {rigid!r}; expected one of {', '.join(RIGID_MODES)}")
+        raise ConfigurationError(
+            f"unknown rigid-stereo mode {rigid!r}; expected one of {', '.join(RIGID_MODES)}"
+        )
     model = robot.model
     fids = [robot.frame_id(c) for c in cameras]
     names = robot.joint_names
@@ -225,7 +229,10 @@ def build_chain(
     chain_of = {jid: k for k, jid in enumerate(on_path)}
     K = len(on_path)
     parent = np.array([chain_of.get(model.parents[j], -1) for j in on_path], dtype=np.int64)
-    jtype = np.array([PRISMATIC if robot.joint_kinds[j - 1] == "prismatic" else REVOLUTE for j in on_path], dtype=np.int64)
+    jtype = np.array(
+        [PRISMATIC if robot.joint_kinds[j - 1] == "prismatic" else REVOLUTE for j in on_path],
+        dtype=np.int64,
+    )
     axis = np.array([_axis(model, j) for j in on_path]).reshape(K, 3)
     R = np.array([model.jointPlacements[j].rotation for j in on_path]).reshape(K, 3, 3)
     t = np.array([model.jointPlacements[j].translation for j in on_path]).reshape(K, 3)
@@ -240,7 +247,9 @@ def build_chain(
         for name in joints:
             robot.joint_index(name)  # UnknownNameError listing the robot's joints
             if name not in chain_names:
-                raise ConfigurationError(f"joint {name!r} moves none of the cameras {list(cameras)} (on their paths: {chain_names})")
+                raise ConfigurationError(
+                    f"joint {name!r} moves none of the cameras {list(cameras)} (on their paths: {chain_names})"
+                )
             if name not in moving:
                 moving.append(name)
     mimic = _mimics(robot.urdf)
@@ -249,18 +258,24 @@ def build_chain(
         for name in coupling.joints:
             robot.joint_index(name)
             if name not in chain_names:
-                raise ConfigurationError(f"coupled joint {name!r} moves none of the cameras {list(cameras)}")
+                raise ConfigurationError(
+                    f"coupled joint {name!r} moves none of the cameras {list(cameras)}"
+                )
     # the unknowns: moving joints that are neither mimic followers nor coupled, then the coupling's
     drivers = [n for n in moving if n not in coupled and not (n in mimic and mimic[n][0] in names)]
     variables = list(drivers) + (list(coupling.variables) if coupling is not None else [])
     m = len(variables)
     if m == 0:
         raise SpecError(f"no joint moves the cameras {list(cameras)}")
-    lower, upper, rA, rb = _unknowns_map(robot, drivers, variables, moving, mimic, coupled, coupling)
+    lower, upper, rA, rb = _unknowns_map(
+        robot, drivers, variables, moving, mimic, coupled, coupling
+    )
     A = rA[joint_index]
     b = rb[joint_index]
 
-    kind, solve_cameras, cam_parent, cam_R, cam_t, anc = _camera_placements(model, fids, paths, chain_of, rigid)
+    kind, solve_cameras, cam_parent, cam_R, cam_t, anc = _camera_placements(
+        model, fids, paths, chain_of, rigid
+    )
     C = len(cam_parent)
     eye, weight = _eyes_and_weights(kind, A, anc, jtype)
     return HeadChain(
@@ -336,16 +351,29 @@ def _unknowns_map(
             rA[i], rb[i] = 0.0, off
             rA[i, v] = mult
             # bound the driver so that the follower stays inside its limits too
-            lo, hi = sorted(((robot.lower[i] - off) / mult, (robot.upper[i] - off) / mult)) if mult else (-np.inf, np.inf)
+            lo, hi = (
+                sorted(((robot.lower[i] - off) / mult, (robot.upper[i] - off) / mult))
+                if mult
+                else (-np.inf, np.inf)
+            )
             lower[v], upper[v] = max(lower[v], lo), min(upper[v], hi)
     if coupling is not None:
         c0 = len(drivers)
         Ac, bc = np.asarray(coupling.A, dtype=float), np.asarray(coupling.b, dtype=float)
-        lo_c, hi_c = np.asarray(coupling.lower, dtype=float), np.asarray(coupling.upper, dtype=float)
-        if Ac.shape != (len(coupling.joints), len(coupling.variables)) or bc.shape != (len(coupling.joints),):
-            raise ConfigurationError(f"coupling A must be ({len(coupling.joints)}, {len(coupling.variables)}) and b ({len(coupling.joints)},)")
+        lo_c, hi_c = (
+            np.asarray(coupling.lower, dtype=float),
+            np.asarray(coupling.upper, dtype=float),
+        )
+        if Ac.shape != (len(coupling.joints), len(coupling.variables)) or bc.shape != (
+            len(coupling.joints),
+        ):
+            raise ConfigurationError(
+                f"coupling A must be ({len(coupling.joints)}, {len(coupling.variables)}) and b ({len(coupling.joints)},)"
+            )
         if not (np.all(np.isfinite(lo_c)) and np.all(np.isfinite(hi_c)) and np.all(lo_c <= hi_c)):
-            raise ConfigurationError(f"coupling bounds must be finite with lower <= upper, got {lo_c.tolist()}..{hi_c.tolist()}")
+            raise ConfigurationError(
+                f"coupling bounds must be finite with lower <= upper, got {lo_c.tolist()}..{hi_c.tolist()}"
+            )
         lower[c0:], upper[c0:] = lo_c, hi_c
         mid, half = 0.5 * (lo_c + hi_c), 0.5 * (hi_c - lo_c)
         for r, name in enumerate(coupling.joints):
@@ -360,7 +388,11 @@ def _unknowns_map(
             rA[i], rb[i] = 0.0, bc[r]
             rA[i, c0:] = Ac[r]
     if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
-        bad = [variables[v] for v in range(m) if not (math.isfinite(lower[v]) and math.isfinite(upper[v]))]
+        bad = [
+            variables[v]
+            for v in range(m)
+            if not (math.isfinite(lower[v]) and math.isfinite(upper[v]))
+        ]
         raise SpecError(f"joints {bad} need finite <limit lower/upper> for gaze control")
     if np.any(lower > upper):
         bad = [variables[v] for v in range(m) if lower[v] > upper[v]]
@@ -387,7 +419,9 @@ def _camera_placements(
         kind = KIND_RIGID_STEREO
         if rigid == "cyclopean":
             cam_parent.append(cam_parent[0])
-            cam_R_v, cam_t_v = _cyclopean_placement(model, fids, int(model.frames[fids[0]].parentJoint))
+            cam_R_v, cam_t_v = _cyclopean_placement(
+                model, fids, int(model.frames[fids[0]].parentJoint)
+            )
             cam_R.append(cam_R_v)
             cam_t.append(cam_t_v)
             anc[2] = anc[0]
@@ -399,7 +433,9 @@ def _camera_placements(
     return kind, solve_cameras, cam_parent, cam_R, cam_t, anc
 
 
-def _eyes_and_weights(kind: str, A: Array, anc: NDArray[np.bool_], jtype: NDArray[np.int64]) -> tuple[NDArray[np.bool_], Array]:
+def _eyes_and_weights(
+    kind: str, A: Array, anc: NDArray[np.bool_], jtype: NDArray[np.int64]
+) -> tuple[NDArray[np.bool_], Array]:
     """Which unknowns are an eye's (on a binocular head, moving joints on one camera's path only),
     and each unknown's step weight (prismatic, eye, or 1)."""
     m = A.shape[1]
@@ -432,7 +468,9 @@ def _cyclopean_placement(model: pin.Model, fids: list[int], jid: int) -> tuple[A
     o = 0.5 * (P[0].translation + P[1].translation)
     z = P[0].rotation[:, 2] + P[1].rotation[:, 2]
     if np.linalg.norm(z) < 1e-9:
-        raise SpecError("the two cameras of the rigid pair look in opposite directions: no cyclopean axis")
+        raise SpecError(
+            "the two cameras of the rigid pair look in opposite directions: no cyclopean axis"
+        )
     z = z / np.linalg.norm(z)
     x = P[1].translation - P[0].translation
     x = x - (x @ z) * z
@@ -447,7 +485,9 @@ def mid_limits(lower: Array, upper: Array) -> Array:
     """The middle of every joint's limits ``lower``..``upper`` [rad]/[m], shape (n,); 0 for a
     joint without finite limits (continuous)."""
     finite = np.isfinite(lower) & np.isfinite(upper)
-    return np.where(finite, 0.5 * (np.where(finite, lower, 0.0) + np.where(finite, upper, 0.0)), 0.0)
+    return np.where(
+        finite, 0.5 * (np.where(finite, lower, 0.0) + np.where(finite, upper, 0.0)), 0.0
+    )
 
 
 def home_readings(robot: PinocchioRobot) -> Array:

@@ -29,7 +29,9 @@ REPORT_TARGETS = 200  # targets of the disparity report (a few ms of compiled so
 REPORT_SEED = 0
 
 
-def head_report(solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_SEED) -> dict[str, Any]:
+def head_report(
+    solver: GazeSolver, n: int = REPORT_TARGETS, seed: int = REPORT_SEED
+) -> dict[str, Any]:
     """``{"cameras", "kind", "joints"}`` (``joints``: what the solver moves) and, on a two-eye
     (``binocular``) head, ``"exact"`` (whether the eyes' axes can meet exactly), ``"disparity"``
     (:meth:`GazeSolver.disparity_report` over ``n`` seeded targets ahead) and, where they cannot
@@ -93,7 +95,9 @@ def format_head_report(rep: dict[str, Any]) -> list[str]:
     n = d["targets"]
     counts = d["statuses"]
     over = f"{n} targets 0.4-3 m ahead"
-    others = ", ".join(f"{k} {v}" for k, v in counts.items() if v and k not in (STATUS_FIXATED, STATUS_DISPARITY))
+    others = ", ".join(
+        f"{k} {v}" for k, v in counts.items() if v and k not in (STATUS_FIXATED, STATUS_DISPARITY)
+    )
     tail = f"; not pointed at: {others}" if others else ""
     if not d["answered"]:
         lines.append(f"  none of {over} is pointed at with the moving joints ({others})")
@@ -117,7 +121,11 @@ def format_head_report(rep: dict[str, Any]) -> list[str]:
         lines.append(
             f"  turned away from facing, fixation alone (policy min-motion) fixates {a['fixated']} of them within the tolerance "
             f"(pointing error median {math.degrees(a['median_rad']):.3g} deg, max {math.degrees(a['max_rad']):.3g} deg"
-            + (f", over the {a['answered']} it answers in the limits; {failed} failed" if failed else "")
+            + (
+                f", over the {a['answered']} it answers in the limits; {failed} failed"
+                if failed
+                else ""
+            )
             + f"); it turns a joint by median {math.degrees(a['turn_median_rad']):.3g} deg, "
             f"max {math.degrees(a['turn_max_rad']):.3g} deg from the facing posture"
         )

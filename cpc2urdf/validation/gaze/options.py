@@ -38,7 +38,9 @@ POLICIES: tuple[str, ...] = ("cyclopean", "min-motion", "eyes-only")
 def check_policy(policy: str) -> None:
     """:class:`ConfigurationError` unless ``policy`` is one of :data:`POLICIES`."""
     if policy not in POLICIES:
-        raise ConfigurationError(f"unknown gaze policy {policy!r}; expected one of {', '.join(POLICIES)}")
+        raise ConfigurationError(
+            f"unknown gaze policy {policy!r}; expected one of {', '.join(POLICIES)}"
+        )
 
 
 def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = None) -> float:
@@ -52,14 +54,20 @@ def pointing_tolerance(tolerance: float | None = None, focal_px: float | None = 
         ConfigurationError: Both given, or either not a positive finite number.
     """
     if tolerance is not None and focal_px is not None:
-        raise ConfigurationError("give a pointing tolerance [rad] or the cameras' focal length [px], not both")
+        raise ConfigurationError(
+            "give a pointing tolerance [rad] or the cameras' focal length [px], not both"
+        )
     if tolerance is not None:
         if not (math.isfinite(tolerance) and tolerance > 0):
-            raise ConfigurationError(f"the pointing tolerance must be a positive number of radians, got {tolerance}")
+            raise ConfigurationError(
+                f"the pointing tolerance must be a positive number of radians, got {tolerance}"
+            )
         return float(tolerance)
     if focal_px is not None:
         if not (math.isfinite(focal_px) and focal_px > 0):
-            raise ConfigurationError(f"the focal length must be a positive number of pixels, got {focal_px}")
+            raise ConfigurationError(
+                f"the focal length must be a positive number of pixels, got {focal_px}"
+            )
         return math.atan(GAZE_PIXEL_FRACTION / focal_px)
     return GAZE_POINTING_TOL
 
@@ -99,10 +107,16 @@ class GazeOptions:
         if self.joints is not None and not isinstance(self.joints, tuple):
             object.__setattr__(self, "joints", tuple(self.joints))
         pointing_tolerance(self.tolerance, self.focal_px)
-        if self.min_distance is not None and not (math.isfinite(self.min_distance) and self.min_distance >= 0.0):
-            raise ConfigurationError(f"min_distance must be a finite distance >= 0 [m], got {self.min_distance!r}")
+        if self.min_distance is not None and not (
+            math.isfinite(self.min_distance) and self.min_distance >= 0.0
+        ):
+            raise ConfigurationError(
+                f"min_distance must be a finite distance >= 0 [m], got {self.min_distance!r}"
+            )
         if self.rigid not in RIGID_MODES:
-            raise ConfigurationError(f"unknown rigid-stereo mode {self.rigid!r}; expected one of {', '.join(RIGID_MODES)}")
+            raise ConfigurationError(
+                f"unknown rigid-stereo mode {self.rigid!r}; expected one of {', '.join(RIGID_MODES)}"
+            )
 
     @property
     def tolerance_rad(self) -> float:
@@ -135,7 +149,9 @@ def check_readings(
     except (TypeError, ValueError) as e:
         raise ConfigurationError(f"q_current must be {n} numbers, got {q!r}") from e
     if qa.shape != (n,):
-        raise ConfigurationError(f"q_current must have shape ({n},) for joints {list(joint_names)}, got shape {qa.shape}")
+        raise ConfigurationError(
+            f"q_current must have shape ({n},) for joints {list(joint_names)}, got shape {qa.shape}"
+        )
     if not np.all(np.isfinite(qa)):
         raise ConfigurationError(f"q_current must be finite, got {qa.tolist()}")
     tol = 1e-9

@@ -50,7 +50,14 @@ from cpc2urdf.validation.gaze.result import (
     GazeSolution,
 )
 
-REGION_CATEGORIES: tuple[str, ...] = ("fixated", "disparity", "joint_limits", "behind", "too_close", "no_solution")
+REGION_CATEGORIES: tuple[str, ...] = (
+    "fixated",
+    "disparity",
+    "joint_limits",
+    "behind",
+    "too_close",
+    "no_solution",
+)
 CATEGORY_COLOURS: dict[str, tuple[float, float, float]] = {  # RGB in [0, 1]
     "fixated": (0.17, 0.63, 0.17),
     "disparity": (1.0, 0.50, 0.05),
@@ -66,14 +73,28 @@ _CATEGORY_OF_STATUS = {
     STATUS_TOO_CLOSE: "too_close",
     STATUS_NO_SOLUTION: "no_solution",
 }
-DEFAULT_RANGE = (0.2, 3.0)  # [m]: distances from the head frame's origin (shell) / forward extent (box)
-DEFAULT_SAMPLES = (16, 37, 25)  # distances x azimuths x elevations (shell); forward x lateral x vertical (box)
+DEFAULT_RANGE = (
+    0.2,
+    3.0,
+)  # [m]: distances from the head frame's origin (shell) / forward extent (box)
+DEFAULT_SAMPLES = (
+    16,
+    37,
+    25,
+)  # distances x azimuths x elevations (shell); forward x lateral x vertical (box)
 SHELL_AZIMUTH = math.radians(90.0)  # [rad]: the shell spans +-90 deg about forward
 SHELL_ELEVATION = math.radians(60.0)  # [rad]: and +-60 deg of elevation
 GRID_KINDS = ("shell", "box")
-MAX_GRID_TARGETS = 1_000_000  # [-]: a grid of more targets is refused (1e6: ~30 s, ~1 GB on the 2-core machine)
-GRID_RANGE = (1e-3, 1e3)  # [m]: NEAR and FAR of a grid lie within (a head's targets; plots of wider spans fail)
-PROGRESS_CHUNK = 20_000  # [-]: targets solved between two redraws of the progress bar of a large grid
+MAX_GRID_TARGETS = (
+    1_000_000  # [-]: a grid of more targets is refused (1e6: ~30 s, ~1 GB on the 2-core machine)
+)
+GRID_RANGE = (
+    1e-3,
+    1e3,
+)  # [m]: NEAR and FAR of a grid lie within (a head's targets; plots of wider spans fail)
+PROGRESS_CHUNK = (
+    20_000  # [-]: targets solved between two redraws of the progress bar of a large grid
+)
 
 
 class BatchSolver(Protocol):
@@ -112,7 +133,9 @@ class BatchAnswer:
     iterations: NDArray[np.int_]
 
 
-def solve_batch(solver: BatchSolver, targets: ArrayLike, q_current: Array | None = None) -> BatchAnswer:
+def solve_batch(
+    solver: BatchSolver, targets: ArrayLike, q_current: Array | None = None
+) -> BatchAnswer:
     """Solve every target of ``targets`` (world) [m], shape (N, 3), with the default policy from
     ``q_current`` (shape (n,); the joints that do not move stay there; None: the home posture):
     ``solver.solve_many`` where the solver has it, else one ``solve`` each."""
@@ -132,7 +155,9 @@ def solve_batch(solver: BatchSolver, targets: ArrayLike, q_current: Array | None
             status.astype(str),
             np.asarray(b.iterations, dtype=int),
         )
-    sols: list[GazeSolution] = [solver.solve(p) if q_current is None else solver.solve(p, q_current=q_current) for p in P]
+    sols: list[GazeSolution] = [
+        solver.solve(p) if q_current is None else solver.solve(p, q_current=q_current) for p in P
+    ]
     n = solver.n
     return BatchAnswer(
         np.array([s.q for s in sols]).reshape(len(sols), n),
@@ -230,11 +255,15 @@ def check_grid_args(near: float, far: float, samples: Sequence[int]) -> None:
     ``samples`` are three whole numbers >= 2 whose product is at most :data:`MAX_GRID_TARGETS`."""
     lo, hi = GRID_RANGE
     if not (math.isfinite(near) and math.isfinite(far) and 0.0 < near < far):
-        raise ConfigurationError(f"range must be two finite distances 0 < NEAR < FAR [m], got {near!r} {far!r}")
+        raise ConfigurationError(
+            f"range must be two finite distances 0 < NEAR < FAR [m], got {near!r} {far!r}"
+        )
     if near < lo or far > hi:
         raise ConfigurationError(f"range must lie within {lo:g}..{hi:g} m, got {near!r} {far!r}")
     if len(samples) != 3 or any(int(k) != k or k < 2 for k in samples):
-        raise ConfigurationError(f"samples must be three whole numbers >= 2 (one per axis), got {list(samples)}")
+        raise ConfigurationError(
+            f"samples must be three whole numbers >= 2 (one per axis), got {list(samples)}"
+        )
     total = math.prod(int(k) for k in samples)
     if total > MAX_GRID_TARGETS:
         raise ConfigurationError(
@@ -242,8 +271,12 @@ def check_grid_args(near: float, far: float, samples: Sequence[int]) -> None:
         )
 
 
-def shell_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DEFAULT_RANGE[1],
-               samples: Sequence[int] = DEFAULT_SAMPLES) -> Grid:
+def shell_grid(
+    frame: HeadFrame,
+    near: float = DEFAULT_RANGE[0],
+    far: float = DEFAULT_RANGE[1],
+    samples: Sequence[int] = DEFAULT_SAMPLES,
+) -> Grid:
     """A spherical shell about the head frame's origin: ``samples[0]`` distances from ``near``
     to ``far`` [m], ``samples[1]`` azimuths over +-90 deg and ``samples[2]`` elevations over
     +-60 deg."""
@@ -256,8 +289,12 @@ def shell_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DE
     return Grid("shell", (d, az, el), frame, frame.to_world(ph), ph)
 
 
-def box_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DEFAULT_RANGE[1],
-             samples: Sequence[int] = DEFAULT_SAMPLES) -> Grid:
+def box_grid(
+    frame: HeadFrame,
+    near: float = DEFAULT_RANGE[0],
+    far: float = DEFAULT_RANGE[1],
+    samples: Sequence[int] = DEFAULT_SAMPLES,
+) -> Grid:
     """A box in front of the head: ``samples[0]`` forward positions from ``near`` to ``far`` [m],
     ``samples[1]`` lateral ones over +-``far`` and ``samples[2]`` vertical ones over +-``far``/2."""
     check_grid_args(near, far, samples)
@@ -268,8 +305,14 @@ def box_grid(frame: HeadFrame, near: float = DEFAULT_RANGE[0], far: float = DEFA
     return Grid("box", (x, y, z), frame, frame.to_world(ph), ph)
 
 
-def make_grid(solver: BatchSolver, kind: str = "shell", near: float = DEFAULT_RANGE[0], far: float = DEFAULT_RANGE[1],
-              samples: Sequence[int] = DEFAULT_SAMPLES, q: Array | None = None) -> Grid:
+def make_grid(
+    solver: BatchSolver,
+    kind: str = "shell",
+    near: float = DEFAULT_RANGE[0],
+    far: float = DEFAULT_RANGE[1],
+    samples: Sequence[int] = DEFAULT_SAMPLES,
+    q: Array | None = None,
+) -> Grid:
     """The ``kind`` grid (:data:`GRID_KINDS`) in front of the solver's head (see
     :func:`shell_grid`, :func:`box_grid`), its head frame taken at readings ``q`` (shape (n,);
     None: the home posture, :func:`head_frame`)."""
@@ -277,7 +320,11 @@ def make_grid(solver: BatchSolver, kind: str = "shell", near: float = DEFAULT_RA
         raise ConfigurationError(f"grid must be one of {', '.join(GRID_KINDS)}, got {kind!r}")
     check_grid_args(near, far, samples)
     posture = None if q is None else np.array(q, dtype=float)
-    frame = head_frame(solver) if posture is None else head_frame_at(solver.model, solver.cameras, posture)
+    frame = (
+        head_frame(solver)
+        if posture is None
+        else head_frame_at(solver.model, solver.cameras, posture)
+    )
     grid = (shell_grid if kind == "shell" else box_grid)(frame, near, far, samples)
     return dataclasses.replace(grid, posture=posture)
 
@@ -323,7 +370,10 @@ class Region:
             "grid": {
                 "kind": self.grid.kind,
                 "axes": [a.tolist() for a in self.grid.axes],
-                "head_frame": {"origin": f.origin.tolist(), "R_world_head": f.R_world_head.tolist()},
+                "head_frame": {
+                    "origin": f.origin.tolist(),
+                    "R_world_head": f.R_world_head.tolist(),
+                },
             },
             "categories": list(REGION_CATEGORIES),
             "counts": self.counts(),
@@ -335,8 +385,9 @@ class Region:
         }
 
 
-def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True,
-                     q_current: Array | None = None) -> Region:
+def reachable_region(
+    solver: BatchSolver, grid: Grid, show_progress: bool = True, q_current: Array | None = None
+) -> Region:
     """Solve every target of ``grid`` (:func:`solve_batch`, from ``q_current``: the joints that
     do not move are held there; None: the home posture) and sort it into a category; a grid of
     more than :data:`PROGRESS_CHUNK` targets is solved in chunks under a progress bar."""
@@ -348,11 +399,17 @@ def reachable_region(solver: BatchSolver, grid: Grid, show_progress: bool = True
 
         chunks = [P[a : a + PROGRESS_CHUNK] for a in range(0, P.shape[0], PROGRESS_CHUNK)]
         parts = []
-        with progress_checked(chunks, f"solving {P.shape[0]} targets ({PROGRESS_CHUNK} a step)") as it:
+        with progress_checked(
+            chunks, f"solving {P.shape[0]} targets ({PROGRESS_CHUNK} a step)"
+        ) as it:
             for chunk in it:
                 parts.append(solve_batch(solver, chunk, q_current))
-        ans = BatchAnswer(*(np.concatenate([getattr(a, f) for a in parts]) for f in
-                            ("q", "reachable", "pointing_error", "status", "iterations")))
+        ans = BatchAnswer(
+            *(
+                np.concatenate([getattr(a, f) for a in parts])
+                for f in ("q", "reachable", "pointing_error", "status", "iterations")
+            )
+        )
     lookup = {s: REGION_CATEGORIES.index(category_of_status(s)) for s in set(ans.status.tolist())}
     category = np.array([lookup[s] for s in ans.status.tolist()], dtype=np.intp)
     return Region(
@@ -416,11 +473,21 @@ def region_figure_png(region: Region, title: str = "", notes: Sequence[str] = ()
     ax = axs[2]
     err = np.degrees(region.error[miss])
     if err.size:
-        sc = ax.scatter(ph[miss, 0], ph[miss, 1], c=np.maximum(err, 1e-6), s=size, marker="s", linewidths=0,
-                        cmap="viridis", norm=LogNorm(vmin=max(float(err.min()), 1e-6), vmax=max(float(err.max()), 2e-6)))
+        sc = ax.scatter(
+            ph[miss, 0],
+            ph[miss, 1],
+            c=np.maximum(err, 1e-6),
+            s=size,
+            marker="s",
+            linewidths=0,
+            cmap="viridis",
+            norm=LogNorm(vmin=max(float(err.min()), 1e-6), vmax=max(float(err.max()), 2e-6)),
+        )
         fig.colorbar(sc, ax=ax, label="pointing error [deg]")
     else:
-        ax.text(0.5, 0.5, "all fixated\nin this slice", transform=ax.transAxes, ha="center", va="center")
+        ax.text(
+            0.5, 0.5, "all fixated\nin this slice", transform=ax.transAxes, ha="center", va="center"
+        )
     ax.set_xlim(axs[0].get_xlim())
     ax.set_ylim(axs[0].get_ylim())
     ax.set_aspect("equal")
@@ -435,14 +502,27 @@ def region_figure_png(region: Region, title: str = "", notes: Sequence[str] = ()
             e = np.degrees(region.error[dis])
             text += f" (error median {np.median(e):.3g} deg, max {e.max():.3g} deg)"
         labels.append(text)
-    handles = [Line2D([], [], marker="s", linestyle="", color=CATEGORY_COLOURS[c]) for c in REGION_CATEGORIES]
+    handles = [
+        Line2D([], [], marker="s", linestyle="", color=CATEGORY_COLOURS[c])
+        for c in REGION_CATEGORIES
+    ]
     fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False, title="whole grid")
     n = region.points.shape[0]
-    frame = ("head frame: the cameras' mid-point at home, x forward along their mean optical axis, "
-             "z up (against their image y)")
-    fig.suptitle("\n".join([f"{title}{': ' if title else ''}reachable region, {n} targets "
-                            f"({region.grid.kind} grid), {counts['fixated']} fixated", frame, *notes]),
-                 fontsize=10)
+    frame = (
+        "head frame: the cameras' mid-point at home, x forward along their mean optical axis, "
+        "z up (against their image y)"
+    )
+    fig.suptitle(
+        "\n".join(
+            [
+                f"{title}{': ' if title else ''}reachable region, {n} targets "
+                f"({region.grid.kind} grid), {counts['fixated']} fixated",
+                frame,
+                *notes,
+            ]
+        ),
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0.0, 0.12, 1.0, 0.97 - 0.03 * (1 + len(notes))))
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)

@@ -20,14 +20,18 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 
-AUDIT_HALF_WIDTH = 3.0  # [m]: the audit's random targets are uniform in a cube this far about the head's centre
+AUDIT_HALF_WIDTH = (
+    3.0  # [m]: the audit's random targets are uniform in a cube this far about the head's centre
+)
 AUDIT_STARTS = 20  # random postures each audited target is solved again from
 
 
 def _finite_home(lower: Array, upper: Array) -> Array:
     """The middle of every joint's limits, 0 for a joint without finite limits, shape (n,)."""
     limited = np.isfinite(lower) & np.isfinite(upper)
-    return np.where(limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0)
+    return np.where(
+        limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0
+    )
 
 
 class SolvedAxes:
@@ -57,9 +61,17 @@ class SolvedAxes:
             x = T1.translation - T0.translation
             x -= (x @ z) * z
             x /= np.linalg.norm(x)
-            M = pin.SE3(np.column_stack([x, np.cross(z, x), z]), 0.5 * (T0.translation + T1.translation))
+            M = pin.SE3(
+                np.column_stack([x, np.cross(z, x), z]), 0.5 * (T0.translation + T1.translation)
+            )
             jid = model.frames[fids[0]].parentJoint
-            self.frames.append(model.addFrame(pin.Frame("bench_cyclopean", jid, data.oMi[jid].actInv(M), pin.FrameType.OP_FRAME)))
+            self.frames.append(
+                model.addFrame(
+                    pin.Frame(
+                        "bench_cyclopean", jid, data.oMi[jid].actInv(M), pin.FrameType.OP_FRAME
+                    )
+                )
+            )
         self.model = model
         self.data = model.createData()
         self.chain = chain
@@ -138,11 +150,19 @@ def generic_reachable_targets(axes: SolvedAxes, n: int, seed: int = 0) -> tuple[
             p0, p1 = O[:, 0] + s[:, None] * Z[:, 0], O[:, 1] + t[:, None] * Z[:, 1]
             pts = 0.5 * (p0 + p1)
             with np.errstate(invalid="ignore"):
-                ok = (np.linalg.norm(p0 - p1, axis=1) < 1e-12) & (s > 0.15) & (s < 5.0) & (t > 0.15) & (t < 5.0)
+                ok = (
+                    (np.linalg.norm(p0 - p1, axis=1) < 1e-12)
+                    & (s > 0.15)
+                    & (s < 5.0)
+                    & (t > 0.15)
+                    & (t < 5.0)
+                )
         P += list(pts[ok])
         Qs += list(Q[ok])
     if len(P) < n:
-        raise DegenerateDataError(f"only {len(P)} of {n} targets found where the solved axes meet in front")
+        raise DegenerateDataError(
+            f"only {len(P)} of {n} targets found where the solved axes meet in front"
+        )
     return np.array(P[:n]), np.array(Qs[:n])
 
 
@@ -181,7 +201,9 @@ def generic_reference_solver(axes: SolvedAxes) -> Callable[[Array, Array], tuple
             return J @ A
 
         u0 = np.clip(chain.u_from_q(q0), lo + 1e-12, hi - 1e-12)
-        res = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        res = least_squares(
+            fun, u0, jac=jac, bounds=(lo, hi), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15
+        )
         return A @ res.x + b, int(res.nfev)
 
     return solve
@@ -196,14 +218,21 @@ def audit_targets(axes: SolvedAxes, n: int, seed: int = 0) -> Array:
     return O[0].mean(axis=0) + rng.uniform(-AUDIT_HALF_WIDTH, AUDIT_HALF_WIDTH, (n, 3))
 
 
-def missed_targets(solver: GazeSolver, P: Array, reachable: NDArray[np.bool_], starts: int = AUDIT_STARTS,
-                   seed: int = 0) -> NDArray[np.intp]:
+def missed_targets(
+    solver: GazeSolver,
+    P: Array,
+    reachable: NDArray[np.bool_],
+    starts: int = AUDIT_STARTS,
+    seed: int = 0,
+) -> NDArray[np.intp]:
     """The targets of ``P`` (N, 3) answered as not fixated (``reachable`` False) that ``solve``
     fixates from one of ``starts`` random postures (its unknowns uniform in their bounds, as a
     warm start ``q_start``): indices into ``P``. Each is a fixatable target the solver called
     unreachable. A lower bound: a target fixated from none of them may still be fixatable."""
     rng = np.random.default_rng(seed)
-    chain = solver.chain  # (its bounds are finite: a joint without limits on a camera's path is refused)
+    chain = (
+        solver.chain
+    )  # (its bounds are finite: a joint without limits on a camera's path is refused)
     missed = []
     for i in np.flatnonzero(~np.asarray(reachable)):
         for q in chain.q_from_u(rng.uniform(chain.lower, chain.upper, (starts, chain.m))):

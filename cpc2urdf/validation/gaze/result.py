@@ -16,12 +16,23 @@ from typing import Any
 from cpc2urdf.transforms import Array
 
 STATUS_FIXATED = "fixated"
-STATUS_LIMITS = "joint_limits"  # the best in-limit configuration does not fixate; a joint is at a limit
+STATUS_LIMITS = (
+    "joint_limits"  # the best in-limit configuration does not fixate; a joint is at a limit
+)
 STATUS_BEHIND = "behind"  # an eye would have to look away from the target
 STATUS_TOO_CLOSE = "too_close"  # the target is closer to the cameras than their baseline
 STATUS_NO_SOLUTION = "no_solution"  # no limit active, yet the two eyes cannot both fixate
-STATUS_DISPARITY = "disparity"  # the head's eyes cannot fixate exactly: the policy's posture, residual split
-STATUSES = (STATUS_FIXATED, STATUS_LIMITS, STATUS_BEHIND, STATUS_TOO_CLOSE, STATUS_NO_SOLUTION, STATUS_DISPARITY)
+STATUS_DISPARITY = (
+    "disparity"  # the head's eyes cannot fixate exactly: the policy's posture, residual split
+)
+STATUSES = (
+    STATUS_FIXATED,
+    STATUS_LIMITS,
+    STATUS_BEHIND,
+    STATUS_TOO_CLOSE,
+    STATUS_NO_SOLUTION,
+    STATUS_DISPARITY,
+)
 
 
 @dataclass(frozen=True)
@@ -69,16 +80,26 @@ class GazeSolution:
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (SI units); a value beyond the float range (the miss distance of a
         target beyond ~1e308 m) is written as null, never as ``Infinity``."""
-        names = ("left", "right") if len(self.pointing_error) == 2 else tuple(f"axis{k}" for k in range(len(self.pointing_error)))
+        names = (
+            ("left", "right")
+            if len(self.pointing_error) == 2
+            else tuple(f"axis{k}" for k in range(len(self.pointing_error)))
+        )
         return {
             "target": self.target.tolist(),
             "policy": self.policy,
             "reachable": self.reachable,
             "status": self.status,
             "joints": self.joints,
-            "pointing_error_rad": {k: _finite(v) for k, v in zip(names, self.pointing_error.tolist(), strict=True)},
-            "miss_distance_m": {k: _finite(v) for k, v in zip(names, self.miss_distance.tolist(), strict=True)},
-            "fixation_point": None if self.fixation_point is None else [_finite(v) for v in self.fixation_point.tolist()],
+            "pointing_error_rad": {
+                k: _finite(v) for k, v in zip(names, self.pointing_error.tolist(), strict=True)
+            },
+            "miss_distance_m": {
+                k: _finite(v) for k, v in zip(names, self.miss_distance.tolist(), strict=True)
+            },
+            "fixation_point": None
+            if self.fixation_point is None
+            else [_finite(v) for v in self.fixation_point.tolist()],
             "vergence_rad": _finite(self.vergence),
             "at_limit": list(self.at_limit),
             "iterations": self.iterations,
@@ -97,7 +118,7 @@ class _FlatSolution(GazeSolution):
     two or three fields of an answer; building all twelve took ~3 us of a ~25 us solve."""
 
     def __repr__(self) -> str:  # the public class's name, not this one's
-        return "GazeSolution" + GazeSolution.__repr__(self)[len(type(self).__qualname__):]
+        return "GazeSolution" + GazeSolution.__repr__(self)[len(type(self).__qualname__) :]
 
     _a: Array  # the output row (status, iterations, readings, errors, misses, fixation point, vergence, limit flags, target)
     _S: int  # solved axes
@@ -147,7 +168,9 @@ class _FlatSolution(GazeSolution):
         return tuple(name for name, hit in zip(self.joint_names, flags, strict=True) if hit)
 
 
-def solution_from_flat(robot_names: tuple[str, ...], out: Array, S: int, policy: str) -> GazeSolution:
+def solution_from_flat(
+    robot_names: tuple[str, ...], out: Array, S: int, policy: str
+) -> GazeSolution:
     """The :class:`GazeSolution` of a compiled solve from its output ``out`` (kept, not copied:
     pass an array no one else holds) of :func:`~cpc2urdf.validation.gaze.kernels.solve_flat`
     (``S`` solved axes; ``fixated`` iff every pointing error is within the tolerance): its

@@ -103,16 +103,24 @@ class GazeSolver:
         self.tolerance = opts.tolerance_rad
         # continuous joints read as revolute without limits: a robot's wheels are off the head's
         # paths; one on a path is refused by build_chain (no finite limits), naming it
-        robot = urdf if isinstance(urdf, PinocchioRobot) else PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
+        robot = (
+            urdf
+            if isinstance(urdf, PinocchioRobot)
+            else PinocchioRobot.from_urdf(urdf, continuous_as_revolute=True)
+        )
         if robot.cpc_model is not None:
             for name in cameras:
-                robot.cpc_model.structure.frame(name)  # UnknownNameError with the model's frame names
+                robot.cpc_model.structure.frame(
+                    name
+                )  # UnknownNameError with the model's frame names
         self.robot = robot
         self.cameras = tuple(cameras)
         self.joint_names = robot.joint_names
         self.joint_kinds = dict(zip(robot.joint_names, robot.joint_kinds, strict=True))
         self.n = robot.n_joints
-        self.chain: HeadChain = build_chain(robot, self.cameras, opts.joints, opts.coupling, opts.rigid)
+        self.chain: HeadChain = build_chain(
+            robot, self.cameras, opts.joints, opts.coupling, opts.rigid
+        )
         self.compiled = CompiledGaze(self.chain, self.tolerance, min_distance=opts.min_distance)
         self.min_distance = self.compiled.min_distance
         self.lower = robot.lower.copy()
@@ -153,14 +161,24 @@ class GazeSolver:
         K = range(len(ch.joint_index))
         if policy == "eyes-only":
             if ch.kind != KIND_BINOCULAR:
-                raise ConfigurationError(f"policy 'eyes-only' needs two eyes; this head is {ch.kind} (cameras {list(self.cameras)})")
+                raise ConfigurationError(
+                    f"policy 'eyes-only' needs two eyes; this head is {ch.kind} (cameras {list(self.cameras)})"
+                )
             moved = [k for k in K if ch.anc[0, k] != ch.anc[1, k]]
         elif not self._version_shaped():
             return self._fast if policy == "min-motion" else self.compiled
         else:  # the table stays
-            moved = [k for k in K if not (ch.anc[0, k] and ch.anc[1, k] and ch.jtype[k] == PRISMATIC)]
-        names = [self.joint_names[ch.joint_index[k]] for k in moved if self.joint_names[ch.joint_index[k]] in ch.moving]
-        sub = build_chain(self.robot, self.cameras, names, self.options.coupling, self.options.rigid)
+            moved = [
+                k for k in K if not (ch.anc[0, k] and ch.anc[1, k] and ch.jtype[k] == PRISMATIC)
+            ]
+        names = [
+            self.joint_names[ch.joint_index[k]]
+            for k in moved
+            if self.joint_names[ch.joint_index[k]] in ch.moving
+        ]
+        sub = build_chain(
+            self.robot, self.cameras, names, self.options.coupling, self.options.rigid
+        )
         mind = self.options.min_distance
         if policy == "cyclopean":
             if self.compiled.disparity_head:  # the near-null posture
@@ -174,7 +192,9 @@ class GazeSolver:
         side as a row over the unknowns of ``sub`` (``s``: +1 where the two turn about nearly the
         same world direction at home, else -1)."""
         ch = self.chain
-        e0, e1 = (int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) for c in (0, 1))
+        e0, e1 = (
+            int(ch.joint_index[np.flatnonzero(ch.anc[c] & ~ch.anc[1 - c])[0]]) for c in (0, 1)
+        )
         data = self.model.createData()
         pin.computeJointJacobians(self.model, data, self.home)
         a0, a1 = (pin.getJointJacobian(self.model, data, e + 1, pin.WORLD)[3:, e] for e in (e0, e1))
@@ -231,7 +251,9 @@ class GazeSolver:
         with its driver, the joints of a stated coupling (readings ``q = A u + b`` sharing an
         unknown). Groups of two or more joints; the other joints move on their own."""
         A = (np.abs(self.chain.robot_A) > 0.0).astype(float)
-        _, label = connected_components(A @ A.T > 0.0, directed=False)  # joints linked by a shared unknown
+        _, label = connected_components(
+            A @ A.T > 0.0, directed=False
+        )  # joints linked by a shared unknown
         groups = (np.flatnonzero(label == k) for k in np.unique(label))
         return tuple(g for g in groups if len(g) > 1)
 
@@ -277,7 +299,9 @@ class GazeSolver:
             # (under the GIL: another thread may be writing it while the kernel runs without)
             # and not checked here: the kernel checks that it is finite and keeps it in the answer
             comp = self._fast
-            plain = type(p_world) is np.ndarray and p_world.dtype is _FLOAT64 and p_world.shape == (3,)
+            plain = (
+                type(p_world) is np.ndarray and p_world.dtype is _FLOAT64 and p_world.shape == (3,)
+            )
             p = p_world.copy() if plain else target_point(p_world)  # type: ignore[union-attr]
             out = comp.solve_target(p)
             if out[0] == S_NOT_FINITE:
@@ -286,7 +310,9 @@ class GazeSolver:
         check_policy(policy)
         return self.solve_checked(target_point(p_world), self.check_q(q_current), policy, q_start)
 
-    def solve_checked(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None) -> GazeSolution:
+    def solve_checked(
+        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None
+    ) -> GazeSolution:
         """:meth:`solve` on a checked target ``p`` and checked in-limit readings ``qc`` (or None):
         the entry of :meth:`track`, which does not re-check the readings it produced itself."""
         comp = self._policy_engine(policy)
@@ -294,7 +320,9 @@ class GazeSolver:
         if q_start is not None:
             qs = np.asarray(q_start, dtype=float)
             if qs.shape != (self.n,) or not np.all(np.isfinite(qs)):
-                raise ConfigurationError(f"q_start must be {self.n} finite readings, got shape {qs.shape}")
+                raise ConfigurationError(
+                    f"q_start must be {self.n} finite readings, got shape {qs.shape}"
+                )
         out = comp.solve_point(p, qc, qs)
         if out[0] == S_NOT_FINITE:  # a caller that skipped the check (solve_checked's contract)
             target_point(p)  # raises, naming the coordinates
@@ -336,7 +364,9 @@ class GazeSolver:
             saccades: None: smooth pursuit only; a :class:`~cpc2urdf.validation.gaze.tracking.SaccadeRule`:
                 minimum-jerk saccades too.
         """
-        return track(self, targets, dt, max_velocity, q_current=q_current, policy=policy, saccades=saccades)
+        return track(
+            self, targets, dt, max_velocity, q_current=q_current, policy=policy, saccades=saccades
+        )
 
     def camera_poses(self, q: ArrayLike) -> tuple[Array, ...]:
         """``T_world_<camera>`` (4, 4) of each named camera (optical frame), in ``cameras`` order,
@@ -360,14 +390,20 @@ class GazeSolver:
 
     @classmethod
     def from_model(
-        cls, model: CPCModel, cameras: Sequence[str] = DEFAULT_CAMERAS, options: GazeOptions | None = None
+        cls,
+        model: CPCModel,
+        cameras: Sequence[str] = DEFAULT_CAMERAS,
+        options: GazeOptions | None = None,
     ) -> GazeSolver:
         """A solver for a :class:`cpc2urdf.model.CPCModel` (via its URDF)."""
         return cls(PinocchioRobot.from_model(model), cameras, options)
 
     @classmethod
     def from_urdf(
-        cls, urdf: str | os.PathLike[str], cameras: Sequence[str] = DEFAULT_CAMERAS, options: GazeOptions | None = None
+        cls,
+        urdf: str | os.PathLike[str],
+        cameras: Sequence[str] = DEFAULT_CAMERAS,
+        options: GazeOptions | None = None,
     ) -> GazeSolver:
         """A solver for URDF text or a URDF file (:meth:`PinocchioRobot.from_urdf`)."""
         return cls(PinocchioRobot.from_urdf(urdf), cameras, options)
@@ -400,8 +436,10 @@ def _options(options: GazeOptions | None, fields: dict[str, Any]) -> GazeOptions
         return opts
     unknown = sorted(set(fields) - {f.name for f in dataclasses.fields(GazeOptions)})
     if unknown:
-        raise ConfigurationError(f"unknown gaze option {unknown[0]!r}; expected one of "
-                                 f"{', '.join(f.name for f in dataclasses.fields(GazeOptions))}")
+        raise ConfigurationError(
+            f"unknown gaze option {unknown[0]!r}; expected one of "
+            f"{', '.join(f.name for f in dataclasses.fields(GazeOptions))}"
+        )
     return dataclasses.replace(opts, **fields)
 
 

@@ -58,13 +58,18 @@ from cpc2urdf.validation.gaze.result import STATUS_DISPARITY, STATUS_FIXATED, Ga
 
 MIN_JERK_PEAK_VELOCITY = 15.0 / 8.0  # peak of d/ds (10 s^3 - 15 s^4 + 6 s^5), at s = 1/2
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)  # peak of its |d2/ds2|, at s = (3 -+ sqrt 3) / 6
-SACCADE_STATUSES = (STATUS_FIXATED, STATUS_DISPARITY)  # answers a saccade aims at: they point at the target
+SACCADE_STATUSES = (
+    STATUS_FIXATED,
+    STATUS_DISPARITY,
+)  # answers a saccade aims at: they point at the target
 DEFAULT_SACCADE_THRESHOLD = math.radians(5.0)  # [rad]: pointing error that starts a saccade
 DEFAULT_SACCADE_MIN_DURATION = 0.02  # [s]: the shortest saccade
 DEFAULT_REAIM_INTERVAL = 0.02  # [s]: a saccade under way checks its aim this often
 REST_FRACTION = 0.1  # [-]: a saccade starts only when the last step is at most this of every joint's speed limit
 STALE_FLOOR = 1e-6  # [rad]: a saccade's end point must miss by more than this beyond the answer to end it (not rounding)
-WARM_START_ANGLE = math.radians(5.0)  # [rad]: a last answer missing the new target by more is not a start
+WARM_START_ANGLE = math.radians(
+    5.0
+)  # [rad]: a last answer missing the new target by more is not a start
 LOCK_TOL = 1e-15  # [rad]/[m]: commanded readings this close to the answer are locked on it
 
 
@@ -108,7 +113,9 @@ class WarmStartSolver(Protocol):
         """Pointing error [rad] of each solved axis at readings ``q`` for target ``p``."""
         ...
 
-    def solve_checked(self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None) -> GazeSolution:
+    def solve_checked(
+        self, p: Array, qc: Array | None, policy: str, q_start: ArrayLike | None
+    ) -> GazeSolution:
         """A solve of a checked target ``p`` from checked readings ``qc``, started at ``q_start``."""
         ...
 
@@ -162,7 +169,10 @@ class SaccadeRule:
         a = np.abs(delta)
         vmax = np.asarray(max_velocity, dtype=float)
         moving = vmax > 0.0
-        T = max(self.min_duration, float(np.max(MIN_JERK_PEAK_VELOCITY * a[moving] / vmax[moving], initial=0.0)))
+        T = max(
+            self.min_duration,
+            float(np.max(MIN_JERK_PEAK_VELOCITY * a[moving] / vmax[moving], initial=0.0)),
+        )
         if self.max_acceleration is not None:
             amax = np.broadcast_to(np.asarray(self.max_acceleration, dtype=float), a.shape)
             T = max(T, math.sqrt(float(np.max(MIN_JERK_PEAK_ACCELERATION * a / amax))))
@@ -176,10 +186,22 @@ class SaccadeRule:
                 f"saccade threshold must be an angle in [0, pi) [rad] (a pointing error never exceeds pi: "
                 f"no saccade would start; degrees? math.radians), got {self.threshold!r}"
             )
-        if not (_is_real(self.min_duration) and math.isfinite(self.min_duration) and self.min_duration >= 0.0):
-            raise ConfigurationError(f"saccade min_duration must be finite and >= 0 [s], got {self.min_duration!r}")
-        if not (_is_real(self.reaim_interval) and math.isfinite(self.reaim_interval) and self.reaim_interval > 0.0):
-            raise ConfigurationError(f"saccade reaim_interval must be finite and > 0 [s], got {self.reaim_interval!r}")
+        if not (
+            _is_real(self.min_duration)
+            and math.isfinite(self.min_duration)
+            and self.min_duration >= 0.0
+        ):
+            raise ConfigurationError(
+                f"saccade min_duration must be finite and >= 0 [s], got {self.min_duration!r}"
+            )
+        if not (
+            _is_real(self.reaim_interval)
+            and math.isfinite(self.reaim_interval)
+            and self.reaim_interval > 0.0
+        ):
+            raise ConfigurationError(
+                f"saccade reaim_interval must be finite and > 0 [s], got {self.reaim_interval!r}"
+            )
         if self.max_acceleration is not None:
             try:
                 raw = np.asarray(self.max_acceleration)
@@ -191,7 +213,9 @@ class SaccadeRule:
                     f"saccade max_acceleration must be a scalar or {n} values, got {self.max_acceleration!r}"
                 ) from e
             if not (np.all(np.isfinite(amax)) and np.all(amax > 0)):
-                raise ConfigurationError(f"saccade max_acceleration must be positive and finite, got {amax.tolist()}")
+                raise ConfigurationError(
+                    f"saccade max_acceleration must be positive and finite, got {amax.tolist()}"
+                )
 
 
 @dataclass(frozen=True)
@@ -289,12 +313,16 @@ class GazeTracker:
         self.max_velocity: Array = vmax
         self._step_limit: Array = self.max_velocity * self.dt
         self._groups = solver.motion_groups
-        self.q: Array | None = solver.check_q(q_current)  # commanded readings; None before the first sample
+        self.q: Array | None = solver.check_q(
+            q_current
+        )  # commanded readings; None before the first sample
         self.goal: Array | None = None
         self._saccade: Saccade | None = None  # the saccade under way
         self._pursuit_only = 0  # samples before a saccade may start again (after one was ended)
         self._last_step: Array | None = None  # the last commanded change of the readings
-        self._reaim_samples = 0 if saccades is None else max(1, round(saccades.reaim_interval / self.dt))
+        self._reaim_samples = (
+            0 if saccades is None else max(1, round(saccades.reaim_interval / self.dt))
+        )
 
     @property
     def in_saccade(self) -> bool:
@@ -312,12 +340,18 @@ class GazeTracker:
         if q_start is not None and self._miss(q_start, p) > WARM_START_ANGLE:
             q_start = None  # the target jumped: the solver's own start beats the last answer
         # q_prev stays between in-limit readings, so it need not be checked again
-        sol = self.solver.solve_checked(p, None if q_prev is None else q_prev.copy(), self.policy, q_start)
+        sol = self.solver.solve_checked(
+            p, None if q_prev is None else q_prev.copy(), self.policy, q_start
+        )
         goal = sol.q
         self.goal = goal
         aims = sol.status in SACCADE_STATUSES  # an answer that points at the target
         sac = self._saccade
-        if q_prev is not None and sac is not None and sac.done - sac.last_check >= self._reaim_samples:
+        if (
+            q_prev is not None
+            and sac is not None
+            and sac.done - sac.last_check >= self._reaim_samples
+        ):
             sac.last_check = sac.done
             if not aims or self._saccade_stale(p, sol):
                 # the target moved on (or can no longer be pointed at): pursuit from here, a new
@@ -330,9 +364,16 @@ class GazeTracker:
         elif self._saccade is not None:
             q_cmd = self._saccade_sample()
             in_saccade = True
-        elif (self.saccades is not None and aims and self._pursuit_only == 0 and self._at_rest()
-              and self._saccade_wanted(q_prev, p, sol)):
-            self._saccade = Saccade(q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt))
+        elif (
+            self.saccades is not None
+            and aims
+            and self._pursuit_only == 0
+            and self._at_rest()
+            and self._saccade_wanted(q_prev, p, sol)
+        ):
+            self._saccade = Saccade(
+                q_prev, goal, self.saccades.duration(goal - q_prev, self.max_velocity, self.dt)
+            )
             q_cmd = self._saccade_sample()
             in_saccade = True
         else:
@@ -343,7 +384,9 @@ class GazeTracker:
             q_cmd = goal.copy()
         self._last_step = q_cmd - q_prev if q_prev is not None else None
         self.q = q_cmd
-        return TrackingStep(q_cmd, goal, sol.reachable, self.solver.pointing_errors(q_cmd, p), locked, in_saccade)
+        return TrackingStep(
+            q_cmd, goal, sol.reachable, self.solver.pointing_errors(q_cmd, p), locked, in_saccade
+        )
 
     def _pursuit(self, q_prev: Array, goal: Array) -> Array:
         """Smooth pursuit: at most ``max_velocity * dt`` per joint; joints that move only
@@ -366,7 +409,9 @@ class GazeTracker:
         """Whether the last commanded step is at most :data:`REST_FRACTION` of every joint's
         speed limit (a head pursuing at speed is not: a saccade from rest would stop it)."""
         step = self._last_step
-        return step is None or bool(np.all(np.abs(step) <= REST_FRACTION * self._step_limit + 1e-15))
+        return step is None or bool(
+            np.all(np.abs(step) <= REST_FRACTION * self._step_limit + 1e-15)
+        )
 
     def _saccade_wanted(self, q_prev: Array, p: Array, sol: GazeSolution) -> bool:
         assert self.saccades is not None
@@ -390,7 +435,9 @@ class GazeTracker:
 
 
 def speed_limits(
-    solver: WarmStartSolver, max_velocity: ArrayLike | Mapping[str, float] | None, moved: NDArray[np.intp]
+    solver: WarmStartSolver,
+    max_velocity: ArrayLike | Mapping[str, float] | None,
+    moved: NDArray[np.intp],
 ) -> Array:
     """Per-joint speed limits [rad/s]/[m/s], shape (n,), from ``max_velocity`` (see
     :class:`GazeTracker`) and the URDF's, checked on the joints the head moves (``moved``):
@@ -410,7 +457,9 @@ def speed_limits(
             if name not in names:
                 raise ConfigurationError(f"max_velocity names an unknown joint {name!r}")
             if not _is_real(value):
-                raise ConfigurationError(f"max_velocity[{name!r}] must be a number [rad/s]/[m/s], got {value!r}")
+                raise ConfigurationError(
+                    f"max_velocity[{name!r}] must be a number [rad/s]/[m/s], got {value!r}"
+                )
             i = names.index(name)
             vmax[i] = float(value)
             given[i] = True
@@ -429,7 +478,9 @@ def speed_limits(
         if v.ndim == 0:
             kinds = {solver.joint_kinds[names[i]] for i in moved.tolist()}
             if len(kinds) > 1:
-                prismatic = [names[i] for i in moved.tolist() if solver.joint_kinds[names[i]] == "prismatic"]
+                prismatic = [
+                    names[i] for i in moved.tolist() if solver.joint_kinds[names[i]] == "prismatic"
+                ]
                 raise ConfigurationError(
                     f"a scalar max_velocity would be rad/s on revolute joints and m/s on prismatic ones "
                     f"({', '.join(prismatic)}): give {{joint: limit}} or {n} values"
@@ -507,7 +558,9 @@ def track(
         raise ConfigurationError(f"targets must have shape (T, 3) [m], got shape {P.shape}")
     if not np.all(np.isfinite(P)):
         raise ConfigurationError("targets contain NaN or inf")
-    tracker = GazeTracker(solver, dt, max_velocity, q_current=q_current, policy=policy, saccades=saccades)
+    tracker = GazeTracker(
+        solver, dt, max_velocity, q_current=q_current, policy=policy, saccades=saccades
+    )
     steps = [tracker.step_checked(p) for p in P]
     T = P.shape[0]
     return Trajectory(

@@ -53,9 +53,7 @@ def _revolute_axis(shortname: str) -> Array:
     )
 
 
-def focus_points(
-    robot: ViewRobot, T_links: dict[str, Array], visuals: list[Visual]
-) -> list[Array]:
+def focus_points(robot: ViewRobot, T_links: dict[str, Array], visuals: list[Visual]) -> list[Array]:
     """Where the head is: the bounding-box corners of the visuals on links moved by a revolute
     joint and on plate/camera frames (the XY table and base may lie outside the view; the viewer
     can zoom out). A robot without plate or camera frames is framed whole."""
@@ -149,4 +147,11 @@ def place_camera(
     return R.T @ (centre + offset), R.T @ centre
 
 
-__all__ = ["FRAME_MARGIN", "VIEWER_FAR", "VIEWER_FOV", "focus_points", "place_camera", "up_direction"]
+__all__ = [
+    "FRAME_MARGIN",
+    "VIEWER_FAR",
+    "VIEWER_FOV",
+    "focus_points",
+    "place_camera",
+    "up_direction",
+]

@@ -141,12 +141,14 @@ def static_view_html(
     summary = build_view(vis, robot, **options)
     overlay = []
     if summary.link_changes and summary.ghost is not None:
-        overlay.append(legend_html(
-            summary.link_changes,
-            os.path.basename(summary.ghost),
-            summary.unmatched_links,
-            anchor=summary.ghost_anchor if summary.ghost_aligned else None,
-        ))
+        overlay.append(
+            legend_html(
+                summary.link_changes,
+                os.path.basename(summary.ghost),
+                summary.unmatched_links,
+                anchor=summary.ghost_anchor if summary.ghost_aligned else None,
+            )
+        )
     if summary.region is not None:
         overlay.append(region_legend_html(summary.region, region_notes))
     vis.window.overlay = "\n".join(overlay)

@@ -39,13 +39,26 @@ from cpc2urdf.validation.view.geometry import hex_colour
 from cpc2urdf.validation.view.view_robot import ViewRobot
 
 REGION_NODE = "reach"  # /meshcat/reach/<category>
-COLOUR_NAMES = {"fixated": "green", "disparity": "orange", "joint_limits": "blue", "behind": "grey",
-                "too_close": "purple", "no_solution": "red"}  # CATEGORY_COLOURS in words, for a terminal
-POINTED = ("fixated", "disparity")  # categories the head points at (disparity: as well as it can): drawn opaque
-OTHER_OPACITY = 0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
+COLOUR_NAMES = {
+    "fixated": "green",
+    "disparity": "orange",
+    "joint_limits": "blue",
+    "behind": "grey",
+    "too_close": "purple",
+    "no_solution": "red",
+}  # CATEGORY_COLOURS in words, for a terminal
+POINTED = (
+    "fixated",
+    "disparity",
+)  # categories the head points at (disparity: as well as it can): drawn opaque
+OTHER_OPACITY = (
+    0.3  # [0-1]: the other categories are drawn translucent, so the pointed-at volume shows through
+)
 POINT_FRACTION = 0.4  # [-]: a point's side is this fraction of the grid's spacing where it lies
 MAX_POINT_FRACTION = 0.05  # [-]: and at most this fraction of the grid's far range (coarse grids)
-RADIAL_FRACTION = 0.8  # [-]: a shell's points at most this fraction of the spacing between its distances
+RADIAL_FRACTION = (
+    0.8  # [-]: a shell's points at most this fraction of the spacing between its distances
+)
 SAME_WORLD = 1e-6  # [m]: drawn points this close to the solver's are in its world
 MAX_FRAMING_POINTS = 20_000  # [-]: the region's outer points that the viewer camera frames, at most
 
@@ -78,11 +91,15 @@ class RegionShown:
 
     def format(self) -> str:
         """One line for a terminal."""
-        parts = ", ".join(f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in self.counts.items() if k)
+        parts = ", ".join(
+            f"{k} {c.replace('_', ' ')} ({COLOUR_NAMES[c]})" for c, k in self.counts.items() if k
+        )
         lo, hi = (1e3 * s for s in self.point_sizes)
         size = f"{lo:.3g} mm" if hi - lo <= 1e-9 * hi else f"{lo:.3g}-{hi:.3g} mm"
-        line = (f"reachable region: {self.n} targets ({self.grid} grid): {parts}; drawn as points of {size}, "
-                f"one category a node under '{REGION_NODE}' in meshcat's controls")
+        line = (
+            f"reachable region: {self.n} targets ({self.grid} grid): {parts}; drawn as points of {size}, "
+            f"one category a node under '{REGION_NODE}' in meshcat's controls"
+        )
         return line + (f"; {self.moved()}" if self.moved() else "")
 
     def moved(self) -> str:
@@ -90,8 +107,10 @@ class RegionShown:
         when the view draws the robot in another world; empty when it is the solver's."""
         if self.offset <= SAME_WORLD:
             return ""
-        return (f"the view draws the robot in its URDF's root link frame: the points lie up to "
-                f"{1e3 * self.offset:.3g} mm from the solver's (and --json's) world, at the same place on the head")
+        return (
+            f"the view draws the robot in its URDF's root link frame: the points lie up to "
+            f"{1e3 * self.offset:.3g} mm from the solver's (and --json's) world, at the same place on the head"
+        )
 
 
 def view_cameras(robot: ViewRobot, cameras: Sequence[str]) -> tuple[str, ...]:
@@ -151,7 +170,9 @@ def framing_points(region: Region, points: Array) -> Array:
     return np.asarray(P[::step])
 
 
-def draw_region_points(vis: meshcat.Visualizer, robot: ViewRobot, region: Region) -> tuple[RegionShown, Array]:
+def draw_region_points(
+    vis: meshcat.Visualizer, robot: ViewRobot, region: Region
+) -> tuple[RegionShown, Array]:
     """Draw ``region`` into ``vis``: under ``/meshcat/reach/<category>`` the category's targets,
     coloured as the PNG (:data:`CATEGORY_COLOURS`), as one point cloud per sample of the grid's
     first axis (``<category>/<k>``: a shell's distances, each with its point size).
@@ -164,7 +185,9 @@ def draw_region_points(vis: meshcat.Visualizer, robot: ViewRobot, region: Region
     """
     points, frame = region_in_view(robot, region)
     sizes = point_sizes(region)
-    first = np.unravel_index(np.arange(points.shape[0]), region.grid.shape)[0]  # index along the first axis
+    first = np.unravel_index(np.arange(points.shape[0]), region.grid.shape)[
+        0
+    ]  # index along the first axis
     for k, name in enumerate(REGION_CATEGORIES):
         opacity = 1.0 if name in POINTED else OTHER_OPACITY
         for j, size in enumerate(sizes.tolist()):
@@ -172,10 +195,16 @@ def draw_region_points(vis: meshcat.Visualizer, robot: ViewRobot, region: Region
             if not mask.any():
                 continue
             P = points[mask].T.astype(np.float32)
-            C = np.repeat(np.array(CATEGORY_COLOURS[name], dtype=np.float32)[:, None], P.shape[1], axis=1)
-            vis[REGION_NODE][name][str(j)].set_object(mg.Points(mg.PointsGeometry(P, C), _PointsMaterial(size, opacity)))
+            C = np.repeat(
+                np.array(CATEGORY_COLOURS[name], dtype=np.float32)[:, None], P.shape[1], axis=1
+            )
+            vis[REGION_NODE][name][str(j)].set_object(
+                mg.Points(mg.PointsGeometry(P, C), _PointsMaterial(size, opacity))
+            )
     offset = float(np.max(np.linalg.norm(points - region.points, axis=1))) if points.size else 0.0
-    shown = RegionShown(region.counts(), region.grid.kind, (float(sizes.min()), float(sizes.max())), frame, offset)
+    shown = RegionShown(
+        region.counts(), region.grid.kind, (float(sizes.min()), float(sizes.max())), frame, offset
+    )
     return shown, framing_points(region, points)
 
 
@@ -184,7 +213,9 @@ class _PointsMaterial(mg.PointsMaterial):  # type: ignore[misc]
     not written to the depth buffer (points behind stay visible)."""
 
     def __init__(self, size: float, opacity: float) -> None:
-        super().__init__(size=size, color=hex_colour((1.0, 1.0, 1.0)))  # white: the points' own colours
+        super().__init__(
+            size=size, color=hex_colour((1.0, 1.0, 1.0))
+        )  # white: the points' own colours
         self.opacity = opacity
 
     def lower(self, object_data: object) -> dict[str, object]:

@@ -168,7 +168,10 @@ def build_view(
         gaze = gaze_configuration(robot, p_target, q0, cameras, policy)
         q0 = gaze.q
     summary = ViewSummary(
-        robot.name, dict(zip(robot.joint_names, q0.tolist(), strict=True)), p_target, gaze,
+        robot.name,
+        dict(zip(robot.joint_names, q0.tolist(), strict=True)),
+        p_target,
+        gaze,
         cameras=tuple(cameras),
     )
 
@@ -354,7 +357,9 @@ def _change_colours(
     above = set(robot.links_above(aligned_on)) if aligned_on is not None else set()
     changes = link_changes({ln: T for ln, T in T_links.items() if ln not in above}, T_ghost, points)
     summary.link_changes = changes
-    summary.unmatched_links = tuple(ln for ln in robot.links if ln not in changes and ln not in above)
+    summary.unmatched_links = tuple(
+        ln for ln in robot.links if ln not in changes and ln not in above
+    )
     colours = {ln: change_rgba(c.displacement) for ln, c in changes.items()}
     colours.update({ln: UNMATCHED_RGBA for ln in summary.unmatched_links})
     return colours
@@ -397,7 +402,6 @@ def _ghost_q(ghost: ViewRobot, robot: ViewRobot, q: Array) -> Array:
     return np.clip(qg, ghost.lower, ghost.upper)
 
 
-
 def _draw_measurements(
     vis: meshcat.Visualizer, robot: ViewRobot, ms: MeasurementSet, summary: ViewSummary
 ) -> list[Array]:
@@ -433,7 +437,10 @@ def _draw_measurements(
         for i in range(len(ms.q)):
             if np.all(np.isfinite(poses[i])):
                 measured.append((T_shown_world @ poses[i])[:3, 3])
-                reading = {**shown, **dict(zip(names, np.asarray(ms.q[i], dtype=float).tolist(), strict=True))}
+                reading = {
+                    **shown,
+                    **dict(zip(names, np.asarray(ms.q[i], dtype=float).tolist(), strict=True)),
+                }
                 q = np.array([reading[j] for j in robot.joint_names])
                 predicted.append(robot.link_poses(q)[link][:3, 3])
     if not measured:

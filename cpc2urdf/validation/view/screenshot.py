@@ -24,8 +24,9 @@ CHROMIUM_FLAGS = (
     "--enable-unsafe-swiftshader",
     "--hide-scrollbars",
 )
-NO_NETWORK_FLAG = "--host-resolver-rules=MAP * ~NOTFOUND"  # for files: the page must not need a network
-
+NO_NETWORK_FLAG = (
+    "--host-resolver-rules=MAP * ~NOTFOUND"  # for files: the page must not need a network
+)
 
 
 def find_chromium() -> str | None:
@@ -114,8 +115,14 @@ def screenshot_html(
     return png
 
 
-def screenshot_page(html_text: str, png_name: str | os.PathLike[str], *, size: tuple[int, int] = (1024, 768),
-                    budget_ms: int = 2000, timeout: float = 120.0) -> bytes:
+def screenshot_page(
+    html_text: str,
+    png_name: str | os.PathLike[str],
+    *,
+    size: tuple[int, int] = (1024, 768),
+    budget_ms: int = 2000,
+    timeout: float = 120.0,
+) -> bytes:
     """The PNG bytes of a page given as text (:func:`screenshot_html` on a temporary copy), so a
     command can render before it writes anything: a failed screenshot leaves no page behind.
     Errors name ``png_name``, the PNG the caller will write.
@@ -128,7 +135,9 @@ def screenshot_page(html_text: str, png_name: str | os.PathLike[str], *, size: t
         page.write_text(html_text, encoding="utf-8")
         shot = (Path(folder) / "page.png").resolve()
         try:
-            return screenshot_html(page, shot, size=size, budget_ms=budget_ms, timeout=timeout).read_bytes()
+            return screenshot_html(
+                page, shot, size=size, budget_ms=budget_ms, timeout=timeout
+            ).read_bytes()
         except OutputError as e:
             raise OutputError(str(e).replace(str(shot), os.fspath(png_name))) from e
 
@@ -137,9 +146,17 @@ def require_chromium(option: str = "--screenshot") -> None:
     """:class:`ConfigurationError` naming ``option`` when no Chromium is found (checked before a
     long computation whose picture it would take)."""
     if find_chromium() is None:
-        raise ConfigurationError(f"{option} needs Chromium, and none was found: install it (apt-get install "
-                                 "chromium) or set CPC2URDF_CHROMIUM")
+        raise ConfigurationError(
+            f"{option} needs Chromium, and none was found: install it (apt-get install "
+            "chromium) or set CPC2URDF_CHROMIUM"
+        )
 
 
-__all__ = ["CHROMIUM_FLAGS", "NO_NETWORK_FLAG", "find_chromium", "require_chromium", "screenshot_html",
-           "screenshot_page"]
+__all__ = [
+    "CHROMIUM_FLAGS",
+    "NO_NETWORK_FLAG",
+    "find_chromium",
+    "require_chromium",
+    "screenshot_html",
+    "screenshot_page",
+]

@@ -112,7 +112,11 @@ class ViewSummary:
         if self.target is not None and self.gaze is not None:
             errors = self.gaze.pointing_error.tolist()
             # one error per solved axis: each camera's, or a rigid pair's one cyclopean axis
-            axes = self.cameras if len(errors) == len(self.cameras) else ("cyclopean axis",) * len(errors)
+            axes = (
+                self.cameras
+                if len(errors) == len(self.cameras)
+                else ("cyclopean axis",) * len(errors)
+            )
             err = ", ".join(
                 f"{k} {math.degrees(v):.3g} deg" for k, v in zip(axes, errors, strict=True)
             )

@@ -76,7 +76,9 @@ EXPLAIN_FACTOR = 10.0
 TIE_FACTOR = 2.0
 MAX_CAMERA_OFFSET = 0.5  # [m]: |t_X|, camera origin from the hand frame's origin
 WORKING_DISTANCE = (0.02, 20.0)  # [m]: median camera-target distance |t_C| of a usable setup
-IMPLAUSIBLE_RESIDUAL = 0.05  # RMS position residual / median camera-target distance (no noise statement)
+IMPLAUSIBLE_RESIDUAL = (
+    0.05  # RMS position residual / median camera-target distance (no noise statement)
+)
 IMPLAUSIBLE_ANGLE = math.radians(5.0)  # [rad] RMS rotation residual (no noise statement)
 LARGE_RESIDUAL = 0.01  # a warning above this fraction of the camera-target distance ...
 LARGE_ANGLE = math.radians(1.0)  # ... or this RMS angle [rad]
@@ -109,10 +111,14 @@ class _Candidate:
         out = []
         lo, hi = WORKING_DISTANCE
         if not lo <= self.distance <= hi:
-            out.append(f"the camera {_length(self.distance)} from the target (expected {lo:g} to {hi:g} m)")
+            out.append(
+                f"the camera {_length(self.distance)} from the target (expected {lo:g} to {hi:g} m)"
+            )
         offset = float(np.linalg.norm(self.X[:3, 3]))
         if offset > MAX_CAMERA_OFFSET:
-            out.append(f"the camera {_length(offset)} from the hand (at most {MAX_CAMERA_OFFSET:g} m expected)")
+            out.append(
+                f"the camera {_length(offset)} from the hand (at most {MAX_CAMERA_OFFSET:g} m expected)"
+            )
         return out
 
     def residuals(self) -> str:
@@ -123,9 +129,13 @@ def _length(x: float) -> str:
     return f"{x:.3g} m" if abs(x) >= 1.0 else f"{x * 1e3:.3g} mm"
 
 
-def _evaluate(H: Array, C: Array, noise: PoseNoise | None, mistake: Mistake | None) -> _Candidate | None:
+def _evaluate(
+    H: Array, C: Array, noise: PoseNoise | None, mistake: Mistake | None
+) -> _Candidate | None:
     """Undo ``mistake`` and solve with the quick fit; None if too few poses remain."""
-    Hm, Cm, kept = mistake.undo(H, C) if mistake is not None else (H, C, np.arange(len(H), dtype=np.intp))
+    Hm, Cm, kept = (
+        mistake.undo(H, C) if mistake is not None else (H, C, np.arange(len(H), dtype=np.intp))
+    )
     n = len(kept)
     if n < MIN_POSES:
         return None
@@ -168,7 +178,9 @@ def _ties(best: _Candidate, alts: list[_Candidate]) -> str:
             continue
         why = "; ".join(a.problems)
         code = a.mistake.code
-        notes.append(f"undoing {code} instead fits as well but puts {why}" if why else f"{code} fits as well")
+        notes.append(
+            f"undoing {code} instead fits as well but puts {why}" if why else f"{code} fits as well"
+        )
     return "; " + "; ".join(notes) if notes else ""
 
 
@@ -254,7 +266,9 @@ def check_consistency(
     given = _evaluate(H, C, noise, None)
     assert given is not None
     alts = [a for m in MISTAKES if (a := _evaluate(H, C, noise, m)) is not None]
-    improvements = tuple((a.mistake.code, given.level / a.level) for a in alts if a.mistake is not None)
+    improvements = tuple(
+        (a.mistake.code, given.level / a.level) for a in alts if a.mistake is not None
+    )
     dof = 6 * n - 12
     fits: list[WeightedFit] = []
 
@@ -266,12 +280,28 @@ def check_consistency(
     p_high = float(chi2.sf(reference().chi2, dof)) if noise is not None else 1.0
     p_low = float(chi2.cdf(reference().chi2, dof)) if noise is not None else 1.0
     ratio = math.sqrt(reference().chi2 / dof) if noise is not None else math.nan
-    verdict = ConsistencyReport(True, noise=kind, rms_translation=given.rms_t, rms_rotation=given.rms_r,
-                                noise_ratio=ratio, alternatives=improvements, false_alarm=false_alarm)
+    verdict = ConsistencyReport(
+        True,
+        noise=kind,
+        rms_translation=given.rms_t,
+        rms_rotation=given.rms_r,
+        noise_ratio=ratio,
+        alternatives=improvements,
+        false_alarm=false_alarm,
+    )
 
-    def refuse(code: str, cause: str, evidence: str, fix: str, outliers: tuple[str, ...] = ()) -> ConsistencyReport:
-        return replace(verdict, consistent=False, code=code, cause=cause, evidence=evidence, fix=fix,
-                       outliers=outliers)
+    def refuse(
+        code: str, cause: str, evidence: str, fix: str, outliers: tuple[str, ...] = ()
+    ) -> ConsistencyReport:
+        return replace(
+            verdict,
+            consistent=False,
+            code=code,
+            cause=cause,
+            evidence=evidence,
+            fix=fix,
+            outliers=outliers,
+        )
 
     # 1. a tested mistake explains the data (unless the data already agree with a stated noise)
     level_ok = noise is None or (p_high >= alpha / 2 and p_low >= alpha / 2)
@@ -279,28 +309,45 @@ def check_consistency(
     if explaining:
         best = explaining[0]
         assert best.mistake is not None
-        evidence = (f"residuals {given.residuals()} as given, {best.residuals()} with it undone"
-                    + _ties(best, alts))
+        evidence = (
+            f"residuals {given.residuals()} as given, {best.residuals()} with it undone"
+            + _ties(best, alts)
+        )
         return refuse(best.mistake.code, best.mistake.cause, evidence, best.mistake.fix)
 
     # 2. physically implausible as given, while an equally good reading is plausible
     if given.problems:
-        readings = [a for a in alts if a.mistake is not None and not a.problems
-                    and (a.mistake.symmetric or a.level <= TIE_FACTOR * given.level)]
+        readings = [
+            a
+            for a in alts
+            if a.mistake is not None
+            and not a.problems
+            and (a.mistake.symmetric or a.level <= TIE_FACTOR * given.level)
+        ]
         if readings:
             best = min(readings, key=lambda a: a.level)
             assert best.mistake is not None
-            return refuse(best.mistake.code, best.mistake.cause,
-                          f"as given the solution puts {'; '.join(given.problems)}", best.mistake.fix)
+            return refuse(
+                best.mistake.code,
+                best.mistake.cause,
+                f"as given the solution puts {'; '.join(given.problems)}",
+                best.mistake.fix,
+            )
         if not WORKING_DISTANCE[0] <= given.distance <= WORKING_DISTANCE[1]:
-            return refuse("implausible", "implausible lengths", f"the solution puts {'; '.join(given.problems)}",
-                          "check the length unit of the poses")
+            return refuse(
+                "implausible",
+                "implausible lengths",
+                f"the solution puts {'; '.join(given.problems)}",
+                "check the length unit of the poses",
+            )
 
     # 3. gross outliers
     fit = reference()
     verdict = replace(verdict, rms_translation=_rms(fit.e_t), rms_rotation=_rms(fit.e_r))
     out, fit_in = _outliers(H, C, noise, fit, alpha)
-    if out and noise is not None:  # outliers explain the data only if the rest agrees with the statement
+    if (
+        out and noise is not None
+    ):  # outliers explain the data only if the rest agrees with the statement
         assert fit_in is not None
         dof_in = 6 * (n - len(out)) - 12
         if not alpha / 2 <= float(chi2.sf(fit_in.chi2, dof_in)) <= 1.0 - alpha / 2:
@@ -309,36 +356,61 @@ def check_consistency(
         assert fit_in is not None
         o = np.array(out)
         e_t, e_r = residual_vectors(H[o], C[o], fit_in.X, fit_in.Z)
-        worst = ", ".join(f"{names[k]} {_length(float(np.linalg.norm(e_t[i])))} / "
-                          f"{math.degrees(float(np.linalg.norm(e_r[i]))):.3g} deg" for i, k in enumerate(out))
-        evidence = (f"residuals {worst}; the other {n - len(out)} poses "
-                    f"{_length(_rms(fit_in.e_t))} / {math.degrees(_rms(fit_in.e_r)):.3g} deg RMS")
-        return refuse("outliers", f"gross outliers: {', '.join(names[k] for k in out)}", evidence,
-                      "remove or re-measure these poses", tuple(names[k] for k in out))
+        worst = ", ".join(
+            f"{names[k]} {_length(float(np.linalg.norm(e_t[i])))} / "
+            f"{math.degrees(float(np.linalg.norm(e_r[i]))):.3g} deg"
+            for i, k in enumerate(out)
+        )
+        evidence = (
+            f"residuals {worst}; the other {n - len(out)} poses "
+            f"{_length(_rms(fit_in.e_t))} / {math.degrees(_rms(fit_in.e_r)):.3g} deg RMS"
+        )
+        return refuse(
+            "outliers",
+            f"gross outliers: {', '.join(names[k] for k in out)}",
+            evidence,
+            "remove or re-measure these poses",
+            tuple(names[k] for k in out),
+        )
 
     # 4. the residual level
     if noise is not None and p_high < alpha / 2:
         tried = max(improvements, key=lambda c: c[1])
-        return refuse("noise_exceeded", f"residuals {ratio:.3g}x the stated noise",
-                      f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_high:.2g}; no tested "
-                      f"mistake explains it (best: {tried[0]}, variance x{1 / tried[1]:.3g})",
-                      "check the pairing of the poses and the kinematic model, or state the noise")
+        return refuse(
+            "noise_exceeded",
+            f"residuals {ratio:.3g}x the stated noise",
+            f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_high:.2g}; no tested "
+            f"mistake explains it (best: {tried[0]}, variance x{1 / tried[1]:.3g})",
+            "check the pairing of the poses and the kinematic model, or state the noise",
+        )
     if noise is not None and p_low < alpha / 2:
-        return refuse("below_noise", f"residuals {ratio:.3g}x the stated noise, far below it",
-                      f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_low:.2g}",
-                      "check the noise statement and the length unit")
-    if noise is None and (given.rms_t > IMPLAUSIBLE_RESIDUAL * given.distance or given.rms_r > IMPLAUSIBLE_ANGLE):
-        return refuse("implausible", "residuals too large for any working setup",
-                      f"{given.residuals()} at a camera-target distance of {_length(given.distance)}; "
-                      "no tested mistake explains them",
-                      "check the pairing of the poses, the kinematic model and the camera calibration")
+        return refuse(
+            "below_noise",
+            f"residuals {ratio:.3g}x the stated noise, far below it",
+            f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_low:.2g}",
+            "check the noise statement and the length unit",
+        )
+    if noise is None and (
+        given.rms_t > IMPLAUSIBLE_RESIDUAL * given.distance or given.rms_r > IMPLAUSIBLE_ANGLE
+    ):
+        return refuse(
+            "implausible",
+            "residuals too large for any working setup",
+            f"{given.residuals()} at a camera-target distance of {_length(given.distance)}; "
+            "no tested mistake explains them",
+            "check the pairing of the poses, the kinematic model and the camera calibration",
+        )
     evidence = f"residuals {_length(_rms(fit.e_t))} / {math.degrees(_rms(fit.e_r)):.3g} deg RMS"
     if noise is not None:
         evidence += f", {ratio:.3g}x the stated noise"
     warnings = [f"implausible solution: it puts {p}" for p in given.problems]
-    if noise is None and (given.rms_t > LARGE_RESIDUAL * given.distance or given.rms_r > LARGE_ANGLE):
-        warnings.append(f"large residuals ({given.residuals()} at a camera-target distance of "
-                        f"{_length(given.distance)}): poses out of sync, outliers or a wrong kinematic model?")
+    if noise is None and (
+        given.rms_t > LARGE_RESIDUAL * given.distance or given.rms_r > LARGE_ANGLE
+    ):
+        warnings.append(
+            f"large residuals ({given.residuals()} at a camera-target distance of "
+            f"{_length(given.distance)}): poses out of sync, outliers or a wrong kinematic model?"
+        )
     return replace(verdict, evidence=evidence, warnings=tuple(warnings))
 
 

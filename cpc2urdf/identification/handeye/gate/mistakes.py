@@ -67,7 +67,11 @@ def _transpose_rotations(T: Array) -> Array:
 
 def _transposed(hand: bool, camera: bool) -> Undo:
     def undo(H: Array, C: Array) -> tuple[Array, Array, NDArray[np.intp]]:
-        return (_transpose_rotations(H) if hand else H), (_transpose_rotations(C) if camera else C), _all(len(H))
+        return (
+            (_transpose_rotations(H) if hand else H),
+            (_transpose_rotations(C) if camera else C),
+            _all(len(H)),
+        )
 
     return undo
 
@@ -120,44 +124,110 @@ def _shifted(step: int) -> Undo:
 
 
 _INVERT_HAND = "invert T_base_hand (give the hand pose in the robot base frame)"
-_INVERT_CAMERA = "invert T_camera_target (give the target pose in the camera frame: solvePnP's rvec/tvec)"
+_INVERT_CAMERA = (
+    "invert T_camera_target (give the target pose in the camera frame: solvePnP's rvec/tvec)"
+)
 
 MISTAKES: tuple[Mistake, ...] = (
-    Mistake("hand_inverted", "inconsistent directions: hand poses inverted (T_hand_base given instead of T_base_hand)",
-            _INVERT_HAND, _inverted(True, False)),
-    Mistake("camera_inverted",
-            "inconsistent directions: camera poses inverted (T_target_camera given instead of T_camera_target)",
-            _INVERT_CAMERA, _inverted(False, True)),
-    Mistake("both_inverted",
-            "inconsistent directions: both pose lists inverted (T_hand_base and T_target_camera given)",
-            "invert both lists", _inverted(True, True), symmetric=True),
-    Mistake("hand_transposed", "hand rotation blocks transposed (R^T in T_base_hand)",
-            "transpose the rotation part of every T_base_hand", _transposed(True, False)),
-    Mistake("camera_transposed", "camera rotation blocks transposed (R^T in T_camera_target)",
-            "transpose the rotation part of every T_camera_target", _transposed(False, True)),
-    Mistake("both_transposed", "rotation blocks transposed in both pose lists",
-            "transpose the rotation part of every pose", _transposed(True, True)),
-    Mistake("hand_lengths_small", "hand-pose lengths 1000x too small (metres in a file that says mm?)",
-            "give T_base_hand's lengths in the file's unit", _scaled(1e3, 1.0)),
-    Mistake("hand_lengths_large", "hand-pose lengths 1000x too large (millimetres in a file that says m?)",
-            "give T_base_hand's lengths in the file's unit", _scaled(1e-3, 1.0)),
-    Mistake("camera_lengths_small", "camera-pose lengths 1000x too small (metres in a file that says mm?)",
-            "give T_camera_target's lengths in the file's unit", _scaled(1.0, 1e3)),
-    Mistake("camera_lengths_large", "camera-pose lengths 1000x too large (millimetres in a file that says m?)",
-            "give T_camera_target's lengths in the file's unit", _scaled(1.0, 1e-3)),
-    Mistake("lengths_small", "all lengths 1000x too small (metres in a file that says mm?)",
-            "state the file's length unit correctly", _scaled(1e3, 1e3), symmetric=True),
-    Mistake("lengths_large", "all lengths 1000x too large (millimetres in a file that says m, or no units?)",
-            "state the file's length unit correctly", _scaled(1e-3, 1e-3), symmetric=True),
-    Mistake("paired_next", "poses paired off by one (each record's camera pose belongs to the next record's hand pose)",
-            "pair every hand pose with the camera pose taken at the same configuration", _shifted(-1)),
-    Mistake("paired_previous",
-            "poses paired off by one (each record's camera pose belongs to the previous record's hand pose)",
-            "pair every hand pose with the camera pose taken at the same configuration", _shifted(1)),
-    Mistake("hand_quaternion_order", "hand quaternions written w,x,y,z where quat_xyzw (x,y,z,w) is expected",
-            "write T_base_hand's quaternions as x, y, z, w", _quaternions(True, False)),
-    Mistake("camera_quaternion_order", "camera quaternions written w,x,y,z where quat_xyzw (x,y,z,w) is expected",
-            "write T_camera_target's quaternions as x, y, z, w", _quaternions(False, True)),
+    Mistake(
+        "hand_inverted",
+        "inconsistent directions: hand poses inverted (T_hand_base given instead of T_base_hand)",
+        _INVERT_HAND,
+        _inverted(True, False),
+    ),
+    Mistake(
+        "camera_inverted",
+        "inconsistent directions: camera poses inverted (T_target_camera given instead of T_camera_target)",
+        _INVERT_CAMERA,
+        _inverted(False, True),
+    ),
+    Mistake(
+        "both_inverted",
+        "inconsistent directions: both pose lists inverted (T_hand_base and T_target_camera given)",
+        "invert both lists",
+        _inverted(True, True),
+        symmetric=True,
+    ),
+    Mistake(
+        "hand_transposed",
+        "hand rotation blocks transposed (R^T in T_base_hand)",
+        "transpose the rotation part of every T_base_hand",
+        _transposed(True, False),
+    ),
+    Mistake(
+        "camera_transposed",
+        "camera rotation blocks transposed (R^T in T_camera_target)",
+        "transpose the rotation part of every T_camera_target",
+        _transposed(False, True),
+    ),
+    Mistake(
+        "both_transposed",
+        "rotation blocks transposed in both pose lists",
+        "transpose the rotation part of every pose",
+        _transposed(True, True),
+    ),
+    Mistake(
+        "hand_lengths_small",
+        "hand-pose lengths 1000x too small (metres in a file that says mm?)",
+        "give T_base_hand's lengths in the file's unit",
+        _scaled(1e3, 1.0),
+    ),
+    Mistake(
+        "hand_lengths_large",
+        "hand-pose lengths 1000x too large (millimetres in a file that says m?)",
+        "give T_base_hand's lengths in the file's unit",
+        _scaled(1e-3, 1.0),
+    ),
+    Mistake(
+        "camera_lengths_small",
+        "camera-pose lengths 1000x too small (metres in a file that says mm?)",
+        "give T_camera_target's lengths in the file's unit",
+        _scaled(1.0, 1e3),
+    ),
+    Mistake(
+        "camera_lengths_large",
+        "camera-pose lengths 1000x too large (millimetres in a file that says m?)",
+        "give T_camera_target's lengths in the file's unit",
+        _scaled(1.0, 1e-3),
+    ),
+    Mistake(
+        "lengths_small",
+        "all lengths 1000x too small (metres in a file that says mm?)",
+        "state the file's length unit correctly",
+        _scaled(1e3, 1e3),
+        symmetric=True,
+    ),
+    Mistake(
+        "lengths_large",
+        "all lengths 1000x too large (millimetres in a file that says m, or no units?)",
+        "state the file's length unit correctly",
+        _scaled(1e-3, 1e-3),
+        symmetric=True,
+    ),
+    Mistake(
+        "paired_next",
+        "poses paired off by one (each record's camera pose belongs to the next record's hand pose)",
+        "pair every hand pose with the camera pose taken at the same configuration",
+        _shifted(-1),
+    ),
+    Mistake(
+        "paired_previous",
+        "poses paired off by one (each record's camera pose belongs to the previous record's hand pose)",
+        "pair every hand pose with the camera pose taken at the same configuration",
+        _shifted(1),
+    ),
+    Mistake(
+        "hand_quaternion_order",
+        "hand quaternions written w,x,y,z where quat_xyzw (x,y,z,w) is expected",
+        "write T_base_hand's quaternions as x, y, z, w",
+        _quaternions(True, False),
+    ),
+    Mistake(
+        "camera_quaternion_order",
+        "camera quaternions written w,x,y,z where quat_xyzw (x,y,z,w) is expected",
+        "write T_camera_target's quaternions as x, y, z, w",
+        _quaternions(False, True),
+    ),
 )
 MISTAKE_CODES = tuple(m.code for m in MISTAKES)
 

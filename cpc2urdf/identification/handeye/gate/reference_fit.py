@@ -47,7 +47,9 @@ def rotvec_from_matrix(R: Array) -> Array:
     fast (the gate's fits evaluate it thousands of times); within 1e-3 rad of 180 deg, where ``v``
     loses the axis, scipy's quaternion route.
     """
-    v = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=-1)
+    v = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=-1
+    )
     s = np.linalg.norm(v, axis=-1)
     c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
     theta = np.arctan2(s, c)
@@ -67,7 +69,9 @@ def matrix_from_rotvec(r: Array) -> Array:
     return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K
 
 
-def residual_vectors(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> tuple[Array, Array]:
+def residual_vectors(
+    T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array
+) -> tuple[Array, Array]:
     """``(e_t, e_r)`` of every pose, each shape (N, 3): position [m], rotation vector [rad]."""
     P = T_base_hand @ X
     Q = Z @ inverse(T_camera_target)
@@ -111,7 +115,9 @@ class WeightedFit:
         return float(np.sum(self.w**2))
 
 
-def whitening(noise: PoseNoise, T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> Array:
+def whitening(
+    noise: PoseNoise, T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array
+) -> Array:
     """``L_k^-1`` with ``L_k L_k^T`` the residual covariance of pose k: shape (N, 6, 6)."""
     L = np.linalg.cholesky(residual_covariance(noise, T_base_hand, T_camera_target, X, Z))
     return np.linalg.inv(L)
@@ -130,12 +136,18 @@ def _weights(
 
 
 def _objective(
-    T_base_hand: Array, T_camera_target: Array, X0: Array, Z0: Array, weigh: Callable[[Array, Array], Array]
+    T_base_hand: Array,
+    T_camera_target: Array,
+    X0: Array,
+    Z0: Array,
+    weigh: Callable[[Array, Array], Array],
 ) -> Callable[[Array], Array]:
     """Whitened residuals (6N,) as a function of ``p`` (12,): ``X = X0 exp(p[:6])``, ``Z = Z0 exp(p[6:])``."""
 
     def fun(p: Array) -> Array:
-        e_t, e_r = residual_vectors(T_base_hand, T_camera_target, _update(X0, p[:6]), _update(Z0, p[6:]))
+        e_t, e_r = residual_vectors(
+            T_base_hand, T_camera_target, _update(X0, p[:6]), _update(Z0, p[6:])
+        )
         return weigh(e_t, e_r).ravel()
 
     return fun
@@ -151,10 +163,14 @@ def jacobian(fun: Callable[[Array], Array], p: Array, step: float = 1e-7) -> Arr
     return np.stack(cols, axis=-1)
 
 
-def whitened(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array, noise: PoseNoise) -> tuple[Array, Array]:
+def whitened(
+    T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array, noise: PoseNoise
+) -> tuple[Array, Array]:
     """Whitened residuals (N, 6) at ``(X, Z)`` and their Jacobian (6N, 12) with respect to
     ``X exp(dx)``, ``Z exp(dz)`` (weights from ``noise`` at ``(X, Z)``)."""
-    fun = _objective(T_base_hand, T_camera_target, X, Z, _weights(T_base_hand, T_camera_target, X, Z, noise))
+    fun = _objective(
+        T_base_hand, T_camera_target, X, Z, _weights(T_base_hand, T_camera_target, X, Z, noise)
+    )
     p0 = np.zeros(12)
     return fun(p0).reshape(-1, 6), jacobian(fun, p0)
 
@@ -182,12 +198,24 @@ def weighted_fit(
     for _ in range(2):
         if noise is None:
             e_t, e_r = residual_vectors(T_base_hand, T_camera_target, X, Z)
-            used = estimate_noise(T_base_hand, T_camera_target, X, Z, np.concatenate([e_t, e_r], axis=-1), dof)
+            used = estimate_noise(
+                T_base_hand, T_camera_target, X, Z, np.concatenate([e_t, e_r], axis=-1), dof
+            )
         assert used is not None
-        fun = _objective(T_base_hand, T_camera_target, X, Z, _weights(T_base_hand, T_camera_target, X, Z, used))
+        fun = _objective(
+            T_base_hand, T_camera_target, X, Z, _weights(T_base_hand, T_camera_target, X, Z, used)
+        )
         if robust:  # Cauchy loss on the whitened residuals: gross outliers barely pull the fit
-            sol = least_squares(fun, np.zeros(12), method="trf", loss="cauchy", f_scale=3.0,
-                                xtol=1e-12, ftol=1e-12, gtol=1e-12)
+            sol = least_squares(
+                fun,
+                np.zeros(12),
+                method="trf",
+                loss="cauchy",
+                f_scale=3.0,
+                xtol=1e-12,
+                ftol=1e-12,
+                gtol=1e-12,
+            )
         else:
             sol = least_squares(fun, np.zeros(12), method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
         X, Z = _update(X, sol.x[:6]), _update(Z, sol.x[6:])

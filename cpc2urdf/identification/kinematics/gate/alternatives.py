@@ -73,16 +73,26 @@ class Alternative:
     length_factor: float = 1.0
 
 
-def _rebuild(ms: MeasurementSet, q: Array, poses: dict[str, Array], labels: list[str] | None = None) -> MeasurementSet:
+def _rebuild(
+    ms: MeasurementSet, q: Array, poses: dict[str, Array], labels: list[str] | None = None
+) -> MeasurementSet:
     """A measurement set like ``ms`` with other readings and poses (points and fit RMS dropped)."""
-    out = MeasurementSet(ms.structure, q, poses, ms.source, ms.robot, list(labels or ms.labels),
-                         metadata=dict(ms.metadata))
+    out = MeasurementSet(
+        ms.structure,
+        q,
+        poses,
+        ms.source,
+        ms.robot,
+        list(labels or ms.labels),
+        metadata=dict(ms.metadata),
+    )
     out.spec = ms.spec
     return out
 
 
 def scale_lengths(factor: float, readings: bool = True) -> Fix:
     """Pose translations (and prismatic readings if ``readings``) times ``factor``."""
+
     def fix(ms: MeasurementSet) -> MeasurementSet:
         q = ms.q.copy()
         if readings:
@@ -92,34 +102,41 @@ def scale_lengths(factor: float, readings: bool = True) -> Fix:
         for T in poses.values():
             T[:, :3, 3] *= factor
         return _rebuild(ms, q, poses)
+
     return fix
 
 
 def scale_revolute(factor: float) -> Fix:
     """Revolute readings times ``factor``."""
+
     def fix(ms: MeasurementSet) -> MeasurementSet:
         q = ms.q.copy()
         revolute = [k for k, j in enumerate(ms.structure.joints) if j.type == "revolute"]
         q[:, revolute] *= factor
         return _rebuild(ms, q, {f: T.copy() for f, T in ms.poses.items()})
+
     return fix
 
 
 def swap_frames(a: str, b: str) -> Fix:
     """The poses of frames ``a`` and ``b`` exchanged."""
+
     def fix(ms: MeasurementSet) -> MeasurementSet:
         poses = {f: T.copy() for f, T in ms.poses.items()}
         poses[a], poses[b] = ms.poses[b].copy(), ms.poses[a].copy()
         return _rebuild(ms, ms.q.copy(), poses)
+
     return fix
 
 
 def swap_joints(a: int, b: int) -> Fix:
     """The readings of joints ``a`` and ``b`` (column indices) exchanged."""
+
     def fix(ms: MeasurementSet) -> MeasurementSet:
         q = ms.q.copy()
         q[:, [a, b]] = q[:, [b, a]]
         return _rebuild(ms, q, {f: T.copy() for f, T in ms.poses.items()})
+
     return fix
 
 
@@ -133,6 +150,7 @@ def _map_poses(fn: Callable[[Array], Array]) -> Fix:
                 out[ok] = fn(T[ok])
             poses[f] = out
         return _rebuild(ms, ms.q.copy(), poses)
+
     return fix
 
 
@@ -166,6 +184,7 @@ def shift_pairing(step: int) -> Fix:
     ``step = +1`` undoes readings paired with the next record's poses: then the poses in
     record ``i`` belong to the readings of record ``i + 1``.
     """
+
     def fix(ms: MeasurementSet) -> MeasurementSet:
         n = ms.n_records
         if step > 0:
@@ -174,6 +193,7 @@ def shift_pairing(step: int) -> Fix:
             q_idx, p_idx = np.arange(0, n + step), np.arange(-step, n)
         poses = {f: T[p_idx].copy() for f, T in ms.poses.items()}
         return _rebuild(ms, ms.q[q_idx].copy(), poses, [ms.labels[int(i)] for i in q_idx])
+
     return fix
 
 
@@ -182,45 +202,101 @@ def alternatives(ms: MeasurementSet) -> list[Alternative]:
     s = ms.structure
     out: list[Alternative] = []
     for factor, story in LENGTH_FACTORS.items():
-        out.append(Alternative(f"lengths x{factor:g}", "lengths", f"lengths look like {story}",
-                               'fix "units": "length"', scale_lengths(factor), factor))
+        out.append(
+            Alternative(
+                f"lengths x{factor:g}",
+                "lengths",
+                f"lengths look like {story}",
+                'fix "units": "length"',
+                scale_lengths(factor),
+                factor,
+            )
+        )
     if any(j.type == "prismatic" for j in s.joints):
         for factor in (1000.0, 0.001):
-            out.append(Alternative(
-                f"pose lengths x{factor:g}", "pose lengths",
-                f"pose lengths look {factor:g}x {'too small' if factor > 1 else 'too large'} for the prismatic "
-                f"readings ({LENGTH_FACTORS[factor]}?)", "convert the poses to the file's length unit",
-                scale_lengths(factor, readings=False), factor))
+            out.append(
+                Alternative(
+                    f"pose lengths x{factor:g}",
+                    "pose lengths",
+                    f"pose lengths look {factor:g}x {'too small' if factor > 1 else 'too large'} for the prismatic "
+                    f"readings ({LENGTH_FACTORS[factor]}?)",
+                    "convert the poses to the file's length unit",
+                    scale_lengths(factor, readings=False),
+                    factor,
+                )
+            )
     if any(j.type == "revolute" for j in s.joints):
         for factor, story in ANGLE_FACTORS.items():
-            out.append(Alternative(f"revolute readings x{factor:.4g}", "angles",
-                                   f"revolute readings look like {story}", 'fix "units": "angle"',
-                                   scale_revolute(factor)))
+            out.append(
+                Alternative(
+                    f"revolute readings x{factor:.4g}",
+                    "angles",
+                    f"revolute readings look like {story}",
+                    'fix "units": "angle"',
+                    scale_revolute(factor),
+                )
+            )
     frames = ms.frames
     for a, b in itertools.combinations(frames, 2):
-        out.append(Alternative(f"swap {a}/{b}", "frames", f"the poses of {a} and {b} look swapped",
-                               f"swap the {a} and {b} poses", swap_frames(a, b)))
+        out.append(
+            Alternative(
+                f"swap {a}/{b}",
+                "frames",
+                f"the poses of {a} and {b} look swapped",
+                f"swap the {a} and {b} poses",
+                swap_frames(a, b),
+            )
+        )
     for (i, ja), (k, jb) in itertools.combinations(enumerate(s.joints), 2):
         if ja.type == jb.type:
-            out.append(Alternative(f"swap {ja.name}/{jb.name}", "joints",
-                                   f"the readings of {ja.name} and {jb.name} look swapped",
-                                   f"swap the {ja.name} and {jb.name} readings", swap_joints(i, k)))
+            out.append(
+                Alternative(
+                    f"swap {ja.name}/{jb.name}",
+                    "joints",
+                    f"the readings of {ja.name} and {jb.name} look swapped",
+                    f"swap the {ja.name} and {jb.name} readings",
+                    swap_joints(i, k),
+                )
+            )
     out += [
-        Alternative("inverted poses", "inverted",
-                    "the poses look inverted (T_frame_world given instead of T_world_frame)",
-                    "invert every pose", _map_poses(_invert)),
-        Alternative("transposed rotations", "transposed", "the rotation blocks look transposed",
-                    "transpose every rotation block", _map_poses(_transpose)),
-        Alternative("quaternions w,x,y,z", "quaternion",
-                    "the quaternions look written w, x, y, z in 'quat_xyzw'",
-                    "write them x, y, z, w", _map_poses(_quaternion_wxyz)),
+        Alternative(
+            "inverted poses",
+            "inverted",
+            "the poses look inverted (T_frame_world given instead of T_world_frame)",
+            "invert every pose",
+            _map_poses(_invert),
+        ),
+        Alternative(
+            "transposed rotations",
+            "transposed",
+            "the rotation blocks look transposed",
+            "transpose every rotation block",
+            _map_poses(_transpose),
+        ),
+        Alternative(
+            "quaternions w,x,y,z",
+            "quaternion",
+            "the quaternions look written w, x, y, z in 'quat_xyzw'",
+            "write them x, y, z, w",
+            _map_poses(_quaternion_wxyz),
+        ),
     ]
     if ms.n_records > 2:
         out += [
-            Alternative("pairing +1", "pairing", "each record's readings look paired with the next record's poses",
-                        "pair each record's readings with its own poses", shift_pairing(+1)),
-            Alternative("pairing -1", "pairing", "each record's readings look paired with the previous record's poses",
-                        "pair each record's readings with its own poses", shift_pairing(-1)),
+            Alternative(
+                "pairing +1",
+                "pairing",
+                "each record's readings look paired with the next record's poses",
+                "pair each record's readings with its own poses",
+                shift_pairing(+1),
+            ),
+            Alternative(
+                "pairing -1",
+                "pairing",
+                "each record's readings look paired with the previous record's poses",
+                "pair each record's readings with its own poses",
+                shift_pairing(-1),
+            ),
         ]
     return out
 

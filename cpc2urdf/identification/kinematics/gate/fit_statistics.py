@@ -145,7 +145,9 @@ def without_poses(ms: MeasurementSet, drop: Iterable[tuple[str, int]]) -> Measur
     poses = {f: T.copy() for f, T in ms.poses.items()}
     for f, k in drop:
         poses[f][k] = np.nan
-    out = MeasurementSet(ms.structure, ms.q, poses, ms.source, ms.robot, list(ms.labels), metadata=dict(ms.metadata))
+    out = MeasurementSet(
+        ms.structure, ms.q, poses, ms.source, ms.robot, list(ms.labels), metadata=dict(ms.metadata)
+    )
     out.spec = ms.spec
     return out
 
@@ -189,7 +191,9 @@ def fit_statistics(
 
     data = without_poses(ms, drop) if drop else ms
     if frames is None:
-        frames = [f for f in model.structure.frame_names if f in data.poses and data.has_pose(f).any()]
+        frames = [
+            f for f in model.structure.frame_names if f in data.poses and data.has_pose(f).any()
+        ]
     frames = list(frames)
     res = refine(model, data, sigma_t, sigma_r, frames=frames, warn=False, max_nfev=max_nfev)
     use = {f: data.has_pose(f) for f in frames}

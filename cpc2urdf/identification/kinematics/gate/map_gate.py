@@ -34,7 +34,9 @@ from scipy.stats import chi2
 from cpc2urdf.identification.kinematics.prior_fit import MapFit, Noise
 
 Z_OUTLIER = 4.0  # [-]: robust standard deviations (per row) that make a record an outlier
-MAX_OUTLIER_SHARE = 0.2  # [-]: more records beyond Z_OUTLIER than this is the model's error, not outliers
+MAX_OUTLIER_SHARE = (
+    0.2  # [-]: more records beyond Z_OUTLIER than this is the model's error, not outliers
+)
 NOISE_ALPHA = 1e-3  # [-]: chance that a fit consistent with the stated noise is refused
 
 
@@ -76,10 +78,14 @@ def record_z(fit: MapFit) -> np.ndarray:
     """Each record's left-out position and orientation statistics (:attr:`MapFit.loo_stat`,
     :attr:`MapFit.loo_stat_rot`) in robust standard deviations per row, the larger of the two,
     shape (N,)."""
-    return np.maximum(_z(fit.loo_stat, 3.0 * fit.loo_points), _z(fit.loo_stat_rot, 3.0 * fit.loo_frames))
+    return np.maximum(
+        _z(fit.loo_stat, 3.0 * fit.loo_points), _z(fit.loo_stat_rot, 3.0 * fit.loo_frames)
+    )
 
 
-def check(fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | None, labels: list[str]) -> GateReport:
+def check(
+    fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | None, labels: list[str]
+) -> GateReport:
     """The gate (module docstring). ``refit(kept)`` fits again on the records ``kept`` (indices)."""
     n = len(fit.loo_points)
     kept = np.arange(n)
@@ -94,28 +100,51 @@ def check(fit: MapFit, refit: Callable[[np.ndarray], MapFit], stated: Noise | No
         outliers, current = (), fit
     ratio, cause = None, ""
     if outliers:
-        cause = (f"{len(outliers)} isolated outlier record(s), more than {Z_OUTLIER:g} standard deviations from "
-                 f"the fit made without them: " + ", ".join(labels[i] for i in outliers))
+        cause = (
+            f"{len(outliers)} isolated outlier record(s), more than {Z_OUTLIER:g} standard deviations from "
+            f"the fit made without them: " + ", ".join(labels[i] for i in outliers)
+        )
     elif stated is not None:
         shown = current.residual_noise
         m_pos = float(current.loo_points.sum()) * 3
         m_rot = float(current.loo_frames.sum()) * 3
-        checks = [("position", shown.position_m, stated.position_m, m_pos - current.dof_position, 1e3, "mm per coordinate")]
+        checks = [
+            (
+                "position",
+                shown.position_m,
+                stated.position_m,
+                m_pos - current.dof_position,
+                1e3,
+                "mm per coordinate",
+            )
+        ]
         if m_rot:
-            checks.append(("orientation", shown.rotation_rad, stated.rotation_rad, m_rot - (current.dof - current.dof_position),
-                           180 / np.pi, "deg per axis"))
+            checks.append(
+                (
+                    "orientation",
+                    shown.rotation_rad,
+                    stated.rotation_rad,
+                    m_rot - (current.dof - current.dof_position),
+                    180 / np.pi,
+                    "deg per axis",
+                )
+            )
         for what, got, want, dof, scale, unit in checks:
             r = got / want
             ratio = r if ratio is None else ratio
             stat = r**2 * max(dof, 1.0)
             if stat > chi2.isf(NOISE_ALPHA, max(dof, 1.0)):
-                cause = (f"unmodelled error: the fit's {what} residuals are {r:.1f}x the stated noise "
-                         f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}), spread over the records, "
-                         "not a few of them (elastic links, backlash, marker bodies, or the stated noise is too small)")
+                cause = (
+                    f"unmodelled error: the fit's {what} residuals are {r:.1f}x the stated noise "
+                    f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}), spread over the records, "
+                    "not a few of them (elastic links, backlash, marker bodies, or the stated noise is too small)"
+                )
                 break
             if stat < chi2.ppf(NOISE_ALPHA, max(dof, 1.0)):
-                cause = (f"the fit's {what} residuals are {1 / r:.1f}x below the stated noise "
-                         f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}): the stated noise is too large")
+                cause = (
+                    f"the fit's {what} residuals are {1 / r:.1f}x below the stated noise "
+                    f"({got * scale:.3f} {unit} against {want * scale:.3f} {unit}): the stated noise is too large"
+                )
                 break
     return GateReport(current, outliers, ratio, cause)
 

@@ -51,8 +51,11 @@ class SizeCheck:
 
     @property
     def what(self) -> str:
-        return ("the measured robot's size against the nominal model's" if self.yardstick == "nominal"
-                else "the prismatic joints' travel against their limits")
+        return (
+            "the measured robot's size against the nominal model's"
+            if self.yardstick == "nominal"
+            else "the prismatic joints' travel against their limits"
+        )
 
     def describe(self) -> str:
         if self.yardstick == "nominal":

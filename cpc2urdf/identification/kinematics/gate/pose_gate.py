@@ -102,13 +102,25 @@ def check_consistency(
     problems, outliers, size = evaluate(stats, noise, ms, nominal, share)
     if not problems and (noise.known or is_exact(stats)):
         return ConsistencyReport(True, ms.source, noise, stats, size=size)
-    diagnosis, tested = diagnose(ms, nominal, noise, stats, size, bool(outliers) or bool(noise_problems(stats, noise)))
+    diagnosis, tested = diagnose(
+        ms, nominal, noise, stats, size, bool(outliers) or bool(noise_problems(stats, noise))
+    )
     if diagnosis is None and not problems:
         return ConsistencyReport(True, ms.source, noise, stats, tested=tuple(tested), size=size)
     if diagnosis is None:
-        diagnosis = unexplained(problems, stats, noise, size, len(alternatives(ms)) + 1, outliers, ms)
-    return ConsistencyReport(False, ms.source, noise, stats, tuple(problems) or ("a likely mistake fits far better",),
-                             diagnosis, tuple(tested), size)
+        diagnosis = unexplained(
+            problems, stats, noise, size, len(alternatives(ms)) + 1, outliers, ms
+        )
+    return ConsistencyReport(
+        False,
+        ms.source,
+        noise,
+        stats,
+        tuple(problems) or ("a likely mistake fits far better",),
+        diagnosis,
+        tuple(tested),
+        size,
+    )
 
 
 __all__ = [

@@ -130,22 +130,40 @@ class ConsistencyReport:
         """The ``consistency`` entry of a model's provenance details (SI units)."""
         out: dict[str, Any] = {
             "consistent": self.consistent,
-            "test": ("chi-square of the weighted residuals (both tails) and per-pose tests against the stated noise"
-                     if self.noise.known else "robust residual scale, refits of likely mistakes, robot size"),
+            "test": (
+                "chi-square of the weighted residuals (both tails) and per-pose tests against the stated noise"
+                if self.noise.known
+                else "robust residual scale, refits of likely mistakes, robot size"
+            ),
             "false_alarm_probability": FALSE_ALARM if self.noise.known else None,
             "noise": "stated" if self.noise.known else "not stated (relative weights)",
             "fit": self.statistics.to_json(),
-            "fit_over_noise": {"translation": self.statistics.ratio_t, "rotation": self.statistics.ratio_r}
-            if self.noise.known else None,
-            "size": None if self.size is None else {"yardstick": self.size.yardstick, "ratio": self.size.ratio,
-                                                     "plausible": self.size.plausible},
+            "fit_over_noise": {
+                "translation": self.statistics.ratio_t,
+                "rotation": self.statistics.ratio_r,
+            }
+            if self.noise.known
+            else None,
+            "size": None
+            if self.size is None
+            else {
+                "yardstick": self.size.yardstick,
+                "ratio": self.size.ratio,
+                "plausible": self.size.plausible,
+            },
             "problems": list(self.problems),
             "alternatives_tested": list(self.tested),
         }
         if self.diagnosis is not None:
             d = self.diagnosis
-            out["diagnosis"] = {"kind": d.kind, "cause": d.cause, "evidence": d.evidence, "remedy": d.remedy,
-                                "fix": d.key, "records": list(d.records)}
+            out["diagnosis"] = {
+                "kind": d.kind,
+                "cause": d.cause,
+                "evidence": d.evidence,
+                "remedy": d.remedy,
+                "fix": d.key,
+                "records": list(d.records),
+            }
         return out
 
 
@@ -154,12 +172,16 @@ def outlier_poses(stats: FitStatistics, noise: Noise) -> list[tuple[str, int]]:
     out = []
     if noise.known:
         for f, p in stats.pose_p_values().items():
-            out += [(f, int(stats.records[f][i])) for i in np.flatnonzero(p < FALSE_ALARM / (2 * stats.n_poses))]
+            out += [
+                (f, int(stats.records[f][i]))
+                for i in np.flatnonzero(p < FALSE_ALARM / (2 * stats.n_poses))
+            ]
         return out
     for f in stats.translation:
         t, r = stats.translation[f], stats.rotation[f]
         bad = ((t > OUTLIER_RATIO * np.median(t)) & (t > FK_AGREEMENT_TOL)) | (
-            (r > OUTLIER_RATIO * np.median(r)) & (r > FK_AGREEMENT_TOL))
+            (r > OUTLIER_RATIO * np.median(r)) & (r > FK_AGREEMENT_TOL)
+        )
         out += [(f, int(stats.records[f][i])) for i in np.flatnonzero(bad)]
     return out
 
@@ -183,8 +205,13 @@ def is_exact(stats: FitStatistics) -> bool:
     return t < FK_AGREEMENT_TOL and r < FK_AGREEMENT_TOL
 
 
-def evaluate(stats: FitStatistics, noise: Noise, ms: MeasurementSet, nominal: CPCModel | None,
-              outlier_share: float = 0.0) -> tuple[list[str], list[tuple[str, int]], SizeCheck | None]:
+def evaluate(
+    stats: FitStatistics,
+    noise: Noise,
+    ms: MeasurementSet,
+    nominal: CPCModel | None,
+    outlier_share: float = 0.0,
+) -> tuple[list[str], list[tuple[str, int]], SizeCheck | None]:
     """``(problems, outlier poses, size)`` of one fit."""
     problems = noise_problems(stats, noise)
     poses = outlier_poses(stats, noise)

@@ -163,7 +163,8 @@ def circle_point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: fl
                     raise DegenerateDataError(
                         f"marker {m!r} is declared on {ms.markers[m].frame!r}, which joint {j.name!r} does not move, "
                         f"but it moves by up to {d.max() * 1e3:.3g} mm while {j.name!r} sweeps (noise "
-                        f"{sigma_p * 1e3:.3g} mm): it is on a link that {j.name!r} moves")
+                        f"{sigma_p * 1e3:.3g} mm): it is on a link that {j.name!r} moves"
+                    )
         below = [m for m in seen_markers if m in y0 and ms.markers[m].frame in moved_frames]
         per_marker: dict[str, tuple[Array, Array, float, float]] = {}  # m -> (u, c, r, weight)
         for m in below:
@@ -189,14 +190,22 @@ def circle_point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: fl
                     continue
                 per_marker[m] = (u / np.linalg.norm(u), y0[m], 0.0, float(th @ th))
         if not per_marker:
-            need = ">= 2 readings besides q0, off the joint's axis" if j.type == "revolute" else ">= 1 reading besides q0"
+            need = (
+                ">= 2 readings besides q0, off the joint's axis"
+                if j.type == "revolute"
+                else ">= 1 reading besides q0"
+            )
             raise DegenerateDataError(
                 f"too few markers for joint {j.name!r}: no marker on a link it moves ({', '.join(sorted(moved_frames))}) "
-                f"was seen at q0 and at {need}; put a marker on such a link away from the axis")
+                f"was seen at q0 and at {need}; put a marker on such a link away from the axis"
+            )
         W = np.array([v[3] for v in per_marker.values()])
         u = np.sum([w * v[0] for w, v in zip(W, per_marker.values(), strict=True)], axis=0)
         u /= np.linalg.norm(u)
-        centre = np.sum([w * v[1] for w, v in zip(W, per_marker.values(), strict=True)], axis=0) / W.sum()
+        centre = (
+            np.sum([w * v[1] for w, v in zip(W, per_marker.values(), strict=True)], axis=0)
+            / W.sum()
+        )
         # Every marker j moves must follow the rotation (translation) of the found axis.
         for m in below:
             ok = ms.has_marker(m)[sweep]
@@ -213,7 +222,8 @@ def circle_point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: fl
                 raise DegenerateDataError(
                     f"marker {m!r} is declared on {ms.markers[m].frame!r}, which joint {j.name!r} moves, but it does not "
                     f"follow that joint's {'circle' if j.type == 'revolute' else 'line'} (off by up to {dev.max() * 1e3:.3g} mm, "
-                    f"moved {moved * 1e3:.3g} mm; noise {sigma_p * 1e3:.3g} mm): it is on another link")
+                    f"moved {moved * 1e3:.3g} mm; noise {sigma_p * 1e3:.3g} mm): it is on another link"
+                )
         parent = link_q0[j.parent]
         if j.type == "revolute":
             o = parent[:3, 3]
@@ -228,7 +238,11 @@ def circle_point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: fl
     frames: dict[str, CPCParams] = {}
     notes: list[str] = []
     for f in s.frames:
-        E = nominal.frames[f.name].matrix() if nominal is not None and f.name in nominal.frames else np.eye(4)
+        E = (
+            nominal.frames[f.name].matrix()
+            if nominal is not None and f.name in nominal.frames
+            else np.eye(4)
+        )
         frames[f.name] = CPCParams.from_matrix(E)
     model = CPCModel(s, CPCParams(), joints, frames)
     model, positions = place_markers(model, ms, ref)
@@ -236,7 +250,9 @@ def circle_point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: fl
     return PointStart(model, positions, axes, radii, protocol, notes)
 
 
-def place_markers(model: CPCModel, ms: MeasurementSet, at: list[int] | None = None) -> tuple[CPCModel, dict[str, Array]]:
+def place_markers(
+    model: CPCModel, ms: MeasurementSet, at: list[int] | None = None
+) -> tuple[CPCModel, dict[str, Array]]:
     """Frames with >= 3 markers of known position fitted to them; unknown marker positions estimated.
 
     Args:
@@ -258,9 +274,15 @@ def place_markers(model: CPCModel, ms: MeasurementSet, at: list[int] | None = No
         if len(known) >= 3 and rows:
             parent = s.frame(f).parent
             i = rows[0]
-            link = model.T_world_base() if parent == BASE else model.link_poses(ms.q[i])[1][0, s.joint_index(parent)]
+            link = (
+                model.T_world_base()
+                if parent == BASE
+                else model.link_poses(ms.q[i])[1][0, s.joint_index(parent)]
+            )
             layout = np.array([ms.markers[m].position for m in known], dtype=float)
-            T_world_f = plate_pose_from_points(layout, np.array([ms.marker_points[m][i] for m in known]), what=f"frame {f}")
+            T_world_f = plate_pose_from_points(
+                layout, np.array([ms.marker_points[m][i] for m in known]), what=f"frame {f}"
+            )
             frames[f] = CPCParams.from_matrix(inverse(link) @ T_world_f)
     model = model.with_params(frames=frames) if frames else model
     T = model.fk(ms.q, list(dict.fromkeys(ms.markers[m].frame for m in seen)))
@@ -277,7 +299,9 @@ def place_markers(model: CPCModel, ms: MeasurementSet, at: list[int] | None = No
     return model, positions
 
 
-def nominal_point_start(nominal: CPCModel, ms: MeasurementSet, iterations: int = 100) -> tuple[CPCModel, dict[str, Array]]:
+def nominal_point_start(
+    nominal: CPCModel, ms: MeasurementSet, iterations: int = 100
+) -> tuple[CPCModel, dict[str, Array]]:
     """Start for marker data at arbitrary configurations: the nominal model placed in world.
 
     The nominal model does not know where the robot stands in the tracker's world nor (for
@@ -293,9 +317,14 @@ def nominal_point_start(nominal: CPCModel, ms: MeasurementSet, iterations: int =
     seen = [m for m in ms.marker_points if ms.has_marker(m).any()]
     frames = list(dict.fromkeys(ms.markers[m].frame for m in seen))
     T_world = nominal.fk(ms.q, frames)
-    T_base: dict[str, Array] = {f: np.asarray(np.linalg.solve(nominal.T_world_base(), T_world[f]), dtype=np.float64)
-                                for f in frames}  # T_base_F(q)
-    pos = {m: np.array(ms.markers[m].position, dtype=float) if ms.markers[m].known else np.zeros(3) for m in seen}
+    T_base: dict[str, Array] = {
+        f: np.asarray(np.linalg.solve(nominal.T_world_base(), T_world[f]), dtype=np.float64)
+        for f in frames
+    }  # T_base_F(q)
+    pos = {
+        m: np.array(ms.markers[m].position, dtype=float) if ms.markers[m].known else np.zeros(3)
+        for m in seen
+    }
     G = np.eye(4)
     for _ in range(iterations):
         a, b = [], []
@@ -304,13 +333,17 @@ def nominal_point_start(nominal: CPCModel, ms: MeasurementSet, iterations: int =
             Tf = T_base[ms.markers[m].frame][ok]
             a.append(Tf[:, :3, :3] @ pos[m] + Tf[:, :3, 3])
             b.append(ms.marker_points[m][ok])
-        G = transforms_from_point_pairs(np.concatenate(a), np.concatenate(b), what="marker points")  # eqs. (18)-(22)
+        G = transforms_from_point_pairs(
+            np.concatenate(a), np.concatenate(b), what="marker points"
+        )  # eqs. (18)-(22)
         for m in seen:
             if ms.markers[m].known:
                 continue
             ok = ms.has_marker(m)
             Tw = G @ T_base[ms.markers[m].frame][ok]
-            pos[m] = np.einsum("nji,nj->ni", Tw[:, :3, :3], ms.marker_points[m][ok] - Tw[:, :3, 3]).mean(0)
+            pos[m] = np.einsum(
+                "nji,nj->ni", Tw[:, :3, :3], ms.marker_points[m][ok] - Tw[:, :3, 3]
+            ).mean(0)
     model = nominal.with_params(world_to_base=CPCParams.from_matrix(G @ nominal.T_world_base()))
     return model, pos
 

@@ -73,12 +73,20 @@ class PointConsistency:
     outliers: list[tuple[int, str, str, float]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
-        return {"consistent": self.consistent, "tests": self.tests,
-                **({"diagnosis": {"cause": self.cause}} if not self.consistent else {}),
-                "outliers": [{"record": r, "label": lb, "marker": m, "distance_m": d} for r, lb, m, d in self.outliers]}
+        return {
+            "consistent": self.consistent,
+            "tests": self.tests,
+            **({"diagnosis": {"cause": self.cause}} if not self.consistent else {}),
+            "outliers": [
+                {"record": r, "label": lb, "marker": m, "distance_m": d}
+                for r, lb, m, d in self.outliers
+            ],
+        }
 
     def error(self) -> InconsistentDataError:
-        return InconsistentDataError(f"the marker points are inconsistent with the fitted model: {self.cause}", self)
+        return InconsistentDataError(
+            f"the marker points are inconsistent with the fitted model: {self.cause}", self
+        )
 
 
 def _extent(points: list[np.ndarray]) -> float:
@@ -101,14 +109,23 @@ def extent_check(ms: MeasurementSet, nominal: CPCModel | None) -> str | None:
         return None
     for k, why in UNIT_MISTAKES:
         if nom / 2 - EXTENT_SLACK <= k * meas <= 2 * nom + EXTENT_SLACK:
-            return (f"{why}: the points span {meas:.4g} m where the nominal robot's marked links span "
-                    f"{nom:.3g} m at the same configurations (state units.length in the file)")
-    return (f"the points span {meas:.4g} m where the nominal robot's marked links span {nom:.3g} m at the same "
-            "configurations: wrong units or wrong robot?")
+            return (
+                f"{why}: the points span {meas:.4g} m where the nominal robot's marked links span "
+                f"{nom:.3g} m at the same configurations (state units.length in the file)"
+            )
+    return (
+        f"the points span {meas:.4g} m where the nominal robot's marked links span {nom:.3g} m at the same "
+        "configurations: wrong units or wrong robot?"
+    )
 
 
-def _point_outliers(ms: MeasurementSet, residuals: dict[str, np.ndarray], sigma_p: float, known: bool,
-                    scale_from: dict[str, np.ndarray] | None = None) -> list[tuple[int, str, str, float]]:
+def _point_outliers(
+    ms: MeasurementSet,
+    residuals: dict[str, np.ndarray],
+    sigma_p: float,
+    known: bool,
+    scale_from: dict[str, np.ndarray] | None = None,
+) -> list[tuple[int, str, str, float]]:
     """Points failing the per-point test; without a noise statement the median is taken over ``scale_from``."""
     d = np.concatenate([v[np.isfinite(v)] for v in residuals.values()])
     ref = np.concatenate([v[np.isfinite(v)] for v in (scale_from or residuals).values()])
@@ -119,7 +136,9 @@ def _point_outliers(ms: MeasurementSet, residuals: dict[str, np.ndarray], sigma_
         for i in np.flatnonzero(np.isfinite(v)):
             z = float(v[i])
             if known:
-                bad = float(gammaincc(1.5, 0.5 * z * z / sigma_p**2)) < FALSE_ALARM / (2 * max(n, 1))
+                bad = float(gammaincc(1.5, 0.5 * z * z / sigma_p**2)) < FALSE_ALARM / (
+                    2 * max(n, 1)
+                )
             else:
                 bad = z > limit
             if bad:
@@ -128,7 +147,10 @@ def _point_outliers(ms: MeasurementSet, residuals: dict[str, np.ndarray], sigma_
 
 
 def _chi2_passed(sum_squares: float, dof: int) -> bool:
-    return min(float(gammaincc(dof / 2, sum_squares / 2)), float(gammainc(dof / 2, sum_squares / 2))) >= FALSE_ALARM / 2
+    return (
+        min(float(gammaincc(dof / 2, sum_squares / 2)), float(gammainc(dof / 2, sum_squares / 2)))
+        >= FALSE_ALARM / 2
+    )
 
 
 def check_point_consistency(
@@ -168,8 +190,13 @@ def check_point_consistency(
     if known:
         p_hi = float(gammaincc(dof / 2, sum_squares / 2))
         p_lo = float(gammainc(dof / 2, sum_squares / 2))
-        tests["chi_square"] = {"sum_squares": sum_squares, "dof": dof, "p_upper": p_hi, "p_lower": p_lo,
-                               "passed": min(p_hi, p_lo) >= FALSE_ALARM / 2}
+        tests["chi_square"] = {
+            "sum_squares": sum_squares,
+            "dof": dof,
+            "p_upper": p_hi,
+            "p_lower": p_lo,
+            "passed": min(p_hi, p_lo) >= FALSE_ALARM / 2,
+        }
     failed = bool(outliers) or (known and not tests["chi_square"]["passed"])
     # Without a noise statement, a fit off by more than MIN_OUTLIER_M anywhere is checked too.
     suspect = failed or (not known and len(d) > 0 and float(d.max()) > MIN_OUTLIER_M)
@@ -185,24 +212,35 @@ def check_point_consistency(
             except DegenerateDataError:
                 continue
             others = {k: v for k, v in res2.items() if k != m}
-            if _point_outliers(ms, others, sigma_p, known) or (known and not _chi2_passed(ss2, dof2)):
+            if _point_outliers(ms, others, sigma_p, known) or (
+                known and not _chi2_passed(ss2, dof2)
+            ):
                 continue
             if not known:  # the others must fit MIN_IMPROVEMENT times better without it
                 before = np.concatenate([v[np.isfinite(v)] for k, v in residuals.items() if k != m])
                 after = np.concatenate([v[np.isfinite(v)] for v in others.values()])
-                if MIN_IMPROVEMENT * float(np.sqrt(np.mean(after**2))) > float(np.sqrt(np.mean(before**2))):
+                if MIN_IMPROVEMENT * float(np.sqrt(np.mean(after**2))) > float(
+                    np.sqrt(np.mean(before**2))
+                ):
                     continue
             off = len(_point_outliers(ms, {m: res2[m]}, sigma_p, known, scale_from=others))
             if off >= WRONG_LINK_MIN_POINTS and 2 * off > n_m:
-                return PointConsistency(False, _wrong_link(ms, m, off, n_m, res2[m]), tests, outliers)
+                return PointConsistency(
+                    False, _wrong_link(ms, m, off, n_m, res2[m]), tests, outliers
+                )
     if outliers:
         outliers.sort(key=lambda o: -o[3])
         first = outliers[0]
         more = f" (and {len(outliers) - 1} more points)" if len(outliers) > 1 else ""
         where = first[1] if first[1] == f"record {first[0]}" else f"{first[1]} (record {first[0]})"
-        return PointConsistency(False, f"outlier: {where} marker {first[2]!r} is "
-                                f"{first[3] * 1e3:.3g} mm from the fit{more}"
-                                + (f", noise {sigma_p * 1e3:.3g} mm" if known else ""), tests, outliers)
+        return PointConsistency(
+            False,
+            f"outlier: {where} marker {first[2]!r} is "
+            f"{first[3] * 1e3:.3g} mm from the fit{more}"
+            + (f", noise {sigma_p * 1e3:.3g} mm" if known else ""),
+            tests,
+            outliers,
+        )
     if known and not tests["chi_square"]["passed"]:
         ratio = float(np.sqrt(sum_squares / max(dof, 1)))
         if refit is not None and ratio > 1:
@@ -212,20 +250,31 @@ def check_point_consistency(
                 except DegenerateDataError:
                     continue
                 if _chi2_passed(ss, df):
-                    return PointConsistency(False, f"{why} (rescaled, the fit matches the stated noise)", tests)
+                    return PointConsistency(
+                        False, f"{why} (rescaled, the fit matches the stated noise)", tests
+                    )
         side = "above" if ratio > 1 else "below"
         return PointConsistency(
-            False, f"the point residuals (rms {np.sqrt(np.mean(d**2)) * 1e3:.3g} mm) are {ratio:.3g}x the stated noise "
+            False,
+            f"the point residuals (rms {np.sqrt(np.mean(d**2)) * 1e3:.3g} mm) are {ratio:.3g}x the stated noise "
             f"sigma_p = {sigma_p * 1e3:.3g} mm per coordinate, {side} it beyond chance (p = "
             f"{min(tests['chi_square']['p_upper'], tests['chi_square']['p_lower']):.1e}): wrong noise statement, "
-            "a marker on another link, or a wrong joint reading", tests)
+            "a marker on another link, or a wrong joint reading",
+            tests,
+        )
     return PointConsistency(True, "", tests)
 
 
 def _wrong_link(ms: MeasurementSet, m: str, n_off: int | None, n: int, v: np.ndarray) -> str:
-    share = f"{n_off} of its {n} points are off the fit" if n_off is not None else f"its {n} points are off the fit"
-    return (f"marker {m!r} does not move with the link it is declared on ({ms.markers[m].frame!r}): {share} "
-            f"(median {float(np.nanmedian(v)) * 1e3:.3g} mm) while the other markers fit: it is on another link")
+    share = (
+        f"{n_off} of its {n} points are off the fit"
+        if n_off is not None
+        else f"its {n} points are off the fit"
+    )
+    return (
+        f"marker {m!r} does not move with the link it is declared on ({ms.markers[m].frame!r}): {share} "
+        f"(median {float(np.nanmedian(v)) * 1e3:.3g} mm) while the other markers fit: it is on another link"
+    )
 
 
 def scaled(ms: MeasurementSet, k: float) -> MeasurementSet:
@@ -234,11 +283,26 @@ def scaled(ms: MeasurementSet, k: float) -> MeasurementSet:
 
     out = ms.subset(np.arange(ms.n_records))
     out.marker_points = {m: Y * k for m, Y in ms.marker_points.items()}
-    out.markers = {m: replace(mk, position=None if mk.position is None else
-                              (mk.position[0] * k, mk.position[1] * k, mk.position[2] * k))
-                   for m, mk in ms.markers.items()}
+    out.markers = {
+        m: replace(
+            mk,
+            position=None
+            if mk.position is None
+            else (mk.position[0] * k, mk.position[1] * k, mk.position[2] * k),
+        )
+        for m, mk in ms.markers.items()
+    }
     return out
 
 
-__all__ = ["EXTENT_RATIO", "MIN_OUTLIER_M", "UNIT_MISTAKES", "WRONG_LINK_MIN_POINTS", "WRONG_LINK_CANDIDATES", "PointConsistency", "check_point_consistency",
-           "extent_check", "scaled"]
+__all__ = [
+    "EXTENT_RATIO",
+    "MIN_OUTLIER_M",
+    "UNIT_MISTAKES",
+    "WRONG_LINK_MIN_POINTS",
+    "WRONG_LINK_CANDIDATES",
+    "PointConsistency",
+    "check_point_consistency",
+    "extent_check",
+    "scaled",
+]

@@ -52,7 +52,9 @@ class PointChart:
         fixed_frames: Frames whose placement is not a parameter (no marker of known position).
     """
 
-    def __init__(self, reference: CPCModel, markers: Sequence[Marker], positions: Mapping[str, Array]) -> None:
+    def __init__(
+        self, reference: CPCModel, markers: Sequence[Marker], positions: Mapping[str, Array]
+    ) -> None:
         if not markers:
             raise DegenerateDataError("nothing to identify: no marker was seen")
         self.markers = tuple(markers)
@@ -60,16 +62,27 @@ class PointChart:
         self.model_chart = Parametrization(reference, frames)
         free_frames = {m.frame for m in self.markers if m.known}
         self.fixed_frames = tuple(f for f in frames if f not in free_frames)
-        cols = [i for b in self.model_chart.blocks if b.kind != "frame" or b.owner in free_frames
-                for i in range(b.start, b.start + len(b.params))]
+        cols = [
+            i
+            for b in self.model_chart.blocks
+            if b.kind != "frame" or b.owner in free_frames
+            for i in range(b.start, b.start + len(b.params))
+        ]
         self.columns = np.array(cols, dtype=int)
         self.unknown = tuple(m for m in self.markers if not m.known)
-        self.positions = {m.name: np.asarray(positions[m.name], dtype=float).copy() for m in self.markers}
+        self.positions = {
+            m.name: np.asarray(positions[m.name], dtype=float).copy() for m in self.markers
+        }
         k = len(self.columns)
         self._marker_slot = {m.name: k + 3 * i for i, m in enumerate(self.unknown)}
-        self.names: tuple[str, ...] = (*(self.model_chart.names[i] for i in cols),
-                                       *(f"{m.name}.{p}" for m in self.unknown for p in MARKER_PARAMS))
-        self.units: tuple[str, ...] = (*(self.model_chart.units[i] for i in cols), *("m",) * (3 * len(self.unknown)))
+        self.names: tuple[str, ...] = (
+            *(self.model_chart.names[i] for i in cols),
+            *(f"{m.name}.{p}" for m in self.unknown for p in MARKER_PARAMS),
+        )
+        self.units: tuple[str, ...] = (
+            *(self.model_chart.units[i] for i in cols),
+            *("m",) * (3 * len(self.unknown)),
+        )
 
     @property
     def reference(self) -> CPCModel:
@@ -99,7 +112,7 @@ class PointChart:
             p = self.positions[m.name].copy()
             if m.name in self._marker_slot:
                 k = self._marker_slot[m.name]
-                p += x[k:k + 3]
+                p += x[k : k + 3]
             out[m.name] = p
         return out
 
@@ -123,15 +136,23 @@ class PointProblem:
         n_points: Used points; there are ``3 * n_points`` residuals.
     """
 
-    def __init__(self, chart: PointChart, q: Array, points: Mapping[str, Array],
-                 use: Mapping[str, NDArray[np.bool_]], sigma_p: float) -> None:
+    def __init__(
+        self,
+        chart: PointChart,
+        q: Array,
+        points: Mapping[str, Array],
+        use: Mapping[str, NDArray[np.bool_]],
+        sigma_p: float,
+    ) -> None:
         if not (sigma_p > 0 and np.isfinite(sigma_p)):
             raise DegenerateDataError(f"marker noise sigma must be positive, got {sigma_p}")
         self.chart = chart
         self.q = np.atleast_2d(q)
         self.markers = [m for m in chart.markers if use[m.name].any()]
         self.rows = {m.name: np.flatnonzero(use[m.name]) for m in self.markers}
-        self.y = {m.name: np.asarray(points[m.name], dtype=float)[self.rows[m.name]] for m in self.markers}
+        self.y = {
+            m.name: np.asarray(points[m.name], dtype=float)[self.rows[m.name]] for m in self.markers
+        }
         self.w = 1.0 / sigma_p
         self.n_points = sum(len(r) for r in self.rows.values())
 
@@ -172,12 +193,14 @@ class PointProblem:
             Tf, Df = T[m.frame][rows], D[m.frame][rows][:, :, c.columns]  # (n, 6, k)
             pw = Tf[:, :3, :3] @ pos[m.name]  # marker lever from the frame origin, in world
             # dy = dp + w x pw = dp - [pw]x w
-            dy = Df[:, :3, :] + np.cross(np.swapaxes(Df[:, 3:, :], 1, 2), pw[:, None, :]).swapaxes(1, 2)
+            dy = Df[:, :3, :] + np.cross(np.swapaxes(Df[:, 3:, :], 1, 2), pw[:, None, :]).swapaxes(
+                1, 2
+            )
             J = np.zeros((len(rows), 3, c.n_params))
             J[:, :, : c.n_model_params] = dy
             k = c.marker_slot(m.name)
             if k is not None:
-                J[:, :, k:k + 3] = Tf[:, :3, :3]
+                J[:, :, k : k + 3] = Tf[:, :3, :3]
             out.append(-J.reshape(-1, c.n_params) * self.w)
         return np.concatenate(out, axis=0)
 

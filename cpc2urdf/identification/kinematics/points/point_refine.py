@@ -98,11 +98,15 @@ def undetermined_by_points(ms: MeasurementSet, markers: list[str]) -> list[str]:
         on = [m for m in markers if ms.markers[m].frame == f]
         known = [m for m in on if ms.markers[m].known]
         if not known:
-            out.append(f"{f}: its placement on its link (orientation and origin) is not determined by point "
-                       f"data (kept at the nominal placement, or the start's without one); the {len(on)} marker position(s) are identified in it")
+            out.append(
+                f"{f}: its placement on its link (orientation and origin) is not determined by point "
+                f"data (kept at the nominal placement, or the start's without one); the {len(on)} marker position(s) are identified in it"
+            )
         elif len(known) < 3:
-            out.append(f"{f}: {len(known)} marker(s) of known position cannot fix its orientation "
-                       f"({'a rotation about any axis through the marker' if len(known) == 1 else 'a rotation about the line through the two markers'} is free)")
+            out.append(
+                f"{f}: {len(known)} marker(s) of known position cannot fix its orientation "
+                f"({'a rotation about any axis through the marker' if len(known) == 1 else 'a rotation about the line through the two markers'} is free)"
+            )
     return out
 
 
@@ -154,7 +158,10 @@ def refine_points(
         raise DegenerateDataError(f"{ms.source}: no marker was seen in any record")
     markers = [ms.markers[m] for m in names]
     seen = {m: ms.has_marker(m) for m in names}
-    used = {m: (np.asarray(use[m], dtype=bool) & seen[m]) if use is not None and m in use else seen[m] for m in names}
+    used = {
+        m: (np.asarray(use[m], dtype=bool) & seen[m]) if use is not None and m in use else seen[m]
+        for m in names
+    }
     points = {m: ms.marker_points[m] for m in names}
     chart = PointChart(model, markers, positions)
     x = np.zeros(chart.n_params)
@@ -164,7 +171,10 @@ def refine_points(
         sol = solve_least_squares(PointProblem(chart, q, points, used, sigma_p), x, max_nfev)
         x, nfev = sol.x, nfev + int(sol.nfev)
         mc = chart.model_chart
-        tilt = max((float(np.hypot(*chart.model_vector(x)[b.start:b.start + 2])) for b in mc.blocks), default=0.0)
+        tilt = max(
+            (float(np.hypot(*chart.model_vector(x)[b.start : b.start + 2])) for b in mc.blocks),
+            default=0.0,
+        )
         if tilt < RECENTRE_TILT:
             break
         chart = PointChart(chart.model_from_vector(x), markers, chart.positions_from_vector(x))
@@ -189,9 +199,9 @@ def refine_points(
         if slot is None:
             std[mk.name] = np.zeros(3)
             continue
-        sd = np.sqrt(np.clip(np.diag(C)[slot:slot + 3], 0.0, None))
+        sd = np.sqrt(np.clip(np.diag(C)[slot : slot + 3], 0.0, None))
         if V0.size:
-            sd = np.where(np.linalg.norm(V0[slot:slot + 3], axis=1) > 1e-6, np.inf, sd)
+            sd = np.where(np.linalg.norm(V0[slot : slot + 3], axis=1) > 1e-6, np.inf, sd)
         std[mk.name] = sd
     # The model's own chart: free columns from C, fixed frame blocks in the null space.
     mc = final.model_chart
@@ -223,35 +233,65 @@ def refine_points(
     undetermined = undetermined_by_points(ms, names)
     seconds = time.perf_counter() - t0
     cov = Covariance(
-        mc.names, mc.units, mc.frames, 0.5 * (Cm + Cm.T), null, covariance_scale, s0, dof, float(sigma_p), 0.0,
+        mc.names,
+        mc.units,
+        mc.frames,
+        0.5 * (Cm + Cm.T),
+        null,
+        covariance_scale,
+        s0,
+        dof,
+        float(sigma_p),
+        0.0,
         details={
             "refinement": {
                 "method": "weighted least squares of marker points (scipy least_squares, Levenberg-Marquardt)",
                 "parameters": final.n_params,
                 "model_parameters": k,
                 "marker_parameters": final.n_params - k,
-                "gauge": mc.gauge_description() + "; frames with no marker of known position: their placement",
+                "gauge": mc.gauge_description()
+                + "; frames with no marker of known position: their placement",
                 "points_used": problem.n_points,
                 "seconds": seconds,
             },
             "identifiability": ident.to_json(),
             "not_determined_by_points": undetermined,
-            "markers": {m: {"frame": ms.markers[m].frame, "position_m": [float(v) for v in pos[m]],
-                            "std_m": [float(v) if np.isfinite(v) else None for v in std[m]],
-                            "known": ms.markers[m].known} for m in names},
+            "markers": {
+                m: {
+                    "frame": ms.markers[m].frame,
+                    "position_m": [float(v) for v in pos[m]],
+                    "std_m": [float(v) if np.isfinite(v) else None for v in std[m]],
+                    "known": ms.markers[m].known,
+                }
+                for m in names
+            },
         },
     )
     refined = with_uncertainty(refined, cov)
     return PointRefinement(
-        model=refined, positions=pos, position_std=std, chart=final, identifiability=ident,
-        undetermined=undetermined, sigma_p=float(sigma_p), variance_factor=s0, dof=dof,
-        cost=0.5 * float(r @ r), n_points=problem.n_points,
+        model=refined,
+        positions=pos,
+        position_std=std,
+        chart=final,
+        identifiability=ident,
+        undetermined=undetermined,
+        sigma_p=float(sigma_p),
+        variance_factor=s0,
+        dof=dof,
+        cost=0.5 * float(r @ r),
+        n_points=problem.n_points,
         rms=float(np.sqrt(np.mean(used_res**2))) if used_res.size else 0.0,
-        residuals=res_table, iterations=nfev, seconds=seconds, success=bool(sol.success), message=str(sol.message),
+        residuals=res_table,
+        iterations=nfev,
+        seconds=seconds,
+        success=bool(sol.success),
+        message=str(sol.message),
     )
 
 
-def point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: float) -> tuple[CPCModel, dict[str, Array], str, list[str]]:
+def point_start(
+    ms: MeasurementSet, nominal: CPCModel | None, sigma_p: float
+) -> tuple[CPCModel, dict[str, Array], str, list[str]]:
     """Where a point-data refinement starts.
 
     Returns:
@@ -271,11 +311,18 @@ def point_start(ms: MeasurementSet, nominal: CPCModel | None, sigma_p: float) ->
         if nominal is None:
             raise DegenerateDataError(
                 f"position-only identification needs a start: the circle-point closed form needs the "
-                f"one-joint-at-a-time protocol ({e}) and the robot has no nominal geometry") from e
+                f"one-joint-at-a-time protocol ({e}) and the robot has no nominal geometry"
+            ) from e
         model, pos = nominal_point_start(nominal, ms)
-        return model, pos, "nominal", [
-            f"closed form not applicable ({e}); refinement started from the nominal model placed in world "
-            "by a rigid fit of the marker points"]
+        return (
+            model,
+            pos,
+            "nominal",
+            [
+                f"closed form not applicable ({e}); refinement started from the nominal model placed in world "
+                "by a rigid fit of the marker points"
+            ],
+        )
     start = circle_point_start(ms, nominal, sigma_p)
     return start.model, start.positions, "circle-point", start.notes
 

@@ -47,7 +47,9 @@ from cpc2urdf.identification.vision.bags.bag_sync import (
 from cpc2urdf.identification.vision.image_folders import write_image
 from cpc2urdf.identification.vision.joints_csv import write_joints_csv
 
-BAG_PROVENANCE = "bag_provenance.json"  # in an images folder: the bag, topics, rule and skipped samples
+BAG_PROVENANCE = (
+    "bag_provenance.json"  # in an images folder: the bag, topics, rule and skipped samples
+)
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,10 @@ class ImageTopic:
         """``CAMERA=TOPIC``."""
         camera, sep, topic = text.partition("=")
         if not sep or not camera or not topic or "/" in camera or camera in (".", ".."):
-            raise ConfigurationError(f"--image expects CAMERA=TOPIC (CAMERA a folder name: left, right or a "
-                                     f"camera frame), got {text!r}")
+            raise ConfigurationError(
+                f"--image expects CAMERA=TOPIC (CAMERA a folder name: left, right or a "
+                f"camera frame), got {text!r}"
+            )
         return cls(camera, topic)
 
 
@@ -79,11 +83,15 @@ class BagImages:
 
 # sensor_msgs/Image encodings we write losslessly: (channels, dtype, cv2 conversion to BGR or None).
 ENCODINGS: dict[str, tuple[int, Any, int | None]] = {
-    "mono8": (1, np.uint8, None), "8UC1": (1, np.uint8, None),
-    "mono16": (1, np.uint16, None), "16UC1": (1, np.uint16, None),
-    "bgr8": (3, np.uint8, None), "8UC3": (3, np.uint8, None),
+    "mono8": (1, np.uint8, None),
+    "8UC1": (1, np.uint8, None),
+    "mono16": (1, np.uint16, None),
+    "16UC1": (1, np.uint16, None),
+    "bgr8": (3, np.uint8, None),
+    "8UC3": (3, np.uint8, None),
     "rgb8": (3, np.uint8, cv2.COLOR_RGB2BGR),
-    "bgra8": (4, np.uint8, None), "rgba8": (4, np.uint8, cv2.COLOR_RGBA2BGRA),
+    "bgra8": (4, np.uint8, None),
+    "rgba8": (4, np.uint8, cv2.COLOR_RGBA2BGRA),
 }
 COMPRESSED = {"png": ".png", "jpeg": ".jpg", "jpg": ".jpg", "tiff": ".tif", "bmp": ".bmp"}
 
@@ -92,16 +100,25 @@ def image_from_msg(msg: Any, where: str, bag: Path) -> NDArray[Any]:
     """A ``sensor_msgs/Image`` as an array OpenCV writes (grey, BGR or BGRA)."""
     enc = str(msg.encoding)
     if enc not in ENCODINGS:
-        raise InputFileError(bag, f"{where}: image encoding {enc!r} is not supported; expected one of "
-                                  f"{', '.join(ENCODINGS)}")
+        raise InputFileError(
+            bag,
+            f"{where}: image encoding {enc!r} is not supported; expected one of "
+            f"{', '.join(ENCODINGS)}",
+        )
     ch, dtype, conv = ENCODINGS[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     item = np.dtype(dtype).itemsize
     data = np.asarray(msg.data, dtype=np.uint8)
     if h <= 0 or w <= 0 or step < w * ch * item or data.size < h * step:
-        raise InputFileError(bag, f"{where}: {data.size} bytes do not hold a {w} x {h} {enc} image with step {step}")
+        raise InputFileError(
+            bag, f"{where}: {data.size} bytes do not hold a {w} x {h} {enc} image with step {step}"
+        )
     rows = data[: h * step].reshape(h, step)[:, : w * ch * item]
-    img = rows.copy().view(np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<")).astype(dtype)
+    img = (
+        rows.copy()
+        .view(np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<"))
+        .astype(dtype)
+    )
     img = img.reshape(h, w, ch) if ch > 1 else img.reshape(h, w)
     if conv is not None:
         img = cv2.cvtColor(img, conv)
@@ -114,7 +131,9 @@ def compressed_suffix(msg: Any, where: str, bag: Path) -> str:
     for key, suffix in COMPRESSED.items():
         if key in fmt:
             return suffix
-    raise InputFileError(bag, f"{where}: compressed format {msg.format!r} is not one of {', '.join(COMPRESSED)}")
+    raise InputFileError(
+        bag, f"{where}: compressed format {msg.format!r} is not one of {', '.join(COMPRESSED)}"
+    )
 
 
 @contextmanager
@@ -163,7 +182,9 @@ def image_folder_from_bag(
     check_topic_options(cams, "--image", "image", "camera", "CAMERA=TOPIC")
     topics = [c.topic for c in images]
     if len(set(topics)) != len(topics):
-        raise ConfigurationError(f"--image: topic {next(t for t in topics if topics.count(t) > 1)!r} given for two cameras")
+        raise ConfigurationError(
+            f"--image: topic {next(t for t in topics if topics.count(t) > 1)!r} given for two cameras"
+        )
     if out_p.exists() and not (out_p.is_dir() and not any(out_p.iterdir())):
         raise OutputError(f"{out_p}: already exists; give a new (or empty) folder")
     joints, kinds, model_names = joint_names_for(robot, [])
@@ -171,7 +192,9 @@ def image_folder_from_bag(
     for c in images:
         by_topic.setdefault(c.topic, []).append(c.camera)
 
-    def read_one(topic: str, msgtype: str, msg: Any, t_bag: int, where: str) -> list[tuple[int | None, str, Any]]:
+    def read_one(
+        topic: str, msgtype: str, msg: Any, t_bag: int, where: str
+    ) -> list[tuple[int | None, str, Any]]:
         # Only the stamp now: the images are read again when they are written (a bag's images
         # need not fit in memory).
         t, stamped = stamp_ns(msg.header, t_bag)
@@ -185,28 +208,45 @@ def image_folder_from_bag(
     for gi, g in enumerate(groups):
         missing = [c for c in cams if c not in {m.key for m in g}]
         if missing:
-            incomplete.append(f"sample {gi} ({stamp_label(g[0].t)}: {', '.join(m.where for m in g)}): no image of "
-                              f"{', '.join(missing)} within {rule.sync_tolerance:g} s")
+            incomplete.append(
+                f"sample {gi} ({stamp_label(g[0].t)}: {', '.join(m.where for m in g)}): no image of "
+                f"{', '.join(missing)} within {rule.sync_tolerance:g} s"
+            )
         else:
             complete.append(g)
             numbers.append(gi)
-    stamps, q, skipped, kept = pair_samples(path, complete, series, kinds, rule, joint_topic, numbers)
+    stamps, q, skipped, kept = pair_samples(
+        path, complete, series, kinds, rule, joint_topic, numbers
+    )
     skipped = incomplete + skipped
     if not kept:
-        raise InputFileError(path, f"no sample with every camera's image and the joints at rest ({len(groups)} "
-                                   f"samples skipped; first: {skipped[0] if skipped else 'none'})")
-    samples = BagSamples(stamps, [stamp_label(t) for t in stamps], q, joints, skipped, n_bag_time, len(messages))
+        raise InputFileError(
+            path,
+            f"no sample with every camera's image and the joints at rest ({len(groups)} "
+            f"samples skipped; first: {skipped[0] if skipped else 'none'})",
+        )
+    samples = BagSamples(
+        stamps, [stamp_label(t) for t in stamps], q, joints, skipped, n_bag_time, len(messages)
+    )
     records = [f"{k:04d}" for k in range(len(kept))]
     s = robot.structure
     order = [joints.index(next(f for f, m in model_names.items() if m == n)) for n in s.joint_names]
-    check_limits(path, s, q, order, joints, samples.labels)  # what `cpc2urdf measure` would refuse, before writing
-    wanted = {(m.topic, m.index): (m.key, rec) for rec, gi in zip(records, kept, strict=True) for m in complete[gi]}
+    check_limits(
+        path, s, q, order, joints, samples.labels
+    )  # what `cpc2urdf measure` would refuse, before writing
+    wanted = {
+        (m.topic, m.index): (m.key, rec)
+        for rec, gi in zip(records, kept, strict=True)
+        for m in complete[gi]
+    }
     with new_folder(out_p) as tmp:
         for cam in cams:
             (tmp / cam).mkdir()
         with open_bag(path) as reader:
             counts: dict[str, int] = {}
-            for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in by_topic]):
+            for conn, _, raw in reader.messages(
+                connections=[c for c in reader.connections if c.topic in by_topic]
+            ):
                 k = counts.get(conn.topic, 0)
                 counts[conn.topic] = k + 1
                 if (conn.topic, k) not in wanted:
@@ -218,14 +258,29 @@ def image_folder_from_bag(
                     data = np.asarray(msg.data, dtype=np.uint8)
                     suffix = compressed_suffix(msg, where, path)
                     if data.size == 0 or cv2.imdecode(data, cv2.IMREAD_UNCHANGED) is None:
-                        raise InputFileError(path, f"{where}: the compressed image ({msg.format}) cannot be decoded")
+                        raise InputFileError(
+                            path, f"{where}: the compressed image ({msg.format}) cannot be decoded"
+                        )
                     (tmp / cam / f"{rec}{suffix}").write_bytes(data.tobytes())
                 else:
                     write_image(tmp / cam / f"{rec}.png", image_from_msg(msg, where, path))
-        write_joints_csv(tmp / "joints.csv", s, records, q[:, order], samples.labels, length="m", angle="rad")
-        write_json(tmp / BAG_PROVENANCE, provenance(path, joint_topic, rule, samples,
-                                                     {c.camera: c.topic for c in images}, "images"))
+        write_joints_csv(
+            tmp / "joints.csv", s, records, q[:, order], samples.labels, length="m", angle="rad"
+        )
+        write_json(
+            tmp / BAG_PROVENANCE,
+            provenance(
+                path, joint_topic, rule, samples, {c.camera: c.topic for c in images}, "images"
+            ),
+        )
     return BagImages(out_p, records, samples)
 
 
-__all__ = ["BAG_PROVENANCE", "BagImages", "ImageTopic", "compressed_suffix", "image_folder_from_bag", "image_from_msg"]
+__all__ = [
+    "BAG_PROVENANCE",
+    "BagImages",
+    "ImageTopic",
+    "compressed_suffix",
+    "image_folder_from_bag",
+    "image_from_msg",
+]

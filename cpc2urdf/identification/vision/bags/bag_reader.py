@@ -45,7 +45,9 @@ def open_bag(bag: Path) -> Iterator[Any]:
         from rosbags.highlevel import AnyReader, AnyReaderError
         from rosbags.typesys import Stores, get_typestore
     except ModuleNotFoundError as e:  # the `ros` extra
-        raise ModuleNotFoundError("reading ROS bags requires rosbags: pip install cpc2urdf[ros]") from e
+        raise ModuleNotFoundError(
+            "reading ROS bags requires rosbags: pip install cpc2urdf[ros]"
+        ) from e
     if not bag.exists():
         raise InputFileError(bag, "no such bag (expected a rosbag1 .bag file or a rosbag2 folder)")
     if bag.is_dir() and not (bag / "metadata.yaml").is_file():
@@ -56,7 +58,9 @@ def open_bag(bag: Path) -> Iterator[Any]:
         reader.open()
     except (AnyReaderError, OSError, ValueError, KeyError) as e:
         why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise InputFileError(bag, f"not a readable ROS bag (expected a rosbag1 .bag file or a rosbag2 folder): {why}") from e
+        raise InputFileError(
+            bag, f"not a readable ROS bag (expected a rosbag1 .bag file or a rosbag2 folder): {why}"
+        ) from e
     try:
         yield reader
     finally:
@@ -67,11 +71,16 @@ def check_topic(reader: Any, bag: Path, topic: str, types: Sequence[str], what: 
     """Refuse a topic the bag lacks (naming the topics it has) or of the wrong message type."""
     topics: Mapping[str, Any] = reader.topics
     if topic not in topics:
-        have = ", ".join(f"{t} ({short_type(i.msgtype or '?')})" for t, i in sorted(topics.items())) or "none"
+        have = (
+            ", ".join(f"{t} ({short_type(i.msgtype or '?')})" for t, i in sorted(topics.items()))
+            or "none"
+        )
         raise InputFileError(bag, f"no topic {topic!r} ({what}); the bag has {have}")
     msgtype = short_type(topics[topic].msgtype or "?")
     if msgtype not in types:
-        raise InputFileError(bag, f"topic {topic} is {msgtype}, expected {' or '.join(types)} ({what})")
+        raise InputFileError(
+            bag, f"topic {topic} is {msgtype}, expected {' or '.join(types)} ({what})"
+        )
 
 
 def stamp_ns(header: Any, bag_time_ns: int) -> tuple[int, bool]:
@@ -104,7 +113,10 @@ class Message:
 
 
 def read_bag(
-    bag: Path, joint_topic: str, joints: Sequence[str], sources: Mapping[str, tuple[str, Sequence[str]]],
+    bag: Path,
+    joint_topic: str,
+    joints: Sequence[str],
+    sources: Mapping[str, tuple[str, Sequence[str]]],
     read_one: Any,
 ) -> tuple[dict[str, Series], list[Message], int]:
     """Read the joint states and the measurement messages.
@@ -137,23 +149,34 @@ def read_bag(
                 if len(pos) == 0:  # an effort-only publisher: no readings
                     continue
                 if len(pos) != len(msg.name):
-                    raise InputFileError(bag, f"{where}: {len(msg.name)} joint names but {len(pos)} positions")
+                    raise InputFileError(
+                        bag, f"{where}: {len(msg.name)} joint names but {len(pos)} positions"
+                    )
                 for name, value in zip(msg.name, pos.tolist(), strict=True):
                     if np.isfinite(value):  # NaN: the driver has no reading of that joint now
                         series.setdefault(str(name), []).append((t, value))
             if conn.topic in sources:
-                for stamp, key, value in read_one(conn.topic, short_type(conn.msgtype), msg, t_bag, where):
+                for stamp, key, value in read_one(
+                    conn.topic, short_type(conn.msgtype), msg, t_bag, where
+                ):
                     n_bag_time += stamp is None
-                    messages.append(Message(t_bag if stamp is None else stamp, key, value, conn.topic, k))
+                    messages.append(
+                        Message(t_bag if stamp is None else stamp, key, value, conn.topic, k)
+                    )
     missing = [j for j in joints if j not in series]
     if missing:
         have = ", ".join(sorted(series)) or "no positions"
-        raise InputFileError(bag, f"{joint_topic} has no reading of joint {missing[0]!r} (the robot needs "
-                                  f"{', '.join(joints)}); its messages name {have}")
+        raise InputFileError(
+            bag,
+            f"{joint_topic} has no reading of joint {missing[0]!r} (the robot needs "
+            f"{', '.join(joints)}); its messages name {have}",
+        )
     out = {}
     for j in joints:
         arr = sorted(series[j])
-        out[j] = Series(np.array([a for a, _ in arr], dtype=np.int64), np.array([b for _, b in arr]))
+        out[j] = Series(
+            np.array([a for a, _ in arr], dtype=np.int64), np.array([b for _, b in arr])
+        )
     return out, messages, n_bag_time
 
 

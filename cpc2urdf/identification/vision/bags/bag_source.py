@@ -117,19 +117,35 @@ def measurements_from_bag(
     check_topic_options(frames, "--pose", "pose", "frame", "FRAME=TOPIC")
     check_frames(robot, frames)
     joints, kinds, _ = joint_names_for(robot, frames)
-    samples, groups, kept = pose_samples(path, poses, "poses of {frame}", joint_topic, joints, kinds, rule)
+    samples, groups, kept = pose_samples(
+        path, poses, "poses of {frame}", joint_topic, joints, kinds, rule
+    )
     records = []
     for row, gi, label in zip(samples.q, kept, samples.labels, strict=True):
-        records.append({"label": label, "joints": dict(zip(joints, row.tolist(), strict=True)),
-                        "poses": {m.key: pose_to_json(m.value) for m in groups[gi]}})
-    doc = {"format": "cpc2urdf/measurements@1", "robot": robot_ref, "units": {"length": "m", "angle": "rad"},
-           "provenance": provenance(path, joint_topic, rule, samples,
-                                     {p.frame: p.describe() for p in poses}, "poses"),
-           "records": records}
+        records.append(
+            {
+                "label": label,
+                "joints": dict(zip(joints, row.tolist(), strict=True)),
+                "poses": {m.key: pose_to_json(m.value) for m in groups[gi]},
+            }
+        )
+    doc = {
+        "format": "cpc2urdf/measurements@1",
+        "robot": robot_ref,
+        "units": {"length": "m", "angle": "rad"},
+        "provenance": provenance(
+            path, joint_topic, rule, samples, {p.frame: p.describe() for p in poses}, "poses"
+        ),
+        "records": records,
+    }
     try:
         ms = measurements_from_json(doc, str(path), robot=robot)
     except InputFileError as e:  # name the sample, not the index of a record the bag does not have
-        problem = re.sub(r"records\[(\d+)\]\.?", lambda m: f"sample {samples.labels[int(m.group(1))]}: ", e.problem)
+        problem = re.sub(
+            r"records\[(\d+)\]\.?",
+            lambda m: f"sample {samples.labels[int(m.group(1))]}: ",
+            e.problem,
+        )
         raise InputFileError(path, problem) from e
     ms.robot = robot_ref
     return BagMeasurements(ms, samples)
@@ -161,11 +177,24 @@ def target_poses_from_bag(
     cams = [t.frame for t in targets]
     check_topic_options(cams, "--target", "target", "camera", "CAMERA=TOPIC")
     joints, kinds, names = joint_names_for(model, [])
-    samples, groups, kept = pose_samples(path, targets, "target poses in {frame}", joint_topic, joints, kinds, rule,
-                                         shared_world=False)
+    samples, groups, kept = pose_samples(
+        path,
+        targets,
+        "target poses in {frame}",
+        joint_topic,
+        joints,
+        kinds,
+        rule,
+        shared_world=False,
+    )
     q = samples.q
-    order = [joints.index(next(f for f, m in names.items() if m == n)) for n in model.structure.joint_names]
-    check_limits(path, model.structure, q, order, joints, samples.labels)  # as the hand-eye pose files would
+    order = [
+        joints.index(next(f for f, m in names.items() if m == n))
+        for n in model.structure.joint_names
+    ]
+    check_limits(
+        path, model.structure, q, order, joints, samples.labels
+    )  # as the hand-eye pose files would
     labels: dict[str, list[str]] = {c: [] for c in cams}
     rows: dict[str, list[Array]] = {c: [] for c in cams}
     poses: dict[str, list[Array]] = {c: [] for c in cams}
@@ -176,11 +205,17 @@ def target_poses_from_bag(
             poses[m.key].append(m.value)
     unseen = [c for c in cams if not labels[c]]
     if unseen:
-        raise InputFileError(path, f"no usable target pose of {unseen[0]} (every sample with it was skipped)")
+        raise InputFileError(
+            path, f"no usable target pose of {unseen[0]} (every sample with it was skipped)"
+        )
     n = model.structure.n_joints
-    meas = HeadImageMeasurement(labels, {c: np.array(rows[c]).reshape(-1, n) for c in cams},
-                                {c: np.array(poses[c]) for c in cams}, {c: np.full(len(labels[c]), np.nan) for c in cams},
-                                list(samples.skipped))
+    meas = HeadImageMeasurement(
+        labels,
+        {c: np.array(rows[c]).reshape(-1, n) for c in cams},
+        {c: np.array(poses[c]) for c in cams},
+        {c: np.full(len(labels[c]), np.nan) for c in cams},
+        list(samples.skipped),
+    )
     return BagTargets(meas, samples)
 
 

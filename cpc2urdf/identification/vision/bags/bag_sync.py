@@ -34,7 +34,9 @@ from cpc2urdf.urdf.robot import UrdfRobot, urdf_source
 
 Array = NDArray[np.float64]
 
-SYNC_TOLERANCE = 0.02  # [s]: a measurement's nearest joint reading, and the messages of one sample, this close
+SYNC_TOLERANCE = (
+    0.02  # [s]: a measurement's nearest joint reading, and the messages of one sample, this close
+)
 REST_WINDOW = 0.1  # [s]: joint readings this close to a sample must show the joint at rest
 REST_TOLERANCE_M = 1e-5  # [m]: a prismatic joint at rest varies less than this over the rest window
 REST_TOLERANCE_RAD = 1.7453292519943296e-4  # [rad] (0.01 deg): same for a revolute joint
@@ -62,7 +64,9 @@ class SyncRule:
         for name in ("sync_tolerance", "rest_window", "rest_tolerance_m", "rest_tolerance_rad"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0 or (name == "sync_tolerance" and v == 0):
-                raise ConfigurationError(f"{name} must be a finite number >= 0 (> 0 for sync_tolerance), got {v!r}")
+                raise ConfigurationError(
+                    f"{name} must be a finite number >= 0 (> 0 for sync_tolerance), got {v!r}"
+                )
 
 
 @dataclass
@@ -101,7 +105,9 @@ def group_messages(messages: list[Message], tol_ns: int) -> list[list[Message]]:
     return groups
 
 
-def check_topic_options(names: Sequence[str], option: str, topic_kind: str, name_kind: str, metavar: str) -> None:
+def check_topic_options(
+    names: Sequence[str], option: str, topic_kind: str, name_kind: str, metavar: str
+) -> None:
     """Refuse an empty topic list or a name given twice (``names``: one per ``option`` given).
 
     Raises:
@@ -111,7 +117,9 @@ def check_topic_options(names: Sequence[str], option: str, topic_kind: str, name
     if not names:
         raise ConfigurationError(f"no {topic_kind} topic: give at least one {option} {metavar}")
     if len(set(names)) != len(names):
-        raise ConfigurationError(f"{option}: {name_kind} {next(n for n in names if names.count(n) > 1)!r} given twice")
+        raise ConfigurationError(
+            f"{option}: {name_kind} {next(n for n in names if names.count(n) > 1)!r} given twice"
+        )
 
 
 def stamp_label(t_ns: int) -> str:
@@ -119,8 +127,13 @@ def stamp_label(t_ns: int) -> str:
 
 
 def pair_samples(
-    bag: Path, groups: list[list[Message]], series: Mapping[str, Series], kinds: Mapping[str, str],
-    rule: SyncRule, joint_topic: str, numbers: Sequence[int] | None = None,
+    bag: Path,
+    groups: list[list[Message]],
+    series: Mapping[str, Series],
+    kinds: Mapping[str, str],
+    rule: SyncRule,
+    joint_topic: str,
+    numbers: Sequence[int] | None = None,
 ) -> tuple[list[int], Array, list[str], list[int]]:
     """Joint readings of each sample (nearest reading, rest check); returns kept stamps, q, skip
     lines and the kept groups' indices (in ``groups``).
@@ -140,25 +153,40 @@ def pair_samples(
         q, why = [], ""
         for j, s in series.items():
             i = int(np.searchsorted(s.t, t))
-            near = min((k for k in (i - 1, i) if 0 <= k < len(s.t)), key=lambda k: abs(int(s.t[k]) - t))
+            near = min(
+                (k for k in (i - 1, i) if 0 <= k < len(s.t)), key=lambda k: abs(int(s.t[k]) - t)
+            )
             gap = abs(int(s.t[near]) - t)
             if gap > tol:
-                raise InputFileError(bag, f"{what}: no {joint_topic} reading of {j} within the sync tolerance "
-                                          f"{rule.sync_tolerance:g} s (nearest {gap / NS:.6g} s away); "
-                                          "unsynchronised clocks or a gap in the recording?")
+                raise InputFileError(
+                    bag,
+                    f"{what}: no {joint_topic} reading of {j} within the sync tolerance "
+                    f"{rule.sync_tolerance:g} s (nearest {gap / NS:.6g} s away); "
+                    "unsynchronised clocks or a gap in the recording?",
+                )
             q.append(float(s.v[near]))
             if window > 0 and not why:
                 inside = (s.t >= t - window) & (s.t <= t + window)
                 if not (np.any(inside & (s.t < t)) and np.any(inside & (s.t > t))):
-                    why = (f"{j} has no reading both before and after it within the rest window "
-                           f"{rule.rest_window:g} s, so rest cannot be checked")
+                    why = (
+                        f"{j} has no reading both before and after it within the rest window "
+                        f"{rule.rest_window:g} s, so rest cannot be checked"
+                    )
                 else:
                     spread = float(np.max(np.abs(s.v[inside] - s.v[near])))
-                    limit = rule.rest_tolerance_m if kinds[j] == "prismatic" else rule.rest_tolerance_rad
+                    limit = (
+                        rule.rest_tolerance_m
+                        if kinds[j] == "prismatic"
+                        else rule.rest_tolerance_rad
+                    )
                     if spread > limit:
-                        unit, scale = ("mm", 1e3) if kinds[j] == "prismatic" else ("deg", 180 / np.pi)
-                        why = (f"{j} moved {spread * scale:.4g} {unit} within {rule.rest_window:g} s "
-                               f"(rest tolerance {limit * scale:.4g} {unit})")
+                        unit, scale = (
+                            ("mm", 1e3) if kinds[j] == "prismatic" else ("deg", 180 / np.pi)
+                        )
+                        why = (
+                            f"{j} moved {spread * scale:.4g} {unit} within {rule.rest_window:g} s "
+                            f"(rest tolerance {limit * scale:.4g} {unit})"
+                        )
         if why:
             skipped.append(f"{what}: joints not at rest: {why}")
             continue
@@ -168,7 +196,9 @@ def pair_samples(
     return stamps, np.array(rows, dtype=float).reshape(len(rows), len(series)), skipped, kept
 
 
-def joint_names_for(robot: RobotSpec | CPCModel, frames: Sequence[str]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+def joint_names_for(
+    robot: RobotSpec | CPCModel, frames: Sequence[str]
+) -> tuple[list[str], dict[str, str], dict[str, str]]:
     """The ``/joint_states`` names the robot needs (a URDF: the joints on the paths to ``frames``;
     a model made from a URDF: the URDF's names of its joints), their types, and the model name of each."""
     if isinstance(robot, UrdfRobot) and robot.names is not None:
@@ -187,8 +217,14 @@ def joint_names_for(robot: RobotSpec | CPCModel, frames: Sequence[str]) -> tuple
     return list(names), kinds, names
 
 
-def check_limits(bag: Path, structure: RobotStructure, q: Array, columns: Sequence[int], joints: Sequence[str],
-                 labels: Sequence[str]) -> None:
+def check_limits(
+    bag: Path,
+    structure: RobotStructure,
+    q: Array,
+    columns: Sequence[int],
+    joints: Sequence[str],
+    labels: Sequence[str],
+) -> None:
     """Refuse a reading outside its joint's limits (what ``cpc2urdf measure`` and the hand-eye
     pose files would refuse), naming the sample and the joint as ``/joint_states`` names it.
 
@@ -208,17 +244,34 @@ def check_limits(bag: Path, structure: RobotStructure, q: Array, columns: Sequen
         bad = np.flatnonzero((q[:, c] < j.lower - LIMIT_SLACK) | (q[:, c] > j.upper + LIMIT_SLACK))
         if bad.size:
             i = int(bad[0])
-            raise InputFileError(bag, f"{labels[i]}: {joints[c]} = {q[i, c]:.6g} is outside "
-                                      f"the joint limits [{j.lower:.6g}, {j.upper:.6g}] (m or rad)")
+            raise InputFileError(
+                bag,
+                f"{labels[i]}: {joints[c]} = {q[i, c]:.6g} is outside "
+                f"the joint limits [{j.lower:.6g}, {j.upper:.6g}] (m or rad)",
+            )
 
 
-def provenance(bag: Path, joint_topic: str, rule: SyncRule, samples: BagSamples, topics: Mapping[str, str],
-                kind: str) -> dict[str, Any]:
-    return {"source": "ros bag", "bag": str(bag), "joint_states": joint_topic, kind: dict(topics),
-            "sync_tolerance_s": rule.sync_tolerance, "rest_window_s": rule.rest_window,
-            "rest_tolerance_m": rule.rest_tolerance_m, "rest_tolerance_rad": rule.rest_tolerance_rad,
-            "messages": samples.n_messages, "messages_at_bag_time": samples.bag_time_messages,
-            "skipped": list(samples.skipped)}
+def provenance(
+    bag: Path,
+    joint_topic: str,
+    rule: SyncRule,
+    samples: BagSamples,
+    topics: Mapping[str, str],
+    kind: str,
+) -> dict[str, Any]:
+    return {
+        "source": "ros bag",
+        "bag": str(bag),
+        "joint_states": joint_topic,
+        kind: dict(topics),
+        "sync_tolerance_s": rule.sync_tolerance,
+        "rest_window_s": rule.rest_window,
+        "rest_tolerance_m": rule.rest_tolerance_m,
+        "rest_tolerance_rad": rule.rest_tolerance_rad,
+        "messages": samples.n_messages,
+        "messages_at_bag_time": samples.bag_time_messages,
+        "skipped": list(samples.skipped),
+    }
 
 
 __all__ = [

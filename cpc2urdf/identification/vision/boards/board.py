@@ -83,10 +83,14 @@ class Board:
         cols, rows = self.size
         if self.kind == "chessboard":
             i, j = np.divmod(np.arange(rows * cols), cols)
-            return np.stack([j * self.square_size, i * self.square_size, 0.0 * i], axis=1).astype(float)
+            return np.stack([j * self.square_size, i * self.square_size, 0.0 * i], axis=1).astype(
+                float
+            )
         if self.kind == "charuco":  # cv2.aruco's getChessboardCorners(), in double precision
             i, j = np.divmod(np.arange((rows - 1) * (cols - 1)), cols - 1)
-            return np.stack([(j + 1) * self.square_size, (i + 1) * self.square_size, 0.0 * i], axis=1).astype(float)
+            return np.stack(
+                [(j + 1) * self.square_size, (i + 1) * self.square_size, 0.0 * i], axis=1
+            ).astype(float)
         i, j = np.divmod(np.arange(rows * cols), cols)
         x = (2 * j + i % 2) if self.kind == "asymmetric_circles" else j
         return np.stack([x * self.spacing, i * self.spacing, 0.0 * i], axis=1).astype(float)
@@ -102,7 +106,12 @@ class Board:
             return (0.0, cols * s, 0.0, rows * s)
         p = self._cv_points
         r = self.circle_radius
-        return (float(p[:, 0].min()) - r, float(p[:, 0].max()) + r, float(p[:, 1].min()) - r, float(p[:, 1].max()) + r)
+        return (
+            float(p[:, 0].min()) - r,
+            float(p[:, 0].max()) + r,
+            float(p[:, 1].min()) - r,
+            float(p[:, 1].max()) + r,
+        )
 
     @cached_property
     def _centre(self) -> tuple[float, float]:
@@ -174,13 +183,17 @@ class Board:
     def charuco_board(self) -> Any:
         """The ``cv2.aruco.CharucoBoard`` (marker ids from :attr:`first_marker_id`)."""
         ids = np.arange(self.first_marker_id, self.first_marker_id + self.n_markers, dtype=np.int32)
-        return cv2.aruco.CharucoBoard(self.size, self.square_size, self.marker_size, self.aruco_dictionary(), ids)
+        return cv2.aruco.CharucoBoard(
+            self.size, self.square_size, self.marker_size, self.aruco_dictionary(), ids
+        )
 
     @cached_property
     def _texture(self) -> NDArray[np.uint8]:
         cols, rows = self.size
         pp = TEXTURE_PX_PER_SQUARE
-        return np.asarray(self.charuco_board().generateImage((cols * pp, rows * pp), marginSize=0, borderBits=1))
+        return np.asarray(
+            self.charuco_board().generateImage((cols * pp, rows * pp), marginSize=0, borderBits=1)
+        )
 
     # ---- appearance -----------------------------------------------------------------------------
 
@@ -226,12 +239,19 @@ class Board:
         """The board's parameters in metres (what :mod:`board_file` writes with ``units: m``)."""
         out: dict[str, Any] = {"kind": self.kind}
         if self.kind == "charuco":
-            out.update(squares=list(self.size), square_size=self.square_size, marker_size=self.marker_size,
-                       dictionary=self.dictionary, first_marker_id=self.first_marker_id)
+            out.update(
+                squares=list(self.size),
+                square_size=self.square_size,
+                marker_size=self.marker_size,
+                dictionary=self.dictionary,
+                first_marker_id=self.first_marker_id,
+            )
         elif self.kind == "chessboard":
             out.update(pattern_size=list(self.size), square_size=self.square_size)
         else:
-            out.update(pattern_size=list(self.size), spacing=self.spacing, circle_radius=self.circle_radius)
+            out.update(
+                pattern_size=list(self.size), spacing=self.spacing, circle_radius=self.circle_radius
+            )
         out["margin"] = self.margin
         return out
 

@@ -52,16 +52,32 @@ _OPTIONAL = ("units", "margin", "name", "first_marker_id")
 
 def _int_pair(doc: Mapping[str, Any], key: str, least: int, path: Path) -> tuple[int, int]:
     v = doc[key]
-    if (not isinstance(v, list) or len(v) != 2 or not all(isinstance(x, int) and not isinstance(x, bool) for x in v)
-            or min(v) < least):
-        raise InputFileError(path, f"{key} must be [cols, rows], two integers >= {least}, got {v!r}")
+    if (
+        not isinstance(v, list)
+        or len(v) != 2
+        or not all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+        or min(v) < least
+    ):
+        raise InputFileError(
+            path, f"{key} must be [cols, rows], two integers >= {least}, got {v!r}"
+        )
     return int(v[0]), int(v[1])
 
 
-def _length(doc: Mapping[str, Any], key: str, scale: float, path: Path, *, zero_ok: bool = False) -> float:
+def _length(
+    doc: Mapping[str, Any], key: str, scale: float, path: Path, *, zero_ok: bool = False
+) -> float:
     v = doc[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 or (zero_ok and v == 0)) or v != v or v == float("inf"):
-        raise InputFileError(path, f"{key} must be a {'non-negative' if zero_ok else 'positive'} length, got {v!r}")
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, (int, float))
+        or not (v > 0 or (zero_ok and v == 0))
+        or v != v
+        or v == float("inf")
+    ):
+        raise InputFileError(
+            path, f"{key} must be a {'non-negative' if zero_ok else 'positive'} length, got {v!r}"
+        )
     return float(v) * scale
 
 
@@ -76,10 +92,14 @@ def board_from_json(doc: Any, path: str | os.PathLike[str] = "board") -> Board:
     allowed = set(_COMMON) | set(_KEYS[kind])
     for k in doc:
         if k not in allowed:
-            raise InputFileError(p, f"unknown key {k!r} for a {kind} board (expected {', '.join(sorted(allowed))})")
+            raise InputFileError(
+                p, f"unknown key {k!r} for a {kind} board (expected {', '.join(sorted(allowed))})"
+            )
     for k in _KEYS[kind]:
         if k not in doc and k not in _OPTIONAL:
-            raise InputFileError(p, f"missing key {k!r} (a {kind} board needs {', '.join(_KEYS[kind])})")
+            raise InputFileError(
+                p, f"missing key {k!r} (a {kind} board needs {', '.join(_KEYS[kind])})"
+            )
     unit = doc.get("units", "m")
     if unit not in LENGTH_UNITS:
         raise InputFileError(p, f"units must be one of {sorted(LENGTH_UNITS)}, got {unit!r}")
@@ -97,11 +117,17 @@ def board_from_json(doc: Any, path: str | os.PathLike[str] = "board") -> Board:
         args["square_size"] = _length(doc, "square_size", s, p)
         args["marker_size"] = _length(doc, "marker_size", s, p)
         if args["marker_size"] >= args["square_size"]:
-            raise InputFileError(p, f"marker_size must be smaller than square_size ({doc['square_size']} {unit}), "
-                                    f"got {doc['marker_size']}")
+            raise InputFileError(
+                p,
+                f"marker_size must be smaller than square_size ({doc['square_size']} {unit}), "
+                f"got {doc['marker_size']}",
+            )
         dic = doc["dictionary"]
         if not isinstance(dic, str) or not dic.startswith("DICT_") or not hasattr(cv2.aruco, dic):
-            raise InputFileError(p, f"dictionary must be an OpenCV ArUco dictionary name such as DICT_5X5_100, got {dic!r}")
+            raise InputFileError(
+                p,
+                f"dictionary must be an OpenCV ArUco dictionary name such as DICT_5X5_100, got {dic!r}",
+            )
         first = doc.get("first_marker_id", 0)
         if isinstance(first, bool) or not isinstance(first, int) or first < 0:
             raise InputFileError(p, f"first_marker_id must be an integer >= 0, got {first!r}")
@@ -109,17 +135,25 @@ def board_from_json(doc: Any, path: str | os.PathLike[str] = "board") -> Board:
         n_dict = int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dic)).bytesList.shape[0])
         n_markers = (args["size"][0] * args["size"][1]) // 2
         if first + n_markers > n_dict:
-            raise InputFileError(p, f"the board needs marker ids {first}..{first + n_markers - 1} but {dic} has only "
-                                    f"{n_dict} markers (choose a larger dictionary or a smaller first_marker_id)")
+            raise InputFileError(
+                p,
+                f"the board needs marker ids {first}..{first + n_markers - 1} but {dic} has only "
+                f"{n_dict} markers (choose a larger dictionary or a smaller first_marker_id)",
+            )
         pitch = args["square_size"]
     else:
         args["size"] = _int_pair(doc, "pattern_size", 2 if kind == "circles" else 2, p)
         args["spacing"] = _length(doc, "spacing", s, p)
         args["circle_radius"] = _length(doc, "circle_radius", s, p)
-        gap = args["spacing"] * (2**0.5 if kind == "asymmetric_circles" else 1.0)  # nearest neighbours
+        gap = args["spacing"] * (
+            2**0.5 if kind == "asymmetric_circles" else 1.0
+        )  # nearest neighbours
         if args["circle_radius"] >= 0.4 * gap:
-            raise InputFileError(p, f"circle_radius must be below 0.4 x the distance between neighbouring circles "
-                                    f"({0.4 * gap / s:g} {unit}), got {doc['circle_radius']}")
+            raise InputFileError(
+                p,
+                f"circle_radius must be below 0.4 x the distance between neighbouring circles "
+                f"({0.4 * gap / s:g} {unit}), got {doc['circle_radius']}",
+            )
         pitch = args["spacing"]
     args["margin"] = _length(doc, "margin", s, p, zero_ok=True) if "margin" in doc else pitch
     return Board(**args)

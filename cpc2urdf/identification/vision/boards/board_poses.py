@@ -93,7 +93,9 @@ def _not_found(image_name: str, board: Board, what: str) -> PlateNotFoundError:
     return PlateNotFoundError(image_name, board.name, what)
 
 
-def detect_board(image: ArrayLike, board: Board, *, image_name: str = "image") -> BoardDetection | DetectionError:
+def detect_board(
+    image: ArrayLike, board: Board, *, image_name: str = "image"
+) -> BoardDetection | DetectionError:
     """Find ``board``'s points in a grey image with OpenCV's detector for its kind.
 
     The order of a grid's points may still be one of the grid's symmetries (module docstring);
@@ -106,41 +108,72 @@ def detect_board(image: ArrayLike, board: Board, *, image_name: str = "image") -
     img = np.ascontiguousarray(np.asarray(image, dtype=np.uint8))
     cols, rows = board.size
     if board.kind == "chessboard":
-        ok, corners = cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+        ok, corners = cv2.findChessboardCornersSB(
+            img, (cols, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+        )
         if not ok:
-            ok, corners = cv2.findChessboardCorners(img, (cols, rows), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            ok, corners = cv2.findChessboardCorners(
+                img, (cols, rows), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+            )
         if not ok:
-            return _not_found(image_name, board, f"board not found (no chessboard of {cols} x {rows} inner corners)")
+            return _not_found(
+                image_name,
+                board,
+                f"board not found (no chessboard of {cols} x {rows} inner corners)",
+            )
         # cornerSubPix after either detector: on rendered views it halves findChessboardCornersSB's
         # corner error (0.09 -> 0.04 px RMS). Its window stays inside one square.
         c = np.asarray(corners, dtype=np.float32).reshape(-1, 1, 2)
         grid = c.reshape(rows, cols, 2)
-        step = min(np.linalg.norm(np.diff(grid, axis=1), axis=2).min(), np.linalg.norm(np.diff(grid, axis=0), axis=2).min())
+        step = min(
+            np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
+            np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
+        )
         win = int(np.clip(step / 3.0, 2, 7))
         corners = cv2.cornerSubPix(img, c, (win, win), (-1, -1), _SUBPIX_CRITERIA)
-        return BoardDetection(np.arange(cols * rows), np.asarray(corners, dtype=float).reshape(-1, 2))
+        return BoardDetection(
+            np.arange(cols * rows), np.asarray(corners, dtype=float).reshape(-1, 2)
+        )
     if board.kind == "charuco":
         det = cv2.aruco.CharucoDetector(board.charuco_board())
         corners, ids, _, marker_ids = det.detectBoard(img)
         n = 0 if ids is None else len(ids)
         if n == 0:
             seen = 0 if marker_ids is None else len(marker_ids)
-            return _not_found(image_name, board, f"board not found (ChArUco {cols} x {rows} squares, {board.dictionary}, "
-                                                 f"ids {board.first_marker_id}..{board.first_marker_id + board.n_markers - 1}; "
-                                                 f"{seen} of its markers seen)")
+            return _not_found(
+                image_name,
+                board,
+                f"board not found (ChArUco {cols} x {rows} squares, {board.dictionary}, "
+                f"ids {board.first_marker_id}..{board.first_marker_id + board.n_markers - 1}; "
+                f"{seen} of its markers seen)",
+            )
         if n < MIN_BOARD_POINTS:
-            return _not_found(image_name, board, f"too few ChArUco corners ({n} < {MIN_BOARD_POINTS}; board partly hidden?)")
+            return _not_found(
+                image_name,
+                board,
+                f"too few ChArUco corners ({n} < {MIN_BOARD_POINTS}; board partly hidden?)",
+            )
         uv = np.asarray(corners, dtype=float).reshape(-1, 2)
         xy = board.object_points()[np.asarray(ids).ravel(), :2]
         sv = np.linalg.svd(xy - xy.mean(0), compute_uv=False)
         if sv[1] < MIN_SPREAD * sv[0]:
-            return _not_found(image_name, board, f"the {n} ChArUco corners seen lie on one line (no pose from them)")
+            return _not_found(
+                image_name,
+                board,
+                f"the {n} ChArUco corners seen lie on one line (no pose from them)",
+            )
         return BoardDetection(np.asarray(ids, dtype=np.intp).ravel(), uv)
-    flags = cv2.CALIB_CB_ASYMMETRIC_GRID if board.kind == "asymmetric_circles" else cv2.CALIB_CB_SYMMETRIC_GRID
+    flags = (
+        cv2.CALIB_CB_ASYMMETRIC_GRID
+        if board.kind == "asymmetric_circles"
+        else cv2.CALIB_CB_SYMMETRIC_GRID
+    )
     ok, centres = cv2.findCirclesGrid(img, (cols, rows), flags=flags)
     if not ok:
         which = "asymmetric" if board.kind == "asymmetric_circles" else "symmetric"
-        return _not_found(image_name, board, f"board not found (no {which} grid of {cols} x {rows} circles)")
+        return _not_found(
+            image_name, board, f"board not found (no {which} grid of {cols} x {rows} circles)"
+        )
     uv = np.asarray(centres, dtype=float).reshape(-1, 2)
     # findCirclesGrid's centres are centroids of thresholded blobs; the plates' detector measures
     # the centroid of each blob's grey-level coverage instead (detect.find_blobs), which is the
@@ -183,12 +216,23 @@ def _texture_score(image: NDArray[np.uint8], board: Board, T: Array, K: Array, D
     circle centres and the gaps between them) predicted by pose ``T``: > 0 when the pose is right."""
     pts = board.object_points()[:, :2]
     s = board.point_spacing
-    probes = np.concatenate([pts + [0.5 * s, 0.5 * s], pts - [0.5 * s, 0.5 * s], pts + [0.5 * s, -0.5 * s], pts - [0.5 * s, -0.5 * s]])
+    probes = np.concatenate(
+        [
+            pts + [0.5 * s, 0.5 * s],
+            pts - [0.5 * s, 0.5 * s],
+            pts + [0.5 * s, -0.5 * s],
+            pts - [0.5 * s, -0.5 * s],
+        ]
+    )
     x0, x1, y0, y1 = board.outline
-    probes = probes[(probes[:, 0] > x0) & (probes[:, 0] < x1) & (probes[:, 1] > y0) & (probes[:, 1] < y1)]
+    probes = probes[
+        (probes[:, 0] > x0) & (probes[:, 0] < x1) & (probes[:, 1] > y0) & (probes[:, 1] < y1)
+    ]
     expected = board.reflectance(probes)
     rvec, _ = cv2.Rodrigues(T[:3, :3])
-    uv, _ = cv2.projectPoints(np.concatenate([probes, np.zeros((len(probes), 1))], 1), rvec, T[:3, 3], K, D)
+    uv, _ = cv2.projectPoints(
+        np.concatenate([probes, np.zeros((len(probes), 1))], 1), rvec, T[:3, 3], K, D
+    )
     uv = np.rint(uv.reshape(-1, 2)).astype(int)
     h, w = image.shape
     keep = (uv[:, 0] >= 1) & (uv[:, 0] < w - 1) & (uv[:, 1] >= 1) & (uv[:, 1] < h - 1)
@@ -228,8 +272,12 @@ def board_pose(
     Km = np.asarray(K, dtype=float)
     Dm = np.asarray(D, dtype=float).ravel()
     if board.pose_ambiguity and not allow_symmetric:
-        return PlateAmbiguousError(image_name, board.name, f"{board.pose_ambiguity}, so it gives no unique pose "
-                                   "(use it for camera calibration; for poses use ChArUco or an asymmetric circle grid)")
+        return PlateAmbiguousError(
+            image_name,
+            board.name,
+            f"{board.pose_ambiguity}, so it gives no unique pose "
+            "(use it for camera calibration; for poses use ChArUco or an asymmetric circle grid)",
+        )
     found = detect_board(img, board, image_name=image_name)
     if isinstance(found, DetectionError):
         return found
@@ -246,17 +294,25 @@ def board_pose(
         if faces and rms <= max_rms_px:
             fits.append((T, rms, ids))
     if not fits:
-        return InconsistentDetectionError(image_name, board.name, f"no pose of the board reprojects its {len(found.ids)} "
-                                          f"points within {max_rms_px} px RMS with the printed face towards the camera "
-                                          "(wrong intrinsics, or wrong board file?)")
+        return InconsistentDetectionError(
+            image_name,
+            board.name,
+            f"no pose of the board reprojects its {len(found.ids)} "
+            f"points within {max_rms_px} px RMS with the printed face towards the camera "
+            "(wrong intrinsics, or wrong board file?)",
+        )
     if len(fits) > 1:
         scores = [_texture_score(img, board, T, Km, Dm) for T, _, _ in fits]
         best = int(np.argmax(scores))
         if board.pose_ambiguity is None:
             others = [s for i, s in enumerate(scores) if i != best]
             if scores[best] <= 0 or max(others) > 0.5 * scores[best]:
-                return PlateAmbiguousError(image_name, board.name, f"{len(fits)} orientations of the board fit equally "
-                                           "(its black and white squares do not tell them apart)")
+                return PlateAmbiguousError(
+                    image_name,
+                    board.name,
+                    f"{len(fits)} orientations of the board fit equally "
+                    "(its black and white squares do not tell them apart)",
+                )
         fits = [fits[best]]
     T, rms, ids = fits[0]
     uv = found.uv
@@ -277,20 +333,29 @@ def _distorted_offset(K: Array, D: Array, T_camera_board: Array, board: Board) -
     off = ellipse_centre_offset(K, T_camera_board, circle_design(board))
     p = board.object_points() @ T_camera_board[:3, :3].T + T_camera_board[:3, 3]
     centre = p[:, :2] / p[:, 2:3]
-    shifted = centre + off / np.array([K[0, 0], K[1, 1]])  # ideal px -> normalised (K has no skew here)
+    shifted = centre + off / np.array(
+        [K[0, 0], K[1, 1]]
+    )  # ideal px -> normalised (K has no skew here)
     pts = np.concatenate([np.concatenate([centre, shifted]), np.ones((2 * len(p), 1))], axis=1)
     uv, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, D)
     uv = uv.reshape(-1, 2)
-    return np.asarray(uv[len(p):] - uv[: len(p)], dtype=float)
+    return np.asarray(uv[len(p) :] - uv[: len(p)], dtype=float)
 
 
 def circle_design(board: Board) -> PlateDesign:
     """A circle grid as a :class:`~cpc2urdf.identification.vision.targets.PlateDesign` (its circles
     in the board frame), for :func:`~cpc2urdf.identification.vision.plate_poses.ellipse_centre_offset`."""
-    return PlateDesign(board.name, board.object_points(), np.full(board.n_points, board.circle_radius), board.outline)
+    return PlateDesign(
+        board.name,
+        board.object_points(),
+        np.full(board.n_points, board.circle_radius),
+        board.outline,
+    )
 
 
-def pnp_pose_covariance(K: ArrayLike, D: ArrayLike, T_camera_board: ArrayLike, p_board: ArrayLike, sigma_px: float) -> Array:
+def pnp_pose_covariance(
+    K: ArrayLike, D: ArrayLike, T_camera_board: ArrayLike, p_board: ArrayLike, sigma_px: float
+) -> Array:
     """Covariance of a PnP pose from independent pixel noise ``sigma_px`` [px] per coordinate:
     ``sigma^2 (J^T J)^-1`` with ``J`` the Jacobian of the projections (central differences of
     ``cv2.projectPoints``) with respect to ``(rotation vector in the camera frame [rad],
@@ -343,7 +408,11 @@ def stereo_board_pose(
     both, uv_l, uv_r = common_points(a, b)
     where = f"{names[0]} + {names[1]}"
     if len(both) < MIN_BOARD_POINTS:
-        return PlateNotFoundError(where, board.name, f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})")
+        return PlateNotFoundError(
+            where,
+            board.name,
+            f"too few corners seen by both cameras ({len(both)} < {MIN_BOARD_POINTS})",
+        )
     p = rig.triangulate(uv_l, uv_r)
     obj = board.object_points()[both]
     try:
@@ -352,13 +421,23 @@ def stereo_board_pose(
         return InconsistentDetectionError(where, board.name, str(e))
     rms = float(registration_rms(T, obj, p))
     pl, pr = rig.project(p)
-    epi = float(np.sqrt(np.mean(np.concatenate([np.sum((pl - uv_l) ** 2, 1), np.sum((pr - uv_r) ** 2, 1)]))))
+    epi = float(
+        np.sqrt(np.mean(np.concatenate([np.sum((pl - uv_l) ** 2, 1), np.sum((pr - uv_r) ** 2, 1)])))
+    )
     if epi > max_epipolar_px:
-        return InconsistentDetectionError(where, board.name, f"left and right corners disagree by {epi:.2f} px RMS after "
-                                          f"triangulation (> {max_epipolar_px} px): wrong rig file, or left/right images swapped?")
+        return InconsistentDetectionError(
+            where,
+            board.name,
+            f"left and right corners disagree by {epi:.2f} px RMS after "
+            f"triangulation (> {max_epipolar_px} px): wrong rig file, or left/right images swapped?",
+        )
     if rms > max_fit_rms:
-        return InconsistentDetectionError(where, board.name, f"the board fits the triangulated corners with {rms * 1e3:.2f} mm "
-                                          f"RMS (> {max_fit_rms * 1e3:.2f} mm): wrong rig file (baseline, units) or board size?")
+        return InconsistentDetectionError(
+            where,
+            board.name,
+            f"the board fits the triangulated corners with {rms * 1e3:.2f} mm "
+            f"RMS (> {max_fit_rms * 1e3:.2f} mm): wrong rig file (baseline, units) or board size?",
+        )
     return StereoPlatePose(board.name, T, p, uv_l, uv_r, rms, epi, 0.0)
 
 

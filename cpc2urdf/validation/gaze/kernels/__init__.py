@@ -148,8 +148,14 @@ def _iterate_problem(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyp
 
 def _iterate(ch, p, b, u, u_ref, lower, upper, sw, gain, null_rel, max_it, ws, rr_at_u):  # type: ignore[no-untyped-def]
     """The iteration (:func:`~.iterate._iterate`) with its problem given argument by argument."""
-    return _iterate_problem(Problem(ch, p, b, u_ref, lower, upper, sw, float(null_rel)), u, float(gain), max_it,
-                            float(rr_at_u), ws)
+    return _iterate_problem(
+        Problem(ch, p, b, u_ref, lower, upper, sw, float(null_rel)),
+        u,
+        float(gain),
+        max_it,
+        float(rr_at_u),
+        ws,
+    )
 
 
 __all__ = [

@@ -56,5 +56,9 @@ def install() -> None:
     """Put the package's locators first (once)."""
     classes = caching.CacheImpl._locator_classes
     if not any(c.__name__.startswith("GazeKernels") for c in classes):
-        bases = (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator, caching.UserWideCacheLocator)
+        bases = (
+            caching.UserProvidedCacheLocator,
+            caching.InTreeCacheLocator,
+            caching.UserWideCacheLocator,
+        )
         classes[:0] = [_keyed_on_the_package(b) for b in bases]

@@ -40,7 +40,9 @@ class _CompileNotice(event.Listener):  # type: ignore[misc]
             self.start = time.perf_counter()
             self.done.clear()
             self.shown = False
-            self.thread = threading.Thread(target=self._draw, name="gaze-compile-notice", daemon=True)
+            self.thread = threading.Thread(
+                target=self._draw, name="gaze-compile-notice", daemon=True
+            )
             self.thread.start()
         self.depth += 1
 
@@ -53,7 +55,9 @@ class _CompileNotice(event.Listener):  # type: ignore[misc]
             if self.thread is not None:
                 self.thread.join()
             if self.shown:
-                sys.stderr.write(f"\r{LABEL}: done in {time.perf_counter() - self.start:.1f} s\033[K\n")
+                sys.stderr.write(
+                    f"\r{LABEL}: done in {time.perf_counter() - self.start:.1f} s\033[K\n"
+                )
                 sys.stderr.flush()
 
     def _draw(self) -> None:

@@ -55,139 +55,238 @@ def _carve_workspace(f, ints, sizes):  # type: ignore[no-untyped-def]
     K, C, S, m, G, n_top = sizes
     M = 2 * S
     o = 0
-    JR = f[o:o + 9 * K]
+    JR = f[o : o + 9 * K]
     o += 9 * K
-    Jp = f[o:o + 3 * K]
+    Jp = f[o : o + 3 * K]
     o += 3 * K
-    Ja = f[o:o + 3 * K]
+    Ja = f[o : o + 3 * K]
     o += 3 * K
-    CR = f[o:o + 9 * C]
+    CR = f[o : o + 9 * C]
     o += 9 * C
-    Co = f[o:o + 3 * C]
+    Co = f[o : o + 3 * C]
     o += 3 * C
-    Jc = f[o:o + 6 * K]
+    Jc = f[o : o + 6 * K]
     o += 6 * K
-    Pc = f[o:o + (5 + m) * S]
+    Pc = f[o : o + (5 + m) * S]
     o += (5 + m) * S
-    r = f[o:o + 3 * S]
+    r = f[o : o + 3 * S]
     o += 3 * S
-    J = f[o:o + M * m]
+    J = f[o : o + M * m]
     o += M * m
-    r2 = f[o:o + 3 * S]
+    r2 = f[o : o + 3 * S]
     o += 3 * S
-    J2 = f[o:o + M * m]
+    J2 = f[o : o + M * m]
     o += M * m
-    g = f[o:o + m]
+    g = f[o : o + m]
     o += m
-    H = f[o:o + m * m]
+    H = f[o : o + m * m]
     o += m * m
-    V = f[o:o + m * m]
+    V = f[o : o + m * m]
     o += m * m
-    lam = f[o:o + m]
+    lam = f[o : o + m]
     o += m
-    dx = f[o:o + m]
+    dx = f[o : o + m]
     o += m
-    trial = f[o:o + m]
+    trial = f[o : o + m]
     o += m
-    Hb = f[o:o + m * m]
+    Hb = f[o : o + m * m]
     o += m * m
-    Vp = f[o:o + m * m]
+    Vp = f[o : o + m * m]
     o += m * m
-    eig = f[o:o + 3]
+    eig = f[o : o + 3]
     o += 3
-    s_prev = f[o:o + m]
+    s_prev = f[o : o + m]
     o += m
-    u_near = f[o:o + m]
+    u_near = f[o : o + m]
     o += m
-    acc = f[o:o + (4 * HISTORY + 2) * m]
+    acc = f[o : o + (4 * HISTORY + 2) * m]
     o += (4 * HISTORY + 2) * m
-    u = f[o:o + m]
+    u = f[o : o + m]
     o += m
-    score = f[o:o + G + 1]
+    score = f[o : o + G + 1]
     o += G + 1
-    ps = f[o:o + 3]
+    ps = f[o : o + 3]
     o += 3
-    b = f[o:o + K]
+    b = f[o : o + K]
     o += K
-    u_ref = f[o:o + m]
+    u_ref = f[o : o + m]
     o += m
-    u_start = f[o:o + m]
+    u_start = f[o : o + m]
     o += m
-    starts = f[o:o + n_top * m]
+    starts = f[o : o + n_top * m]
     o += n_top * m
-    u_out = f[o:o + m]
+    u_out = f[o : o + m]
     o += m
-    e_out = f[o:o + S]
+    e_out = f[o : o + S]
     o += S
-    u1 = f[o:o + m]
+    u1 = f[o : o + m]
     o += m
-    e1 = f[o:o + S]
+    e1 = f[o : o + S]
     o += S
-    best_start = f[o:o + m]
+    best_start = f[o : o + m]
     o += m
-    u2 = f[o:o + m]
+    u2 = f[o : o + m]
     o += m
-    e2 = f[o:o + S]
+    e2 = f[o : o + S]
     o += S
-    ones = f[o:o + m]
+    ones = f[o : o + m]
     o += m
-    null_z = f[o:o + m]
+    null_z = f[o : o + m]
     o += m
-    null_c = f[o:o + m]
+    null_c = f[o : o + m]
     o += m
-    ref_key = f[o:o + m + K]
+    ref_key = f[o : o + m + K]
     o += m + K
-    ref_axis = f[o:o + 6]
+    ref_axis = f[o : o + 6]
     o += 6
-    ref_cost = f[o:o + G]
+    ref_cost = f[o : o + G]
     o += G
-    vw_plain = f[o:o + 4]
+    vw_plain = f[o : o + 4]
     o += 4
     return Workspace(
-        JR.reshape((K, 3, 3)), Jp.reshape((K, 3)), Ja.reshape((K, 3)), CR.reshape((C, 3, 3)), Co.reshape((C, 3)),
-        Jc.reshape((6, K)), Pc.reshape((S, 5 + m)), r, J.reshape((M, m)), r2, J2.reshape((M, m)), g,
-        H.reshape((m, m)), V.reshape((m, m)), lam, ints[0:m], ints[m + n_top:m + n_top + m], dx, trial,
-        Hb.reshape((m, m)), Vp.reshape((m, m)), eig, s_prev, u_near, acc.reshape((4 * HISTORY + 2, m)), u, score,
-        ints[m:m + n_top], ps, b, u_ref, u_start, starts.reshape((n_top, m)), u_out, e_out, u1, e1, best_start, u2,
-        e2, ones, null_z, null_c, ref_key, ref_axis, ref_cost, vw_plain,
+        JR.reshape((K, 3, 3)),
+        Jp.reshape((K, 3)),
+        Ja.reshape((K, 3)),
+        CR.reshape((C, 3, 3)),
+        Co.reshape((C, 3)),
+        Jc.reshape((6, K)),
+        Pc.reshape((S, 5 + m)),
+        r,
+        J.reshape((M, m)),
+        r2,
+        J2.reshape((M, m)),
+        g,
+        H.reshape((m, m)),
+        V.reshape((m, m)),
+        lam,
+        ints[0:m],
+        ints[m + n_top : m + n_top + m],
+        dx,
+        trial,
+        Hb.reshape((m, m)),
+        Vp.reshape((m, m)),
+        eig,
+        s_prev,
+        u_near,
+        acc.reshape((4 * HISTORY + 2, m)),
+        u,
+        score,
+        ints[m : m + n_top],
+        ps,
+        b,
+        u_ref,
+        u_start,
+        starts.reshape((n_top, m)),
+        u_out,
+        e_out,
+        u1,
+        e1,
+        best_start,
+        u2,
+        e2,
+        ones,
+        null_z,
+        null_c,
+        ref_key,
+        ref_axis,
+        ref_cost,
+        vw_plain,
     )
 
 
 # The float buffer's fields in their order, with their shapes, for the Python side (nothing to
 # compile): the same layout as :func:`_carve_workspace` (tests/test_first_use.py checks it).
 _FLOATS = (
-    ("JR", "K 3 3"), ("Jp", "K 3"), ("Ja", "K 3"), ("CR", "C 3 3"), ("Co", "C 3"), ("Jc", "6 K"), ("Pc", "S 5+m"),
-    ("r", "3S"), ("J", "M m"), ("r2", "3S"), ("J2", "M m"), ("g", "m"), ("H", "m m"), ("V", "m m"), ("lam", "m"),
-    ("dx", "m"), ("trial", "m"), ("Hb", "m m"), ("Vp", "m m"), ("eig", "3"), ("s_prev", "m"), ("u_near", "m"),
-    ("acc", "A m"), ("u", "m"), ("score", "G+1"), ("ps", "3"), ("b", "K"), ("u_ref", "m"), ("u_start", "m"),
-    ("starts", "T m"), ("u_out", "m"), ("e_out", "S"), ("u1", "m"), ("e1", "S"), ("best_start", "m"), ("u2", "m"),
-    ("e2", "S"), ("ones", "m"), ("null_z", "m"), ("null_c", "m"), ("ref_key", "m+K"), ("ref_axis", "6"),
-    ("ref_cost", "G"), ("vw_plain", "4"),
+    ("JR", "K 3 3"),
+    ("Jp", "K 3"),
+    ("Ja", "K 3"),
+    ("CR", "C 3 3"),
+    ("Co", "C 3"),
+    ("Jc", "6 K"),
+    ("Pc", "S 5+m"),
+    ("r", "3S"),
+    ("J", "M m"),
+    ("r2", "3S"),
+    ("J2", "M m"),
+    ("g", "m"),
+    ("H", "m m"),
+    ("V", "m m"),
+    ("lam", "m"),
+    ("dx", "m"),
+    ("trial", "m"),
+    ("Hb", "m m"),
+    ("Vp", "m m"),
+    ("eig", "3"),
+    ("s_prev", "m"),
+    ("u_near", "m"),
+    ("acc", "A m"),
+    ("u", "m"),
+    ("score", "G+1"),
+    ("ps", "3"),
+    ("b", "K"),
+    ("u_ref", "m"),
+    ("u_start", "m"),
+    ("starts", "T m"),
+    ("u_out", "m"),
+    ("e_out", "S"),
+    ("u1", "m"),
+    ("e1", "S"),
+    ("best_start", "m"),
+    ("u2", "m"),
+    ("e2", "S"),
+    ("ones", "m"),
+    ("null_z", "m"),
+    ("null_c", "m"),
+    ("ref_key", "m+K"),
+    ("ref_axis", "6"),
+    ("ref_cost", "G"),
+    ("vw_plain", "4"),
 )
 _INTS = (("idx", "m"), ("top_g", "T"), ("free", "m"))  # the int buffer's fields in their order
 
 
-def _shapes(fields: tuple[tuple[str, str], ...], sizes: tuple[int, ...]) -> list[tuple[str, tuple[int, ...]]]:
+def _shapes(
+    fields: tuple[tuple[str, str], ...], sizes: tuple[int, ...]
+) -> list[tuple[str, tuple[int, ...]]]:
     """Each field's shape for ``sizes`` ``(K, C, S, m, G, n_top)``."""
     K, C, S, m, G, n_top = sizes
-    dims = {"K": K, "C": C, "S": S, "m": m, "M": 2 * S, "3S": 3 * S, "5+m": 5 + m, "G+1": G + 1, "G": G, "T": n_top,
-            "m+K": m + K, "A": 4 * HISTORY + 2}
-    return [(name, tuple(dims[d] if d in dims else int(d) for d in shape.split())) for name, shape in fields]
+    dims = {
+        "K": K,
+        "C": C,
+        "S": S,
+        "m": m,
+        "M": 2 * S,
+        "3S": 3 * S,
+        "5+m": 5 + m,
+        "G+1": G + 1,
+        "G": G,
+        "T": n_top,
+        "m+K": m + K,
+        "A": 4 * HISTORY + 2,
+    }
+    return [
+        (name, tuple(dims[d] if d in dims else int(d) for d in shape.split()))
+        for name, shape in fields
+    ]
 
 
-def _carve_in_python(f: NDArray[np.float64], ints: NDArray[np.int64], sizes: tuple[int, ...]) -> Workspace:
+def _carve_in_python(
+    f: NDArray[np.float64], ints: NDArray[np.int64], sizes: tuple[int, ...]
+) -> Workspace:
     """:func:`_carve_workspace` with numpy views."""
     views = {}
     for buf, fields in ((f, _FLOATS), (ints, _INTS)):
         o = 0
         for name, shape in _shapes(fields, sizes):
             n = int(np.prod(shape))
-            views[name] = buf[o:o + n].reshape(shape)
+            views[name] = buf[o : o + n].reshape(shape)
             o += n
     return Workspace(**views)
 
 
-def _buffers_in_python(sizes: tuple[int, ...], allocate: Any = None) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def _buffers_in_python(
+    sizes: tuple[int, ...], allocate: Any = None
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The two buffers (float, int) of a workspace of ``sizes`` with the values a workspace starts
     with: no reference posture cached, no warm eigenvectors, equal weights. ``allocate(n_float,
     n_int)``: the two empty buffers (default numpy's)."""
@@ -213,7 +312,9 @@ def _allocate(n_float, n_int):  # type: ignore[no-untyped-def]
 def scratch(I: NDArray[Any]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The two buffers (float, int) of a workspace for the packed head whose ints are ``I``
     (:func:`~.flat.pack_flat`): what :func:`~.flat.solve_flat` carves its workspace from."""
-    return _buffers_in_python((int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1))
+    return _buffers_in_python(
+        (int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1)
+    )
 
 
 def workspace(chain: HeadChain) -> Workspace:

@@ -17,9 +17,13 @@ PROBE_ITERATIONS = 8  # policy iterations a further start gets before it must be
 # falls by orders of magnitude per step, one this slow is left by a bound or the head's disparity
 STALLED = 1e-6
 SECONDARY_GAIN = 1.0  # [-]: fraction of the policy's (first-order) error removed per step
-POLICY_STEP_TOL = 1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
+POLICY_STEP_TOL = (
+    1e-5  # [rad]/[m]: a policy step this small ends the policy phase (then pointing alone)
+)
 DAMPING = 1e-4  # [-]: Levenberg-Marquardt damping, times |r|^2
-SAME_BASIN = 1e-3  # [rad]/[m]: a probe this close to the best answer (every unknown) is converging to it
+SAME_BASIN = (
+    1e-3  # [rad]/[m]: a probe this close to the best answer (every unknown) is converging to it
+)
 OVERSHOOT = 0.1  # [-]: a step back along the last one by more than this fraction of it is shortened (secant)
 STEP_TOL = 1e-13  # [rad]/[m]: a step this small ends the iteration
 VERSION_POLISH = 1e-4  # [rad]: the polish zeroes a version this small (larger: a bound holds it)
@@ -31,7 +35,9 @@ AT_BOUND = 1e-12  # [rad]/[m]: an unknown (a reading) this close to a bound (a l
 # (unreachable answers sit at 0-3e-6, answers held by the zero-version task at 0.06-0.2)
 STATIONARY = 1e-4
 HISTORY = 2  # pairs (x, step) of the policy phase's Anderson acceleration (its 2x2 solve: 2 only)
-ACCELERATE_BELOW = 1e-6  # [-]: |r|^2 under which the policy phase is accelerated (pointing error ~1e-3 rad)
+ACCELERATE_BELOW = (
+    1e-6  # [-]: |r|^2 under which the policy phase is accelerated (pointing error ~1e-3 rad)
+)
 START_DISTANCE = 0.01  # [-]: best_starts' cost of a start's squared (scaled) distance from u_ref
 # the same on a one-camera head with spare joints (a camera on an arm, TALOS), where a start facing
 # the target from far off the reference walks far in the null space (fewest iterations at 0.3)
@@ -50,14 +56,22 @@ STRUCTURAL_NULL = 1e-12  # [-]: a 4th eigenvalue at most this of the 1st at ever
 
 # status codes of the compiled solve (indices into result.py's STATUSES)
 S_FIXATED, S_LIMITS, S_BEHIND, S_TOO_CLOSE, S_NO_SOLUTION, S_DISPARITY = 0, 1, 2, 3, 4, 5
-S_NOT_FINITE = -1  # solve_flat's answer to a target with a NaN or infinite coordinate (nothing solved)
+S_NOT_FINITE = (
+    -1
+)  # solve_flat's answer to a target with a NaN or infinite coordinate (nothing solved)
 
 # the solve's mode: bit flags (solve_flat's ``mode``)
-MODE_Q_CURRENT = 1  # qin[:n] holds the current readings (the min-motion reference; held joints read there)
+MODE_Q_CURRENT = (
+    1  # qin[:n] holds the current readings (the min-motion reference; held joints read there)
+)
 MODE_WARM_START = 2  # qin[n:] holds a start to try first (e.g. the last answer while tracking)
-MODE_FALLBACK = 4  # retry without the zero-version task when the first answer is at a limit or unsolved
+MODE_FALLBACK = (
+    4  # retry without the zero-version task when the first answer is at a limit or unsolved
+)
 
 # the iteration's state flags in the workspace's ``eig`` (3,): > 0 is set
 EIG_WARM = 0  # Vp holds the eigenvectors of a recent step with every unknown free (a warm start)
-EIG_EXACT = 1  # V, lam hold the decomposition at this very u, every unknown free (the polish reuses it)
+EIG_EXACT = (
+    1  # V, lam hold the decomposition at this very u, every unknown free (the polish reuses it)
+)
 EIG_PROBE = 2  # stop once u is within SAME_BASIN of u_near (a probe reaching the best answer)

@@ -43,9 +43,13 @@ def _jacobi_any(H, f, lam, V):  # type: ignore[no-untyped-def]
             diag += H[i, i] * H[i, i]
             for j in range(i + 1, f):
                 off += H[i, j] * H[i, j]
-        if off <= 1e-24 * diag or off == 0.0:  # off-diagonal at 1e-12 of the diagonal (a Newton step needs no more)
+        if (
+            off <= 1e-24 * diag or off == 0.0
+        ):  # off-diagonal at 1e-12 of the diagonal (a Newton step needs no more)
             break
-        tiny = 1e-24 * diag / (f * f)  # elements this small cannot keep the test above from passing: not rotated
+        tiny = (
+            1e-24 * diag / (f * f)
+        )  # elements this small cannot keep the test above from passing: not rotated
         # the circle method: player n - 1 fixed, the others turning; round r pairs (r, n - 1)
         # and ((r + i) mod (n - 1), (r - i) mod (n - 1)), i = 1 .. n/2 - 1
         for r in range(n - 1):
@@ -208,7 +212,6 @@ def _sort_eigen(lam, V, f):  # type: ignore[no-untyped-def]
             for k in range(f):
                 V[k, j - 1], V[k, j] = V[k, j], V[k, j - 1]
             j -= 1
-
 
 
 @hot_kernel

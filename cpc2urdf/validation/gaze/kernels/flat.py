@@ -91,15 +91,64 @@ def pack_flat(
     (``centre``: the point far targets are pulled in towards, world [m], shape (3,))."""
     ch = Chain(*ch)  # (a plain tuple in the same order too)
     parent, cam_parent, solve_cams, vw = ch.parent, ch.cam_parent, ch.solve_cameras, ch.tasks
-    axis, R, t, A, b, cam_R, cam_t, c, anc, jtype = ch.axis, ch.R, ch.t, ch.A, ch.b, ch.cam_R, ch.cam_t, ch.version_row, ch.anc, ch.jtype
+    axis, R, t, A, b, cam_R, cam_t, c, anc, jtype = (
+        ch.axis,
+        ch.R,
+        ch.t,
+        ch.A,
+        ch.b,
+        ch.cam_R,
+        ch.cam_t,
+        ch.version_row,
+        ch.anc,
+        ch.jtype,
+    )
     table_u, table_o, table_z = table
     robot_A, robot_b, robot_lo, robot_hi, pinv = robot
-    K, C, S, m, G, n = len(parent), len(cam_parent), len(solve_cams), len(lower), table_u.shape[1], len(robot_b)
-    floats = [axis, R, t, A, b, cam_R, cam_t, c, vw, lower, upper, sw, 0.5 * (lower + upper), table_u, table_o,
-              table_z, robot_A, robot_b, robot_lo, robot_hi, pinv,
-              np.array([null_rel, tol, baseline, 1.0 if vw[0] > 0.0 else 0.0]), np.asarray(centre, dtype=float)]
-    ints = [np.array([K, C, S, m, G, n, n_starts, max_it, int(bool(disparity_head))]), parent, jtype, cam_parent,
-            anc, solve_cams, joint_index, held, still]
+    K, C, S, m, G, n = (
+        len(parent),
+        len(cam_parent),
+        len(solve_cams),
+        len(lower),
+        table_u.shape[1],
+        len(robot_b),
+    )
+    floats = [
+        axis,
+        R,
+        t,
+        A,
+        b,
+        cam_R,
+        cam_t,
+        c,
+        vw,
+        lower,
+        upper,
+        sw,
+        0.5 * (lower + upper),
+        table_u,
+        table_o,
+        table_z,
+        robot_A,
+        robot_b,
+        robot_lo,
+        robot_hi,
+        pinv,
+        np.array([null_rel, tol, baseline, 1.0 if vw[0] > 0.0 else 0.0]),
+        np.asarray(centre, dtype=float),
+    ]
+    ints = [
+        np.array([K, C, S, m, G, n, n_starts, max_it, int(bool(disparity_head))]),
+        parent,
+        jtype,
+        cam_parent,
+        anc,
+        solve_cams,
+        joint_index,
+        held,
+        still,
+    ]
     F = np.concatenate([np.asarray(x, dtype=float).ravel() for x in floats])
     I = np.concatenate([np.asarray(x).astype(np.int64).ravel() for x in ints])
     return np.ascontiguousarray(F), np.ascontiguousarray(I)
@@ -110,68 +159,85 @@ def _unpack(F, I):  # type: ignore[no-untyped-def]
     """The :class:`Head` as views of :func:`pack_flat`'s arrays."""
     K, C, S, m, G, n = I[0], I[1], I[2], I[3], I[4], I[5]
     o = I_HEADER
-    parent = I[o:o + K]
+    parent = I[o : o + K]
     o += K
-    jtype = I[o:o + K]
+    jtype = I[o : o + K]
     o += K
-    cam_parent = I[o:o + C]
+    cam_parent = I[o : o + C]
     o += C
-    anc = I[o:o + C * K].reshape((C, K))
+    anc = I[o : o + C * K].reshape((C, K))
     o += C * K
-    solve_cams = I[o:o + S]
+    solve_cams = I[o : o + S]
     o += S
-    joint_index = I[o:o + K]
+    joint_index = I[o : o + K]
     o += K
-    held = I[o:o + K]
+    held = I[o : o + K]
     o += K
-    still = I[o:o + n]
+    still = I[o : o + n]
     f = 0
-    axis = F[f:f + 3 * K].reshape((K, 3))
+    axis = F[f : f + 3 * K].reshape((K, 3))
     f += 3 * K
-    R = F[f:f + 9 * K].reshape((K, 3, 3))
+    R = F[f : f + 9 * K].reshape((K, 3, 3))
     f += 9 * K
-    t = F[f:f + 3 * K].reshape((K, 3))
+    t = F[f : f + 3 * K].reshape((K, 3))
     f += 3 * K
-    A = F[f:f + K * m].reshape((K, m))
+    A = F[f : f + K * m].reshape((K, m))
     f += K * m
-    b = F[f:f + K]
+    b = F[f : f + K]
     f += K
-    cam_R = F[f:f + 9 * C].reshape((C, 3, 3))
+    cam_R = F[f : f + 9 * C].reshape((C, 3, 3))
     f += 9 * C
-    cam_t = F[f:f + 3 * C].reshape((C, 3))
+    cam_t = F[f : f + 3 * C].reshape((C, 3))
     f += 3 * C
-    c = F[f:f + m]
+    c = F[f : f + m]
     f += m
-    vw = F[f:f + 4]
+    vw = F[f : f + 4]
     f += 4
-    lower = F[f:f + m]
+    lower = F[f : f + m]
     f += m
-    upper = F[f:f + m]
+    upper = F[f : f + m]
     f += m
-    sw = F[f:f + m]
+    sw = F[f : f + m]
     f += m
-    home = F[f:f + m]
+    home = F[f : f + m]
     f += m
-    table_u = F[f:f + G * m].reshape((m, G))
+    table_u = F[f : f + G * m].reshape((m, G))
     f += G * m
-    table_o = F[f:f + 3 * G].reshape((3, G))
+    table_o = F[f : f + 3 * G].reshape((3, G))
     f += 3 * G
-    table_z = F[f:f + 3 * G].reshape((3, G))
+    table_z = F[f : f + 3 * G].reshape((3, G))
     f += 3 * G
-    robot_A = F[f:f + n * m].reshape((n, m))
+    robot_A = F[f : f + n * m].reshape((n, m))
     f += n * m
-    robot_b = F[f:f + n]
+    robot_b = F[f : f + n]
     f += n
-    robot_lo = F[f:f + n]
+    robot_lo = F[f : f + n]
     f += n
-    robot_hi = F[f:f + n]
+    robot_hi = F[f : f + n]
     f += n
-    pinv = F[f:f + m * n].reshape((m, n))
+    pinv = F[f : f + m * n].reshape((m, n))
     f += m * n
-    scalars = F[f:f + F_SCALARS]
+    scalars = F[f : f + F_SCALARS]
     ch = Chain(parent, jtype, axis, R, t, A, b, cam_parent, cam_R, cam_t, anc, solve_cams, c, vw)
-    return Head(ch, lower, upper, sw, home, table_u, table_o, table_z, robot_A, robot_b, robot_lo, robot_hi, pinv,
-                scalars, joint_index, held, still)
+    return Head(
+        ch,
+        lower,
+        upper,
+        sw,
+        home,
+        table_u,
+        table_o,
+        table_z,
+        robot_A,
+        robot_b,
+        robot_lo,
+        robot_hi,
+        pinv,
+        scalars,
+        joint_index,
+        held,
+        still,
+    )
 
 
 def out_size(n: int, S: int) -> int:
@@ -191,7 +257,9 @@ def _solve_rows(F, I, T, qin, mode, OUT, f, ints):  # type: ignore[no-untyped-de
         _solve_target(head, plain, I, ws, T[i], qin, mode, OUT[i])
 
 
-def solve_flat(F: Array, I: Array, p: Array, qin: Array, mode: int, out: Array, f: Array, ints: Array) -> None:
+def solve_flat(
+    F: Array, I: Array, p: Array, qin: Array, mode: int, out: Array, f: Array, ints: Array
+) -> None:
     """One target ``p`` (3,) (see :func:`_solve_target`): the entry of ``GazeSolver.solve``. The
     workspace is carved from the buffers ``f`` and ``ints`` (:func:`~.buffers.scratch`), which
     keep, from call to call, the reference posture's scores (:func:`~.starts.best_starts`); no other
@@ -229,7 +297,15 @@ def _solve_target(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-unt
         return
     ch, lower, upper, sw, scalars = head.ch, head.lower, head.upper, head.sw, head.scalars
     settings = Settings(scalars[1], I[7], I[8] != 0, scalars[2])
-    ps, b, u_ref, u_start, starts, u_out, e_out = ws.ps, ws.b, ws.u_ref, ws.u_start, ws.starts, ws.u_out, ws.e_out
+    ps, b, u_ref, u_start, starts, u_out, e_out = (
+        ws.ps,
+        ws.b,
+        ws.u_ref,
+        ws.u_start,
+        ws.starts,
+        ws.u_out,
+        ws.e_out,
+    )
     eig = ws.eig  # the state the iteration keeps in the workspace: nothing from another target
     eig[0] = 0.0
     eig[1] = 0.0
@@ -247,8 +323,12 @@ def _solve_target(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-unt
     for attempt in range(3):
         chain, weights, rows, table_from = ch, sw, starts[:n_first], row  # the first pass
         if attempt == 1:  # without the zero-version task, from the first answer
-            if not ((mode & MODE_FALLBACK) != 0 and scalars[3] > 0.0 and (st == S_LIMITS or st == S_NO_SOLUTION)
-                    and not _pointing_stationary(plain, u_out, b, ps, lower, upper, ws)):
+            if not (
+                (mode & MODE_FALLBACK) != 0
+                and scalars[3] > 0.0
+                and (st == S_LIMITS or st == S_NO_SOLUTION)
+                and not _pointing_stationary(plain, u_out, b, ps, lower, upper, ws)
+            ):
                 break
             fell_back = True
             _copy(u_out, ws.u1)
@@ -263,8 +343,18 @@ def _solve_target(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-unt
             _copy(e_out, ws.e2)
             _copy(ws.best_start, starts[0])
             chain, weights, rows, table_from = plain, ws.ones, starts[:1], 0
-        it_a, st_a = solve_one(Problem(chain, ps, b, u_ref, lower, upper, weights, scalars[0]), p, settings, rows,
-                               table_from, head.table_u, u_out, e_out, ws, np.inf)
+        it_a, st_a = solve_one(
+            Problem(chain, ps, b, u_ref, lower, upper, weights, scalars[0]),
+            p,
+            settings,
+            rows,
+            table_from,
+            head.table_u,
+            u_out,
+            e_out,
+            ws,
+            np.inf,
+        )
         if attempt == 0:
             it, st = it_a, st_a
         elif attempt == 1:
@@ -300,7 +390,7 @@ def _readings(head, n, qin, mode, ws):  # type: ignore[no-untyped-def]
                 b[k] = qin[head.joint_index[k]]
     warm = (mode & MODE_WARM_START) != 0
     if warm:
-        _u_of_q(qin[n:2 * n], head.robot_b, head.pinv, head.lower, head.upper, ws.u_start)
+        _u_of_q(qin[n : 2 * n], head.robot_b, head.pinv, head.lower, head.upper, ws.u_start)
     return warm
 
 
@@ -324,7 +414,7 @@ def _report(head, n, ws, p, qin, mode, st, it, out):  # type: ignore[no-untyped-
     has_qc = (mode & MODE_Q_CURRENT) != 0
     out[0] = st
     out[1] = it
-    q = out[2:2 + n]
+    q = out[2 : 2 + n]
     for i in range(n):
         s = robot_b[i]
         for v in range(m):
@@ -342,12 +432,18 @@ def _report(head, n, ws, p, qin, mode, st, it, out):  # type: ignore[no-untyped-
         y = CR[cam, 0, 1] * dx + CR[cam, 1, 1] * dy + CR[cam, 2, 1] * dz
         z = CR[cam, 0, 2] * dx + CR[cam, 1, 2] * dy + CR[cam, 2, 2] * dz
         # the lateral offset in front of the camera, the distance behind it
-        out[o + S + s_] = (math.sqrt(x * x + y * y) if z >= 0 else math.sqrt(x * x + y * y + z * z)) / f
+        out[o + S + s_] = (
+            math.sqrt(x * x + y * y) if z >= 0 else math.sqrt(x * x + y * y + z * z)
+        ) / f
     o += 2 * S
-    _fixation_point(CR, Co, solve_cams, out[o:o + 4])
+    _fixation_point(CR, Co, solve_cams, out[o : o + 4])
     o += 4
     for i in range(n):
-        out[o + i] = 1.0 if (q[i] <= head.robot_lo[i] + AT_BOUND or q[i] >= head.robot_hi[i] - AT_BOUND) else 0.0
+        out[o + i] = (
+            1.0
+            if (q[i] <= head.robot_lo[i] + AT_BOUND or q[i] >= head.robot_hi[i] - AT_BOUND)
+            else 0.0
+        )
     o += n
     out[o], out[o + 1], out[o + 2] = p[0], p[1], p[2]
 
@@ -430,8 +526,22 @@ def _without_version(ch, vw):  # type: ignore[no-untyped-def]
     vw[1] = 0.0
     vw[TASK_MIN_DISTANCE] = ch.tasks[TASK_MIN_DISTANCE]
     vw[TASK_NEAR_NULL] = ch.tasks[TASK_NEAR_NULL]
-    return Chain(ch.parent, ch.jtype, ch.axis, ch.R, ch.t, ch.A, ch.b, ch.cam_parent, ch.cam_R, ch.cam_t, ch.anc,
-                 ch.solve_cameras, ch.version_row, vw)
+    return Chain(
+        ch.parent,
+        ch.jtype,
+        ch.axis,
+        ch.R,
+        ch.t,
+        ch.A,
+        ch.b,
+        ch.cam_parent,
+        ch.cam_R,
+        ch.cam_t,
+        ch.anc,
+        ch.solve_cameras,
+        ch.version_row,
+        vw,
+    )
 
 
 @hot_kernel

@@ -25,13 +25,17 @@ from typing import Any
 
 from numba.core.dispatcher import Dispatcher
 
-_PACKAGE = __name__.rsplit(".", 1)[0]  # the kernels package: the gaze modules call kernels through it
+_PACKAGE = __name__.rsplit(".", 1)[
+    0
+]  # the kernels package: the gaze modules call kernels through it
 _lock = threading.Lock()
 _swapped: list[tuple[Any, str, Dispatcher]] = []  # (module, name, dispatcher) replaced by Python
 _worker: subprocess.Popen[bytes] | None = None
 WARM = "cpc2urdf.validation.gaze.warm"  # the module the background process runs
-NOTICE = ("gaze: first use: solving with the Python kernels (~2 ms a target) while the compiled ones "
-          "(~10 us) are built in the background and cached")
+NOTICE = (
+    "gaze: first use: solving with the Python kernels (~2 ms a target) while the compiled ones "
+    "(~10 us) are built in the background and cached"
+)
 
 
 def compiled() -> bool:
@@ -69,8 +73,13 @@ def compile_in_background() -> None:
         return
     if mode != "python":
         env = {**os.environ, "CPC2URDF_GAZE_FIRST_USE": "compile", "CPC2URDF_PROGRESS": "0"}
-        _worker = subprocess.Popen([sys.executable, "-m", WARM], stdin=subprocess.DEVNULL, env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _worker = subprocess.Popen(
+            [sys.executable, "-m", WARM],
+            stdin=subprocess.DEVNULL,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         if os.environ.get("CPC2URDF_PROGRESS", "1") != "0":
             print(NOTICE, file=sys.stderr)
     run_interpreted()

@@ -61,7 +61,9 @@ from cpc2urdf.validation.gaze.kernels.step import (
     _version,
 )
 
-D_PLAIN = 4 * HISTORY  # the row of the workspace's ``acc`` holding the plain step of an accelerated one
+D_PLAIN = (
+    4 * HISTORY
+)  # the row of the workspace's ``acc`` holding the plain step of an accelerated one
 
 
 @internal_kernel
@@ -82,12 +84,18 @@ def _iterate(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyped-def]
     # task's and a disparity head's near-null moves are left as they are)
     accelerate = gain > 0.0 and vw_w == 0.0 and pb.null_rel <= ACCELERATE_NULL_REL and m <= 62
     near_rel = max(ch.tasks[TASK_NEAR_NULL], pb.null_rel)  # the null cut near a fixating posture
-    moved_before = False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
+    moved_before = (
+        False  # s_prev holds the last accepted step of this call (before its scale sigma_prev)
+    )
     sigma_prev = 1.0
     nh = 0  # pairs (x, F) in the acceleration's history
     h_free = 0  # the free unknowns of the pairs in the history, as bits
     rr_old = 0.0  # |r|^2 before the last accepted step
-    rr = rr_at_u if rr_at_u >= 0.0 else _residual_hot(ch, u, pb.b, pb.p, ws.r, ws.J, WITH_JACOBIAN, ws)
+    rr = (
+        rr_at_u
+        if rr_at_u >= 0.0
+        else _residual_hot(ch, u, pb.b, pb.p, ws.r, ws.J, WITH_JACOBIAN, ws)
+    )
     it = 0
     while it < max_it:
         if gain == 0.0 and rr <= POLISHED:  # polished: no further step (and its eigen-solve) needed
@@ -96,11 +104,19 @@ def _iterate(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyped-def]
                 break
         it += 1
         null_rel = near_rel if rr <= NEAR_FIXATION else pb.null_rel  # this iteration's null cut
-        f, vmove, held_off, exact_v, have_v = _active_set_step(pb, u, gain, null_rel, rr, accelerate, exact_v,
-                                                               have_v, ws)
+        f, vmove, held_off, exact_v, have_v = _active_set_step(
+            pb, u, gain, null_rel, rr, accelerate, exact_v, have_v, ws
+        )
         accel, nh, h_free = _accelerate(u, sw, rr, vmove, held_off, accelerate, nh, h_free, ws)
         big, scale = _capped(dx, sw, m)
-        if accelerate and not accel and scale < 1.0 and vmove > 0.0 and moved_before and rr > rr_old:
+        if (
+            accelerate
+            and not accel
+            and scale < 1.0
+            and vmove > 0.0
+            and moved_before
+            and rr > rr_old
+        ):
             big, scale = _cap_walk_alone(dx, dn, sw, big, scale)
         plain = big * scale
         if accel:  # converged is judged on the plain step (an accelerated one can stagnate)
@@ -113,7 +129,9 @@ def _iterate(pb, u, gain, max_it, rr_at_u, ws):  # type: ignore[no-untyped-def]
             break
         if moved_before and not accel:
             scale = _shorten_overshoot(dx, sw, ws.s_prev, scale, sigma_prev)
-        accepted, limited, scale, accel, nh = _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws)
+        accepted, limited, scale, accel, nh = _line_search(
+            pb, u, gain, rr, vmove, scale, accel, nh, ws
+        )
         if not accepted:
             break
         moved = _take_step(u, sw, ws)
@@ -183,7 +201,9 @@ def _active_set_step(pb, u, gain, null_rel, rr, accelerate, exact_v, have_v, ws)
         for v in range(m):
             if free[v]:
                 du = dx[v] / sw[v]
-                if (u[v] <= lower[v] + AT_BOUND and du < 0.0) or (u[v] >= upper[v] - AT_BOUND and du > 0.0):
+                if (u[v] <= lower[v] + AT_BOUND and du < 0.0) or (
+                    u[v] >= upper[v] - AT_BOUND and du > 0.0
+                ):
                     free[v] = 0
                     changed = True
         if not changed:
@@ -200,8 +220,8 @@ def _accelerate(u, sw, rr, vmove, held_off, accelerate, nh, h_free, ws):  # type
     is dropped when the step map grew since its last pair. Returns ``(accel, nh, h_free)``."""
     free, dx, acc = ws.free, ws.dx, ws.acc
     m = u.shape[0]
-    hx, hf = acc[0:HISTORY], acc[HISTORY:2 * HISTORY]
-    dXh, dFh, d_plain = acc[2 * HISTORY:3 * HISTORY], acc[3 * HISTORY:4 * HISTORY], acc[D_PLAIN]
+    hx, hf = acc[0:HISTORY], acc[HISTORY : 2 * HISTORY]
+    dXh, dFh, d_plain = acc[2 * HISTORY : 3 * HISTORY], acc[3 * HISTORY : 4 * HISTORY], acc[D_PLAIN]
     accel = False
     if accelerate:
         bits = 0
@@ -321,7 +341,9 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
     elif vmove > 0.0:  # the polish's zero-version move (scaled unknowns)
         allowance = min(vmove, 1.0) * 1e-2
     allow = allowance * scale * scale
-    tries = BACKTRACKS + 1 if accel else BACKTRACKS  # the fallback to the plain step is not a halving
+    tries = (
+        BACKTRACKS + 1 if accel else BACKTRACKS
+    )  # the fallback to the plain step is not a halving
     cut_tried = gain == 0.0  # the policy phase's cut at the first bound, tried once
     cut_now = False  # this trial is the step cut at its first bound (not a halving)
     sb = -1.0  # the step's scale at the first bound it reaches (-1: not yet found)
@@ -329,7 +351,9 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
     k = 0
     while k < tries:
         for v in range(m):
-            trial[v] = min(max(u[v] + (sb if cut_now else scale) * dx[v] / sw[v], lower[v]), upper[v])
+            trial[v] = min(
+                max(u[v] + (sb if cut_now else scale) * dx[v] / sw[v], lower[v]), upper[v]
+            )
         if cut_now:
             trial[vb] = lower[vb] if dx[vb] / sw[vb] < 0.0 else upper[vb]
         rr_new = _residual_hot(ch, trial, pb.b, pb.p, ws.r2, ws.J2, RESIDUAL_ONLY, ws)
@@ -339,7 +363,9 @@ def _line_search(pb, u, gain, rr, vmove, scale, accel, nh, ws):  # type: ignore[
                 return True, True, sb, accel, nh
         elif rr_new <= rr + allow or rr_new <= EXACT_RESIDUAL:
             return True, False, scale, accel, nh
-        elif accel:  # the accelerated step failed: the plain one (its own allowance), a fresh history
+        elif (
+            accel
+        ):  # the accelerated step failed: the plain one (its own allowance), a fresh history
             accel = False
             nh = 0
             for v in range(m):

@@ -33,11 +33,19 @@ Chain = namedtuple(
     "Chain",
     "parent jtype axis R t A b cam_parent cam_R cam_t anc solve_cameras version_row tasks",
 )
-TASK_WEIGHT, TASK_VERSION_REF, TASK_MIN_DISTANCE, TASK_NEAR_NULL = 0, 1, 2, 3  # indices into Chain.tasks
+TASK_WEIGHT, TASK_VERSION_REF, TASK_MIN_DISTANCE, TASK_NEAR_NULL = (
+    0,
+    1,
+    2,
+    3,
+)  # indices into Chain.tasks
 
 
 def pack(
-    chain: HeadChain, version_row: Array | None = None, version_weight: float = 0.0, min_distance: float = 0.0
+    chain: HeadChain,
+    version_row: Array | None = None,
+    version_weight: float = 0.0,
+    min_distance: float = 0.0,
 ) -> Chain:
     """The chain's arrays as the :class:`Chain` the kernels take, with the policy's secondary tasks:
     the zero-version task's row ``c`` over the unknowns (None: none) and its weight, the minimum
@@ -49,8 +57,20 @@ def pack(
     weight = float(version_weight) if version_row is not None else 0.0
     tasks = np.array([weight, float(c @ home), float(min_distance), 0.0])
     return Chain(
-        chain.parent, chain.jtype, chain.axis, chain.R, chain.t, chain.A, chain.b, chain.cam_parent, chain.cam_R,
-        chain.cam_t, np.ascontiguousarray(chain.anc, dtype=np.int64), chain.solve_cameras, c, tasks,
+        chain.parent,
+        chain.jtype,
+        chain.axis,
+        chain.R,
+        chain.t,
+        chain.A,
+        chain.b,
+        chain.cam_parent,
+        chain.cam_R,
+        chain.cam_t,
+        np.ascontiguousarray(chain.anc, dtype=np.int64),
+        chain.solve_cameras,
+        c,
+        tasks,
     )
 
 
@@ -71,7 +91,17 @@ def _fk_scalars(ch, u, b, JR, Jp, Ja, CR, Co):  # type: ignore[no-untyped-def]
             p20, p21, p22 = JR[pk, 2, 0], JR[pk, 2, 1], JR[pk, 2, 2]
             ox, oy, oz = Jp[pk, 0], Jp[pk, 1], Jp[pk, 2]
         else:
-            p00, p01, p02, p10, p11, p12, p20, p21, p22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+            p00, p01, p02, p10, p11, p12, p20, p21, p22 = (
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+            )
             ox, oy, oz = 0.0, 0.0, 0.0
         tx, ty, tz = t[k, 0], t[k, 1], t[k, 2]
         px = ox + p00 * tx + p01 * ty + p02 * tz

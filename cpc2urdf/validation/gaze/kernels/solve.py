@@ -60,11 +60,21 @@ def solve_one(pb, p, settings, starts, table_from, table_u, u_out, err_out, ws, 
     n_rows = starts.shape[0]
     for k in range(n_rows):
         if k > table_from:
-            further_start(k - table_from, n_rows - table_from, pb.u_ref, pb.sw, table_u, ws.score, ws.top_g,
-                          starts[k])
+            further_start(
+                k - table_from,
+                n_rows - table_from,
+                pb.u_ref,
+                pb.sw,
+                table_u,
+                ws.score,
+                ws.top_g,
+                starts[k],
+            )
         for v in range(m):
             u[v] = starts[k, v]
-        it, rr, answered = _run_start(pb, u, u_out, k == 0 and best_rr == np.inf, best_rr, settings.max_it, ws)
+        it, rr, answered = _run_start(
+            pb, u, u_out, k == 0 and best_rr == np.inf, best_rr, settings.max_it, ws
+        )
         total += it
         if not answered:
             continue
@@ -124,7 +134,22 @@ def _run_start(pb, u, u_out, first, best_rr, max_it, ws):  # type: ignore[no-unt
 def _decided_by_geometry(pb, u, baseline, ws):  # type: ignore[no-untyped-def]
     """Whether the answer ``u`` leaves the target behind a solved camera or nearer than the
     baseline: no other start would fixate it."""
-    residual(pb.ch, u, pb.b, pb.p, ws.r, ws.J, RESIDUAL_ONLY, ws.JR, ws.Jp, ws.Ja, ws.CR, ws.Co, ws.Jc, ws.Pc)
+    residual(
+        pb.ch,
+        u,
+        pb.b,
+        pb.p,
+        ws.r,
+        ws.J,
+        RESIDUAL_ONLY,
+        ws.JR,
+        ws.Jp,
+        ws.Ja,
+        ws.CR,
+        ws.Co,
+        ws.Jc,
+        ws.Pc,
+    )
     Pc = ws.Pc
     for s in range(Pc.shape[0]):
         if Pc[s, 2] <= 0.0 or Pc[s, 3] < baseline:
@@ -172,7 +197,9 @@ def _judge(pb, p, settings, u_out, err_out, ws):  # type: ignore[no-untyped-def]
     if behind:
         return S_BEHIND
     for v in range(u_out.shape[0]):
-        if lower[v] < upper[v] and (u_out[v] <= lower[v] + AT_BOUND or u_out[v] >= upper[v] - AT_BOUND):
+        if lower[v] < upper[v] and (
+            u_out[v] <= lower[v] + AT_BOUND or u_out[v] >= upper[v] - AT_BOUND
+        ):
             return S_LIMITS
     if settings.disparity_head:
         return S_DISPARITY

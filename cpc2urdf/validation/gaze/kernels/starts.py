@@ -14,7 +14,10 @@ from cpc2urdf.validation.gaze.kernels.constants import (
 )
 from cpc2urdf.validation.gaze.kernels.kinematics import fk
 
-DISTINCT, ANY = np.bool_(True), np.bool_(False)  # _best_other's choice (numpy bools: one compiled copy)
+DISTINCT, ANY = (
+    np.bool_(True),
+    np.bool_(False),
+)  # _best_other's choice (numpy bools: one compiled copy)
 
 
 @internal_kernel
@@ -42,7 +45,9 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # typ
     for k in range(K):
         if key[m + k] != b[k]:
             same = False
-    if not same:  # u_ref's cyclopean centre and axis, and each entry's cost of its distance from u_ref
+    if (
+        not same
+    ):  # u_ref's cyclopean centre and axis, and each entry's cost of its distance from u_ref
         for v in range(m):
             key[v] = u_ref[v]
         for k in range(K):
@@ -75,7 +80,9 @@ def best_starts(ch, p, b, u_ref, sw, table_u, table_o, table_z, out, ws):  # typ
     for g in range(G):
         dx, dy, dz = px - table_o[0, g], py - table_o[1, g], pz - table_o[2, g]
         nd2 = max(dx * dx + dy * dy + dz * dz, 1e-300)
-        score[g] = (dx * table_z[0, g] + dy * table_z[1, g] + dz * table_z[2, g]) / math.sqrt(nd2) - cost[g]
+        score[g] = (dx * table_z[0, g] + dy * table_z[1, g] + dz * table_z[2, g]) / math.sqrt(
+            nd2
+        ) - cost[g]
     nzr = math.sqrt(zx * zx + zy * zy + zz * zz) + 1e-300
     dx, dy, dz = px - ox, py - oy, pz - oz
     nd2 = dx * dx + dy * dy + dz * dz
@@ -146,4 +153,3 @@ def _best_other(score, top_g, j, distinct, u_ref, sw, table_u):  # type: ignore[
             best = score[g]
             pick = g
     return pick
-
