@@ -21,5 +21,6 @@ fi
 
 python -m pip install -q -e ".[dev]"
 ruff check .
+ruff format --check .
 mypy
 python -m pytest -n auto "$@"   # one worker per core
