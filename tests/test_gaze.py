@@ -533,7 +533,7 @@ def test_cyclopean_fixates_targets_reachable_only_near_a_corner_of_the_limits(no
 
 
 def test_issue_14_targets_are_answered():
-    """The targets of issue 14 (and one of each exception class the fuzz found before the fix)
+    """The targets a fuzz once broke on (and one of each exception class the fuzz found before the fix)
     get an answer; these are out of reach of the cyclopean policy (multi-start least squares
     finds no better residual than ~0.04 and ~0.07), and say so."""
     solver = solver_for("iis_head")

@@ -1,4 +1,4 @@
-"""Gaze never raises on a finite target (issue 14): a seeded fuzz of ``GazeSolver.solve``.
+"""Gaze never raises on a finite target: a seeded fuzz of ``GazeSolver.solve``.
 
 Every solve of a finite target must return a :class:`GazeSolution` (fixated or not) without an
 exception or a numpy warning, with readings that are finite and inside the limits, the fixed
@@ -356,7 +356,7 @@ def test_tracking_through_camera_centres_and_far_away():
                 assert np.all(v <= vmax * (1 + 1e-12)), policy
 
 
-# ---- every head shape, through the compiled batch solver (issue 15) ---------------------------
+# ---- every head shape, through the compiled batch solver -------------------------------------
 
 SHAPE_FAST_CUBE = 300  # cube targets per head shape by default
 SHAPE_FAST_CONFIGS = 4  # configurations whose special targets are solved, by default

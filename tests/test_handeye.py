@@ -266,7 +266,7 @@ def test_opencv_answers_where_we_refuse() -> None:
 
 
 def test_every_solver_takes_1000_poses_in_seconds_and_little_memory() -> None:
-    """Issue 42: ``--method all`` on 1,000 poses in seconds within 1 GB. All pairs were 499,500
+    """``--method all`` on 1,000 poses in seconds within 1 GB. All pairs were 499,500
     relative motions (Daniilidis: ~150 s, the SVD's full left factor once asked 24 GiB at 120
     poses); now 15 pairs per pose and every solver built for all poses at once."""
     import resource

@@ -276,7 +276,7 @@ class CompiledGaze:
         straight ahead, failed alike); now 0 / 13, the 13 every target within 1.1e-6 rad of an
         eye's roll axis (under the null cut: docs/gaze.md, Known limits). The cost, on
         two pan-tilt eyes without a neck: 35 of 2,109 unreachable targets' best answers worse
-        (median 2.6 deg), none better; iterations 15.1 -> 10.4 (docs/gaze.md, seventeenth pass)."""
+        (median 2.6 deg), none better; iterations 15.1 -> 10.4."""
         ch = self.chain
         rng = np.random.default_rng(TABLE_SEED)
         U = np.tile(self.home_u, (TABLE_SIZE, 1))
@@ -316,7 +316,7 @@ class CompiledGaze:
         on a redundant head the policy phase walked far along the null space from it (iCub:
         12.6 iterations a reachable target); the policy's answer for a nearby direction is close
         to the answer wanted (10.1), and the policy's local minimum reached from it is more often
-        the lower one (sixteenth pass, docs/gaze.md). Built for the middle of the limits (no
+        the lower one. Built for the middle of the limits (no
         ``q_current``): from other readings, or with held joints elsewhere, it helps less."""
         P, status, answers = self._solve_along_table(TABLE_SIZE)
         pointed = (status == kernels.S_FIXATED) | (status == kernels.S_DISPARITY)
