@@ -94,28 +94,15 @@ def _camera_errors(model: CPCModel, truth: CPCModel) -> str:
     )
 
 
-def run(args: argparse.Namespace) -> int:
+def _stage1(args: argparse.Namespace, out: Path, st: _Stages) -> tuple[CPCModel, str, str]:
+    """Stage 1 simulated (or rendered and measured): the true head, the measurement and held-out files."""
     import numpy as np
 
-    from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.files.jsonio import make_folder
     from cpc2urdf.files.model_file import save_model
     from cpc2urdf.files.robot_ref import load_model
-    from cpc2urdf.identification.handeye.stage2 import perturb_cameras, run_stage2, write_pose_files
+    from cpc2urdf.identification.handeye.stage2 import perturb_cameras
 
-    if args.seed < 0:  # numpy's generators take seeds >= 0; refused before the folder is made
-        raise ConfigurationError(f"--seed must be >= 0, got {args.seed}")
-    out = Path(args.output)
-    make_folder(out)
-    d = str(out)
-    seed = str(args.seed)
-    st = _Stages()
-
-    st.start("nominal IIS-head -> URDF -> cross-check (Pinocchio, yourdfpy, urdfdom)")
-    _cli("export", "iis_head", "-o", f"{d}/nominal.urdf")
-    _cli("check", f"{d}/nominal.urdf", "--model", "iis_head")
-    st.done()
-
+    d, seed = str(out), str(args.seed)
     if args.from_images:
         st.start(
             "render the stage-1 experiment as stereo images, then measure them (circle detector)"
@@ -146,16 +133,17 @@ def run(args: argparse.Namespace) -> int:
         measurements, heldout = f"{d}/sim/measurements.json", f"{d}/sim/heldout.json"
     st.done()
 
-    st.start("identify (closed form + maximum likelihood) -> URDF -> cross-check")
-    _cli("identify", measurements, "-o", f"{d}/stage1_model.json")
-    _cli("export", f"{d}/stage1_model.json", "-o", f"{d}/stage1.urdf")
-    _cli("check", f"{d}/stage1.urdf", "--model", f"{d}/stage1_model.json")
-    st.done()
+    return truth, measurements, heldout
 
-    st.start("held-out accuracy (Shih et al. Table 4)")
-    _cli("accuracy", f"{d}/stage1_model.json", heldout)
-    st.done()
 
+def _stage2(args: argparse.Namespace, out: Path, truth: CPCModel, st: _Stages) -> None:
+    """Stage 2: both cameras by hand-eye calibration (from rendered images with --from-images),
+    then the calibrated model's URDF, checked."""
+    from cpc2urdf.files.model_file import save_model
+    from cpc2urdf.files.robot_ref import load_model
+    from cpc2urdf.identification.handeye.stage2 import run_stage2, write_pose_files
+
+    d = str(out)
     if args.from_images:
         st.start(
             "stage 2 from images: the head cameras photograph the 5x5 disk target; solvePnP; hand-eye"
@@ -208,6 +196,13 @@ def run(args: argparse.Namespace) -> int:
     _cli("check", f"{d}/head.urdf", "--model", f"{d}/model.json", "--gaze-report")
     st.done()
 
+
+def _gaze(args: argparse.Namespace, out: Path, st: _Stages) -> tuple[Array, Array]:
+    """Gaze on the calibrated head: a target where its axes meet, and one straight ahead. Returns
+    the home readings and the target drawn in the view."""
+    from cpc2urdf.files.robot_ref import load_model
+
+    d = str(out)
     st.start("gaze: fixate targets in front of the calibrated head (joint limits as constraints)")
     from cpc2urdf.errors import DegenerateDataError
     from cpc2urdf.identification.simulation.heads import reachable_targets
@@ -255,6 +250,17 @@ def run(args: argparse.Namespace) -> int:
     )
     st.done()
 
+    return q_home, reachable
+
+
+def _view_and_reach(
+    args: argparse.Namespace, out: Path, q_home: Array, reachable: Array, st: _Stages
+) -> None:
+    """The 3D view of the calibrated head (the truth as a ghost) and its reachable region."""
+    from cpc2urdf.files.robot_ref import load_model
+
+    d = str(out)
+    model = load_model(f"{d}/model.json")
     st.start("view: a self-contained meshcat page of the calibrated head, the true head as a ghost")
     from cpc2urdf.validation.view import find_chromium, screenshot_html, write_view_html
 
@@ -280,5 +286,37 @@ def run(args: argparse.Namespace) -> int:
     )
     st.done()
 
+
+def run(args: argparse.Namespace) -> int:
+
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.jsonio import make_folder
+
+    if args.seed < 0:  # numpy's generators take seeds >= 0; refused before the folder is made
+        raise ConfigurationError(f"--seed must be >= 0, got {args.seed}")
+    out = Path(args.output)
+    make_folder(out)
+    d = str(out)
+    st = _Stages()
+
+    st.start("nominal IIS-head -> URDF -> cross-check (Pinocchio, yourdfpy, urdfdom)")
+    _cli("export", "iis_head", "-o", f"{d}/nominal.urdf")
+    _cli("check", f"{d}/nominal.urdf", "--model", "iis_head")
+    st.done()
+
+    truth, measurements, heldout = _stage1(args, out, st)
+    st.start("identify (closed form + maximum likelihood) -> URDF -> cross-check")
+    _cli("identify", measurements, "-o", f"{d}/stage1_model.json")
+    _cli("export", f"{d}/stage1_model.json", "-o", f"{d}/stage1.urdf")
+    _cli("check", f"{d}/stage1.urdf", "--model", f"{d}/stage1_model.json")
+    st.done()
+
+    st.start("held-out accuracy (Shih et al. Table 4)")
+    _cli("accuracy", f"{d}/stage1_model.json", heldout)
+    st.done()
+
+    _stage2(args, out, truth, st)
+    q_home, reachable = _gaze(args, out, st)
+    _view_and_reach(args, out, q_home, reachable, st)
     print(f"\ndemo finished: the calibrated head is {d}/model.json and {d}/head.urdf")
     return 0
