@@ -59,7 +59,7 @@ from cpc2urdf.identification.simulation.truth import (
 )
 from cpc2urdf.identification.simulation.visibility import ViewReport, check_view, visible_heldout
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.model import CPCModel, CPCParams
+from cpc2urdf.model import CPCModel, CPCParams, RobotStructure
 from cpc2urdf.model_metadata import Provenance
 from cpc2urdf.progress import progress
 from cpc2urdf.urdf.robot import UrdfRobot
@@ -156,6 +156,59 @@ def simulate_experiment(
     ref = robot_ref or ref
     nominal = spec.nominal_model()
     s = nominal.structure
+    frames = _plates_to_measure(spec, s, noise)
+    rig = rig or StereoRig.verged()
+    r = calibration_ranges(s, ranges)
+    file_names = _file_joint_names(spec, s)
+    q, labels = protocol_configurations(r, M, file_names)
+    rng_geometry, rng_noise, rng_heldout = (
+        np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3)
+    )
+
+    # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
+    w2b = world_to_base or experiment_placement(nominal, rig, q, frames, r)
+    truth = perturbed_model(
+        nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r
+    )
+    q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
+    view = _checked_view(truth, rig, q, q_held, frames, labels, require_view)
+
+    poses, points = _measure_protocol(
+        truth,
+        q,
+        frames,
+        M,
+        rng_noise,
+        show_progress=show_progress,
+        noise=noise,
+        sigma_t=sigma_t,
+        sigma_r=sigma_r,
+        rig=rig,
+        pixel_sigma=pixel_sigma,
+    )
+    provenance = _provenance(
+        seed, M, file_names, r, geometry_error_t, geometry_error_r, rig, view, redrawn
+    )
+    measured, heldout = _measurement_sets(
+        spec,
+        truth,
+        q,
+        labels,
+        poses,
+        points,
+        q_held,
+        frames,
+        ref,
+        _noise_doc(noise, sigma_t, sigma_r, pixel_sigma),
+        provenance,
+    )
+    truth = _with_truth_provenance(truth, nominal, ref, seed, provenance, w2b)
+    return Experiment(truth, measured, heldout)
+
+
+def _plates_to_measure(spec: RobotSpec, s: RobotStructure, noise: str) -> list[str]:
+    """The robot's plate frames to measure; refuses a robot without any, or stereo noise on a
+    plate without a circle layout (before the placement search, in the file's names)."""
     frames = measured_frames(s)
     if not frames:
         raise ConfigurationError(f"robot {s.name!r} has no frame of kind 'plate' to measure")
@@ -170,24 +223,30 @@ def simulate_experiment(
             f"stereo noise needs the circle layout of each measured plate, and {name!r} has none "
             "(a URDF link carries no layout); use fig10 or no noise"
         )
-    rig = rig or StereoRig.verged()
-    r = calibration_ranges(s, ranges)
-    # Files about a URDF robot name its joints as the URDF does (labels, provenance).
-    file_names = [
+    return frames
+
+
+def _file_joint_names(spec: RobotSpec, s: RobotStructure) -> list[str]:
+    """The joint names the files use: a URDF robot's files name its joints as the URDF does
+    (labels, provenance)."""
+    return [
         spec.names.urdf_joint(n) if isinstance(spec, UrdfRobot) and spec.names else n
         for n in s.joint_names
     ]
-    q, labels = protocol_configurations(r, M, file_names)
-    rng_geometry, rng_noise, rng_heldout = (
-        np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(3)
-    )
 
-    # The placement depends on the robot, rig and ranges only (a fixed sample), not on the seed.
-    w2b = world_to_base or experiment_placement(nominal, rig, q, frames, r)
-    truth = perturbed_model(
-        nominal.with_params(world_to_base=w2b), rng_geometry, geometry_error_t, geometry_error_r
-    )
-    q_held, redrawn = visible_heldout(truth, rig, r, n_heldout, frames, rng_heldout)
+
+def _checked_view(
+    truth: CPCModel,
+    rig: StereoRig,
+    q: np.ndarray,
+    q_held: np.ndarray,
+    frames: list[str],
+    labels: list[str],
+    require_view: bool,
+) -> ViewReport:
+    """How the rig sees the plates of ``truth`` over the protocol and held-out configurations;
+    with ``require_view``, refuses an unmeasurable experiment (:func:`_unmeasurable`)."""
+    n_heldout = len(q_held)
     view = check_view(
         truth,
         rig,
@@ -202,9 +261,27 @@ def simulate_experiment(
             f"the rig does not see {unmeasurable[0]}{more}; narrow the calibration ranges, "
             "widen the rig's field of view or place the robot differently"
         )
+    return view
 
-    # Measure joint by joint so that a long run shows progress (the protocol's blocks).
-    blocks = [np.arange(1)] + [1 + i * M + np.arange(M) for i in range(s.n_joints)]
+
+def _measure_protocol(
+    truth: CPCModel,
+    q: np.ndarray,
+    frames: list[str],
+    M: int,
+    rng_noise: np.random.Generator,
+    *,
+    show_progress: bool,
+    noise: str,
+    sigma_t: float,
+    sigma_r: float,
+    rig: StereoRig,
+    pixel_sigma: float,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Measured plate poses and circle points at the protocol's configurations ``q``, measured
+    joint by joint so that a long run shows progress (the protocol's blocks)."""
+    n_joints = truth.structure.n_joints
+    blocks = [np.arange(1)] + [1 + i * M + np.arange(M) for i in range(n_joints)]
     items = progress(blocks, "simulate") if show_progress else blocks
     parts = [
         measure_poses(
@@ -222,9 +299,22 @@ def simulate_experiment(
     ]
     poses = {f: np.concatenate([p[0][f] for p in parts]) for f in frames}
     points = {f: np.concatenate([p[1][f] for p in parts]) for f in parts[0][1]}
+    return poses, points
 
-    noise_doc = _noise_doc(noise, sigma_t, sigma_r, pixel_sigma)
-    provenance = {
+
+def _provenance(
+    seed: int,
+    M: int,
+    file_names: list[str],
+    r: np.ndarray,
+    geometry_error_t: float,
+    geometry_error_r: float,
+    rig: StereoRig,
+    view: ViewReport,
+    redrawn: int,
+) -> dict[str, Any]:
+    """The measurement files' ``provenance`` section: how the experiment was simulated."""
+    return {
         "simulator": "cpc2urdf.identification.simulation.stage1_experiment",
         "seed": seed,
         "M": M,
@@ -243,6 +333,25 @@ def simulate_experiment(
             "heldout_redrawn_unmeasurable": redrawn,
         },
     }
+
+
+def _measurement_sets(
+    spec: RobotSpec,
+    truth: CPCModel,
+    q: np.ndarray,
+    labels: list[str],
+    poses: dict[str, np.ndarray],
+    points: dict[str, np.ndarray],
+    q_held: np.ndarray,
+    frames: list[str],
+    ref: str,
+    noise_doc: dict[str, Any],
+    provenance: dict[str, Any],
+) -> tuple[MeasurementSet, MeasurementSet]:
+    """The measured set (noisy poses, circle points and their fit RMS) and the held-out set
+    (TRUE poses, no noise)."""
+    s = truth.structure
+    n_heldout = len(q_held)
     fit_rms = {}
     if points:
         from cpc2urdf.registration import registration_rms
@@ -284,7 +393,19 @@ def simulate_experiment(
         },
         spec=keep,
     )
-    truth = truth.with_params(
+    return measured, heldout
+
+
+def _with_truth_provenance(
+    truth: CPCModel,
+    nominal: CPCModel,
+    ref: str,
+    seed: int,
+    provenance: dict[str, Any],
+    w2b: CPCParams,
+) -> CPCModel:
+    """``truth`` with the nominal's metadata and a provenance saying it is a simulated truth."""
+    return truth.with_params(
         metadata=nominal.metadata.replace(
             provenance=Provenance(
                 method="simulated truth",
@@ -299,7 +420,6 @@ def simulate_experiment(
             )
         )
     )
-    return Experiment(truth, measured, heldout)
 
 
 def _check_arguments(noise: str, n_heldout: int, **sigmas: float) -> None:
