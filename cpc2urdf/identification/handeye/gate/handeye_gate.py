@@ -236,6 +236,119 @@ def _rms(e: Array) -> float:
     return float(np.sqrt(np.mean(np.sum(e**2, axis=-1))))
 
 
+def _refuse(
+    verdict: ConsistencyReport,
+    code: str,
+    cause: str,
+    evidence: str,
+    fix: str,
+    outliers: tuple[str, ...] = (),
+) -> ConsistencyReport:
+    """The verdict turned into a refusal with the cause named."""
+    return replace(
+        verdict,
+        consistent=False,
+        code=code,
+        cause=cause,
+        evidence=evidence,
+        fix=fix,
+        outliers=outliers,
+    )
+
+
+def _mistake_refusal(
+    verdict: ConsistencyReport,
+    given: _Candidate,
+    explaining: list[_Candidate],
+    alts: list[_Candidate],
+) -> ConsistencyReport | None:
+    """Test 1: the refusal naming the tested mistake that best explains the data, if any."""
+    if not explaining:
+        return None
+    best = explaining[0]
+    assert best.mistake is not None
+    ties = _ties(best, alts)
+    evidence = f"residuals {given.residuals()} as given, {best.residuals()} with it undone{ties}"
+    return _refuse(verdict, best.mistake.code, best.mistake.cause, evidence, best.mistake.fix)
+
+
+def _plausibility_refusal(
+    verdict: ConsistencyReport, given: _Candidate, alts: list[_Candidate]
+) -> ConsistencyReport | None:
+    """Test 2: refuse data physically implausible as given (a plausible reading named if any)."""
+    if not given.problems:
+        return None
+    readings = [
+        a
+        for a in alts
+        if a.mistake is not None
+        and not a.problems
+        and (a.mistake.symmetric or a.level <= TIE_FACTOR * given.level)
+    ]
+    if readings:
+        best = min(readings, key=lambda a: a.level)
+        assert best.mistake is not None
+        return _refuse(
+            verdict,
+            best.mistake.code,
+            best.mistake.cause,
+            f"as given the solution puts {'; '.join(given.problems)}",
+            best.mistake.fix,
+        )
+    if not WORKING_DISTANCE[0] <= given.distance <= WORKING_DISTANCE[1]:
+        return _refuse(
+            verdict,
+            "implausible",
+            "implausible lengths",
+            f"the solution puts {'; '.join(given.problems)}",
+            "check the length unit of the poses",
+        )
+    return None
+
+
+def _outlier_refusal(
+    verdict: ConsistencyReport,
+    H: Array,
+    C: Array,
+    noise: PoseNoise | None,
+    fit: WeightedFit,
+    alpha: float,
+    names: list[str],
+) -> ConsistencyReport | None:
+    """Test 3: refuse gross outliers (with stated noise, only if the rest then agrees with it)."""
+    n = len(H)
+    out, fit_in = _outliers(H, C, noise, fit, alpha)
+    if (
+        out and noise is not None
+    ):  # outliers explain the data only if the rest agrees with the statement
+        assert fit_in is not None
+        dof_in = 6 * (n - len(out)) - 12
+        if not alpha / 2 <= float(chi2.sf(fit_in.chi2, dof_in)) <= 1.0 - alpha / 2:
+            out = []
+    if not out:
+        return None
+    assert fit_in is not None
+    o = np.array(out)
+    e_t, e_r = residual_vectors(H[o], C[o], fit_in.X, fit_in.Z)
+    worst = ", ".join(
+        f"{names[k]} {_length(float(np.linalg.norm(e_t[i])))} / "
+        f"{math.degrees(float(np.linalg.norm(e_r[i]))):.3g} deg"
+        for i, k in enumerate(out)
+    )
+    evidence = (
+        f"residuals {worst}; the other {n - len(out)} poses "
+        f"{_length(_rms(fit_in.e_t))} / {math.degrees(_rms(fit_in.e_r)):.3g} deg RMS"
+    )
+    return _refuse(
+        verdict,
+        "outliers",
+        f"gross outliers: {', '.join(names[k] for k in out)}",
+        evidence,
+        "remove or re-measure these poses",
+        tuple(names[k] for k in out),
+    )
+
+
 def check_consistency(
     T_base_hand: Array,
     T_camera_target: Array,
@@ -290,93 +403,30 @@ def check_consistency(
         false_alarm=false_alarm,
     )
 
-    def refuse(
-        code: str, cause: str, evidence: str, fix: str, outliers: tuple[str, ...] = ()
-    ) -> ConsistencyReport:
-        return replace(
-            verdict,
-            consistent=False,
-            code=code,
-            cause=cause,
-            evidence=evidence,
-            fix=fix,
-            outliers=outliers,
-        )
-
     # 1. a tested mistake explains the data (unless the data already agree with a stated noise)
     level_ok = noise is None or (p_high >= alpha / 2 and p_low >= alpha / 2)
     explaining = [] if noise is not None and level_ok else _explaining(given, alts, alpha)
-    if explaining:
-        best = explaining[0]
-        assert best.mistake is not None
-        evidence = (
-            f"residuals {given.residuals()} as given, {best.residuals()} with it undone"
-            + _ties(best, alts)
-        )
-        return refuse(best.mistake.code, best.mistake.cause, evidence, best.mistake.fix)
+    refusal = _mistake_refusal(verdict, given, explaining, alts)
+    if refusal is not None:
+        return refusal
 
     # 2. physically implausible as given, while an equally good reading is plausible
-    if given.problems:
-        readings = [
-            a
-            for a in alts
-            if a.mistake is not None
-            and not a.problems
-            and (a.mistake.symmetric or a.level <= TIE_FACTOR * given.level)
-        ]
-        if readings:
-            best = min(readings, key=lambda a: a.level)
-            assert best.mistake is not None
-            return refuse(
-                best.mistake.code,
-                best.mistake.cause,
-                f"as given the solution puts {'; '.join(given.problems)}",
-                best.mistake.fix,
-            )
-        if not WORKING_DISTANCE[0] <= given.distance <= WORKING_DISTANCE[1]:
-            return refuse(
-                "implausible",
-                "implausible lengths",
-                f"the solution puts {'; '.join(given.problems)}",
-                "check the length unit of the poses",
-            )
+    refusal = _plausibility_refusal(verdict, given, alts)
+    if refusal is not None:
+        return refusal
 
     # 3. gross outliers
     fit = reference()
     verdict = replace(verdict, rms_translation=_rms(fit.e_t), rms_rotation=_rms(fit.e_r))
-    out, fit_in = _outliers(H, C, noise, fit, alpha)
-    if (
-        out and noise is not None
-    ):  # outliers explain the data only if the rest agrees with the statement
-        assert fit_in is not None
-        dof_in = 6 * (n - len(out)) - 12
-        if not alpha / 2 <= float(chi2.sf(fit_in.chi2, dof_in)) <= 1.0 - alpha / 2:
-            out = []
-    if out:
-        assert fit_in is not None
-        o = np.array(out)
-        e_t, e_r = residual_vectors(H[o], C[o], fit_in.X, fit_in.Z)
-        worst = ", ".join(
-            f"{names[k]} {_length(float(np.linalg.norm(e_t[i])))} / "
-            f"{math.degrees(float(np.linalg.norm(e_r[i]))):.3g} deg"
-            for i, k in enumerate(out)
-        )
-        evidence = (
-            f"residuals {worst}; the other {n - len(out)} poses "
-            f"{_length(_rms(fit_in.e_t))} / {math.degrees(_rms(fit_in.e_r)):.3g} deg RMS"
-        )
-        return refuse(
-            "outliers",
-            f"gross outliers: {', '.join(names[k] for k in out)}",
-            evidence,
-            "remove or re-measure these poses",
-            tuple(names[k] for k in out),
-        )
+    refusal = _outlier_refusal(verdict, H, C, noise, fit, alpha, names)
+    if refusal is not None:
+        return refusal
 
     # 4. the residual level
     if noise is not None and p_high < alpha / 2:
         tried = max(improvements, key=lambda c: c[1])
-        return refuse(
+        return _refuse(
+            verdict,
             "noise_exceeded",
             f"residuals {ratio:.3g}x the stated noise",
             f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_high:.2g}; no tested "
@@ -384,7 +434,8 @@ def check_consistency(
             "check the pairing of the poses and the kinematic model, or state the noise",
         )
     if noise is not None and p_low < alpha / 2:
-        return refuse(
+        return _refuse(
+            verdict,
             "below_noise",
             f"residuals {ratio:.3g}x the stated noise, far below it",
             f"chi2 = {fit.chi2:.4g} for {dof} degrees of freedom, p = {p_low:.2g}",
@@ -393,13 +444,25 @@ def check_consistency(
     if noise is None and (
         given.rms_t > IMPLAUSIBLE_RESIDUAL * given.distance or given.rms_r > IMPLAUSIBLE_ANGLE
     ):
-        return refuse(
+        return _refuse(
+            verdict,
             "implausible",
             "residuals too large for any working setup",
             f"{given.residuals()} at a camera-target distance of {_length(given.distance)}; "
             "no tested mistake explains them",
             "check the pairing of the poses, the kinematic model and the camera calibration",
         )
+    return _accept(verdict, given, fit, noise, ratio)
+
+
+def _accept(
+    verdict: ConsistencyReport,
+    given: _Candidate,
+    fit: WeightedFit,
+    noise: PoseNoise | None,
+    ratio: float,
+) -> ConsistencyReport:
+    """The consistent verdict: the residual evidence and the warnings about the solution."""
     evidence = f"residuals {_length(_rms(fit.e_t))} / {math.degrees(_rms(fit.e_r)):.3g} deg RMS"
     if noise is not None:
         evidence += f", {ratio:.3g}x the stated noise"
