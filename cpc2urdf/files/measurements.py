@@ -507,7 +507,6 @@ def _parse_records(
             )
         markers[mname] = Marker(mname, frame, pos)
     record_keys = _RECORD_KEYS_2 if version == 2 else _RECORD_KEYS
-    file_joints = [names.joints[n] for n in s.joint_names]
 
     N, n = len(records), s.n_joints
     q = np.empty((N, n))
@@ -536,33 +535,7 @@ def _parse_records(
         if not isinstance(label, str):
             raise ValueError(f"{where}.label must be a string, got {label!r}")
         labels.append(label)
-        joints = rec.get("joints")
-        if not isinstance(joints, Mapping):
-            raise ValueError(f"{where}.joints must be an object {{joint name: reading}}")
-        for name in joints:
-            if name not in file_joints and name not in names.ignored:
-                raise ValueError(
-                    f"{where}.joints: unknown joint {name!r}; robot {s.name!r} has {', '.join(file_joints)}"
-                )
-        missing = [j for j in file_joints if j not in joints]
-        if missing:
-            need = (
-                "every joint on the paths from the root to the measured links"
-                if names.subtree
-                else "every joint"
-            )
-            raise ValueError(f"{where}.joints lacks {missing} ({need} needs a reading)")
-        for k, j in enumerate(s.joints):
-            key = names.joints[j.name]
-            v = finite_float(joints[key], f"{where}.joints.{key}") * units.joint_scale(j.type)
-            if not (j.lower - 1e-9 <= v <= j.upper + 1e-9):
-                unit = units.length_name if j.type == "prismatic" else units.angle_name
-                scale = units.joint_scale(j.type)
-                raise ValueError(
-                    f"{where}.joints.{key} = {joints[key]} {unit} is outside the joint limits "
-                    f"[{j.lower / scale:.6g}, {j.upper / scale:.6g}] {unit} (wrong units?)"
-                )
-            q[i, k] = v
+        q[i] = _record_joints(rec.get("joints"), where, s, names, units)
         rec_poses = rec.get("poses", {})
         rec_points = rec.get("points", {})
         if not isinstance(rec_poses, Mapping):
@@ -652,6 +625,41 @@ def _parse_records(
         markers=markers,
         marker_points=marker_points,
     )
+
+
+def _record_joints(
+    joints: Any, where: str, s: RobotStructure, names: _FileNames, units: Units
+) -> list[float]:
+    """A record's joint readings in model order and SI units, checked against the joints and limits."""
+    file_joints = [names.joints[n] for n in s.joint_names]
+    if not isinstance(joints, Mapping):
+        raise ValueError(f"{where}.joints must be an object {{joint name: reading}}")
+    for name in joints:
+        if name not in file_joints and name not in names.ignored:
+            raise ValueError(
+                f"{where}.joints: unknown joint {name!r}; robot {s.name!r} has {', '.join(file_joints)}"
+            )
+    missing = [j for j in file_joints if j not in joints]
+    if missing:
+        need = (
+            "every joint on the paths from the root to the measured links"
+            if names.subtree
+            else "every joint"
+        )
+        raise ValueError(f"{where}.joints lacks {missing} ({need} needs a reading)")
+    row: list[float] = []
+    for j in s.joints:
+        key = names.joints[j.name]
+        v = finite_float(joints[key], f"{where}.joints.{key}") * units.joint_scale(j.type)
+        if not (j.lower - 1e-9 <= v <= j.upper + 1e-9):
+            unit = units.length_name if j.type == "prismatic" else units.angle_name
+            scale = units.joint_scale(j.type)
+            raise ValueError(
+                f"{where}.joints.{key} = {joints[key]} {unit} is outside the joint limits "
+                f"[{j.lower / scale:.6g}, {j.upper / scale:.6g}] {unit} (wrong units?)"
+            )
+        row.append(v)
+    return row
 
 
 def _known_frame(s: RobotStructure, names: _FileNames, key: str, where: str) -> Any:
