@@ -105,14 +105,7 @@ def measure_stereo_images(
     """
     check_on_error(on_error)
     root = Path(images_dir)
-    if not root.is_dir():
-        raise InputFileError(root, "no such images folder")
-    for sub in STEREO_FOLDERS:
-        if not (root / sub).is_dir():
-            raise InputFileError(
-                root,
-                f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)",
-            )
+    _check_images_dir(root)
     table = read_joints_csv(joints or root / "joints.csv", structure, aliases=joint_aliases)
     plate_boards = check_plate_boards(boards, structure) if boards else None
     designs = [] if plate_boards else list(designs or robot_plate_designs(structure.frames))
@@ -133,49 +126,10 @@ def measure_stereo_images(
     with progress_checked(range(N), "measure", show_progress) as bar:
         for i in bar:
             rec = table.records[i]
-            imgs = []
-            for sub in STEREO_FOLDERS:
-                path = find_image(root / sub, rec)
-                try:
-                    if path is None:
-                        raise RecordError(
-                            f"{sub}/{rec}.*",
-                            "all plates",
-                            f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})",
-                        )
-                    img = read_grey(path)
-                    if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
-                        raise RecordError(
-                            str(path),
-                            "all plates",
-                            f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
-                        )
-                    imgs.append((img, str(path)))
-                except InputFileError as e:
-                    report_problem(RecordError(e.path, "all plates", e.problem), on_error, problems)
-                    break
-                except RecordError as e:
-                    report_problem(e, on_error, problems)
-                    break
+            imgs = _read_pair(root, rec, rig, on_error, problems)
             if len(imgs) != 2:
                 continue
-            result: dict[str, StereoPlatePose | DetectionError]
-            if plate_boards:
-                result = {
-                    n: stereo_board_pose(
-                        imgs[0][0], imgs[1][0], rig, b, names=(imgs[0][1], imgs[1][1])
-                    )
-                    for n, b in plate_boards.items()
-                }
-            else:
-                result = stereo_plate_poses(
-                    imgs[0][0],
-                    imgs[1][0],
-                    rig,
-                    designs,
-                    names=(imgs[0][1], imgs[1][1]),
-                    correct_bias=correct_bias,
-                )
+            result = _measure_pair(imgs, rig, designs, plate_boards, correct_bias)
             failed = [r for r in result.values() if isinstance(r, DetectionError)]
             for err in failed:
                 report_problem(err, on_error, problems)
@@ -210,27 +164,110 @@ def measure_stereo_images(
         {n: fit[n][idx] for n in names},
         {
             "description": f"stage-1 measurements of {structure.name} from stereo images in {root}",
-            "provenance": {
-                "source": "cpc2urdf measure (identification/measure_images.py)",
-                "images": str(root),
-                "records_in_joints_csv": N,
-                "records_measured": int(keep.sum()),
-                "ellipse_bias_corrected": bool(correct_bias),
-                "plate_designs": {
-                    d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index}
-                    for d in designs
-                },
-                **(
-                    {"plate_boards": {n: b.to_json() for n, b in plate_boards.items()}}
-                    if plate_boards
-                    else {}
-                ),
-                "rig": rig.to_json(),
-                "skipped": problems[:200],
-            },
+            "provenance": _provenance(
+                root, N, int(keep.sum()), correct_bias, designs, plate_boards, rig, problems
+            ),
         },
     )
     return ImageMeasurement(ms, problems, details)
+
+
+def _check_images_dir(root: Path) -> None:
+    """Refuse an images folder that is missing or lacks a ``left/`` or ``right/`` sub-folder."""
+    if not root.is_dir():
+        raise InputFileError(root, "no such images folder")
+    for sub in STEREO_FOLDERS:
+        if not (root / sub).is_dir():
+            raise InputFileError(
+                root,
+                f"missing sub-folder {sub}/ (expected left/<record>.png and right/<record>.png)",
+            )
+
+
+def _read_pair(
+    root: Path, rec: str, rig: StereoRig, on_error: str, problems: list[str]
+) -> list[tuple[np.ndarray, str]]:
+    """Record ``rec``'s left and right images (grey image, path); fewer than two when an image
+    is missing, unreadable or not the rig's size (reported by the ``on_error`` policy)."""
+    imgs = []
+    for sub in STEREO_FOLDERS:
+        path = find_image(root / sub, rec)
+        try:
+            if path is None:
+                raise RecordError(
+                    f"{sub}/{rec}.*",
+                    "all plates",
+                    f"no image file (looked for {', '.join(IMAGE_EXTENSIONS)})",
+                )
+            img = read_grey(path)
+            if (img.shape[1], img.shape[0]) != tuple(rig.image_size):
+                raise RecordError(
+                    str(path),
+                    "all plates",
+                    f"image is {img.shape[1]} x {img.shape[0]} px, the rig file says {rig.image_size[0]} x {rig.image_size[1]}",
+                )
+            imgs.append((img, str(path)))
+        except InputFileError as e:
+            report_problem(RecordError(e.path, "all plates", e.problem), on_error, problems)
+            break
+        except RecordError as e:
+            report_problem(e, on_error, problems)
+            break
+    return imgs
+
+
+def _measure_pair(
+    imgs: list[tuple[np.ndarray, str]],
+    rig: StereoRig,
+    designs: list[PlateDesign],
+    plate_boards: dict[str, Board] | None,
+    correct_bias: bool,
+) -> dict[str, StereoPlatePose | DetectionError]:
+    """Each plate's pose (or why not) in one stereo pair: the boards if given, else the circle
+    plates of ``designs``."""
+    if plate_boards:
+        return {
+            n: stereo_board_pose(imgs[0][0], imgs[1][0], rig, b, names=(imgs[0][1], imgs[1][1]))
+            for n, b in plate_boards.items()
+        }
+    return stereo_plate_poses(
+        imgs[0][0],
+        imgs[1][0],
+        rig,
+        designs,
+        names=(imgs[0][1], imgs[1][1]),
+        correct_bias=correct_bias,
+    )
+
+
+def _provenance(
+    root: Path,
+    n_records: int,
+    n_measured: int,
+    correct_bias: bool,
+    designs: list[PlateDesign],
+    plate_boards: dict[str, Board] | None,
+    rig: StereoRig,
+    problems: list[str],
+) -> dict[str, object]:
+    """The measurement file's ``provenance`` section: images, counts, plates, rig, skips."""
+    return {
+        "source": "cpc2urdf measure (identification/measure_images.py)",
+        "images": str(root),
+        "records_in_joints_csv": n_records,
+        "records_measured": n_measured,
+        "ellipse_bias_corrected": bool(correct_bias),
+        "plate_designs": {
+            d.name: {"radii_m": d.radii.tolist(), "marker_index": d.marker_index} for d in designs
+        },
+        **(
+            {"plate_boards": {n: b.to_json() for n, b in plate_boards.items()}}
+            if plate_boards
+            else {}
+        ),
+        "rig": rig.to_json(),
+        "skipped": problems[:200],
+    }
 
 
 def dictionary_family(name: str) -> str:
