@@ -22,9 +22,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import OptimizeResult
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.files.measurements import Marker, MeasurementSet
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
     analyze_jacobian,
@@ -125,6 +126,96 @@ def _covariance(J: Array, r: Array, names: tuple[str, ...]) -> tuple[Array, Arra
     return 0.5 * (C + C.T), V0, dof, float(r @ r / dof)
 
 
+def _solve_recentred(
+    chart: PointChart,
+    markers: list[Marker],
+    q: Array,
+    points: Mapping[str, Array],
+    used: Mapping[str, NDArray[np.bool_]],
+    sigma_p: float,
+    max_nfev: int | None,
+) -> tuple[PointChart, Array, OptimizeResult, int]:
+    """Solve from ``chart``, re-centring it after large axis turns (at most MAX_RECENTRES times).
+
+    Returns:
+        ``(chart, x, sol, nfev)``: the last chart, the solution in it, the last solver result and
+        the solver evaluations of all stages.
+    """
+    x = np.zeros(chart.n_params)
+    nfev = 0
+    sol = None
+    for _ in range(MAX_RECENTRES + 1):
+        sol = solve_least_squares(PointProblem(chart, q, points, used, sigma_p), x, max_nfev)
+        x, nfev = sol.x, nfev + int(sol.nfev)
+        mc = chart.model_chart
+        tilt = max(
+            (float(np.hypot(*chart.model_vector(x)[b.start : b.start + 2])) for b in mc.blocks),
+            default=0.0,
+        )
+        if tilt < RECENTRE_TILT:
+            break
+        chart = PointChart(chart.model_from_vector(x), markers, chart.positions_from_vector(x))
+        x = np.zeros(chart.n_params)
+    assert sol is not None
+    return chart, x, sol, nfev
+
+
+def _marker_std(final: PointChart, markers: list[Marker], C: Array, V0: Array) -> dict[str, Array]:
+    """Marker position std from ``C``: zeros for known markers, inf along undetermined directions."""
+    std: dict[str, Array] = {}
+    for mk in markers:
+        slot = final.marker_slot(mk.name)
+        if slot is None:
+            std[mk.name] = np.zeros(3)
+            continue
+        sd = np.sqrt(np.clip(np.diag(C)[slot : slot + 3], 0.0, None))
+        if V0.size:
+            sd = np.where(np.linalg.norm(V0[slot : slot + 3], axis=1) > 1e-6, np.inf, sd)
+        std[mk.name] = sd
+    return std
+
+
+def _model_covariance(final: PointChart, C: Array, V0: Array) -> tuple[Array, Array]:
+    """``(Cm, null)`` in the model's own chart: free columns from ``C``, fixed frame blocks and
+    ``V0``'s model part in the null space."""
+    k = final.n_model_params
+    mc = final.model_chart
+    P = mc.n_params
+    Cm = np.zeros((P, P))
+    cols = final.columns
+    Cm[np.ix_(cols, cols)] = C[:k, :k]
+    nulls = []
+    for b in mc.blocks:
+        if b.kind == "frame" and b.owner in final.fixed_frames:
+            for i in range(b.start, b.start + len(b.params)):
+                e = np.zeros(P)
+                e[i] = 1.0
+                nulls.append(e)
+    if V0.size:
+        for v in V0.T:
+            e = np.zeros(P)
+            e[cols] = v[:k]
+            if np.linalg.norm(e) > 1e-6:
+                nulls.append(e / np.linalg.norm(e))
+    null = np.array(nulls).T if nulls else np.zeros((P, 0))
+    return Cm, null
+
+
+def _residual_table(
+    blocks: Mapping[str, Array],
+    seen: Mapping[str, NDArray[np.bool_]],
+    names: list[str],
+    n_records: int,
+) -> dict[str, Array]:
+    """Marker -> per record 3-D residual distance [m] (NaN where unseen)."""
+    res_table: dict[str, Array] = {}
+    for m in names:
+        tab = np.full(n_records, np.nan)
+        tab[np.flatnonzero(seen[m])] = np.linalg.norm(blocks[m], axis=1)
+        res_table[m] = tab
+    return res_table
+
+
 def refine_points(
     model: CPCModel,
     ms: MeasurementSet,
@@ -164,22 +255,7 @@ def refine_points(
     }
     points = {m: ms.marker_points[m] for m in names}
     chart = PointChart(model, markers, positions)
-    x = np.zeros(chart.n_params)
-    nfev = 0
-    sol = None
-    for _ in range(MAX_RECENTRES + 1):
-        sol = solve_least_squares(PointProblem(chart, q, points, used, sigma_p), x, max_nfev)
-        x, nfev = sol.x, nfev + int(sol.nfev)
-        mc = chart.model_chart
-        tilt = max(
-            (float(np.hypot(*chart.model_vector(x)[b.start : b.start + 2])) for b in mc.blocks),
-            default=0.0,
-        )
-        if tilt < RECENTRE_TILT:
-            break
-        chart = PointChart(chart.model_from_vector(x), markers, chart.positions_from_vector(x))
-        x = np.zeros(chart.n_params)
-    assert sol is not None
+    chart, x, sol, nfev = _solve_recentred(chart, markers, q, points, used, sigma_p, max_nfev)
     refined = chart.model_from_vector(x)
     final = PointChart(refined, markers, chart.positions_from_vector(x))
     problem = PointProblem(final, q, points, used, sigma_p)
@@ -193,42 +269,12 @@ def refine_points(
     # Marker position std; inf along undetermined directions.
     k = final.n_model_params
     pos = final.positions_from_vector(x0)
-    std: dict[str, Array] = {}
-    for mk in markers:
-        slot = final.marker_slot(mk.name)
-        if slot is None:
-            std[mk.name] = np.zeros(3)
-            continue
-        sd = np.sqrt(np.clip(np.diag(C)[slot : slot + 3], 0.0, None))
-        if V0.size:
-            sd = np.where(np.linalg.norm(V0[slot : slot + 3], axis=1) > 1e-6, np.inf, sd)
-        std[mk.name] = sd
+    std = _marker_std(final, markers, C, V0)
     # The model's own chart: free columns from C, fixed frame blocks in the null space.
     mc = final.model_chart
-    P = mc.n_params
-    Cm = np.zeros((P, P))
-    cols = final.columns
-    Cm[np.ix_(cols, cols)] = C[:k, :k]
-    nulls = []
-    for b in mc.blocks:
-        if b.kind == "frame" and b.owner in final.fixed_frames:
-            for i in range(b.start, b.start + len(b.params)):
-                e = np.zeros(P)
-                e[i] = 1.0
-                nulls.append(e)
-    if V0.size:
-        for v in V0.T:
-            e = np.zeros(P)
-            e[cols] = v[:k]
-            if np.linalg.norm(e) > 1e-6:
-                nulls.append(e / np.linalg.norm(e))
-    null = np.array(nulls).T if nulls else np.zeros((P, 0))
+    Cm, null = _model_covariance(final, C, V0)
     blocks = PointProblem(final, q, points, seen, sigma_p).residual_blocks(x0)
-    res_table: dict[str, Array] = {}
-    for m in names:
-        tab = np.full(ms.n_records, np.nan)
-        tab[np.flatnonzero(seen[m])] = np.linalg.norm(blocks[m], axis=1)
-        res_table[m] = tab
+    res_table = _residual_table(blocks, seen, names, ms.n_records)
     used_res = np.concatenate([res_table[m][used[m]] for m in names])
     undetermined = undetermined_by_points(ms, names)
     seconds = time.perf_counter() - t0
