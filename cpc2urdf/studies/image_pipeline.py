@@ -117,16 +117,11 @@ def _noise_rows(
 
 def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     """Run the study; returns the numbers (px, mm, deg) and a markdown report under ``"md"``."""
-    from cpc2urdf.files.measurements import MeasurementSet
-    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
     from cpc2urdf.identification.simulation.image_experiment import render_experiment
-    from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
     from cpc2urdf.identification.vision.measure_stereo import measure_stereo_images
-    from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset, stereo_plate_poses
-    from cpc2urdf.identification.vision.render import PinholeView, render_view
+    from cpc2urdf.identification.vision.render import PinholeView
     from cpc2urdf.identification.vision.targets import robot_plate_designs
-    from cpc2urdf.transforms import inverse, rotation_error
-    from cpc2urdf.validation.heldout import accuracy
+    from cpc2urdf.transforms import inverse
 
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -146,28 +141,74 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         PinholeView(rig.K1, rig.D1, rig.image_size, inverse(rig.T_world_camera(w)))
         for w in ("left", "right")
     ]
-    Ks = (rig.K1, rig.K2)
     held = exp.heldout
     q = held.q[:poses]
     T_true = {d.name: held.poses[d.name][:poses] for d in designs}
 
-    # Ellipse-centre offsets at these configurations (exact conic geometry).
-    offsets = np.array(
+    offsets = _ellipse_offsets(len(q), designs, T_true, views, rig)
+    rows, sigma_det = _noise_rows(q, designs, T_true, views, rig, rng)
+    sys_err = _systematic_errors(min(len(q), 10), designs, T_true, views, rig)
+    from_images, ref = _identification(
+        s, meas.measurements, exp.measured, held, designs, rig, sigma_det
+    )
+
+    md = _report(
+        rig=rig,
+        seed=seed,
+        M=M,
+        n_poses=len(q),
+        rows=rows,
+        offsets=offsets,
+        sys_err=sys_err,
+        n_records=exp.measured.n_records,
+        n_heldout=held.n_records,
+        from_images=from_images,
+        ref=ref,
+        sigma_det=sigma_det,
+        n_skipped=len(meas.problems),
+        ms_per_image=t_render / n_images * 1e3,
+        ms_per_pair=t_measure / (n_images / 2) * 1e3,
+    )
+    return {
+        "rows": rows,
+        "offsets": offsets,
+        "from_images": from_images,
+        "reference": ref,
+        "md": md,
+    }
+
+
+def _ellipse_offsets(
+    n: int, designs: list[Any], T_true: dict[str, np.ndarray], views: list[Any], rig: Any
+) -> np.ndarray:
+    """Ellipse-centre offsets [px] at the first ``n`` configurations (exact conic geometry)."""
+    from cpc2urdf.identification.vision.plate_poses import ellipse_centre_offset
+
+    Ks = (rig.K1, rig.K2)
+    return np.array(
         [
             np.linalg.norm(
                 ellipse_centre_offset(K, v.T_camera_world @ T_true[d.name][i], d), axis=1
             )
-            for i in range(len(q))
+            for i in range(n)
             for d in designs
             for v, K in zip(views, Ks, strict=True)
         ]
     ).ravel()
 
-    rows, sigma_det = _noise_rows(q, designs, T_true, views, rig, rng)
 
-    # Systematic effect of the offset: noise-free, supersampled images, with and without correction.
+def _systematic_errors(
+    n: int, designs: list[Any], T_true: dict[str, np.ndarray], views: list[Any], rig: Any
+) -> dict[bool, list[tuple[float, float]]]:
+    """Systematic effect of the offset: plate pose errors [mm, deg] on noise-free, supersampled
+    images of the first ``n`` configurations, without (``False``) and with (``True``) the
+    correction."""
+    from cpc2urdf.identification.vision.plate_poses import stereo_plate_poses
+    from cpc2urdf.identification.vision.render import render_view
+    from cpc2urdf.transforms import rotation_error
+
     sys_err: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
-    for i in range(min(len(q), 10)):
+    for i in range(n):
         plates = [(d, T_true[d.name][i]) for d in designs]
         imgs = [render_view(v, plates, supersample=16) for v in views]
         for corr_flag in (False, True):
@@ -182,14 +223,31 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
                             math.degrees(float(rotation_error(r.T_world_plate[:3, :3], T[:3, :3]))),
                         )
                     )
+    return sys_err
 
-    # Identification from the rendered experiment vs exact poses + the detector's pixel noise.
+
+def _identification(
+    s: Any,
+    from_images_set: Any,
+    exact: Any,
+    held: Any,
+    designs: list[Any],
+    rig: Any,
+    sigma_det: float | None,
+) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """Held-out RMS [mm] per plate of the closed-form identification from the rendered
+    experiment, and from the exact poses disturbed by the detector's pixel noise (5 draws);
+    ``s`` is the robot structure."""
+    from cpc2urdf.files.measurements import MeasurementSet
+    from cpc2urdf.identification.kinematics.closed_form import identify_closed_form
+    from cpc2urdf.identification.simulation.measurement_noise import stereo_noise
+    from cpc2urdf.validation.heldout import accuracy
+
     def score(ms: MeasurementSet) -> dict[str, float]:
         model, _ = identify_closed_form(ms)
         return {f: b.rms * 1e3 for f, b in accuracy(model, held).items()}
 
-    from_images = score(meas.measurements)
-    exact = exp.measured
+    from_images = score(from_images_set)
     ref = []
     for k in range(5):
         rk = np.random.default_rng(1000 + k)
@@ -198,16 +256,37 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
             for d in designs
         }
         ref.append(score(MeasurementSet(s, exact.q, poses_k, labels=exact.labels)))
+    return from_images, ref
+
+
+def _report(
+    *,
+    rig: Any,
+    seed: int,
+    M: int,
+    n_poses: int,
+    rows: list[dict[str, Any]],
+    offsets: np.ndarray,
+    sys_err: dict[bool, list[tuple[float, float]]],
+    n_records: int,
+    n_heldout: int,
+    from_images: dict[str, float],
+    ref: list[dict[str, float]],
+    sigma_det: float | None,
+    n_skipped: int,
+    ms_per_image: float,
+    ms_per_pair: float,
+) -> str:
+    """The study's markdown report."""
     ref_median = {f: float(np.median([r[f] for r in ref])) for f in from_images}
     ref_range = {f: (min(r[f] for r in ref), max(r[f] for r in ref)) for f in from_images}
-
     w, h = rig.image_size
     md = [
         "# Image pipeline at the paper's geometry (`cpc2urdf study images`)",
         "",
         f"Rig: {w} x {h} px, f = {rig.K1[0, 0]:.0f} px, baseline {rig.baseline * 1e3:.0f} mm, verged at 1.5 m, "
         f"distortion k1 = {rig.D1[0]:g}, k2 = {rig.D1[1]:g}. Plates: 5 mm circles (6.5 mm marker), 25 mm pitch, "
-        f"70 mm plates. Images: Gaussian blur {BLUR} px, 8-bit, noise as listed. {len(q)} held-out "
+        f"70 mm plates. Images: Gaussian blur {BLUR} px, 8-bit, noise as listed. {n_poses} held-out "
         f"configurations x 2 plates x 2 cameras (seed {seed}).",
         "",
         "## Circle centres vs the true projected centres [px]",
@@ -243,9 +322,9 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
         f"{np.sqrt(np.mean(se_f[:, 0] ** 2)):.4f} mm / {np.sqrt(np.mean(se_f[:, 1] ** 2)):.4f} deg RMS, "
         f"with it {np.sqrt(np.mean(se_t[:, 0] ** 2)):.4f} mm / {np.sqrt(np.mean(se_t[:, 1] ** 2)):.4f} deg RMS.",
         "",
-        f"## Identification from {exact.n_records} rendered stereo pairs (M = {M}, grey noise 2)",
+        f"## Identification from {n_records} rendered stereo pairs (M = {M}, grey noise 2)",
         "",
-        f"Held-out positioning error RMS [mm] over {held.n_records} configurations, closed form:",
+        f"Held-out positioning error RMS [mm] over {n_heldout} configurations, closed form:",
         "",
         "| plate | from the images | exact poses + detector pixel noise (median of 5) | range |",
         "|---|---|---|---|",
@@ -257,20 +336,14 @@ def run_study(*, poses: int = 20, M: int = 9, seed: int = 0) -> dict[str, Any]:
     md += [
         "",
         f"Detector pixel noise used for the reference: {sigma_det:.4f} px per coordinate. Skipped plates: "
-        f"{len(meas.problems)}.",
+        f"{n_skipped}.",
         "",
-        f"Speed (this machine): rendering {t_render / n_images * 1e3:.0f} ms per 1280 x 1024 image, "
-        f"measuring {t_measure / (n_images / 2) * 1e3:.0f} ms per stereo pair (read, detect both plates, "
+        f"Speed (this machine): rendering {ms_per_image:.0f} ms per 1280 x 1024 image, "
+        f"measuring {ms_per_pair:.0f} ms per stereo pair (read, detect both plates, "
         "triangulate, register).",
         "",
     ]
-    return {
-        "rows": rows,
-        "offsets": offsets,
-        "from_images": from_images,
-        "reference": ref,
-        "md": "\n".join(md),
-    }
+    return "\n".join(md)
 
 
 def main(argv: list[str] | None = None) -> int:
