@@ -321,7 +321,7 @@ def _solve_target(head, plain, I, ws, p, qin, mode, out):  # type: ignore[no-unt
     it, st, it2, st2 = 0, S_NO_SOLUTION, 0, S_NO_SOLUTION
     fell_back = False
     for attempt in range(3):
-        chain, weights, rows, table_from = ch, sw, starts[:n_first], row  # the first round of starts
+        chain, weights, rows, table_from = ch, sw, starts[:n_first], row  # round one
         if attempt == 1:  # without the zero-version task, from the first answer
             if not (
                 (mode & MODE_FALLBACK) != 0
