@@ -3,7 +3,7 @@
 The solve compiles as one entry over one iteration (``kernels/_jit.py``); these tests keep that
 shape (no kernel compiled twice for another signature), the workspace's two layouts (numba's and
 Python's) equal, the cache keyed on the whole package, and the line on stderr while compiling.
-``python -m cpc2urdf.studies.first_use`` measures the first runs themselves (slow: minutes).
+``cpc2urdf bench first-use`` measures the first runs themselves (slow: minutes).
 """
 
 from __future__ import annotations
@@ -140,7 +140,7 @@ def test_a_line_says_the_kernels_compile(monkeypatch):
 
 @pytest.mark.slow
 def test_first_use_script_times_a_command():
-    """``python -m cpc2urdf.studies.first_use --commands check`` runs (the cheapest command)."""
+    """``cpc2urdf bench first-use --commands check`` runs (the cheapest command)."""
     done = subprocess.run(
         [sys.executable, "-m", "cpc2urdf.studies.first_use", "--commands", "check"],
         capture_output=True,
@@ -185,7 +185,7 @@ def test_python_kernels_answer_as_the_compiled_ones_bit_for_bit(head):
 def test_first_cli_gaze_solves_in_python_and_compiles_nothing(tmp_path):
     """A fresh install (an empty numba cache) with ``CPC2URDF_GAZE_FIRST_USE=python``: ``cpc2urdf
     gaze`` answers as the compiled solver does and writes nothing to the cache. (By default it also
-    starts the background compile: ``python -m cpc2urdf.studies.first_use`` times that.)"""
+    starts the background compile: ``cpc2urdf bench first-use`` times that.)"""
     import os
 
     from cpc2urdf.validation.gaze import solver_for

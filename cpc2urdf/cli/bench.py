@@ -12,6 +12,10 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
         "cpc2urdf.studies.bench_gaze",
         "gaze IK solve time and success vs scipy least_squares",
     ),
+    "first-use": (
+        "cpc2urdf.studies.first_use",
+        "the first run of gaze, check and a Python solve after an install, against the second",
+    ),
 }
 
 

@@ -45,6 +45,14 @@ STUDIES: dict[str, tuple[str, str]] = {
         "cpc2urdf.studies.real_data",
         "calibration held out on three real robots (TIAGo, TALOS, UR10) vs their URDFs and FIGAROH",
     ),
+    "handeye-pairs": (
+        "cpc2urdf.studies.handeye_pairs",
+        "AX = XB from all pose pairs, ours (O(N)) or consecutive ones: X's error on the same data",
+    ),
+    "gaze-ahead": (
+        "cpc2urdf.studies.gaze_ahead",
+        "calibrated demo heads (seeds 0-9) answer targets ahead facing them, vs the nominal head",
+    ),
 }
 
 

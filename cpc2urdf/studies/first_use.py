@@ -6,7 +6,7 @@ process compiles them into the cache (``kernels/interpreted.py``); the second ru
 has ended, loads them. Printed: wall time [s] of each run, the first over the second, and how long
 the background compile took after the first run.
 
-    python -m cpc2urdf.studies.first_use [--json out.json] [--commands gaze python check check-gaze]
+    cpc2urdf bench first-use [--json out.json] [--commands gaze python check check-gaze]
 
 The commands (as the README and docs/gaze.md show them):
 
@@ -22,7 +22,6 @@ as it is, other work included.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -31,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+from cpc2urdf.argparsing import OneLineParser
 
 TARGET = ("-0.6", "-0.6", "0.7")
 PYTHON_SOLVE = (
@@ -135,7 +136,7 @@ def measure(names: list[str]) -> list[dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="cpc2urdf bench first-use", description=__doc__.splitlines()[0])
     parser.add_argument(
         "--commands",
         nargs="+",

@@ -13,7 +13,7 @@ head's: the targets are carried over by the rigid transform that best maps the n
 camera centres and optical axes onto the calibrated head's over seeded configurations
 (:func:`world_map`).
 
-Run: ``python -m cpc2urdf.studies.gaze_ahead [SEED ...]`` (default 0-9).
+Run: ``cpc2urdf study gaze-ahead [SEED ...]`` (default 0-9).
 """
 
 from __future__ import annotations
@@ -115,7 +115,11 @@ def ahead_deviation(calibrated: CPCModel, n: int = 30, seed: int = 0) -> dict[st
 def main(argv: list[str] | None = None) -> int:
     """Print the deviations for the seeds in ``argv`` (default 0-9); exit 1 if any exceeds
     :data:`MAX_DEVIATION`."""
-    seeds = [int(s) for s in (sys.argv[1:] if argv is None else argv)] or list(range(10))
+    from cpc2urdf.argparsing import OneLineParser
+
+    ap = OneLineParser(prog="cpc2urdf study gaze-ahead", description=__doc__.split("\n")[0])
+    ap.add_argument("seeds", nargs="*", type=int, help="demo seeds (default 0-9)")
+    seeds = ap.parse_args(sys.argv[1:] if argv is None else argv).seeds or list(range(10))
     worst = 0.0
     print("seed  max |pan| dev  max |tilt| dev  vergence [deg]  statuses")
     for seed in seeds:

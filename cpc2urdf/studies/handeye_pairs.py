@@ -18,7 +18,7 @@ and OpenCV's all-pairs ``CALIB_HAND_EYE_TSAI`` for reference, on two pose distri
   of two sinusoids over the sequence, amplitude ~1 rad / 0.3 m), so that consecutive poses
   are close.
 
-    python -m cpc2urdf.studies.handeye_pairs [--repeats 20] [--seed 0] [--poses 40 60 100 200]
+    cpc2urdf study handeye-pairs [--repeats 20] [--seed 0] [--poses 40 60 100 200]
 
 Prints a markdown table of mean X rotation (``||dR||_F``) and translation [mm] errors.
 """
@@ -109,9 +109,7 @@ def run(repeats: int, seed: int, poses: list[int]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = OneLineParser(
-        prog="python -m cpc2urdf.studies.handeye_pairs", description=__doc__.split("\n")[0]
-    )
+    ap = OneLineParser(prog="cpc2urdf study handeye-pairs", description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--poses", type=int, nargs="+", default=[40, 60, 100, 200])
