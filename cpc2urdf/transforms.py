@@ -220,9 +220,13 @@ def rotation_defect(R: ArrayLike) -> float:
 
 
 def skew(v: ArrayLike) -> Array:
-    """The cross-product matrix ``[v]_x`` of a 3-vector: ``skew(v) @ u == cross(v, u)``, shape (3, 3)."""
+    """The cross-product matrix ``[v]_x`` of a 3-vector: ``skew(v) @ u == cross(v, u)``; vectors
+    (..., 3) -> (..., 3, 3)."""
     v = np.asarray(v, dtype=float)
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    S = np.zeros((*v.shape[:-1], 3, 3))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return S
 
 
 def quat_wxyz_from_matrix(R: ArrayLike) -> Array:
@@ -234,24 +238,25 @@ def quat_wxyz_from_matrix(R: ArrayLike) -> Array:
     return np.where(q[..., :1] < 0, -q, q)
 
 
-def quat_left_matrix(q: ArrayLike) -> Array:
-    """Matrix of ``p -> q p`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``a~``), shape (4, 4)."""
+def _quat_matrix(q: ArrayLike, sign: float) -> Array:
     q = np.asarray(q, dtype=float)
-    w, v = q[0], q[1:]
-    M = np.empty((4, 4))
-    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
-    M[1:, 1:] = w * np.eye(3) + skew(v)
+    w, v = q[..., 0], q[..., 1:]
+    M = np.empty((*q.shape[:-1], 4, 4))
+    M[..., 0, 0], M[..., 0, 1:], M[..., 1:, 0] = w, -v, v
+    M[..., 1:, 1:] = w[..., None, None] * np.eye(3) + sign * skew(v)
     return M
+
+
+def quat_left_matrix(q: ArrayLike) -> Array:
+    """Matrix of ``p -> q p`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``a~``);
+    quaternions (..., 4) -> (..., 4, 4)."""
+    return _quat_matrix(q, 1.0)
 
 
 def quat_right_matrix(q: ArrayLike) -> Array:
-    """Matrix of ``p -> p q`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``b~``), shape (4, 4)."""
-    q = np.asarray(q, dtype=float)
-    w, v = q[0], q[1:]
-    M = np.empty((4, 4))
-    M[0, 0], M[0, 1:], M[1:, 0] = w, -v, v
-    M[1:, 1:] = w * np.eye(3) - skew(v)
-    return M
+    """Matrix of ``p -> p q`` for a quaternion ``q = [w, x, y, z]`` (Li et al.'s ``b~``);
+    quaternions (..., 4) -> (..., 4, 4)."""
+    return _quat_matrix(q, -1.0)
 
 
 def quat_multiply(p: ArrayLike, q: ArrayLike) -> Array:
@@ -260,14 +265,16 @@ def quat_multiply(p: ArrayLike, q: ArrayLike) -> Array:
 
 
 def dual_quat_from_transform(T: ArrayLike) -> tuple[Array, Array]:
-    """Unit dual quaternion ``q + eps q'`` of a rigid transform (4, 4): ``q' = 1/2 (0, t) q``.
+    """Unit dual quaternion ``q + eps q'`` of a rigid transform: ``q' = 1/2 (0, t) q``.
 
     Returns:
-        ``(q, q')``, each ``[w, x, y, z]`` of shape (4,), with ``w >= 0``; ``t`` in [m].
+        ``(q, q')``, each ``[w, x, y, z]``, with ``w >= 0``; transforms (..., 4, 4) -> (..., 4)
+        each; ``t`` in [m].
     """
     T = np.asarray(T, dtype=float)
-    q = quat_wxyz_from_matrix(T[:3, :3])
-    return q, 0.5 * quat_multiply(np.concatenate([[0.0], T[:3, 3]]), q)
+    q = quat_wxyz_from_matrix(T[..., :3, :3])
+    t = np.concatenate([np.zeros((*T.shape[:-2], 1)), T[..., :3, 3]], axis=-1)
+    return q, 0.5 * np.einsum("...ij,...j->...i", quat_left_matrix(t), q)
 
 
 def transform_from_dual_quat(q: ArrayLike, qd: ArrayLike) -> Array:

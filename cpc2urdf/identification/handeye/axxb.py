@@ -41,9 +41,12 @@ from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.gate.gate_report import ConsistencyReport
 from cpc2urdf.transforms import (
     Array,
+    dual_quat_from_transform,
     homogeneous,
     inverse,
     project_to_rotation,
+    quat_left_matrix,
+    quat_right_matrix,
     quat_wxyz_from_matrix,
     rotation_error,
     skew,
@@ -396,14 +399,6 @@ def _align_axis_signs(VA: Array, VB: Array, solve: Callable[[Array, Array], Arra
     return solve(VA, VB)
 
 
-def _skew_stack(v: Array) -> Array:
-    """Cross-product matrices of vectors (N, 3) -> (N, 3, 3)."""
-    S = np.zeros((len(v), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return S
-
-
 def _modified_rodrigues(R: Array) -> Array:
     """Tsai-Lenz's ``P = 2 sin(theta/2) n`` of rotations (N, 3, 3) -> (N, 3)."""
     r = Rotation.from_matrix(R).as_rotvec()
@@ -415,7 +410,7 @@ def _modified_rodrigues(R: Array) -> Array:
 def _tsai_rotation(PA: Array, PB: Array) -> Array:
     """Tsai-Lenz rotation step (``P_A = R_X P_B``): ``skew(P_A + P_B) P'_X = P_B - P_A``, then
     ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)`` and ``R_X`` from ``P_X``."""
-    M = _skew_stack(PA + PB).reshape(-1, 3)
+    M = skew(PA + PB).reshape(-1, 3)
     Pp = np.linalg.lstsq(M, (PB - PA).reshape(-1), rcond=None)[0]
     P = 2.0 * Pp / math.sqrt(1.0 + Pp @ Pp)
     n2 = float(P @ P)
@@ -456,36 +451,13 @@ def solve_park_martin(A: Array, B: Array) -> Array:
 # ---- Daniilidis: dual quaternions -------------------------------------------------------------
 
 
-def quat_matrices(q: Array) -> tuple[Array, Array]:
-    """``(L(q), R(q))`` of quaternions ``[w, x, y, z]`` (N, 4): the matrices of ``p -> q p`` and
-    ``p -> p q`` (:func:`~cpc2urdf.transforms.quat_left_matrix`, ``quat_right_matrix``), each
-    (N, 4, 4)."""
-    w, v = q[:, 0], q[:, 1:]
-    L = np.empty((len(q), 4, 4))
-    L[:, 0, 0], L[:, 0, 1:], L[:, 1:, 0] = w, -v, v
-    L[:, 1:, 1:] = w[:, None, None] * np.eye(3)
-    R = L.copy()
-    S = _skew_stack(v)
-    L[:, 1:, 1:] += S
-    R[:, 1:, 1:] -= S
-    return L, R
-
-
-def dual_quats(T: Array) -> tuple[Array, Array]:
-    """Unit dual quaternions ``(q, q')`` of rigid transforms (N, 4, 4), each (N, 4), ``w >= 0``
-    (:func:`~cpc2urdf.transforms.dual_quat_from_transform` for a stack)."""
-    q = quat_wxyz_from_matrix(T[:, :3, :3])
-    t = np.concatenate([np.zeros((len(T), 1)), T[:, :3, 3]], axis=1)
-    return q, 0.5 * np.einsum("kij,kj->ki", quat_matrices(t)[0], q)
-
-
 def _daniilidis_null_space(a: Array, ad: Array, b: Array, bd: Array) -> Array:
     """X from sign-matched dual quaternions of the motions (each (N, 4)): thin SVD of the stacked
     ``[L(a) - R(b), 0; L(a') - R(b'), L(a) - R(b)]``, then the null-space combination."""
-    La, _ = quat_matrices(a)
-    Lad, _ = quat_matrices(ad)
-    _, Rb = quat_matrices(b)
-    _, Rbd = quat_matrices(bd)
+    La = quat_left_matrix(a)
+    Lad = quat_left_matrix(ad)
+    Rb = quat_right_matrix(b)
+    Rbd = quat_right_matrix(bd)
     S = np.zeros((len(a), 8, 8))
     S[:, :4, :4] = S[:, 4:, 4:] = La - Rb
     S[:, 4:, :4] = Lad - Rbd
@@ -509,14 +481,15 @@ def solve_daniilidis(A: Array, B: Array) -> Array:
     (Li et al. 2010's setup, 100 poses: X translation error 0.30 mm instead of 0.60). Built for all
     motions at once and solved by a thin SVD: time and memory linear in N.
     """
-    a, ad = dual_quats(A)
-    b, bd = dual_quats(B)
+    a, ad = dual_quat_from_transform(A)
+    b, bd = dual_quat_from_transform(B)
     sign = np.where(a[:, 0] * b[:, 0] < 0, -1.0, 1.0)[:, None]  # equal angles: scalar parts agree
     ok = a[:, 0] > math.cos(AMBIGUOUS_AXIS_ANGLE / 2.0)  # a[:, 0] = cos(angle / 2) >= 0
     if ok.all() or ok.sum() < 2:
         return _daniilidis_null_space(a, ad, sign * b, sign * bd)
     X1 = _daniilidis_null_space(a[ok], ad[ok], sign[ok] * b[ok], sign[ok] * bd[ok])
-    Lx, Rx = quat_matrices(quat_wxyz_from_matrix(X1[None, :3, :3]))
+    qx = quat_wxyz_from_matrix(X1[None, :3, :3])
+    Lx, Rx = quat_left_matrix(qx), quat_right_matrix(qx)
     xbx = np.einsum("ij,kj->ki", Lx[0] @ Rx[0].T, b)  # x b x* (R(x*) = R(x)^T for a unit x)
     sign = np.where(np.einsum("ki,ki->k", a, xbx) < 0, -1.0, 1.0)[:, None]
     return _daniilidis_null_space(a, ad, sign * b, sign * bd)
@@ -562,12 +535,10 @@ __all__ = [
     "check_directions",
     "diagnose",
     "make_result",
-    "dual_quats",
     "mean_pose",
     "motion_pairs",
     "null_space_combination",
     "outlier_warnings",
-    "quat_matrices",
     "relative_motions",
     "residuals",
     "rotation_spread",

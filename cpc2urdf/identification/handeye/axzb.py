@@ -38,9 +38,10 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.handeye.axxb import dual_quats, null_space_combination, quat_matrices
+from cpc2urdf.identification.handeye.axxb import null_space_combination
 from cpc2urdf.transforms import (
     Array,
+    dual_quat_from_transform,
     homogeneous,
     inverse,
     project_to_rotation,
@@ -135,15 +136,15 @@ def align_quaternion_signs(qa: Array, qb: Array, hubs: int = SIGN_HUBS) -> tuple
 
 def solve_dual_quaternion(A: Array, B: Array) -> tuple[Array, Array]:
     """Li et al. eqs. (9)-(14): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4)."""
-    a, ad = dual_quats(A)
-    b, bd = dual_quats(B)
+    a, ad = dual_quat_from_transform(A)
+    b, bd = dual_quat_from_transform(B)
     qa, qb = align_quaternion_signs(a, b)
     sa = np.where(np.einsum("ki,ki->k", qa, a) > 0, 1.0, -1.0)[:, None]
     sb = np.where(np.einsum("ki,ki->k", qb, b) > 0, 1.0, -1.0)[:, None]
-    La, _ = quat_matrices(sa * a)
-    Lad, _ = quat_matrices(sa * ad)
-    _, Rb = quat_matrices(sb * b)
-    _, Rbd = quat_matrices(sb * bd)
+    La = quat_left_matrix(sa * a)
+    Lad = quat_left_matrix(sa * ad)
+    Rb = quat_right_matrix(sb * b)
+    Rbd = quat_right_matrix(sb * bd)
     S = np.zeros((len(A), 8, 16))  # eq. (12) with the signs of eq. (11), all poses at once
     S[:, :4, 0:4] = La
     S[:, :4, 8:12] = -Rb

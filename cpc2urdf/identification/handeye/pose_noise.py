@@ -32,7 +32,7 @@ from scipy.stats import chi2
 
 from cpc2urdf.files.jsonio import finite_float
 from cpc2urdf.files.units import Units
-from cpc2urdf.transforms import Array
+from cpc2urdf.transforms import Array, skew
 
 NOISE_STREAMS = ("T_base_hand", "T_camera_target")
 _NOISE_KEYS = ("position", "angle")
@@ -129,15 +129,6 @@ class PoseNoise:
         }
 
 
-def _skew_stack(v: Array) -> Array:
-    """``[v]_x`` of vectors (N, 3): shape (N, 3, 3)."""
-    S = np.zeros((*v.shape[:-1], 3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
-    return S
-
-
 def _noise_jacobian(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Array) -> Array:
     """``d[e_t; e_r] / d[da, dalpha, dc, dgamma]`` per pose: shape (N, 6, 12)."""
     n = len(T_base_hand)
@@ -147,9 +138,9 @@ def _noise_jacobian(T_base_hand: Array, T_camera_target: Array, X: Array, Z: Arr
     eye = np.broadcast_to(np.eye(3), (n, 3, 3))
     J = np.zeros((n, 6, 12))
     J[:, :3, 0:3] = eye
-    J[:, :3, 3:6] = -_skew_stack(u)
+    J[:, :3, 3:6] = -skew(u)
     J[:, :3, 6:9] = M
-    J[:, :3, 9:12] = M @ _skew_stack(t_C)
+    J[:, :3, 9:12] = M @ skew(t_C)
     J[:, 3:, 3:6] = -eye
     J[:, 3:, 9:12] = -M
     return J

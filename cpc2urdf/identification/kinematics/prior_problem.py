@@ -73,18 +73,10 @@ def _right_jacobian(w: Array) -> Array:
     return np.eye(3) - (1 - math.cos(t)) / t**2 * K + (t - math.sin(t)) / t**3 * K @ K
 
 
-def _skews(v: Array) -> Array:
-    """``[v]_x`` of each row of ``v`` (N, 3), shape (N, 3, 3)."""
-    out = np.zeros((len(v), 3, 3))
-    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return out
-
-
 def _left_jacobian_inverse(r: Array) -> Array:
     """``Jl(r)^-1`` of each rotation vector ``r`` (N, 3): ``log(exp(d) exp(r)) ~ r + Jl^-1 d``, shape (N, 3, 3)."""
     t = np.linalg.norm(r, axis=1)
-    K = _skews(r)
+    K = skew(r)
     small = t < 1e-6
     ts = np.where(small, 1.0, t)
     c = np.where(small, 1.0 / 12.0, (1.0 / ts**2 - (1 + np.cos(ts)) / (2 * ts * np.sin(ts))))
@@ -260,7 +252,7 @@ class MapProblem:
         else:
             x_local = np.einsum("nji,nj->ni", R, y - A[:, :3, 3])
             full[:, :, :3] = R @ R_omega.T
-            full[:, :, 3:] = -R @ (_skews(x_local) @ Jr)
+            full[:, :, 3:] = -R @ (skew(x_local) @ Jr)
         J[:, :, cols : cols + len(comps)] += full[:, :, comps]
 
     def _block_local(

@@ -81,7 +81,7 @@ def residual_vectors(
 
 
 def quick_fit(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
-    """``(X, Z)`` by Park-Martin (all pairs) and the chordal mean; shapes (4, 4)."""
+    """``(X, Z)`` by Park-Martin (over :func:`~cpc2urdf.identification.handeye.axxb.motion_pairs`) and the chordal mean; shapes (4, 4)."""
     A, B = relative_motions(T_base_hand, T_camera_target)
     X = solve_park_martin(A, B)
     return X, target_from_x(T_base_hand, T_camera_target, X)
