@@ -332,7 +332,7 @@ class CompiledGaze:
         worker would otherwise wait on the pool it occupies."""
         P = np.ascontiguousarray((self.table_o + TABLE_TARGET_DISTANCE * self.table_z)[:count])
         OUT = np.empty((len(P), self._out_size))
-        kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), 4, OUT)
+        kernels.solve_flat_many(self.F, self.I, P, np.zeros(2 * self.n), kernels.MODE_FALLBACK, OUT)
         U = np.array([self.chain.u_from_q(q) for q in OUT[:, 2 : 2 + self.n]])
         return P, OUT[:, 0], U
 
@@ -448,7 +448,7 @@ class CompiledGaze:
         checked or copied in Python."""
         f, ints = self._scratch()
         out = np.empty(self._out_size)
-        kernels.solve_flat(self.F, self.I, p, self._qin, 4, out, f, ints)
+        kernels.solve_flat(self.F, self.I, p, self._qin, kernels.MODE_FALLBACK, out, f, ints)
         return out
 
     def solve_point(self, p: Array, q_current: Array | None, q_start: Array | None = None) -> Array:
@@ -464,14 +464,14 @@ class CompiledGaze:
             p = np.array(p, dtype=float)
         if q_current is None and q_start is None:
             return self.solve_target(p)
-        mode = 4
+        mode = kernels.MODE_FALLBACK
         qin = np.empty(2 * self.n)
         if q_current is not None:
             qin[: self.n] = q_current
-            mode |= 1
+            mode |= kernels.MODE_Q_CURRENT
         if q_start is not None:
             qin[self.n :] = q_start
-            mode |= 2
+            mode |= kernels.MODE_WARM_START
         f, ints = self._scratch()
         out = np.empty(self._out_size)
         kernels.solve_flat(self.F, self.I, p, qin, mode, out, f, ints)
@@ -507,7 +507,7 @@ class CompiledGaze:
         N = P.shape[0]
         n = self.n
         qin = np.zeros(2 * n)
-        mode = 4
+        mode = kernels.MODE_FALLBACK
         if q_current is not None:
             Q = np.asarray(q_current, dtype=float)
             if Q.shape != (n,) or not np.all(np.isfinite(Q)):
@@ -515,8 +515,8 @@ class CompiledGaze:
                     f"q_current must be {n} finite readings, got shape {Q.shape}"
                 )
             qin[:n] = Q
-            mode |= 1
-        OUT = np.empty((N, kernels.out_size(n, self.S)))
+            mode |= kernels.MODE_Q_CURRENT
+        OUT = np.empty((N, self._out_size))
         threads = min(self.threads, N // THREADED_BATCH)
         if threads > 1:
             # the kernel releases the GIL: one thread per core, each on an equal share. Rows are

@@ -14,24 +14,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.errors import DegenerateDataError
+from cpc2urdf.transforms import Array
+from cpc2urdf.validation.gaze.chain import mid_limits
 
 if TYPE_CHECKING:
     from cpc2urdf.validation.gaze import GazeSolver
 
-Array = NDArray[np.float64]
-
-AUDIT_HALF_WIDTH = (
-    3.0  # [m]: the audit's random targets are uniform in a cube this far about the head's centre
-)
+# [m]: the audit's random targets are uniform in a cube this far about the head's centre
+AUDIT_HALF_WIDTH = 3.0
 AUDIT_STARTS = 20  # random postures each audited target is solved again from
-
-
-def _finite_home(lower: Array, upper: Array) -> Array:
-    """The middle of every joint's limits, 0 for a joint without finite limits, shape (n,)."""
-    limited = np.isfinite(lower) & np.isfinite(upper)
-    return np.where(
-        limited, 0.5 * (np.where(limited, lower, 0.0) + np.where(limited, upper, 0.0)), 0.0
-    )
 
 
 class SolvedAxes:
@@ -47,7 +38,7 @@ class SolvedAxes:
         chain = solver.chain
         model = pin.Model(solver.model)
         fids = [model.getFrameId(c) for c in solver.cameras]
-        self.home: Array = _finite_home(solver.lower, solver.upper)
+        self.home: Array = mid_limits(solver.lower, solver.upper)
         self.frames: list[int] = []
         for c in chain.solve_cameras.tolist():
             if c < len(fids):

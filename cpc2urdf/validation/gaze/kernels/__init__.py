@@ -64,7 +64,7 @@ from cpc2urdf.validation.gaze.kernels.constants import (  # noqa: E402
     STRUCTURAL_NULL,
 )
 from cpc2urdf.validation.gaze.kernels.flat import out_size, pack_flat, solve_flat, solve_flat_many  # noqa: E402
-from cpc2urdf.validation.gaze.kernels.kinematics import Chain, fk, pack, pointing_error  # noqa: E402
+from cpc2urdf.validation.gaze.kernels.kinematics import fk, pack, pointing_error  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.pointing import residual  # noqa: E402
 from cpc2urdf.validation.gaze.kernels.step import Problem  # noqa: E402
 
@@ -92,11 +92,7 @@ def _jacobi_any(H, f, lam, V):  # type: ignore[no-untyped-def]
     _eigen._jacobi_any(H, f, lam, V)
 
 
-def _sizes(I):  # type: ignore[no-untyped-def]
-    """``(K, C, S, m, G, n_top)`` of a workspace for the packed head whose ints are ``I``."""
-    return int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1
-
-
+_sizes = _workspace_module.sizes_of
 _carve_workspace = _workspace_module._carve_in_python
 _carve_workspace_counted = njit(error_model="numpy")(_workspace_module._carve_workspace.py_func)
 
@@ -110,23 +106,15 @@ def _workspace(K, C, S, m, G, n_top):  # type: ignore[no-untyped-def]
     """A :class:`Workspace` carved by numba from two buffers it allocates (the arrays' base is numba's
     MemInfo), started as :func:`~.buffers.scratch` starts one."""
     sizes = (int(K), int(C), int(S), int(m), int(G), int(n_top))
-    f, ints = _workspace_module._buffers_in_python(sizes)  # the sizes and starting values
+    f, ints = _workspace_module._started(sizes)
     ws = _new_workspace(f.size, ints.size, sizes)
-    ws.ref_key[:] = np.nan
-    ws.eig[:] = 0.0
-    ws.ones[:] = 1.0
+    _workspace_module.start(ws)
     return ws
 
 
 # the kernels that return views, as copies of their own with reference counting (not cached: the
 # solve's copies, without it, are cached under the same name)
 _unpack = njit(error_model="numpy")(_flat._unpack.py_func)
-_without_version = njit(error_model="numpy")(_flat._without_version.py_func)
-
-
-@kernel
-def _pointing_stationary(ch, u, b, p, lower, upper, ws):  # type: ignore[no-untyped-def]
-    return _flat._pointing_stationary(ch, u, b, p, lower, upper, ws)
 
 
 @kernel_without_refcounts
@@ -183,7 +171,6 @@ __all__ = [
     "S_NOT_FINITE",
     "S_NO_SOLUTION",
     "S_TOO_CLOSE",
-    "Chain",
     "Problem",
     "Workspace",
     "best_starts",

@@ -7,6 +7,8 @@ from target to target, :func:`~.starts.best_starts`' cache of the reference post
 
 from __future__ import annotations
 
+import functools
+import math
 from collections import namedtuple
 from typing import Any
 
@@ -14,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cpc2urdf.validation.gaze.chain import HeadChain
-from cpc2urdf.validation.gaze.kernels._jit import kernel, view_kernel
+from cpc2urdf.validation.gaze.kernels._jit import view_kernel
 from cpc2urdf.validation.gaze.kernels.constants import HISTORY
 
 #: The workspace of one solve, for a head of K joints, C cameras, S solved axes, m unknowns, G table
@@ -284,37 +286,39 @@ def _carve_in_python(
     return Workspace(**views)
 
 
-def _buffers_in_python(
-    sizes: tuple[int, ...], allocate: Any = None
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """The two buffers (float, int) of a workspace of ``sizes`` with the values a workspace starts
-    with: no reference posture cached, no warm eigenvectors, equal weights. ``allocate(n_float,
-    n_int)``: the two empty buffers (default numpy's)."""
-    n_float = sum(int(np.prod(shape)) for _, shape in _shapes(_FLOATS, sizes))
-    n_int = sum(int(np.prod(shape)) for _, shape in _shapes(_INTS, sizes))
-    if allocate is None:
-        f, ints = np.empty(n_float), np.empty(n_int, dtype=np.int64)
-    else:
-        f, ints = allocate(n_float, n_int)
-    ws = _carve_in_python(f, ints, sizes)
+def start(ws: Workspace) -> None:
+    """The values a workspace starts with: no reference posture cached, no warm eigenvectors, equal
+    weights."""
     ws.ref_key[:] = np.nan
     ws.eig[:] = 0.0
     ws.ones[:] = 1.0
+
+
+@functools.cache
+def _started(sizes: tuple[int, ...]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The two buffers of a started workspace of ``sizes``, carved once: a template to copy."""
+    n_float = sum(math.prod(shape) for _, shape in _shapes(_FLOATS, sizes))
+    n_int = sum(math.prod(shape) for _, shape in _shapes(_INTS, sizes))
+    f, ints = np.zeros(n_float), np.zeros(n_int, dtype=np.int64)
+    start(_carve_in_python(f, ints, sizes))
     return f, ints
 
 
-@kernel
-def _allocate(n_float, n_int):  # type: ignore[no-untyped-def]
-    """Two empty buffers allocated by numba (an array's base is then numba's MemInfo)."""
-    return np.empty(n_float), np.empty(n_int, dtype=np.int64)
+def _buffers_in_python(sizes: tuple[int, ...]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The two buffers (float, int) of a started workspace of ``sizes`` (:func:`start`)."""
+    f, ints = _started(sizes)
+    return f.copy(), ints.copy()
+
+
+def sizes_of(I: NDArray[Any]) -> tuple[int, int, int, int, int, int]:
+    """``(K, C, S, m, G, n_top)`` of a workspace for the packed head whose ints are ``I``."""
+    return int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1
 
 
 def scratch(I: NDArray[Any]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The two buffers (float, int) of a workspace for the packed head whose ints are ``I``
     (:func:`~.flat.pack_flat`): what :func:`~.flat.solve_flat` carves its workspace from."""
-    return _buffers_in_python(
-        (int(I[0]), int(I[1]), int(I[2]), int(I[3]), int(I[4]), int(I[6]) + 1)
-    )
+    return _buffers_in_python(sizes_of(I))
 
 
 def workspace(chain: HeadChain) -> Workspace:

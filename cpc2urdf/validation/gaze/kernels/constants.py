@@ -61,13 +61,11 @@ S_NOT_FINITE = (
 )  # solve_flat's answer to a target with a NaN or infinite coordinate (nothing solved)
 
 # the solve's mode: bit flags (solve_flat's ``mode``)
-MODE_Q_CURRENT = (
-    1  # qin[:n] holds the current readings (the min-motion reference; held joints read there)
-)
+# qin[:n] holds the current readings (the min-motion reference; held joints read there)
+MODE_Q_CURRENT = 1
 MODE_WARM_START = 2  # qin[n:] holds a start to try first (e.g. the last answer while tracking)
-MODE_FALLBACK = (
-    4  # retry without the zero-version task when the first answer is at a limit or unsolved
-)
+# retry without the zero-version task when the first answer is at a limit or unsolved
+MODE_FALLBACK = 4
 
 # the iteration's state flags in the workspace's ``eig`` (3,): > 0 is set
 EIG_WARM = 0  # Vp holds the eigenvectors of a recent step with every unknown free (a warm start)

@@ -25,9 +25,8 @@ from typing import Any
 
 from numba.core.dispatcher import Dispatcher
 
-_PACKAGE = __name__.rsplit(".", 1)[
-    0
-]  # the kernels package: the gaze modules call kernels through it
+# the kernels package: the gaze modules call kernels through it
+_PACKAGE = __name__.rsplit(".", 1)[0]
 _lock = threading.Lock()
 _swapped: list[tuple[Any, str, Dispatcher]] = []  # (module, name, dispatcher) replaced by Python
 _worker: subprocess.Popen[bytes] | None = None
