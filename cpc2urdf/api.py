@@ -148,18 +148,13 @@ def simulate(
     Returns:
         ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.stage1_experiment.Experiment`.
     """
-    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
-    from cpc2urdf.urdf.robot import UrdfRobot
+    from cpc2urdf.identification.simulation.stage1_experiment import (
+        measured_robot,
+        simulate_experiment,
+    )
 
-    spec = load_robot(robot)
-    if isinstance(spec, UrdfRobot):
-        if measure is None:
-            raise ConfigurationError(
-                f"{robot}: name the links the rig measures (measure=[LINK, ...])"
-            )
-        spec = spec.restricted(list(measure))
-    elif measure is not None:
-        raise ConfigurationError(f"measure= names links of a URDF robot; {robot!r} is not a URDF")
+    ref = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None
+    spec = measured_robot(load_robot(robot), ref or "robot", measure, option="measure=")
     exp = simulate_experiment(
         spec,
         seed=seed,
@@ -167,7 +162,7 @@ def simulate(
         sigma_t=sigma_mm / 1000,
         sigma_r=np.radians(sigma_deg),
         n_heldout=heldout,
-        robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None,
+        robot_ref=ref,
     )
     # the sets keep their robot, as when read from the files `cpc2urdf simulate` writes
     return exp._replace(

@@ -163,31 +163,6 @@ DEFAULT_NOISE = "fig10"
 DEFAULT_PIXEL_SIGMA = 0.15  # [px]
 
 
-def _measured_robot(spec: RobotSpec, ref: str, measure: list[str] | None) -> RobotSpec:
-    """The robot to simulate: a URDF's sub-tree of the ``--measure`` links (its measured plates).
-
-    Raises:
-        ConfigurationError: ``--measure`` with a robot that is not a URDF, or a URDF without it.
-        InputFileError: A link that is not in the URDF, is its root, or is moved by a joint
-            directly (:func:`cpc2urdf.urdf.robot.urdf_robot` names it).
-    """
-    from cpc2urdf.errors import ConfigurationError
-    from cpc2urdf.urdf.robot import UrdfRobot
-
-    if not isinstance(spec, UrdfRobot):
-        if measure is not None:
-            raise ConfigurationError(
-                f"--measure names links of a URDF robot; {ref!r} is not a URDF (its plates are measured)"
-            )
-        return spec
-    if measure is None:
-        raise ConfigurationError(
-            f"{ref}: name the links the rig measures with --measure LINK [LINK ...] "
-            "(plate, marker or camera links, each on a fixed joint)"
-        )
-    return spec.restricted(measure)
-
-
 def _as_markers(
     exp: Experiment, k: int, sigma_p: float, seed: int
 ) -> tuple[MeasurementSet, MeasurementSet]:
@@ -265,7 +240,10 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.files.measurements import measurements_to_json
     from cpc2urdf.files.model_file import model_to_json
     from cpc2urdf.files.robot_ref import load_robot, looks_like_path
-    from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
+    from cpc2urdf.identification.simulation.stage1_experiment import (
+        measured_robot,
+        simulate_experiment,
+    )
     from cpc2urdf.identification.vision.stereo import StereoRig
 
     out = Path(args.output)
@@ -306,7 +284,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigurationError(
             f"--markers must be at least 1 (markers per measured frame), got {args.markers}"
         )
-    spec = _measured_robot(load_robot(args.robot), args.robot, args.measure)
+    spec = measured_robot(load_robot(args.robot), args.robot, args.measure)
     # A robot file is referred to relative to DIR, so the files can move together.
     text = str(args.robot)
     is_path = looks_like_path(text)

@@ -522,6 +522,7 @@ def _parse_records(
             store[name] = np.full((N, *shape), np.nan)
         return store[name]
 
+    file_joints = [names.joints[n] for n in s.joint_names]
     for i, rec in enumerate(records):
         where = f"records[{i}]"
         if not isinstance(rec, Mapping):
@@ -535,7 +536,7 @@ def _parse_records(
         if not isinstance(label, str):
             raise ValueError(f"{where}.label must be a string, got {label!r}")
         labels.append(label)
-        q[i] = _record_joints(rec.get("joints"), where, s, names, units)
+        q[i] = _record_joints(rec.get("joints"), where, s, names, file_joints, units)
         rec_poses = rec.get("poses", {})
         rec_points = rec.get("points", {})
         if not isinstance(rec_poses, Mapping):
@@ -628,10 +629,15 @@ def _parse_records(
 
 
 def _record_joints(
-    joints: Any, where: str, s: RobotStructure, names: _FileNames, units: Units
+    joints: Any,
+    where: str,
+    s: RobotStructure,
+    names: _FileNames,
+    file_joints: list[str],
+    units: Units,
 ) -> list[float]:
-    """A record's joint readings in model order and SI units, checked against the joints and limits."""
-    file_joints = [names.joints[n] for n in s.joint_names]
+    """A record's joint readings in model order and SI units, checked against the joints and
+    limits; ``file_joints``: the model's joints as the file names them."""
     if not isinstance(joints, Mapping):
         raise ValueError(f"{where}.joints must be an object {{joint name: reading}}")
     for name in joints:

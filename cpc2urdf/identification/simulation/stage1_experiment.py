@@ -29,7 +29,7 @@ In memory::
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -86,6 +86,31 @@ def _as_spec(robot: str | Path | RobotSpec | CPCModel) -> tuple[RobotSpec, str]:
     from cpc2urdf.files.robot_ref import load_robot
 
     return load_robot(robot), str(robot)
+
+
+def measured_robot(
+    spec: RobotSpec, ref: str, measure: Sequence[str] | None, option: str = "--measure"
+) -> RobotSpec:
+    """The robot to simulate: a URDF's sub-tree of the ``measure`` links (its measured plates);
+    any other robot as it is. ``option`` names the argument in the messages.
+
+    Raises:
+        ConfigurationError: ``measure`` with a robot that is not a URDF, or a URDF without it.
+        InputFileError: A link that is not in the URDF, is its root, or is moved by a joint
+            directly (:func:`cpc2urdf.urdf.robot.urdf_robot` names it).
+    """
+    if not isinstance(spec, UrdfRobot):
+        if measure is not None:
+            raise ConfigurationError(
+                f"{option} names links of a URDF robot; {ref!r} is not a URDF (its plates are measured)"
+            )
+        return spec
+    if measure is None:
+        raise ConfigurationError(
+            f"{ref}: name the links the rig measures with {option} LINK [LINK ...] "
+            "(plate, marker or camera links, each on a fixed joint)"
+        )
+    return spec.restricted(list(measure))
 
 
 def simulate_experiment(
