@@ -34,6 +34,7 @@ from typing import Any
 from cpc2urdf.argparsing import OneLineParser
 
 TARGET = ("-0.6", "-0.6", "0.7")
+COMMANDS = ("gaze", "python", "check", "check-gaze")  # the keys of commands()
 PYTHON_SOLVE = (
     "import cpc2urdf; s = cpc2urdf.gaze_solver('iis_head'); "
     "print(s.solve([-0.6, -0.6, 0.7]).status)"
@@ -140,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--commands",
         nargs="+",
-        default=["gaze", "python", "check", "check-gaze"],
-        choices=["gaze", "python", "check", "check-gaze"],
+        default=list(COMMANDS),
+        choices=COMMANDS,
     )
     parser.add_argument("--json", help="also write the rows to this JSON file")
     args = parser.parse_args(argv)

@@ -51,13 +51,8 @@ STRATEGIES = ("I-optimal", "D-optimal", "protocol")
 DEFAULT_CANDIDATES = 500
 DEFAULT_TASK = 200
 TASK_SEED = 1  # the task sample's own stream (the candidates use the plan's seed)
-MAX_TARGET_N = 400
-CURVE_M = (
-    2,
-    3,
-    5,
-    9,
-)  # protocol sizes the curve compares at (M = 9: the paper's choice)  # largest plan --target-error searches
+MAX_TARGET_N = 400  # largest plan --target-error searches
+CURVE_M = (2, 3, 5, 9)  # protocol sizes the curve compares at (M = 9: the paper's choice)
 
 
 @dataclass
