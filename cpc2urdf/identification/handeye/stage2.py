@@ -83,7 +83,7 @@ IMAGE_MARGIN = 10.0  # [px] every disk centre must be this far inside the image
 DEFAULT_TARGET_DISTANCE = 0.4  # [m]
 
 
-def _T_base(model: CPCModel, frame: str, q: Array) -> Array:
+def base_poses(model: CPCModel, frame: str, q: Array) -> Array:
     """``T_base_<frame>`` for configurations q (N, n): shape (N, 4, 4)."""
     return inverse(model.T_world_base())[None] @ model.fk_frame(frame, q)
 
@@ -102,7 +102,7 @@ def default_target_placement(
     configuration, on their mean optical axis, its disks facing them (target z = -optical axis,
     target x = the cameras' mean x). Shape (4, 4)."""
     q = home_configuration(model)[None]
-    T = np.concatenate([_T_base(model, c, q) for c in cameras])
+    T = np.concatenate([base_poses(model, c, q) for c in cameras])
     d = T[:, :3, 2].mean(axis=0)
     d /= np.linalg.norm(d)
     x = T[:, :3, 0].mean(axis=0)
@@ -209,7 +209,7 @@ def sample_configurations(
                 "whole target; move the target or narrow the joint ranges"
             )
         q = rng.uniform(mid - half, mid + half)
-        T_cam = {c: _T_base(truth, c, q[None])[0] for c in cameras}
+        T_cam = {c: base_poses(truth, c, q[None])[0] for c in cameras}
         if all(project_target(inverse(T_cam[c]) @ T_base_target, intrinsics)[1] for c in cameras):
             accepted.append(q)
     return np.array(accepted)
@@ -231,7 +231,7 @@ def simulate_observations(
     poses: dict[str, Array] = {}
     points: dict[str, Array] = {}
     for c in cameras:
-        T_base_cam = _T_base(truth, c, q)
+        T_base_cam = base_poses(truth, c, q)
         Ts, uvs = [], []
         for k in range(len(q)):
             uv, _ = project_target(inverse(T_base_cam[k]) @ T_base_target, intrinsics)
@@ -249,7 +249,7 @@ def simulate_observations(
 
 def hand_poses(model: CPCModel, camera: str, q: Array) -> Array:
     """``T_base_hand`` of the camera's hand (its plate frame) from ``model``, shape (N, 4, 4)."""
-    return _T_base(model, HAND_OF_CAMERA[camera], q)
+    return base_poses(model, HAND_OF_CAMERA[camera], q)
 
 
 def calibrate_cameras(
@@ -314,6 +314,19 @@ def with_camera_frame(
     h = model.structure.frame(hand)
     T_link_camera = model.frames[hand].matrix() @ result.X
     out = model.with_frame(Frame(camera, h.parent, "camera"), CPCParams.from_matrix(T_link_camera))
+    return with_handeye_record(out, camera, hand, result, extra)
+
+
+def with_handeye_record(
+    model: CPCModel,
+    camera: str,
+    hand: str,
+    result: HandEyeResult,
+    extra: dict[str, Any] | None = None,
+) -> CPCModel:
+    """A copy of ``model`` with ``result`` recorded in ``metadata.handeye[camera]`` (a
+    :class:`~cpc2urdf.model_metadata.HandEyeRecord`; the consistency gate's report, if the gate
+    ran, under ``details["consistency"]``)."""
     record = HandEyeRecord(
         hand=hand,
         method=result.method,
@@ -331,8 +344,8 @@ def with_camera_frame(
             ),
         },
     )
-    handeye = {**out.metadata.handeye, camera: record}
-    return out.with_params(metadata=out.metadata.replace(handeye=handeye))
+    handeye = {**model.metadata.handeye, camera: record}
+    return model.with_params(metadata=model.metadata.replace(handeye=handeye))
 
 
 @dataclass
@@ -497,6 +510,7 @@ __all__ = [
     "Stage2Result",
     "DEFAULT_TARGET_DISTANCE",
     "IMAGE_MARGIN",
+    "base_poses",
     "calibrate_cameras",
     "camera_errors",
     "default_target_placement",
@@ -509,5 +523,6 @@ __all__ = [
     "sample_configurations",
     "simulate_observations",
     "with_camera_frame",
+    "with_handeye_record",
     "write_pose_files",
 ]
