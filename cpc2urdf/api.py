@@ -23,7 +23,7 @@ import dataclasses
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -31,13 +31,14 @@ from numpy.typing import ArrayLike
 from cpc2urdf.errors import ConfigurationError, UnknownNameError
 from cpc2urdf.files.measurements import MeasurementSet, load_measurements
 from cpc2urdf.files.model_file import save_model
-from cpc2urdf.files.robot_ref import RobotRef, load_model, load_robot
+from cpc2urdf.files.robot_ref import RobotRef, is_urdf_ref, load_model, load_robot
 from cpc2urdf.files.spec import RobotSpec
 from cpc2urdf.model import CPCModel
 
 if TYPE_CHECKING:  # the stages are imported inside the functions that use them
     from cpc2urdf.identification.handeye.axxb import HandEyeResult
     from cpc2urdf.identification.handeye.pose_file import HandEyePoses
+    from cpc2urdf.identification.handeye.urdf_stage2 import HandEyeSimulation
     from cpc2urdf.identification.planning.outputs import PlanOutputs
     from cpc2urdf.identification.planning.plan_file import LoadedPlan
     from cpc2urdf.identification.simulation.stage1_experiment import Experiment
@@ -123,6 +124,42 @@ def measurements_from_bag(
     ).measurements
 
 
+@overload
+def simulate(
+    robot: RobotRef = ...,
+    *,
+    measure: Sequence[str] | None = ...,
+    seed: int = ...,
+    M: int = ...,
+    sigma_mm: float = ...,
+    sigma_deg: float = ...,
+    heldout: int = ...,
+    cameras: None = ...,
+    poses: int = ...,
+    pixel_noise: float = ...,
+    camera_error_mm: float = ...,
+    camera_error_deg: float = ...,
+) -> Experiment: ...
+
+
+@overload
+def simulate(
+    robot: RobotRef = ...,
+    *,
+    measure: Sequence[str] | None = ...,
+    seed: int = ...,
+    M: int = ...,
+    sigma_mm: float = ...,
+    sigma_deg: float = ...,
+    heldout: int = ...,
+    cameras: Sequence[str],
+    poses: int = ...,
+    pixel_noise: float = ...,
+    camera_error_mm: float = ...,
+    camera_error_deg: float = ...,
+) -> HandEyeSimulation: ...
+
+
 def simulate(
     robot: RobotRef = "iis_head",
     *,
@@ -132,21 +169,35 @@ def simulate(
     sigma_mm: float = 0.5,
     sigma_deg: float = 0.5,
     heldout: int = 50,
-) -> Experiment:
+    cameras: Sequence[str] | None = None,
+    poses: int = 20,
+    pixel_noise: float = 0.1,
+    camera_error_mm: float = 5.0,
+    camera_error_deg: float = 3.0,
+) -> Experiment | HandEyeSimulation:
     """A simulated stage-1 experiment in memory (``cpc2urdf simulate``): a true robot (the nominal
     one with random geometric error), its plates measured with Fig. 10 pose noise while one joint
-    moves at a time, and held-out configurations with their true poses.
+    moves at a time, and held-out configurations with their true poses. With ``cameras``, stage 2
+    of a URDF robot's cameras instead (``cpc2urdf simulate ROBOT.urdf --cameras``, docs/handeye.md).
 
     Args:
-        robot: Shipped name, spec, model file or URDF path (a URDF needs ``measure``).
+        robot: Shipped name, spec, model file or URDF path (a URDF needs ``measure`` or ``cameras``).
         measure: A URDF's measured links (plate, marker or camera links on fixed joints).
         seed: Seed of everything random (the same seed gives the same experiment).
         M: Values per joint over its calibration range.
         sigma_mm, sigma_deg: The pose noise (translation per entry, rotation angle).
         heldout: Held-out configurations.
+        cameras: A URDF's camera links, optical (z forward) or body (x forward); ``LINK:optical``
+            or ``LINK:body`` where the file cannot tell.
+        poses: Stage 2: configurations in which every camera sees the 25-disk target.
+        pixel_noise: Stage 2: std of the image noise per coordinate [px].
+        camera_error_mm, camera_error_deg: Stage 2: the true mounts are the URDF's moved by up to
+            this per axis and turned by this about a random axis.
 
     Returns:
-        ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.stage1_experiment.Experiment`.
+        ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.stage1_experiment.Experiment`;
+        with ``cameras`` a :class:`~cpc2urdf.identification.handeye.urdf_stage2.HandEyeSimulation`
+        (hand-eye poses per camera, the true mounts).
     """
     from cpc2urdf.identification.simulation.stage1_experiment import (
         measured_robot,
@@ -154,6 +205,22 @@ def simulate(
     )
 
     ref = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None
+    if cameras is not None:
+        from cpc2urdf.identification.handeye.urdf_stage2 import simulate_handeye
+
+        if measure is not None or ref is None or not is_urdf_ref(ref):
+            raise ConfigurationError(
+                "cameras= simulates stage 2 of a URDF robot: give a URDF path and no measure="
+            )
+        return simulate_handeye(
+            ref,
+            cameras,
+            n_poses=poses,
+            pixel_noise=pixel_noise,
+            seed=seed,
+            translation=camera_error_mm / 1000,
+            rotation=float(np.radians(camera_error_deg)),
+        )
     spec = measured_robot(load_robot(robot), ref or "robot", measure, option="measure=")
     exp = simulate_experiment(
         spec,
@@ -338,8 +405,15 @@ def calibrate_cameras(
     The camera frame is placed on the link of ``hand`` at ``T_link_hand @ X`` (stage 2 of
     Shih et al.); ``cpc2urdf handeye POSES --model M -o OUT`` does the same.
 
+    A URDF robot's camera: with ``model`` a URDF path (or a model built from one) and ``camera``
+    one of its links, optical (z forward) or body (x forward), the link is placed in its own
+    convention (``X`` is the optical frame's pose in the mount's parent link, converted by the
+    REP-103 rotation; a link whose convention the file cannot show is refused unless named
+    ``LINK:optical``/``LINK:body``); :func:`export_urdf` then writes its mount origin back into
+    the URDF, x forward for an x-forward link.
+
     Args:
-        model: The identified model (or a reference :func:`load_model` accepts).
+        model: The identified model (or a reference :func:`load_model` accepts, or a URDF).
         poses: Head-camera observations of the target with the hand poses, or their file.
         method: Hand-eye solver (default Li et al.'s Kronecker method).
         camera: Camera frame name (default: the pose file's ``camera``).
@@ -354,16 +428,50 @@ def calibrate_cameras(
     from cpc2urdf.identification.handeye.pose_file import HandEyePoses
     from cpc2urdf.identification.handeye.solvers import calibrate_poses
     from cpc2urdf.identification.handeye.stage2 import with_camera_frame
+    from cpc2urdf.identification.handeye.urdf_stage2 import with_calibrated_camera
 
-    m = model if isinstance(model, CPCModel) else load_model(model)
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
+    urdf_path = os.fspath(model) if isinstance(model, (str, os.PathLike)) else None
+    m = None if urdf_path is not None and is_urdf_ref(urdf_path) else _as_model(model)
+    tree = _camera_urdf(urdf_path, m, camera or data.camera)
+
+    def solution() -> HandEyeResult:
+        if result is not None:
+            return result
+        return calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
+
+    if tree is not None:  # a URDF camera link, in its own convention
+        name = camera or data.camera
+        assert name is not None
+        extra = {"poses": data.source}
+        return with_calibrated_camera(m, tree, name, solution(), hand=hand or None, extra=extra)
+    assert m is not None
     camera, hand = camera_mount(m, data, camera=camera, hand=hand)
-    solution = (
-        result
-        if result is not None
-        else calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
-    )
-    return with_camera_frame(m, camera, hand, solution, {"poses": data.source})
+    return with_camera_frame(m, camera, hand, solution(), {"poses": data.source})
+
+
+def _as_model(model: CPCModel | RobotRef) -> CPCModel:
+    return model if isinstance(model, CPCModel) else load_model(model)
+
+
+def _camera_urdf(urdf: str | None, model: CPCModel | None, camera: str | None) -> Any:
+    """The URDF whose camera link ``camera`` names: ``urdf`` itself, or the one ``model`` was built
+    from when ``camera`` is one of its links; else None (a camera frame of a CPC model)."""
+    from cpc2urdf.urdf.camera_frames import split_convention
+    from cpc2urdf.urdf.robot import urdf_source
+    from cpc2urdf.urdf.tree import read_urdf_tree
+
+    if model is None:
+        if not camera:
+            raise ConfigurationError(
+                f"{urdf}: name the camera link (--camera, or 'camera' in the pose file)"
+            )
+        return read_urdf_tree(urdf)  # type: ignore[arg-type]
+    source = urdf_source(model)
+    if source is None or not camera:
+        return None
+    tree = read_urdf_tree(source.path)
+    return tree if tree.has_link(split_convention(camera)[0]) else None
 
 
 def export_urdf(

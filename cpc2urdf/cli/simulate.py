@@ -7,6 +7,9 @@ configurations inside the calibration range with their true poses). See docs/mea
 each measured frame of the same true robot, their points with ``--marker-sigma-mm`` noise at the
 same configurations, and their true points in the held-out file.
 
+``--cameras LINK [LINK ...]`` (a URDF robot) simulates stage 2 instead: hand-eye pose files of
+those camera links and their true mounts (docs/handeye.md).
+
 A URDF robot needs ``--measure LINK [LINK ...]``: the links the rig measures (plate, marker or
 camera links on fixed joints, docs/urdf.md). The records then read only the joints on the paths
 from the root to them, in the URDF's names, and ``cpc2urdf identify`` / ``export`` write the
@@ -52,6 +55,42 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         default=None,
         help="URDF robot: the links the rig measures (plate, marker or camera links, each on a fixed "
         "joint); the records have readings for the joints on the paths from the root to them only",
+    )
+    p.add_argument(
+        "--cameras",
+        nargs="+",
+        metavar="LINK",
+        default=None,
+        help="URDF robot: simulate stage 2 (hand-eye) of these camera links instead, optical "
+        "(z forward) or body (x forward; LINK:optical or LINK:body where the URDF cannot tell); "
+        "writes DIR/handeye_<LINK>.json per camera and the true mounts DIR/handeye_truth.json, "
+        "DIR/handeye_truth.urdf (docs/handeye.md)",
+    )
+    p.add_argument(
+        "--poses",
+        type=int,
+        default=20,
+        metavar="N",
+        help="--cameras: configurations with the target in view of every camera (default 20)",
+    )
+    p.add_argument(
+        "--pixel-noise",
+        type=float,
+        default=0.1,
+        metavar="PX",
+        help="--cameras: std of each disk-centre image coordinate [px] (default 0.1)",
+    )
+    p.add_argument(
+        "--camera-error-mm",
+        type=float,
+        default=5.0,
+        help="--cameras: true mounts moved by up to this per axis [mm] (default 5)",
+    )
+    p.add_argument(
+        "--camera-error-deg",
+        type=float,
+        default=3.0,
+        help="--cameras: true mounts turned by this about a random axis [deg] (default 3)",
     )
     p.add_argument(
         "-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)"
@@ -154,7 +193,49 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 
 def written_files(args: argparse.Namespace) -> dict[str, str]:
     """The files written into the output folder (checked against the inputs before the command runs)."""
-    return {f"-o (its {name})": os.path.join(args.output, name) for name in FILES}
+    names: tuple[str, ...] = FILES
+    if args.cameras:
+        from cpc2urdf.identification.handeye.urdf_stage2 import TRUTH_FILES, pose_file_name
+
+        names = (*(pose_file_name(c) for c in args.cameras), *TRUTH_FILES)
+    return {f"-o (its {name})": os.path.join(args.output, name) for name in names}
+
+
+def _run_handeye(args: argparse.Namespace, out: Path) -> int:
+    """``--cameras``: stage 2 of a URDF robot's cameras, as pose files and the true mounts."""
+    from cpc2urdf.api import simulate
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.identification.handeye.urdf_stage2 import write_simulation
+
+    for flag in ("measure", "plan", "markers"):
+        if getattr(args, flag) is not None:
+            raise ConfigurationError(f"--cameras simulates stage 2; it takes no --{flag}")
+    for flag in ("pixel_noise", "camera_error_mm", "camera_error_deg"):
+        v = getattr(args, flag)
+        if not (math.isfinite(v) and v >= 0):
+            raise ConfigurationError(
+                f"--{flag.replace('_', '-')} must be a finite number >= 0, got {v:g}"
+            )
+    if args.seed < 0:
+        raise ConfigurationError(f"--seed must be a non-negative integer, got {args.seed}")
+    sim = simulate(
+        args.robot,
+        cameras=args.cameras,
+        seed=args.seed,
+        poses=args.poses,
+        pixel_noise=args.pixel_noise,
+        camera_error_mm=args.camera_error_mm,
+        camera_error_deg=args.camera_error_deg,
+    )
+    paths = write_simulation(sim, out)
+    print(f"wrote {', '.join(str(p) for p in paths)}")
+    for link, cam in sim.rig.cameras.items():
+        optical = "" if cam.optical == link else f", optical frame {cam.optical or 'REP-103 turn'}"
+        print(
+            f"  {link}: {cam.convention} link on {cam.hand} (joint {cam.mount.name}{optical}); "
+            f"{len(sim.q)} configurations, pixel noise {sim.pixel_noise:g} px"
+        )
+    return 0
 
 
 DEFAULT_SIGMA_MM = 0.5  # Fig. 10
@@ -249,6 +330,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a folder")
+    if args.cameras:
+        return _run_handeye(args, out)
     if args.M < 2:
         raise ConfigurationError(f"--M must be at least 2, got {args.M}")
     if args.heldout < 1:  # a measurement file needs at least one record
