@@ -444,7 +444,9 @@ def calibrate_cameras(
         name = camera or data.camera
         assert name is not None
         extra = {"poses": data.source}
-        return with_calibrated_camera(m, tree, name, solution(), hand=hand or None, extra=extra)
+        return with_calibrated_camera(
+            m, tree, name, solution(), hand=hand or data.hand or None, extra=extra
+        )
     assert m is not None
     camera, hand = camera_mount(m, data, camera=camera, hand=hand)
     return with_camera_frame(m, camera, hand, solution(), {"poses": data.source})

@@ -99,6 +99,10 @@ def test_a_link_of_unknown_convention_is_refused_in_one_line(tmp_path: Path) -> 
     assert stated.optical is None
     np.testing.assert_allclose(stated.T_link_optical, T_BODY_OPTICAL)
     assert camera_link(bare, "cam", OPTICAL).convention == OPTICAL
+    # simulated and written back as stated: the pose file names it cam:body
+    sim = cpc2urdf.simulate(urdf, cameras=["cam:body"], poses=6, pixel_noise=0.0)
+    assert sim.pose_documents()["cam"]["camera"] == "cam:body"
+    assert sim.q.shape == (6, 1)
 
 
 def test_cli_refuses_an_unknown_convention_and_writes_nothing(tmp_path: Path) -> None:
@@ -201,3 +205,25 @@ def test_two_cameras_and_the_iis_head_path_unchanged(tmp_path: Path) -> None:
         cpc2urdf.simulate("iis_head", cameras=["camera_left_optical"])
     exp = cpc2urdf.simulate("iis_head", M=2, heldout=1)
     assert exp.truth.structure.name
+
+
+def test_poses_of_another_hand_on_the_same_link(tmp_path: Path) -> None:
+    """Poses whose hand is a link fixed to the mount's parent are converted; a moving one refused."""
+    from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
+
+    link = "rgbd_rgb_optical_frame"  # hangs on rgbd_rgb_frame, fixed to head_2_link
+    sim = cpc2urdf.simulate(TALOS, cameras=[link], pixel_noise=0.0, seed=2)
+    fk = read_urdf_tree(TALOS).fk()
+    T_head_parent = np.linalg.inv(fk["head_2_link"]) @ fk["rgbd_rgb_frame"]
+    H = sim.T_base_hand[link] @ np.linalg.inv(T_head_parent)
+    poses = save_handeye_poses(
+        tmp_path / "p.json", H, sim.T_camera_target[link], camera=link, hand="head_2_link"
+    )
+    model = cpc2urdf.calibrate_cameras(TALOS, poses)
+    out = cpc2urdf.export_urdf(model, tmp_path / "c.urdf")
+    t, r = _errors(
+        read_urdf_tree(out).joints["rgbd_rgb_optical_joint"].origin, sim.true_mounts()[link]
+    )
+    assert t < 1e-6 and r < 1e-6
+    with pytest.raises(InputFileError, match="poses' hand 'torso_2_link' is not fixed to it"):
+        cpc2urdf.calibrate_cameras(TALOS, poses, hand="torso_2_link")

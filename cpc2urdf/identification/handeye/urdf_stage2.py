@@ -47,7 +47,7 @@ from cpc2urdf.identification.handeye.stage2 import (
 )
 from cpc2urdf.model import CPCModel, CPCParams, Frame
 from cpc2urdf.transforms import Array, inverse, rotation_error
-from cpc2urdf.urdf.camera_frames import CameraLink, split_convention
+from cpc2urdf.urdf.camera_frames import CameraLink, camera_link, split_convention
 from cpc2urdf.urdf.camera_mounts import (
     camera_links,
     frame_name,
@@ -180,7 +180,7 @@ class HandEyeSimulation:
                 self.T_base_hand[link],
                 C,
                 labels=[f"config {k}" for k in range(len(C))],
-                camera=link,
+                camera=_as_named(self.rig.tree, cam),
                 hand=cam.hand,
                 units=Units("mm", "deg"),
                 description=f"stage-2 simulation of {self.rig.tree.name}: {len(C)} configurations, "
@@ -222,6 +222,16 @@ class HandEyeSimulation:
         assert base is not None
         model = with_camera_links(base, self.rig.tree, self.true_mounts())
         return calibrated_urdf_text(writeback_plan(model))
+
+
+def _as_named(tree: UrdfTree, cam: CameraLink) -> str:
+    """The camera's name for its pose file: ``LINK``, or ``LINK:body``/``LINK:optical`` when the
+    URDF cannot tell (so that ``cpc2urdf handeye`` reads the file as it was simulated)."""
+    try:
+        camera_link(tree, cam.link)
+    except InputFileError:
+        return f"{cam.link}:{cam.convention}"
+    return cam.link
 
 
 def _configurations(
@@ -329,7 +339,8 @@ def with_calibrated_camera(
         tree: The URDF.
         camera: The camera link.
         result: Its hand-eye solution.
-        hand: The hand the poses were taken with (must be the mount's parent link); None: that link.
+        hand: The hand the poses were taken with: the mount's parent link (None), or a URDF link
+            or model frame fixed to it (e.g. a measured plate on the same link).
         extra: More details for the record (e.g. the pose file).
 
     Raises:
@@ -338,23 +349,43 @@ def with_calibrated_camera(
     """
     link, stated = split_convention(camera)
     cam = camera_links(tree, {link: stated})[link]
-    if hand is not None and hand != cam.hand:
-        raise InputFileError(
-            tree.source,
-            f"camera link {link!r} hangs on link {cam.hand!r} (joint {cam.mount.name!r}), but the poses' hand "
-            f"is {hand!r}; give T_base_hand of {cam.hand!r}",
-        )
     base = model if model is not None else urdf_robot(tree, [link]).nominal
     assert base is not None
-    out = with_camera_links(base, tree, {link: cam.link_pose(result.X)})
+    T_mount_hand = _hand_in_mount_parent(base, tree, cam, hand)
+    T_hand_link = cam.link_pose(T_mount_hand @ result.X)
+    out = with_camera_links(base, tree, {link: T_hand_link})
     details = {
         **(extra or {}),
         "camera_link": link,
         "convention": cam.convention,
         "optical_link": cam.optical,
-        "T_hand_link": cam.link_pose(result.X).tolist(),
+        f"T_{cam.hand}_{link}": T_hand_link.tolist(),
     }
-    return with_handeye_record(out, frame_name(out, tree, link), cam.hand, result, details)
+    return with_handeye_record(out, frame_name(out, tree, link), hand or cam.hand, result, details)
+
+
+def _hand_in_mount_parent(
+    model: CPCModel, tree: UrdfTree, cam: CameraLink, hand: str | None
+) -> Array:
+    """The poses' hand in the mount's parent link: identity for that link (or None); else a URDF
+    link or model frame on the same rigid body (the same model link frame)."""
+    if hand is None or hand == cam.hand:
+        return np.eye(4)
+    K, T_K_parent = link_placement(model, tree, cam.hand)
+    if tree.has_link(hand):
+        K_hand, T_K_hand = link_placement(model, tree, hand)
+    elif hand in model.structure.frame_names:
+        K_hand, T_K_hand = model.structure.frame(hand).parent, model.frames[hand].matrix()
+    else:
+        K_hand = None
+    if K_hand != K:
+        raise InputFileError(
+            tree.source,
+            f"camera link {cam.link!r} hangs on link {cam.hand!r} (joint {cam.mount.name!r}), but the "
+            f"poses' hand {hand!r} is {'not a link' if K_hand is None else 'not fixed to it'}; give "
+            f"T_base_hand of {cam.hand!r}",
+        )
+    return inverse(T_K_parent) @ T_K_hand
 
 
 def pose_file_name(camera: str) -> str:
