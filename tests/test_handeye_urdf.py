@@ -17,6 +17,7 @@ import pinocchio as pin
 import pytest
 
 import cpc2urdf
+from cpc2urdf.api import load_handeye_poses
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, DEFAULT_HANDEYE_METHOD, calibrate
 from cpc2urdf.identification.handeye.urdf_stage2 import HandEyeSimulation
@@ -126,6 +127,28 @@ def test_cli_refuses_an_unknown_convention_and_writes_nothing(tmp_path: Path) ->
     assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
     assert "imu_link" in run.stderr and "optical" in run.stderr and "body" in run.stderr
     assert not out.exists()
+    ok = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cpc2urdf",
+            "simulate",
+            str(TALOS),
+            "--cameras",
+            "rgbd_link",
+            "--poses",
+            "5",
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert "rgbd_link: body link on head_2_link (joint rgbd_joint" in ok.stdout
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["handeye_rgbd_link.json", "handeye_truth.json", "handeye_truth.urdf"]
+    assert len(load_handeye_poses(out / "handeye_rgbd_link.json").labels) == 5
 
 
 def test_noise_free_stage2_recovers_the_mount_and_writes_it_x_forward(tmp_path: Path) -> None:

@@ -205,8 +205,13 @@ def _run_handeye(args: argparse.Namespace, out: Path) -> int:
     """``--cameras``: stage 2 of a URDF robot's cameras, as pose files and the true mounts."""
     from cpc2urdf.api import simulate
     from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import is_urdf_ref
     from cpc2urdf.identification.handeye.urdf_stage2 import write_simulation
 
+    if not is_urdf_ref(args.robot):
+        raise ConfigurationError(
+            f"--cameras names camera links of a URDF robot; {args.robot!r} is not a URDF"
+        )
     for flag in ("measure", "plan", "markers"):
         if getattr(args, flag) is not None:
             raise ConfigurationError(f"--cameras simulates stage 2; it takes no --{flag}")
