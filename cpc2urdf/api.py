@@ -360,12 +360,20 @@ def solve_handeye(
 
 
 def camera_mount(
-    model: CPCModel, poses: HandEyePoses, *, camera: str | None = None, hand: str | None = None
+    model: CPCModel | PathLike,
+    poses: HandEyePoses,
+    *,
+    camera: str | None = None,
+    hand: str | None = None,
 ) -> tuple[str, str]:
     """The camera frame to add and the frame it is fixed to, checked against ``model``.
 
+    With ``model`` a URDF path, ``camera`` is a camera link of it (optical or x-forward body,
+    docs/handeye.md) and ``hand`` (default: the mount's parent link) a link fixed to its mount's
+    parent; both are checked as :func:`calibrate_cameras` will place them.
+
     Args:
-        model: The model the camera goes into.
+        model: The model the camera goes into, or a URDF.
         poses: The hand-eye poses (their file may name ``camera`` and ``hand``).
         camera: Camera frame name (default: the pose file's ``camera``).
         hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
@@ -375,6 +383,13 @@ def camera_mount(
             naming a frame that is not a camera.
     """
     camera, hand = camera or poses.camera, hand or poses.hand
+    if not isinstance(model, CPCModel) and is_urdf_ref(os.fspath(model)):
+        from cpc2urdf.identification.handeye.urdf_stage2 import urdf_camera_mount
+
+        tree = _camera_urdf(os.fspath(model), None, camera)
+        cam = urdf_camera_mount(None, tree, camera or "", hand or None)[0]
+        return camera or cam.link, hand or cam.hand
+    model = model if isinstance(model, CPCModel) else load_model(model)
     if not camera or not hand:
         raise ConfigurationError(
             f"{poses.source}: give the camera and hand frame names (--camera/--hand, or 'camera'/'hand' in the pose file)"

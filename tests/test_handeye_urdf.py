@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 
 import cpc2urdf
-from cpc2urdf.api import load_handeye_poses
+from cpc2urdf.api import camera_mount, load_handeye_poses
 from cpc2urdf.errors import InputFileError
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, DEFAULT_HANDEYE_METHOD, calibrate
 from cpc2urdf.identification.handeye.urdf_stage2 import HandEyeSimulation
@@ -250,3 +250,8 @@ def test_poses_of_another_hand_on_the_same_link(tmp_path: Path) -> None:
     assert t < 1e-6 and r < 1e-6
     with pytest.raises(InputFileError, match="poses' hand 'torso_2_link' is not fixed to it"):
         cpc2urdf.calibrate_cameras(TALOS, poses, hand="torso_2_link")
+    # checked before any solver runs (the command's --urdf)
+    data = load_handeye_poses(poses)
+    assert camera_mount(TALOS, data) == (link, "head_2_link")
+    with pytest.raises(InputFileError, match="'imu_link': its convention cannot be told"):
+        camera_mount(TALOS, data, camera="imu_link")

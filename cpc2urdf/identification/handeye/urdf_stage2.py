@@ -347,11 +347,8 @@ def with_calibrated_camera(
         InputFileError: As :func:`~cpc2urdf.urdf.camera_frames.camera_link`, or a ``hand`` that is
             not the mount's parent link.
     """
-    link, stated = split_convention(camera)
-    cam = camera_links(tree, {link: stated})[link]
-    base = model if model is not None else urdf_robot(tree, [link]).nominal
-    assert base is not None
-    T_mount_hand = _hand_in_mount_parent(base, tree, cam, hand)
+    cam, base, T_mount_hand = urdf_camera_mount(model, tree, camera, hand)
+    link = cam.link
     T_hand_link = cam.link_pose(T_mount_hand @ result.X)
     out = with_camera_links(base, tree, {link: T_hand_link})
     details = {
@@ -362,6 +359,23 @@ def with_calibrated_camera(
         f"T_{cam.hand}_{link}": T_hand_link.tolist(),
     }
     return with_handeye_record(out, frame_name(out, tree, link), hand or cam.hand, result, details)
+
+
+def urdf_camera_mount(
+    model: CPCModel | None, tree: UrdfTree, camera: str, hand: str | None
+) -> tuple[CameraLink, CPCModel, Array]:
+    """Check a URDF camera link and the poses' hand before solving: the camera link, the model
+    it goes into (``model``, or the URDF's sub-tree on its path) and the poses' hand in the
+    mount's parent link, shape (4, 4).
+
+    Raises:
+        InputFileError: As :func:`with_calibrated_camera`.
+    """
+    link, stated = split_convention(camera)
+    cam = camera_links(tree, {link: stated})[link]
+    base = model if model is not None else urdf_robot(tree, [link]).nominal
+    assert base is not None
+    return cam, base, _hand_in_mount_parent(base, tree, cam, hand)
 
 
 def _hand_in_mount_parent(
@@ -422,6 +436,7 @@ __all__ = [
     "pose_file_name",
     "simulate_handeye",
     "simulation_files",
+    "urdf_camera_mount",
     "with_calibrated_camera",
     "write_simulation",
 ]
