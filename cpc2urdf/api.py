@@ -322,11 +322,30 @@ def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
     return out
 
 
-def load_handeye_poses(path: PathLike) -> HandEyePoses:
-    """Read a ``cpc2urdf/handeye-poses@1`` file (``docs/handeye.md``)."""
+def load_handeye_poses(
+    path: PathLike,
+    camera: PathLike | None = None,
+    *,
+    time_offset: float | None = None,
+    eye_to_hand: bool = False,
+) -> HandEyePoses:
+    """Read a ``cpc2urdf/handeye-poses@1`` file, or a robot and a camera pose stream (CSV or TUM;
+    ``camera`` default: ``SEQ_camera.*`` beside ``SEQ_robot.*``) paired at the clock offset
+    ``time_offset`` [s] (``t_camera = t_robot + time_offset``; estimated when None), with
+    ``eye_to_hand`` for a fixed camera watching a marker on the hand (``docs/handeye.md``)."""
+    from cpc2urdf.identification.handeye import stream_files
     from cpc2urdf.identification.handeye.pose_file import load_handeye_poses as _load
 
-    return _load(path)
+    if stream_files.is_pose_file(path):
+        if camera is not None or time_offset is not None or eye_to_hand:
+            raise ConfigurationError(
+                f"{path}: a pose file pairs its poses already; a camera stream, a time offset and "
+                "eye-to-hand apply to pose streams (CSV, TUM)"
+            )
+        return _load(path)
+    return stream_files.load_handeye_streams(
+        path, camera, time_offset=time_offset, eye_to_hand=eye_to_hand
+    )
 
 
 def load_plan(path: PathLike, structure: RobotStructure | None = None) -> LoadedPlan:

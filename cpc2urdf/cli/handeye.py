@@ -1,25 +1,45 @@
-"""``cpc2urdf handeye poses.json --method NAME|all [--json]``: hand-eye / robot-world calibration."""
+"""``cpc2urdf handeye poses.json|ROBOT [CAMERA] --method NAME|all [--json]``: hand-eye / robot-world
+calibration from a pose file or two pose streams."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from typing import Any
 
-METHOD_NOTES = {
-    "tsai": "AX = XB, Tsai & Lenz 1989",
-    "park_martin": "AX = XB, Park & Martin 1994",
-    "daniilidis": "AX = XB, Daniilidis 1999 (dual quaternions)",
-    "kronecker": "AX = ZB, Li et al. 2010 (Kronecker product)",
-    "dual_quaternion": "AX = ZB, Li et al. 2010 (dual quaternions)",
-    "zhuang": "AX = ZB, Zhuang et al. 1994 (quaternions, two stages)",
-    "refined": "AX = ZB, Kronecker start + joint nonlinear least squares",
-}
 X_DIRECTION = "X = T_hand_camera: camera pose in the hand frame (maps camera to hand coordinates)"
 Z_DIRECTION = (
     "Z = T_base_target: target pose in the robot base frame (maps target to base coordinates)"
 )
+
+
+X_EYE_TO_HAND = (
+    "X = T_hand_marker: marker pose in the hand frame (eye to hand: the camera is fixed, "
+    "T_camera_target = inv(T_camera_marker))"
+)
+Z_EYE_TO_HAND = "Z = T_base_camera: camera pose in the robot base frame"
+
+
+def _pairing_lines(pairing: Any) -> list[str]:
+    """What pairing the streams did: frames, the clock offset and how it was found."""
+    off = pairing.time_offset * 1e3
+    if pairing.how == "estimated":
+        how = (
+            f"{off:+.3f} ± {pairing.sigma * 1e3:.3f} ms (estimated: angular-speed cross-"
+            f"correlation {pairing.coarse * 1e3:+.3f} ms, refined by the rotation residual)"
+        )
+    elif pairing.how == "given":
+        how = f"{off:+.3f} ms (given)"
+    else:
+        how = "0 (both streams have the same time stamps: rows paired as they are)"
+    return [
+        f"streams: {pairing.n_robot} robot poses, {pairing.n_camera} camera frames with a target "
+        f"pose, {pairing.n_paired} inside the robot's time span, {pairing.n_keyframes} keyframes "
+        "kept (5 deg or 20 mm apart)",
+        f"clock offset t_camera - t_robot = {how}; robot poses taken at t_camera - offset",
+    ]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -29,10 +49,35 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "handeye",
         help="hand-eye (X = T_hand_camera) and robot-world (Z = T_base_target) calibration",
         description="Solve A X = X B or A X = Z B from a cpc2urdf/handeye-poses@1 file (records "
-        "of T_base_hand and T_camera_target, see docs/handeye.md). Prints X = T_hand_camera, "
-        "Z = T_base_target and the residual of every pose in mm and degrees.",
+        "of T_base_hand and T_camera_target), or from a robot and a camera pose stream (CSV or "
+        "TUM, each pose with its time; KinHEC's exports) paired at their clock offset, see "
+        "docs/handeye.md. Prints X = T_hand_camera, Z = T_base_target and the residual of every "
+        "pose in mm and degrees.",
     )
-    p.add_argument("poses", help="hand-eye pose file (cpc2urdf/handeye-poses@1)")
+    p.add_argument(
+        "poses",
+        help="hand-eye pose file (cpc2urdf/handeye-poses@1), or the robot's T_base_hand stream "
+        "(CSV: t,x,y,z,qx,qy,qz,qw; TUM; KinHEC's SEQ_robot.csv)",
+    )
+    p.add_argument(
+        "camera_stream",
+        nargs="?",
+        metavar="CAMERA",
+        help="the camera's T_camera_target stream (default: SEQ_camera.* beside SEQ_robot.*)",
+    )
+    p.add_argument(
+        "--time-offset",
+        type=float,
+        metavar="SECONDS",
+        help="known clock offset t_camera - t_robot [s] (robot poses taken at t_camera - offset); "
+        "default: estimated, or 0 when both streams have the same time stamps",
+    )
+    p.add_argument(
+        "--eye-to-hand",
+        action="store_true",
+        help="streams only: the camera is fixed and watches a marker on the hand; the camera "
+        "stream is T_camera_marker, X = T_hand_marker, Z = T_base_camera",
+    )
     p.add_argument(
         "--method",
         default=DEFAULT_HANDEYE_METHOD,
@@ -96,9 +141,14 @@ def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
 def run(args: argparse.Namespace) -> int:
     from cpc2urdf.api import calibrate_cameras, load_handeye_poses, save_model, solve_handeye
     from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
-    from cpc2urdf.identification.handeye.solvers import ALL_METHODS
+    from cpc2urdf.identification.handeye.solvers import ALL_METHODS, SOLVERS
 
-    data = load_handeye_poses(args.poses)
+    data = load_handeye_poses(
+        args.poses,
+        args.camera_stream,
+        time_offset=args.time_offset,
+        eye_to_hand=args.eye_to_hand,
+    )
     model = _model_to_extend(args, data)
     methods = list(ALL_METHODS) if args.method == "all" else [args.method]
     results, refused = {}, {}
@@ -140,6 +190,8 @@ def run(args: argparse.Namespace) -> int:
             doc.update(results[args.method].to_json())
         if model is not None:
             doc["wrote"] = str(path)
+        if data.pairing is not None:
+            doc["streams"] = dataclasses.asdict(data.pairing)
         print(json.dumps(doc, indent=2))
         return 0
 
@@ -147,16 +199,22 @@ def run(args: argparse.Namespace) -> int:
     who = ", ".join(
         x for x in (data.camera and f"camera {data.camera}", data.hand and f"hand {data.hand}") if x
     )
-    print(f"hand-eye calibration of {args.poses}: {n} poses" + (f" ({who})" if who else ""))
-    print(f"  {X_DIRECTION}")
-    print(f"  {Z_DIRECTION}")
+    if data.pairing is None:
+        print(f"hand-eye calibration of {args.poses}: {n} poses" + (f" ({who})" if who else ""))
+    else:
+        print(f"hand-eye calibration of {data.source}: {n} poses" + (f" ({who})" if who else ""))
+        for line in _pairing_lines(data.pairing):
+            print(f"  {line}")
+    eye_to_hand = data.pairing is not None and data.pairing.eye_to_hand
+    print(f"  {X_EYE_TO_HAND if eye_to_hand else X_DIRECTION}")
+    print(f"  {Z_EYE_TO_HAND if eye_to_hand else Z_DIRECTION}")
     print(
         "  residual of pose k: camera pose T_base_hand[k] X vs Z inv(T_camera_target[k]), "
         "position [mm] and angle [deg]"
     )
     if len(results) == 1 and not refused:
         ((m, r),) = results.items()
-        print(f"\nmethod {m} ({METHOD_NOTES[m]})")
+        print(f"\nmethod {m} ({SOLVERS[m].description})")
         print(f"X  {_pose_line(r.X)}")
         for row in r.X[:3]:
             print("     [" + " ".join(f"{v:13.9f}" for v in row[:3]) + f" {row[3] * 1e3:12.6f} mm]")
@@ -183,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'':16s} Z  {_pose_line(r.Z)}")
         print(
             f"{'':16s} RMS residual {r.rms_translation() * 1e3:.4f} mm, "
-            f"{math.degrees(r.rms_rotation()):.4f} deg   ({METHOD_NOTES[m]})"
+            f"{math.degrees(r.rms_rotation()):.4f} deg   ({SOLVERS[m].description})"
         )
     for m, why in refused.items():
         print(f"{m:16s} refused: {why}")

@@ -40,6 +40,7 @@ from cpc2urdf.files.jsonio import read_json, require_format, write_json
 from cpc2urdf.files.poses import pose_from_json, pose_to_json
 from cpc2urdf.files.units import Units
 from cpc2urdf.identification.handeye.pose_noise import PoseNoise
+from cpc2urdf.identification.handeye.streams import StreamPairing
 from cpc2urdf.transforms import Array
 
 HANDEYE_POSES_FORMAT = "cpc2urdf/handeye-poses@1"
@@ -59,6 +60,8 @@ class HandEyePoses:
         hand: Name of the hand frame, or "".
         source: Where the poses came from (a file path, or ``"<memory>"``); errors name it.
         noise: The noise the file states, or None (the consistency gate then estimates it).
+        pairing: How pose streams became these pairs (clock offset, frames, keyframes), or None
+            for a pose file (:mod:`cpc2urdf.identification.handeye.stream_files`).
     """
 
     T_base_hand: Array
@@ -68,6 +71,7 @@ class HandEyePoses:
     hand: str = ""
     source: str = "<memory>"
     noise: PoseNoise | None = None
+    pairing: StreamPairing | None = None
 
 
 def handeye_poses_from_json(doc: Any, source: str = "<handeye poses>") -> HandEyePoses:
