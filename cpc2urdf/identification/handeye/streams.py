@@ -35,6 +35,7 @@ SPEED_WINDOW = 0.1  # [s] angular speed from poses this far apart (noise vs time
 GRID_RATE = 500.0  # [Hz] the cross-correlation's resampling grid
 MAX_OFFSET = 0.5  # [s] the cross-correlation searches offsets up to this size
 SEARCH_HALF_WIDTH = 0.05  # [s] the residual search around the cross-correlation's offset
+SEARCH_SHIFTS = 2  # times the search window moves on when its minimum is at an edge
 MAX_COST_FRAMES = 1000  # camera frames the residual cost uses at most (evenly spread)
 KEYFRAME_ANGLE = np.radians(5.0)  # KinHEC's keyframes: 5 deg or 2 cm from the last one kept
 KEYFRAME_DISTANCE = 0.02  # [m]
@@ -174,7 +175,8 @@ def refine_time_offset(
 
     The cost is ``J(o) = Σ_k |e_k(o)|²`` over a fixed set of camera frames (those inside the robot
     span for every trial offset), ``e_k`` the :func:`rotation_residuals` with ``R_X``, ``R_Z``
-    solved again at each ``o``. A 21-point grid finds the basin, Brent's method the minimum. The
+    solved again at each ``o``. A 21-point grid finds the basin (moved on by its width up to
+    ``SEARCH_SHIFTS`` times while the minimum is at an edge), Brent's method the minimum. The
     standard deviation is the sandwich ``sqrt(Σ_k j_k'²) / J''`` (``j_k = |e_k|²``, derivatives
     by central differences, the step shrunk to about two sigmas), assuming independent frames.
     Translations are left out: their residual mixes the camera's rotation noise times the
@@ -182,11 +184,8 @@ def refine_time_offset(
     temporal track were 2.3x further off and their sigma 90x too small.
     """
     t0, t1 = robot.t[robot.valid()][[0, -1]]
-    use = (
-        camera.valid()
-        & (camera.t - start - half_width >= t0)
-        & (camera.t - start + half_width <= t1)
-    )
+    reach = half_width * (1 + 2 * SEARCH_SHIFTS)
+    use = camera.valid() & (camera.t - start - reach >= t0) & (camera.t - start + reach <= t1)
     idx = np.flatnonzero(use)
     if len(idx) < 3:
         raise DegenerateDataError("fewer than 3 camera frames overlap the robot stream")
@@ -200,11 +199,18 @@ def refine_time_offset(
     def cost(offset: float) -> float:
         return float(frame_costs(offset).sum())
 
-    grid = np.linspace(start - half_width, start + half_width, 21)
-    k = int(np.argmin([cost(g) for g in grid]))
+    centre = start
+    for _ in range(1 + SEARCH_SHIFTS):  # a minimum at the window's edge moves the window on
+        grid = np.linspace(centre - half_width, centre + half_width, 21)
+        k = int(np.argmin([cost(g) for g in grid]))
+        if 0 < k < 20:
+            break
+        centre = grid[k]
     step = grid[1] - grid[0]
     bounds = (grid[max(k - 1, 0)], grid[min(k + 1, 20)])
     best = float(minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 1e-7}).x)
+    if not 0 < k < 20:  # still at an edge: no minimum found, no uncertainty to give
+        return best, float("inf")
     return best, _sandwich_sigma(frame_costs, best, step)
 
 
