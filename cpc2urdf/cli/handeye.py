@@ -209,8 +209,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"  {X_EYE_TO_HAND if eye_to_hand else X_DIRECTION}")
     print(f"  {Z_EYE_TO_HAND if eye_to_hand else Z_DIRECTION}")
     print(
-        "  residual of pose k: camera pose T_base_hand[k] X vs Z inv(T_camera_target[k]), "
-        "position [mm] and angle [deg]"
+        f"  residual of pose k: {'marker' if eye_to_hand else 'camera'} pose T_base_hand[k] X vs "
+        "Z inv(T_camera_target[k]), position [mm] and angle [deg]"
     )
     if len(results) == 1 and not refused:
         ((m, r),) = results.items()
