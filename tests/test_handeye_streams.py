@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import shutil
 import subprocess
 from pathlib import Path
@@ -122,6 +123,9 @@ def test_kinhec_csv_export_read_and_solved_through_the_command(
     out = capsys.readouterr().out
     assert "seq_camera.csv" in out and "clock offset t_camera - t_robot = +37.000 ±" in out
     assert f"{len(camera.t) - len(camera.t[::7])} camera frames with a target pose" in out
+    assert main(["handeye", str(path), "--method", "kronecker", "--json"]) == 0
+    streams_doc = json.loads(capsys.readouterr().out)["streams"]
+    assert streams_doc["how"] == "estimated" and abs(streams_doc["time_offset"] - OFFSET) < 1e-6
     data = load_handeye_poses(path)  # measured columns only: the decoys would not fit
     assert data.labels[0].startswith("t=") and data.pairing is not None
     assert np.abs(solve_handeye(data, "kronecker").X - X_TRUE).max() < 2e-6
@@ -144,7 +148,19 @@ def test_generic_csv_any_quaternion_order_and_units_and_tum(tmp_path: Path) -> N
             for t, r in zip(robot.t, v, strict=True)
         )
     )
-    for f, tol in ((tmp_path / "r.csv", 1e-12), (tum, 1e-8)):
+    ros = tmp_path / "ros.csv"  # rostopic echo -p: stamps in ns, field names
+    names = [
+        f"field.pose.{k}.{c}"
+        for k, cs in (("position", "xyz"), ("orientation", "xyzw"))
+        for c in cs
+    ]
+    rows = [["%time", "field.header.stamp", *names]]
+    rows += [
+        [str(int(t * 1e9) + 5), str(int(round(t * 1e9))), *map(_num, (*r[:3], *r[4:], r[3]))]
+        for t, r in zip(robot.t, v, strict=True)
+    ]
+    _write(ros, rows)
+    for f, tol in ((tmp_path / "r.csv", 1e-12), (tum, 1e-8), (ros, 1e-12)):
         s = read_pose_stream(f, "robot")
         assert np.abs(s.t - robot.t).max() < tol and np.abs(s.T - robot.T).max() < tol
 

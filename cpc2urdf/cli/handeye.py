@@ -191,7 +191,10 @@ def run(args: argparse.Namespace) -> int:
         if model is not None:
             doc["wrote"] = str(path)
         if data.pairing is not None:
-            doc["streams"] = dataclasses.asdict(data.pairing)
+            doc["streams"] = {  # an infinite sigma (no minimum found) as null: valid JSON
+                k: None if isinstance(v, float) and not math.isfinite(v) else v
+                for k, v in dataclasses.asdict(data.pairing).items()
+            }
         print(json.dumps(doc, indent=2))
         return 0
 

@@ -33,21 +33,32 @@ from cpc2urdf.identification.handeye.pose_file import HandEyePoses
 from cpc2urdf.identification.handeye.streams import PoseStream, pair_streams
 from cpc2urdf.transforms import inverse
 
-TIME_NAMES = ("t", "time", "timestamp", "stamp")
+TIME_NAMES = ("t", "time", "timestamp", "stamp", "rostime")
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 COMPONENTS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 _ALIASES = {"x": ("x", "tx", "px"), "y": ("y", "ty", "py"), "z": ("z", "tz", "pz")}
 KINHEC_PREFIX = {"robot": "base_ee_meas_", "camera": "cam_target_meas_"}
 TUM_COLUMNS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
+# `rostopic echo -p`: field.header.stamp and %time (receipt) in ns, field.pose.position.x, ...
+_ROS_NAMES = re.compile(
+    r"^(?:%time|field\.header\.stamp|.*\b(?:position|translation|orientation|rotation)\.[xyzw])$"
+)
 QUATERNION_NORM_TOL = 1e-3  # as pose files (files/poses.py)
 _NAME_UNIT = re.compile(
     r"^(?P<name>[a-z]+)(?:_(?P<u>[a-z]+)|\s*\[(?P<b>[a-z]+)\])?$"
 )  # x_mm, t[ns]
 
 
+def _ros_name(m: re.Match[str]) -> str:
+    name = m[0]
+    if name in ("%time", "field.header.stamp"):
+        return "rostime_ns" if name == "%time" else "stamp_ns"
+    return ("q" if name.split(".")[-2] in ("orientation", "rotation") else "") + name[-1]
+
+
 def _columns(header: list[str], role: str, where: str) -> tuple[list[int], list[float]]:
     """Indices of t, x, y, z, qx, qy, qz, qw in ``header`` and each one's scale to SI."""
-    names = [h.strip().lower() for h in header]
+    names = [_ROS_NAMES.sub(_ros_name, h.strip().lower()) for h in header]
     prefix, other = KINHEC_PREFIX[role], KINHEC_PREFIX["camera" if role == "robot" else "robot"]
     found: dict[str, tuple[int, float]] = {}
     if any(n.startswith(prefix) for n in names):  # KinHEC: measured columns only, w-first
@@ -95,14 +106,23 @@ def _rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
         raise InputFileError(path, "empty file; expected a header and one pose per row")
     comments = [s.lstrip("#").split() for _, s in lines if s.startswith("#")]
     data = [(k, s) for k, s in lines if not s.startswith("#")]
-    if "," in lines[0][1] or not data or "," in data[0][1]:  # CSV: the first row is the header
-        rows = [
-            (k, [c.strip() for c in r])
-            for (k, _), r in zip(lines, csv.reader(s for _, s in lines), strict=True)
-        ]
-        return rows[0][1], rows[1:]
-    header = next((c for c in reversed(comments) if len(c) >= 8), list(TUM_COLUMNS))
-    return header, [(k, s.split()) for k, s in data]
+    if not data:
+        raise InputFileError(path, "no data rows; expected one pose per row")
+    if "," in data[0][1]:
+        rows = [(k, r) for (k, _), r in zip(data, csv.reader(s for _, s in data), strict=True)]
+    else:
+        rows = [(k, s.split()) for k, s in data]
+    try:
+        float(rows[0][1][0])
+    except ValueError:
+        return rows[0][1], rows[1:]  # a header row
+    if "," in data[0][1]:
+        raise InputFileError(
+            path,
+            f"line {rows[0][0]}: expected a header row naming the columns "
+            "(t, x, y, z, qx, qy, qz, qw in any order)",
+        )
+    return next((c for c in reversed(comments) if len(c) >= 8), list(TUM_COLUMNS)), rows
 
 
 def read_pose_stream(path: str | os.PathLike[str], role: str) -> PoseStream:
@@ -122,7 +142,7 @@ def read_pose_stream(path: str | os.PathLike[str], role: str) -> PoseStream:
     V = np.full((len(rows), 8), np.nan)
     for r, (line, cells) in enumerate(rows):
         for c, i in enumerate(idx):
-            cell = cells[i] if i < len(cells) else ""
+            cell = cells[i].strip() if i < len(cells) else ""
             try:
                 V[r, c] = float(cell) if cell else np.nan
             except ValueError:
