@@ -229,12 +229,15 @@ def handeye_poses_from_streams(
 
 
 def is_pose_file(path: str | os.PathLike[str]) -> bool:
-    """A JSON document (a ``cpc2urdf/handeye-poses@1`` file) rather than a pose stream."""
+    """A ``.json`` file, or a JSON document under another name, rather than a pose stream (a
+    file that cannot be read goes to the JSON reader, which names the problem)."""
+    if str(path).lower().endswith(".json"):
+        return True
     try:
         with open(path, "rb") as f:
-            return f.read(64).lstrip().startswith(b"{")
+            return f.read(64).lstrip()[:1] in (b"{", b"[")
     except OSError:
-        return str(path).endswith(".json")  # let the JSON reader name the problem
+        return True
 
 
 def load_handeye_streams(
