@@ -153,7 +153,7 @@ def test_cli_refuses_an_unknown_convention_and_writes_nothing(tmp_path: Path) ->
 
 def test_noise_free_stage2_recovers_the_mount_and_writes_it_x_forward(tmp_path: Path) -> None:
     sim = cpc2urdf.simulate(TALOS, cameras=["rgbd_link"], pixel_noise=0.0, seed=3)
-    files = sorted(p.name for p in cpc2urdf_write(sim, tmp_path))
+    files = sorted(p.name for p in _write(sim, tmp_path))
     assert files == ["handeye_rgbd_link.json", "handeye_truth.json", "handeye_truth.urdf"]
     poses = tmp_path / "handeye_rgbd_link.json"
     model = cpc2urdf.calibrate_cameras(TALOS, poses, DEFAULT_HANDEYE_METHOD)
@@ -178,7 +178,7 @@ def test_noise_free_stage2_recovers_the_mount_and_writes_it_x_forward(tmp_path: 
     np.testing.assert_allclose(_pin_pose(written, "rgbd_optical_frame", q), T_hand @ X, atol=1e-9)
 
 
-def cpc2urdf_write(sim: HandEyeSimulation, folder: Path) -> list[Path]:
+def _write(sim: HandEyeSimulation, folder: Path) -> list[Path]:
     """``cpc2urdf simulate ... --cameras`` output of ``sim``."""
     from cpc2urdf.identification.handeye.urdf_stage2 import write_simulation
 
