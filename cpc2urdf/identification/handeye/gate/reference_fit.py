@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from cpc2urdf.identification.handeye.axxb import relative_motions, solve_park_martin, target_from_x
 from cpc2urdf.identification.handeye.pose_noise import (
@@ -33,31 +32,11 @@ from cpc2urdf.identification.handeye.pose_noise import (
     estimate_noise,
     residual_covariance,
 )
-from cpc2urdf.transforms import Array, homogeneous, inverse, skew
+from cpc2urdf.transforms import Array, homogeneous, inverse, rotvec_from_matrix, skew
 
 # Residuals below these are rounding, not noise: floors of every level the gate compares.
 NUMERIC_POSITION = 1e-9  # [m]
 NUMERIC_ANGLE = 1e-9  # [rad]
-
-
-def rotvec_from_matrix(R: Array) -> Array:
-    """Rotation vectors of rotation matrices (N, 3, 3) -> (N, 3) [rad].
-
-    ``theta = atan2(|v|, (tr R - 1) / 2)`` with ``v = vee(R - R^T) / 2 = sin(theta) n``: exact and
-    fast (the gate's fits evaluate it thousands of times); within 1e-3 rad of 180 deg, where ``v``
-    loses the axis, scipy's quaternion route.
-    """
-    v = 0.5 * np.stack(
-        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=-1
-    )
-    s = np.linalg.norm(v, axis=-1)
-    c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
-    theta = np.arctan2(s, c)
-    out = v * np.where(s > 1e-300, theta / np.where(s > 1e-300, s, 1.0), 1.0)[:, None]
-    near_pi = theta > np.pi - 1e-3
-    if np.any(near_pi):
-        out[near_pi] = Rotation.from_matrix(R[near_pi]).as_rotvec()
-    return out
 
 
 def matrix_from_rotvec(r: Array) -> Array:
@@ -241,7 +220,6 @@ __all__ = [
     "matrix_from_rotvec",
     "quick_fit",
     "residual_vectors",
-    "rotvec_from_matrix",
     "weighted_fit",
     "whitened",
     "whitening",
