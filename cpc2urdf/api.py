@@ -357,7 +357,7 @@ def load_plan(path: PathLike, structure: RobotStructure | None = None) -> Loaded
 
 
 def solve_handeye(
-    poses: HandEyePoses | PathLike, method: str = "kronecker", *, accept_inconsistent: bool = False
+    poses: HandEyePoses | PathLike, method: str = "ml", *, accept_inconsistent: bool = False
 ) -> HandEyeResult:
     """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``),
     through the consistency gate (the poses' stated noise against the residuals; docs/handeye.md).
@@ -427,7 +427,7 @@ def camera_mount(
 def calibrate_cameras(
     model: CPCModel | RobotRef,
     poses: HandEyePoses | PathLike,
-    method: str = "kronecker",
+    method: str = "ml",
     *,
     camera: str | None = None,
     hand: str | None = None,

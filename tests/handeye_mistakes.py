@@ -169,7 +169,8 @@ def outliers(doc: Doc) -> Doc:
     return d
 
 
-#: ``(mistake, code the gate names, words the refusal contains)``
+#: ``(mistake, code the gate names, words the refusal contains)``; :func:`outliers` is not one:
+#: the poses are dropped and named, and the answer given without them.
 MISTAKES: tuple[tuple[Callable[[Doc], Doc], str, str], ...] = (
     (
         hand_inverted,
@@ -190,5 +191,4 @@ MISTAKES: tuple[tuple[Callable[[Doc], Doc], str, str], ...] = (
     (paired_off_by_one, "paired_next", "poses paired off by one"),
     (hand_quaternions_wxyz, "hand_quaternion_order", "hand quaternions written w,x,y,z"),
     (camera_quaternions_wxyz, "camera_quaternion_order", "camera quaternions written w,x,y,z"),
-    (outliers, "outliers", "gross outliers: config 3, config 8"),
 )

@@ -186,7 +186,9 @@ def residual_covariance(
     if noise.camera_angle_per_metre > 0.0:
         d2 = np.sum(T_camera_target[:, :3, 3] ** 2, axis=-1)
         S = S + noise.camera_angle_per_metre**2 * d2[:, None, None] * terms[3]
-    return S
+    # rounding can leave a zero-noise direction a hair below zero: keep S positive definite
+    floor = 1e-12 * np.trace(S, axis1=1, axis2=2) + 1e-30
+    return S + floor[:, None, None] * np.eye(6)
 
 
 # Floors of an estimated noise (noise-free data has none): residuals below are rounding.

@@ -30,7 +30,8 @@ import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-from numpy.typing import ArrayLike
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.handeye.axxb import (
     HandEyeResult,
@@ -56,6 +57,12 @@ from cpc2urdf.identification.handeye.gate.gate_report import (
     InconsistentPosesError,
 )
 from cpc2urdf.identification.handeye.gate.handeye_gate import check_consistency
+from cpc2urdf.identification.handeye.likelihood import (
+    OUTLIER_PROBABILITY,
+    LikelihoodFit,
+    solve_likelihood,
+    solve_xz,
+)
 from cpc2urdf.identification.handeye.pose_file import HandEyePoses
 from cpc2urdf.identification.handeye.pose_noise import PoseNoise
 from cpc2urdf.transforms import Array, inverse
@@ -147,6 +154,12 @@ SOLVERS: dict[str, HandEyeSolver] = {
             zhuang_a0_check,
         ),
         HandEyeSolver(
+            "ml",
+            AX_ZB,
+            "AX = ZB, joint maximum likelihood: noise estimated, outliers dropped",
+            lambda H, C: solve_xz(H, C),
+        ),
+        HandEyeSolver(
             "refined",
             AX_ZB,
             "AX = ZB, Kronecker start + joint nonlinear least squares",
@@ -157,8 +170,8 @@ SOLVERS: dict[str, HandEyeSolver] = {
 HAND_EYE_METHODS = tuple(n for n, s in SOLVERS.items() if s.equation == AX_XB)
 ROBOT_WORLD_METHODS = tuple(n for n, s in SOLVERS.items() if s.equation == AX_ZB)
 ALL_METHODS = HAND_EYE_METHODS + ROBOT_WORLD_METHODS
-#: The solver used when none is named (``cpc2urdf handeye``, the API): Li et al.'s Kronecker method.
-DEFAULT_HANDEYE_METHOD = "kronecker"
+#: The solver used when none is named (``cpc2urdf handeye``, the API): the joint maximum likelihood.
+DEFAULT_HANDEYE_METHOD = "ml"
 
 
 @dataclass(frozen=True)
@@ -177,28 +190,52 @@ class Gate:
     accept_inconsistent: bool = False
 
 
-_last_verdict: list[tuple[tuple[object, ...], ConsistencyReport]] = []
+_last_verdict: list[
+    tuple[tuple[object, ...], LikelihoodFit, ConsistencyReport, NDArray[np.bool_]]
+] = []
+#: Verdicts that isolated outliers can cause: judged again without the poses the fit drops.
+_OUTLIER_CODES = ("outliers", "implausible", "noise_exceeded")
 
 
 def _gate_verdict(
-    H: Array, C: Array, noise: PoseNoise | None, labels: Sequence[str] | None
-) -> ConsistencyReport:
-    """The gate's verdict on these poses, computed once for the same poses, noise and labels.
+    H: Array, C: Array, noise: PoseNoise | None, labels: Sequence[str] | None, unknown_scale: bool
+) -> tuple[LikelihoodFit, ConsistencyReport, NDArray[np.bool_]]:
+    """The maximum-likelihood fit (outliers found, the scale estimated if unknown), the gate's
+    verdict and the poses every solver gets, computed once for the same poses, noise and labels.
 
-    The verdict does not depend on the solver, and ``--method all`` asks it for the same poses
-    seven times (1,000 poses: ~1.4 s each); the last one is kept (frozen, one entry).
+    The gate judges all poses: a mistake it names (inverted poses, a unit, pairs off by one) is
+    refused. When what it finds is what isolated outliers cause, it judges again without the
+    poses the fit drops, and the solvers get only those kept. Nothing here depends on the solver,
+    and ``--method all`` asks seven times (1,000 poses: ~1.4 s each); the last answer is kept.
     """
     key = (
         hashlib.sha256(H.tobytes() + C.tobytes()).hexdigest(),
         H.shape,
         noise,
         None if labels is None else tuple(labels),
+        unknown_scale,
     )
     if _last_verdict and _last_verdict[0][0] == key:
-        return _last_verdict[0][1]
-    report = check_consistency(H, C, noise=noise, labels=labels)
-    _last_verdict[:] = [(key, report)]
-    return report
+        return _last_verdict[0][1:]
+    fit = solve_likelihood(H, C, estimate_scale=unknown_scale)
+    Cm = _metric(C, fit.scale)
+    report = check_consistency(H, Cm, noise=noise, labels=labels)
+    keep = np.ones(len(H), dtype=bool)
+    if not report.consistent and report.code in _OUTLIER_CODES and not fit.inliers.all():
+        keep = fit.inliers
+        kept = None if labels is None else [str(x) for x, k in zip(labels, keep, strict=True) if k]
+        report = check_consistency(H[keep], Cm[keep], noise=noise, labels=kept)
+    _last_verdict[:] = [(key, fit, report, keep)]
+    return fit, report, keep
+
+
+def _metric(C: Array, scale: float) -> Array:
+    """Target poses with their translations divided by ``scale``."""
+    if scale == 1.0:
+        return C
+    out = C.copy()
+    out[:, :3, 3] /= scale
+    return out
 
 
 def _run(
@@ -208,10 +245,14 @@ def _run(
     methods: Sequence[str],
     kind: str,
     gate: Gate | bool,
+    unknown_scale: bool = False,
 ) -> HandEyeResult:
-    """Validate, diagnose (or gate) and solve with ``SOLVERS[method]``, which must be one of ``methods``."""
+    """Validate, diagnose (or gate) and solve with ``SOLVERS[method]``, which must be one of
+    ``methods``. Gated, every solver gets the poses the maximum-likelihood fit keeps."""
     if method not in methods:
         raise ValueError(f"unknown {kind}method {method!r}; known: {', '.join(methods)}")
+    if unknown_scale and method != "ml":
+        raise ValueError(f"method {method!r} needs metric target poses; ml estimates a scale")
     solver = SOLVERS[method]
     H = as_pose_stack(T_base_hand, "T_base_hand")
     C = as_pose_stack(T_camera_target, "T_camera_target")
@@ -221,19 +262,45 @@ def _run(
         warnings += solver.check(H)
     report: ConsistencyReport | None = None
     if options is not None:
-        report = _gate_verdict(H, C, options.noise, options.labels)
+        fit, report, keep = _gate_verdict(H, C, options.noise, options.labels, unknown_scale)
         if not report.consistent and not options.accept_inconsistent:
             raise InconsistentPosesError(report)
         if not report.consistent:
             warnings.append(f"inconsistent data accepted: {report.summary()}")
         warnings += report.warnings
-    X, Z = solver.solve(H, C)
+    else:
+        keep = np.ones(len(H), dtype=bool)
+        if method == "ml":
+            fit = solve_likelihood(H, C, estimate_scale=unknown_scale)
+    if unknown_scale:
+        C = _metric(C, fit.scale)
+        warnings.append(f"target translations were {fit.scale:.6g} times the metric ones")
+    keep = fit.inliers if method == "ml" else keep
+    if not keep.all():
+        warnings.append(_dropped(keep, options.labels if options is not None else None))
+    X, Z = (fit.X, fit.Z) if method == "ml" else solver.solve(H[keep], C[keep])
     result = make_result(method, H, C, X, Z, warnings)
     return replace(result, consistency=report) if report is not None else result
 
 
+def _dropped(keep: NDArray[np.bool_], labels: Sequence[str] | None) -> str:
+    """The warning naming the poses the maximum-likelihood fit dropped as outliers."""
+    out = [int(k) for k in np.flatnonzero(~keep)]
+    names = [str(labels[k]) if labels is not None else f"pose {k}" for k in out]
+    shown = ", ".join(names[:10]) + (f" and {len(names) - 10} more" if len(names) > 10 else "")
+    return (
+        f"{len(out)} of {len(keep)} poses dropped as outliers (residual beyond the "
+        f"{OUTLIER_PROBABILITY:.1%} point of the fitted noise): {shown}"
+    )
+
+
 def calibrate(
-    T_base_hand: ArrayLike, T_camera_target: ArrayLike, method: str, *, gate: Gate | bool = False
+    T_base_hand: ArrayLike,
+    T_camera_target: ArrayLike,
+    method: str,
+    *,
+    gate: Gate | bool = False,
+    unknown_scale: bool = False,
 ) -> HandEyeResult:
     """Solve for ``X = T_hand_camera`` and ``Z = T_base_target`` with any solver of :data:`ALL_METHODS`.
 
@@ -244,6 +311,8 @@ def calibrate(
         gate: Run the consistency gate after the degenerate-data checks (``True``, or a
             :class:`Gate` with the stated noise, pose labels and whether to accept inconsistent
             data); ``False`` (default, the solver studies) keeps only the quick direction check.
+        unknown_scale: The target translations are known up to one factor (a monocular
+            visual-odometry trajectory): ``ml`` estimates it; the residuals are then metric.
 
     Returns:
         The solution with per-pose residuals and warnings (and, gated, ``consistency``).
@@ -255,7 +324,7 @@ def calibrate(
             ``DegenerateDataError``); the message names the most likely mistake.
         ValueError: Malformed poses or an unknown method.
     """
-    return _run(T_base_hand, T_camera_target, method, ALL_METHODS, "", gate)
+    return _run(T_base_hand, T_camera_target, method, ALL_METHODS, "", gate, unknown_scale)
 
 
 def calibrate_poses(

@@ -77,7 +77,7 @@ TIE_FACTOR = 2.0
 MAX_CAMERA_OFFSET = 0.5  # [m]: |t_X|, camera origin from the hand frame's origin
 WORKING_DISTANCE = (0.02, 20.0)  # [m]: median camera-target distance |t_C| of a usable setup
 IMPLAUSIBLE_RESIDUAL = (
-    0.05  # RMS position residual / median camera-target distance (no noise statement)
+    0.2  # RMS position residual / median camera-target distance (no noise statement)
 )
 IMPLAUSIBLE_ANGLE = math.radians(5.0)  # [rad] RMS rotation residual (no noise statement)
 LARGE_RESIDUAL = 0.01  # a warning above this fraction of the camera-target distance ...
