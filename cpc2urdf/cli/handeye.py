@@ -1,5 +1,6 @@
 """``cpc2urdf handeye poses.json|ROBOT [CAMERA] --method NAME|all [--json]``: hand-eye / robot-world
-calibration from a pose file or two pose streams."""
+calibration from a pose file or two pose streams; ``--model M -o OUT`` adds the camera frame to a
+model, ``--urdf ROBOT.urdf --camera LINK -o OUT`` writes the camera link's mount back into a URDF."""
 
 from __future__ import annotations
 
@@ -90,7 +91,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument(
         "--model", help="model file (or shipped robot) to put the camera frame into; needs -o"
     )
-    p.add_argument("-o", "--output", help="write MODEL with the camera frame added (atomically)")
+    p.add_argument(
+        "-o",
+        "--output",
+        help="write MODEL with the camera frame added, or with --urdf the calibrated URDF "
+        "(atomically)",
+    )
+    p.add_argument(
+        "--urdf",
+        metavar="ROBOT.urdf",
+        help="write the camera link's mount (--camera: an optical or x-forward body link of this "
+        "URDF) back into it as -o, in the link's own convention (docs/handeye.md)",
+    )
     p.add_argument("--camera", help="camera frame name (default: the pose file's 'camera')")
     p.add_argument("--hand", help="hand frame name in MODEL (default: the pose file's 'hand')")
     p.add_argument(
@@ -101,8 +113,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "docs/handeye.md): the diagnosis is printed as a warning and stored in the model",
     )
     p.set_defaults(
-        run=run, may_replace=("model",)
+        run=run, may_replace=("model",), written=_reports
     )  # -o MODEL: the model updated in place, atomically
+
+
+def _reports(args: argparse.Namespace) -> dict[str, str]:
+    """With --urdf: the calibration report written next to -o (checked against the inputs before
+    the command runs)."""
+    from cpc2urdf.urdf.report import report_paths
+
+    if getattr(args, "urdf", None) is None or not args.output:
+        return {}
+    try:
+        json_path, text_path = report_paths(args.output)
+    except ValueError:  # no file name (-o .): refused by run, before writing
+        return {}
+    return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
 
 
 def _pose_line(T: Any) -> str:
@@ -117,11 +143,25 @@ def _pose_line(T: Any) -> str:
 
 
 def _model_to_extend(args: argparse.Namespace, data: Any) -> Any:
-    """The model --model names (checked against the poses before solving), or None."""
+    """The model --model names (checked against the poses before solving), or None; with --urdf,
+    its camera link and the poses' hand checked before solving (None)."""
     from cpc2urdf.api import camera_mount, load_model
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.jsonio import check_output_path
+    from cpc2urdf.files.robot_ref import is_urdf_ref
 
+    if args.urdf is not None:  # checked before the solve: the camera link and the poses' hand
+        if args.model is not None or args.output is None or args.method == "all":
+            raise ConfigurationError(
+                "--urdf needs -o (the calibrated URDF), one --method (not 'all') and no --model"
+            )
+        if not is_urdf_ref(args.urdf):
+            raise ConfigurationError(
+                f"--urdf {args.urdf}: not a URDF (a .urdf file, or XML); a CPC model goes in --model"
+            )
+        check_output_path(args.output)
+        camera_mount(args.urdf, data, camera=args.camera, hand=args.hand)
+        return None
     if (args.model is None) != (args.output is None):
         raise ConfigurationError(
             "--model and -o/--output go together (the model to extend and where to write it)"
@@ -175,6 +215,19 @@ def run(args: argparse.Namespace) -> int:
         )
         path = save_model(out, args.output)
         camera, hand = args.camera or data.camera, args.hand or data.hand
+    if args.urdf is not None:  # the camera link's mount origin, in the link's own convention
+        from cpc2urdf.api import export_urdf
+
+        placed = calibrate_cameras(
+            args.urdf,
+            data,
+            args.method,
+            camera=args.camera,
+            hand=args.hand,
+            result=results[args.method],
+            accept_inconsistent=args.accept_inconsistent,
+        )
+        path = export_urdf(placed, args.output)
 
     if args.json:
         doc: dict[str, Any] = {
@@ -188,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
             doc["refused"] = refused
         else:
             doc.update(results[args.method].to_json())
-        if model is not None:
+        if model is not None or args.urdf is not None:
             doc["wrote"] = str(path)
         if data.pairing is not None:
             doc["streams"] = {  # an infinite sigma (no minimum found) as null: valid JSON
@@ -236,6 +289,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {w}")
         if model is not None:
             print(f"wrote {path}: frame {camera} on the link of {hand} at T_link_{hand} @ X")
+        if args.urdf is not None:
+            print(f"wrote {path}: the camera link's mount origin, in the link's own convention")
         return 0
 
     print()
