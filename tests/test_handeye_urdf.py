@@ -6,6 +6,7 @@ from example-robot-data.
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -196,21 +197,154 @@ def test_optical_link_written_back_in_its_own_convention(tmp_path: Path) -> None
     np.testing.assert_allclose(mount, r.X, atol=1e-12)  # an optical link is X itself
 
 
-def test_default_solver_within_twice_the_best_on_tiago() -> None:
+@pytest.mark.parametrize(
+    ("urdf", "link"), [(TIAGO, "xtion_link"), (TALOS, "rgbd_link")], ids=["tiago", "talos"]
+)
+def test_default_solver_within_twice_the_best(urdf: Path, link: str) -> None:
     """Median over seeds of the mount error, 0.1 px, 30 configurations: the default solver's
-    translation and rotation errors within 2x the best solver's (``--method all``)."""
+    translation and rotation errors within 2x the best solver's (``--method all``). TALOS failed
+    this while the default was ``kronecker`` (its translation ~3x the best's); ``ml`` passes."""
     errors: dict[str, list[tuple[float, float]]] = {m: [] for m in ALL_METHODS}
     for seed in range(5):
-        sim = cpc2urdf.simulate(TIAGO, cameras=["xtion_link"], poses=30, pixel_noise=0.1, seed=seed)
-        cam, true = sim.rig.cameras["xtion_link"], sim.true_mounts()["xtion_link"]
+        sim = cpc2urdf.simulate(urdf, cameras=[link], poses=30, pixel_noise=0.1, seed=seed)
+        cam, true = sim.rig.cameras[link], sim.true_mounts()[link]
         for m in ALL_METHODS:
-            r = calibrate(sim.T_base_hand["xtion_link"], sim.T_camera_target["xtion_link"], m)
+            r = calibrate(sim.T_base_hand[link], sim.T_camera_target[link], m)
             errors[m].append(_errors(cam.link_pose(r.X), true))
     median = {m: np.median(np.array(e), axis=0) for m, e in errors.items()}
     best = np.min(np.array(list(median.values())), axis=0)
     default = median[DEFAULT_HANDEYE_METHOD]
     assert default[0] <= 2 * best[0] and default[1] <= 2 * best[1], (default, best)
     assert default[0] < 2e-3 and default[1] < math.radians(0.2)
+
+
+def _cli(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "cpc2urdf", *argv], capture_output=True, text=True)
+
+
+def _pin_mount(urdf: Path, hand: str, link: str) -> np.ndarray:
+    """``T_hand_link`` by Pinocchio (all joints at 0; the mount is fixed)."""
+    return np.linalg.inv(_pin_pose(urdf, hand, {})) @ _pin_pose(urdf, link, {})
+
+
+def test_cli_handeye_writes_the_camera_link_back_into_the_urdf(tmp_path: Path) -> None:
+    """``simulate TALOS --cameras rgbd_link`` then ``handeye POSES --urdf TALOS -o cal.urdf`` with
+    the default method: the written link, by Pinocchio, within 2x the best solver's error of the
+    truth (``handeye_truth.json``, ``handeye_truth.urdf``), x forward; only its mount changed."""
+    sim = tmp_path / "sim"
+    ok = _cli("simulate", str(TALOS), "--cameras", "rgbd_link", "--poses", "30", "-o", str(sim))
+    assert ok.returncode == 0, ok.stderr
+    poses, out = sim / "handeye_rgbd_link.json", tmp_path / "cal.urdf"
+    run = _cli("handeye", str(poses), "--urdf", str(TALOS), "-o", str(out))
+    assert run.returncode == 0, run.stderr
+    assert f"method {DEFAULT_HANDEYE_METHOD} " in run.stdout
+    assert f"wrote {out}: the camera link's mount origin, in the link's own convention" in (
+        run.stdout
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "cal.report.json",
+        "cal.report.txt",
+        "cal.urdf",
+        "sim",
+    ]
+    truth = json.loads((sim / "handeye_truth.json").read_text())["cameras"]["rgbd_link"]
+    assert (truth["convention"], truth["hand"]) == (BODY, "head_2_link")
+    true = np.array(truth["T_hand_link"])
+    np.testing.assert_allclose(
+        _pin_mount(sim / "handeye_truth.urdf", "head_2_link", "rgbd_link"), true, atol=1e-9
+    )
+    written = _pin_mount(out, "head_2_link", "rgbd_link")
+    data = load_handeye_poses(poses)
+    errors = {}
+    for m in ALL_METHODS:  # each solver's link pose: X is the optical frame in the hand
+        X = cpc2urdf.solve_handeye(data, m).X
+        errors[m] = _errors(X @ T_BODY_OPTICAL.T, true)
+    best = np.min(np.array(list(errors.values())), axis=0)
+    t, r = _errors(written, true)
+    np.testing.assert_allclose((t, r), errors[DEFAULT_HANDEYE_METHOD], atol=1e-9)
+    assert t <= 2 * best[0] and r <= 2 * best[1], ((t, r), best)
+    assert t < 2e-3 and r < math.radians(0.2)
+    assert math.degrees(rotation_error(written[:3, :3], np.eye(3))) < 10  # x forward
+    before, after = TALOS.read_text().splitlines(), out.read_text().splitlines()
+    assert [i for i, (a, b) in enumerate(zip(before, after, strict=True)) if a != b] == [278]
+    # --json names the file written
+    again = _cli(
+        "handeye", str(poses), "--urdf", str(TALOS), "-o", str(tmp_path / "j.urdf"), "--json"
+    )
+    assert again.returncode == 0, again.stderr
+    assert json.loads(again.stdout)["wrote"] == str(tmp_path / "j.urdf")
+
+
+def test_cli_handeye_urdf_bad_input_one_line_nothing_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cpc2urdf.cli import main
+    from cpc2urdf.identification.handeye.pose_file import save_handeye_poses
+
+    sim = cpc2urdf.simulate(TALOS, cameras=["rgbd_link"], poses=6, pixel_noise=0.0, seed=4)
+    poses = save_handeye_poses(
+        tmp_path / "p.json",
+        sim.T_base_hand["rgbd_link"],
+        sim.T_camera_target["rgbd_link"],
+        camera="rgbd_link",
+        hand="head_2_link",
+    )
+    bare = save_handeye_poses(  # no camera named: --camera needed
+        tmp_path / "bare.json", sim.T_base_hand["rgbd_link"], sim.T_camera_target["rgbd_link"]
+    )
+    out = tmp_path / "cal.urdf"
+    cases = {
+        "--urdf needs -o": [str(poses), "--urdf", str(TALOS)],
+        "one --method": [str(poses), "--urdf", str(TALOS), "-o", str(out), "--method", "all"],
+        "no --model": [str(poses), "--urdf", str(TALOS), "-o", str(out), "--model", "talos"],
+        "not a URDF": [str(poses), "--urdf", str(poses), "-o", str(out)],
+        "its convention cannot be told": [
+            str(poses),
+            "--urdf",
+            str(TALOS),
+            "-o",
+            str(out),
+            "--camera",
+            "imu_link",
+        ],
+        "is not fixed to it": [
+            str(poses),
+            "--urdf",
+            str(TALOS),
+            "-o",
+            str(out),
+            "--hand",
+            "torso_2_link",
+        ],
+        "name the camera link": [str(bare), "--urdf", str(TALOS), "-o", str(out)],
+        "the same file as the input urdf": [str(poses), "--urdf", str(TALOS), "-o", str(TALOS)],
+    }
+    # -o p.urdf.urdf's report is p.urdf.report.json: poses of that name are not replaced
+    poses_report = tmp_path / "p.urdf.report.json"
+    poses_report.write_text(poses.read_text())
+    cases["the same file as the input poses"] = [
+        str(poses_report),
+        "--urdf",
+        str(TALOS),
+        "-o",
+        str(tmp_path / "p.urdf.urdf"),
+    ]
+    for expected, argv in cases.items():
+        assert main(["handeye", *argv]) == 2, expected
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and expected in err, (expected, err)
+        assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "bare.json",
+        "p.json",
+        "p.urdf.report.json",
+    ]
+    # the pose file's camera named by --camera: accepted
+    assert (
+        main(["handeye", str(bare), "--urdf", str(TALOS), "-o", str(out), "--camera", "rgbd_link"])
+        == 0
+    )
+    assert out.is_file()
 
 
 def test_two_cameras_and_the_iis_head_path_unchanged(tmp_path: Path) -> None:
