@@ -232,9 +232,11 @@ def estimate_noise(
 
     def nll(v: Array, Kk: Array, ek: Array) -> float:
         S = np.einsum("i,injk->njk", v, Kk)
+        sign, logdet = np.linalg.slogdet(S)
+        if not np.all(sign > 0) or not np.all(np.isfinite(logdet)):
+            return math.inf  # not a covariance: never a step's answer
         return float(
-            np.sum(np.linalg.slogdet(S)[1])
-            + np.einsum("nj,nj->", ek, np.linalg.solve(S, ek[..., None])[..., 0])
+            np.sum(logdet) + np.einsum("nj,nj->", ek, np.linalg.solve(S, ek[..., None])[..., 0])
         )
 
     def fit(keep: NDArray[np.intp], v: Array) -> Array:
@@ -243,7 +245,10 @@ def estimate_noise(
         v = np.maximum(v, floor)
         f = nll(v, Kk, ek)
         for _ in range(50):
-            Si = np.linalg.inv(np.einsum("i,injk->njk", v, Kk))
+            S = np.einsum("i,injk->njk", v, Kk)
+            if not np.all(np.isfinite(S)) or np.any(np.linalg.det(S) <= 0.0):
+                break  # a variance left the finite, positive range: keep the last good one
+            Si = np.linalg.inv(S)
             SK = np.einsum("njk,inkl->injl", Si, Kk)  # S^-1 K_i
             a = np.einsum("njk,nk->nj", Si, ek)
             g = 0.5 * (np.einsum("nj,injk,nk->i", a, Kk, a) - np.einsum("injj->i", SK))
