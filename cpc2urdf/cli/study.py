@@ -49,6 +49,10 @@ STUDIES: dict[str, tuple[str, str]] = {
         "cpc2urdf.studies.handeye_pairs",
         "AX = XB from all pose pairs, ours (O(N)) or consecutive ones: X's error on the same data",
     ),
+    "kinhec": (
+        "cpc2urdf.studies.handeye_kinhec",
+        "the default hand-eye solver on KinHEC's tracks vs its baselines (pip install kinhec)",
+    ),
     "gaze-ahead": (
         "cpc2urdf.studies.gaze_ahead",
         "calibrated demo heads (seeds 0-9) answer targets ahead facing them, vs the nominal head",
