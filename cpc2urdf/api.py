@@ -357,7 +357,11 @@ def load_plan(path: PathLike, structure: RobotStructure | None = None) -> Loaded
 
 
 def solve_handeye(
-    poses: HandEyePoses | PathLike, method: str = "ml", *, accept_inconsistent: bool = False
+    poses: HandEyePoses | PathLike,
+    method: str = "ml",
+    *,
+    accept_inconsistent: bool = False,
+    unknown_scale: bool = False,
 ) -> HandEyeResult:
     """Hand-eye and robot-world calibration ``A X = Z B`` of one camera (``cpc2urdf handeye``),
     through the consistency gate (the poses' stated noise against the residuals; docs/handeye.md).
@@ -367,6 +371,8 @@ def solve_handeye(
         method: A solver name of :data:`cpc2urdf.identification.handeye.solvers.ALL_METHODS`.
         accept_inconsistent: Keep a result whose poses fail the gate (the diagnosis is in its
             warnings) instead of raising.
+        unknown_scale: The target translations are known up to one factor (monocular visual
+            odometry); ``ml`` estimates it.
 
     Returns:
         ``X = T_hand_camera``, ``Z = T_base_target`` and the residual of every pose.
@@ -375,7 +381,9 @@ def solve_handeye(
     from cpc2urdf.identification.handeye.solvers import calibrate_poses
 
     data = poses if isinstance(poses, HandEyePoses) else load_handeye_poses(poses)
-    return calibrate_poses(data, method, accept_inconsistent=accept_inconsistent)
+    return calibrate_poses(
+        data, method, accept_inconsistent=accept_inconsistent, unknown_scale=unknown_scale
+    )
 
 
 def camera_mount(
@@ -449,7 +457,7 @@ def calibrate_cameras(
     Args:
         model: The identified model (or a reference :func:`load_model` accepts, or a URDF).
         poses: Head-camera observations of the target with the hand poses, or their file.
-        method: Hand-eye solver (default Li et al.'s Kronecker method).
+        method: Hand-eye solver (default the joint maximum likelihood ``ml``).
         camera: Camera frame name (default: the pose file's ``camera``).
         hand: Frame of the model the camera is fixed to (default: the pose file's ``hand``).
         result: A solution of these poses already computed (then ``method`` is not run again).

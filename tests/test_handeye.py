@@ -301,7 +301,8 @@ def test_motion_pairs_all_up_to_31_poses_then_15_per_pose() -> None:
 
 
 def test_many_poses_degenerate_still_refused() -> None:
-    # 500 poses about one axis, or a pose list inverted: refused by every solver as with all pairs.
+    # 500 poses about one axis, or a pose list inverted: refused by every solver as with all pairs
+    # (ml answers what one axis determines).
     rng = np.random.default_rng(0)
     X, Z, _, _ = make_data(rng)
     axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
@@ -313,6 +314,9 @@ def test_many_poses_degenerate_still_refused() -> None:
     )
     C = inverse(X)[None] @ inverse(H) @ Z[None]
     for method in ALL_METHODS:
+        if method == "ml":  # answers the determined part and names the rest
+            assert calibrate(H, C, method).warnings[0].startswith("partly determined")
+            continue
         with pytest.raises(DegenerateDataError, match="parallel axes"):
             calibrate(H, C, method)
     _, _, H, C = make_data(rng, 500)

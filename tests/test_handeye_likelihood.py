@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from test_handeye import EXACT, make_data
 
+from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.axzb import solve_kronecker
 from cpc2urdf.identification.handeye.likelihood import pose_residuals, solve_likelihood
 from cpc2urdf.identification.handeye.solvers import DEFAULT_HANDEYE_METHOD, Gate, calibrate
@@ -128,3 +131,25 @@ def test_unknown_scale_recovered() -> None:
     C[:, :3, 3] *= 2.5
     fit = solve_likelihood(H, C, estimate_scale=True)
     assert abs(fit.scale - 2.5) < 1e-9 and np.abs(fit.X - X).max() < EXACT
+
+
+def test_one_joint_gives_the_determined_part_and_names_the_rest() -> None:
+    """All hand rotations about one axis: the default answers and names X's rotation about that
+    axis as undetermined; what is determined is exact; the closed forms still refuse."""
+    X, Z, _, _ = make_data(np.random.default_rng(0), 3)
+    H = np.array(
+        [
+            homogeneous(Rotation.from_euler("z", a).as_matrix(), [0.3, 0.1, 0.5])
+            for a in np.linspace(0.0, 2.0, 10)
+        ]
+    )
+    C = inverse(X)[None] @ inverse(H) @ Z[None]
+    result = calibrate(H, C, "ml", gate=Gate())
+    words = next(w for w in result.warnings if w.startswith("undetermined by these poses"))
+    about = json.loads(words.split("X's rotation about ")[1].split("]")[0] + "]")
+    assert abs(np.dot(about, [0.0, 0.0, 1.0])) > 0.999  # the joint's axis, in the hand frame
+    # determined: the camera's tilt to the axis and its distance from it
+    assert abs(result.X[2, 2] - X[2, 2]) < 1e-9
+    assert np.hypot(*result.X[:2, 3]) == pytest.approx(np.hypot(*X[:2, 3]), abs=1e-9)
+    with pytest.raises(DegenerateDataError, match="parallel axes"):
+        calibrate(H, C, "kronecker", gate=Gate())

@@ -103,6 +103,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="write the camera link's mount (--camera: an optical or x-forward body link of this "
         "URDF) back into it as -o, in the link's own convention (docs/handeye.md)",
     )
+    p.add_argument(
+        "--unknown-scale",
+        action="store_true",
+        help="the target poses' translations are known up to one factor (a monocular visual "
+        "odometry or SLAM trajectory): ml estimates it",
+    )
     p.add_argument("--camera", help="camera frame name (default: the pose file's 'camera')")
     p.add_argument("--hand", help="hand frame name in MODEL (default: the pose file's 'hand')")
     p.add_argument(
@@ -194,7 +200,12 @@ def run(args: argparse.Namespace) -> int:
     results, refused = {}, {}
     for m in methods:
         try:
-            results[m] = solve_handeye(data, m, accept_inconsistent=args.accept_inconsistent)
+            results[m] = solve_handeye(
+                data,
+                m,
+                accept_inconsistent=args.accept_inconsistent,
+                unknown_scale=args.unknown_scale,
+            )
         except InconsistentDataError:
             raise  # the gate judges the data, the same for every solver: names the file already
         except DegenerateDataError as e:

@@ -14,8 +14,9 @@ defaults: the two measured streams are paired by
 :func:`~cpc2urdf.identification.handeye.streams.pair_streams` (row by row when synchronous; the
 clock offset estimated by us otherwise, never KinHEC's ground truth), KinHEC's keyframes (5 deg
 or 2 cm apart, at most 200) are kept, and the default solver runs through the consistency gate.
-What a user states is passed as they would: ``--eye-to-hand`` for eye-to-hand sequences and
-``--unknown-scale`` on the monocular track. A refusal counts as no answer, with its cause.
+What a user knows of their setup is passed as they would: ``--eye-to-hand`` for eye-to-hand
+sequences, ``--unknown-scale`` for camera trajectories known up to scale (monocular visual
+odometry: KinHEC's ``scale`` is not 1). A refusal counts as no answer, with its cause.
 
 The table: per track, the median X rotation [deg] and translation [mm] errors of ours and of the
 best baseline per metric (the lowest median of any KinHEC solver; synchronous sequences and the
@@ -61,7 +62,7 @@ def evaluate(seq: Any) -> dict[str, Any]:
         )
         row["offset_error_ms"] = 1e3 * abs(pairing.time_offset - seq.time_offset)
         result = calibrate(
-            H, C, DEFAULT_HANDEYE_METHOD, gate=Gate(), unknown_scale=m["track"] == "monocular"
+            H, C, DEFAULT_HANDEYE_METHOD, gate=Gate(), unknown_scale=float(m["scale"]) != 1.0
         )
     except Cpc2UrdfError as e:
         row.update(ok=False, error=str(e).splitlines()[0][:300])

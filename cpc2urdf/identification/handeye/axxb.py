@@ -208,25 +208,35 @@ def check_degenerate(T_base_hand: Array, T_camera_target: Array) -> list[str]:
             f"{n} poses; hand-eye calibration needs at least {MIN_POSES} (two motions about "
             "non-parallel axes)"
         )
-    rms, axes = rotation_spread(T_base_hand)
-    if rms[0] < DEGENERATE_ROTATION:
-        raise DegenerateDataError(
-            f"tiny rotations: the hand rotates by {math.degrees(rms[0]):.3g} deg RMS between poses "
-            f"(< {math.degrees(DEGENERATE_ROTATION):g} deg); the rotation of X is undetermined"
-        )
-    if rms[1] < DEGENERATE_ROTATION:
-        ax = np.round(axes[:, 0], 3).tolist()
-        raise DegenerateDataError(
-            f"rotations about parallel axes only (all about {ax} in the base frame, "
-            f"{math.degrees(rms[1]):.3g} deg RMS about any other direction): X's rotation about "
-            "that axis is undetermined; move a second joint with a non-parallel axis"
-        )
+    problem = rotation_degeneracy(T_base_hand)
+    if problem:
+        raise DegenerateDataError(problem)
+    rms, _ = rotation_spread(T_base_hand)
     if rms[1] < WEAK_ROTATION:
         return [
             f"weak data: the hand rotations excite a second axis by only {math.degrees(rms[1]):.3g} "
             f"deg RMS (< {math.degrees(WEAK_ROTATION):g} deg); expect noise to be amplified"
         ]
     return []
+
+
+def rotation_degeneracy(T_base_hand: Array) -> str:
+    """Why the hand rotations cannot determine X's rotation ("" if they can): tiny rotations, or
+    rotations about parallel axes only."""
+    rms, axes = rotation_spread(T_base_hand)
+    if rms[0] < DEGENERATE_ROTATION:
+        return (
+            f"tiny rotations: the hand rotates by {math.degrees(rms[0]):.3g} deg RMS between poses "
+            f"(< {math.degrees(DEGENERATE_ROTATION):g} deg); the rotation of X is undetermined"
+        )
+    if rms[1] < DEGENERATE_ROTATION:
+        ax = np.round(axes[:, 0], 3).tolist()
+        return (
+            f"rotations about parallel axes only (all about {ax} in the base frame, "
+            f"{math.degrees(rms[1]):.3g} deg RMS about any other direction): X's rotation about "
+            "that axis is undetermined; move a second joint with a non-parallel axis"
+        )
+    return ""
 
 
 def diagnose(T_base_hand: Array, T_camera_target: Array) -> list[str]:
@@ -540,6 +550,7 @@ __all__ = [
     "null_space_combination",
     "outlier_warnings",
     "relative_motions",
+    "rotation_degeneracy",
     "residuals",
     "rotation_spread",
     "solve_daniilidis",

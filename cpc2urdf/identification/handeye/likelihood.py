@@ -30,7 +30,7 @@ parameter of the fit (started from the translation least squares given the start
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +59,8 @@ NOISE_GROUPS = np.array([0, 0, 0, 1, 1, 1, 2, 3, 4, 5, 6, 7])
 #: translation level shared by the hand and the target).
 MIN_POSES_PER_NOISE = 3
 FEW_POSES_TIES = np.array([0, 1, 0, 0, 0, 1, 1, 1])
+#: A direction of the fit is undetermined when its information is below this fraction of the best.
+UNDETERMINED = 1e-9
 _MAX_ROUNDS = 8  # outlier rounds
 _MAX_GLS = 20  # weight / solve rounds per set
 _MAX_STEPS = 20  # Gauss-Newton steps per weight
@@ -79,6 +81,8 @@ class LikelihoodFit:
         covariance: Covariance of the solution's perturbation ``(X exp(dx), Z exp(dz)[, log s])``
             (rotation vector, translation per unknown), shape (12, 12) or (13, 13).
         start: Which start the fit began from.
+        undetermined: Directions of the perturbation the poses do not determine (the fit kept
+            its start along them), one per row; none for data that determine X and Z.
     """
 
     X: Array
@@ -88,6 +92,31 @@ class LikelihoodFit:
     noise: Array
     covariance: Array
     start: str
+    undetermined: Array = field(default_factory=lambda: np.zeros((0, 12)))
+
+    def undetermined_words(self) -> list[str]:
+        """The directions the poses do not determine, in words (X's in the hand frame, Z's in
+        the base frame); the solution keeps its start there. Empty when X and Z are determined."""
+        parts = []
+        for name, k, R in (
+            ("X's rotation about", 0, self.X[:3, :3]),
+            ("X's translation along", 3, self.X[:3, :3]),
+            ("Z's rotation about", 6, self.Z[:3, :3]),
+            ("Z's translation along", 9, self.Z[:3, :3]),
+        ):
+            if len(self.undetermined):
+                _, sv, Vt = np.linalg.svd(self.undetermined[:, k : k + 3], full_matrices=False)
+                parts += [
+                    f"{name} {np.round(R @ d, 3).tolist()}"
+                    for g, d in zip(sv, Vt, strict=True)
+                    if g > 0.1
+                ]
+        if not parts:
+            return []
+        return [
+            "undetermined by these poses, kept at the closed form's values (X in the hand "
+            "frame, Z in the base frame): " + "; ".join(parts)
+        ]
 
 
 def pose_residuals(H: Array, C: Array, X: Array, Z: Array, scale: float = 1.0) -> Array:
@@ -303,7 +332,7 @@ def _gls(
     H: Array, C: Array, X: Array, Z: Array, s: float, theta: Array, with_scale: bool
 ) -> tuple[Array, Array, float, Array, Array]:
     """Alternate the noise's and the solution's maximum likelihood on these poses:
-    ``(X, Z, s, theta, covariance)``."""
+    ``(X, Z, s, theta, normal matrix)``."""
     normal = np.eye(13 if with_scale else 12)
     for _ in range(_MAX_GLS):
         A, G = _adjoint(inverse(X)[None])[0], _camera_map(C, s)
@@ -314,7 +343,7 @@ def _gls(
         X, Z, s, normal = _gauss_newton(H, C, X, Z, s, W, with_scale)
         if done:
             break
-    return X, Z, s, theta, np.asarray(np.linalg.pinv(normal), dtype=float)
+    return X, Z, s, theta, normal
 
 
 def _selection_factor(h: float) -> float:
@@ -374,12 +403,15 @@ def solve_likelihood(
     limit = chi2.ppf(OUTLIER_PROBABILITY, 6)
     cov = np.full((12, 12), np.nan)
     for _ in range(_MAX_ROUNDS):
-        X, Z, s, theta, cov = _gls(H[keep], C[keep], X, Z, s, theta, estimate_scale)
+        X, Z, s, theta, normal = _gls(H[keep], C[keep], X, Z, s, theta, estimate_scale)
+        cov = np.asarray(np.linalg.pinv(normal), dtype=float)
         new = _distances(H, C, X, Z, s, theta, cov, keep, h, estimate_scale) <= limit
         if new.sum() < max(3, n // 2) or np.array_equal(new, keep):
             break
         keep, h = new, OUTLIER_PROBABILITY
-    return LikelihoodFit(X, Z, s, keep, np.exp(theta), cov, start)
+    lam, V = np.linalg.eigh(normal)
+    null = V[:, lam <= UNDETERMINED * lam.max()].T
+    return LikelihoodFit(X, Z, s, keep, np.exp(theta), cov, start, null)
 
 
 def solve_xz(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
@@ -397,6 +429,7 @@ __all__ = [
     "START_QUANTILE",
     "TAIL_RATIO",
     "TRIPLES",
+    "UNDETERMINED",
     "LikelihoodFit",
     "pose_residuals",
     "solve_likelihood",

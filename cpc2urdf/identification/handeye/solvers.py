@@ -33,7 +33,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.handeye.axxb import (
+    MIN_POSES,
     HandEyeResult,
     as_pose_stack,
     check_degenerate,
@@ -41,6 +43,7 @@ from cpc2urdf.identification.handeye.axxb import (
     make_result,
     relative_motions,
     residuals,
+    rotation_degeneracy,
     solve_daniilidis,
     solve_park_martin,
     solve_tsai,
@@ -269,6 +272,14 @@ def _level_of_the_fit(
     )
 
 
+def _partly_determined(H: Array, C: Array) -> str:
+    """Why the hand rotations leave part of X and Z undetermined ("" if they do not, or if the
+    data have other problems, which :func:`check_degenerate` then refuses)."""
+    if len(H) != len(C) or len(H) < MIN_POSES:
+        return ""
+    return rotation_degeneracy(H)
+
+
 def _metric(C: Array, scale: float) -> Array:
     """Target poses with their translations divided by ``scale``."""
     if scale == 1.0:
@@ -292,12 +303,22 @@ def _run(
     if method not in methods:
         raise ValueError(f"unknown {kind}method {method!r}; known: {', '.join(methods)}")
     if unknown_scale and method != "ml":
-        raise ValueError(f"method {method!r} needs metric target poses; ml estimates a scale")
+        raise DegenerateDataError(
+            f"{method} needs metric target poses; only ml estimates an unknown scale"
+        )
     solver = SOLVERS[method]
     H = as_pose_stack(T_base_hand, "T_base_hand")
     C = as_pose_stack(T_camera_target, "T_camera_target")
     options = Gate() if gate is True else gate or None
-    warnings = check_degenerate(H, C) if options is not None else diagnose(H, C)
+    partial = _partly_determined(H, C) if method == "ml" else ""
+    if partial:  # ml gives the determined part and names the rest
+        warnings = [
+            f"partly determined: {partial}",
+            "consistency gate not run: it needs poses that determine X and Z",
+        ]
+        options = None
+    else:
+        warnings = check_degenerate(H, C) if options is not None else diagnose(H, C)
     if solver.check is not None:
         warnings += solver.check(H)
     report: ConsistencyReport | None = None
@@ -316,6 +337,7 @@ def _run(
         C = _metric(C, fit.scale)
         warnings.append(f"target translations were {fit.scale:.6g} times the metric ones")
     keep = fit.inliers if method == "ml" else keep
+    warnings += fit.undetermined_words() if method == "ml" else []
     if not keep.all():
         warnings.append(_dropped(keep, options.labels if options is not None else None))
     X, Z = (fit.X, fit.Z) if method == "ml" else solver.solve(H[keep], C[keep])
@@ -368,7 +390,11 @@ def calibrate(
 
 
 def calibrate_poses(
-    poses: HandEyePoses, method: str, *, accept_inconsistent: bool = False
+    poses: HandEyePoses,
+    method: str,
+    *,
+    accept_inconsistent: bool = False,
+    unknown_scale: bool = False,
 ) -> HandEyeResult:
     """:func:`calibrate` of a pose file's poses through the consistency gate (the API and the CLI).
 
@@ -381,7 +407,9 @@ def calibrate_poses(
     """
     gate = Gate(noise=poses.noise, labels=poses.labels, accept_inconsistent=accept_inconsistent)
     try:
-        return calibrate(poses.T_base_hand, poses.T_camera_target, method, gate=gate)
+        return calibrate(
+            poses.T_base_hand, poses.T_camera_target, method, gate=gate, unknown_scale=unknown_scale
+        )
     except InconsistentPosesError as e:
         raise InconsistentPosesError(e.report, poses.source) from e
 

@@ -79,7 +79,7 @@ WORKING_DISTANCE = (0.02, 20.0)  # [m]: median camera-target distance |t_C| of a
 IMPLAUSIBLE_RESIDUAL = (
     0.2  # RMS position residual / median camera-target distance (no noise statement)
 )
-IMPLAUSIBLE_ANGLE = math.radians(5.0)  # [rad] RMS rotation residual (no noise statement)
+IMPLAUSIBLE_ANGLE = math.radians(20.0)  # [rad] RMS rotation residual (no noise statement)
 LARGE_RESIDUAL = 0.01  # a warning above this fraction of the camera-target distance ...
 LARGE_ANGLE = math.radians(1.0)  # ... or this RMS angle [rad]
 MIN_POSES_FOR_OUTLIERS = 5
