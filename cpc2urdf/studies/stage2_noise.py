@@ -23,7 +23,7 @@ from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.progress import progress
 
 NOISE_LEVELS = (0.0, 0.05, 0.1, 0.2, 0.5)  # [px]
-METHODS = ("tsai", "park_martin", "kronecker", "refined")
+METHODS = ("tsai", "park_martin", "kronecker", "refined", "ml")
 
 
 def run_study(

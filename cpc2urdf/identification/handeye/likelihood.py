@@ -3,28 +3,34 @@
 Conventions of :mod:`cpc2urdf.identification.handeye.axxb`: ``H_k = T_base_hand[k]``,
 ``C_k = T_camera_target[k]``, unknowns ``X = T_hand_camera`` and ``Z = T_base_target``.
 
-Model. Pose k closes the loop ``H_k X C_k = Z``. Noise on the hand pose (a twist in the hand
-frame) and on the target pose (a twist in the camera frame) both move the camera pose; to first
-order the residual ``e_k = log((H_k X)^-1 Z C_k^-1)`` (rotation vector [rad], translation [m],
-camera frame) is zero-mean Gaussian with one covariance ``S = Ad(X^-1) S_hand Ad(X^-1)^T +
-S_camera`` for every pose. With ``S`` unknown (a full 6 x 6: anisotropic camera noise, lever arms
-coupling rotation and translation), the maximum likelihood of X, Z is the minimum of
-``det(sum_k e_k e_k^T)``, reached by iterated generalised least squares: weight by ``S``, solve,
-re-estimate ``S`` from the residuals, until ``det S`` stops falling.
+Model. Pose k closes the loop ``H_k X C_k = Z``. The residual ``e_k = log((H_k X)^-1 Z C_k^-1)``
+(rotation vector [rad], translation [m], camera frame) has, to first order, the covariance
+``S_k = Ad(X^-1) diag(hand) Ad(X^-1)^T + G_k diag(target) G_k^T``: a hand twist (hand frame) and
+a target error made of a rotation about the target's origin (target axes) and a shift (camera
+axes), ``G_k`` mapping the latter to the camera frame (:data:`NOISE_GROUPS`: 8 levels; below
+:data:`MIN_POSES_PER_NOISE` poses per level, 2). X, Z and the noise levels are estimated
+together: Gauss-Newton on the whitened residuals alternates with the noise's maximum likelihood.
 
 Start. Each closed form (Kronecker in metres and in millimetres, Park & Martin, the dual
 quaternions) and, from 8 poses on, Kronecker on random triples of poses are scored by a low
 quantile of the camera-pose mismatch (position plus angle times the camera-target distance): a
 least-quantile-of-squares start that ignores up to half the poses.
 
-Outliers. The fit starts on the half of the poses the start explains best (its covariance
-corrected for that selection), then keeps every pose whose Mahalanobis distance is below the
-chi-square 99.9 % point (6 dof) and refits, until the set stops changing. The dropped poses are
-returned, so that the report can name them.
+Outliers. When the start leaves a heavy tail, the fit starts on the half of the poses it explains
+best (its covariance corrected for that selection); then every pose whose leverage-corrected
+Mahalanobis distance is below the chi-square 99.9 % point (6 dof) is kept and the fit repeated,
+until the set stops changing. The dropped poses are returned, so that the report can name them.
+
+Drift. Time-ordered residuals correlated from one pose to the next (:data:`DRIFT_CORRELATION`: a
+visual-odometry trajectory drifting) bias the absolute poses' rotation; X's rotation then comes
+from consecutive motions ``A X = X B``, its translation from the poses.
 
 Unknown scale (a monocular visual-odometry or structure-from-motion camera trajectory): with
 ``estimate_scale`` the target-pose translations are ``s`` times the metric ones, ``s`` is a
 parameter of the fit (started from the translation least squares given the start's rotations).
+
+Undetermined directions (hand rotations about parallel axes only) keep the start's values: the
+Gauss-Newton steps are minimum-norm, and :attr:`LikelihoodFit.undetermined` lists them.
 """
 
 from __future__ import annotations
@@ -34,11 +40,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
+from scipy.optimize import least_squares, minimize
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from cpc2urdf.identification.handeye.axxb import relative_motions, solve_park_martin, target_from_x
+from cpc2urdf.identification.handeye.axxb import (
+    mean_pose,
+    relative_motions,
+    solve_park_martin,
+    target_from_x,
+)
 from cpc2urdf.identification.handeye.axzb import solve_dual_quaternion, solve_kronecker
 from cpc2urdf.transforms import Array, homogeneous, inverse, rotvec_from_matrix, skew
 
@@ -57,10 +68,14 @@ TAIL_RATIO = 4.0
 NOISE_GROUPS = np.array([0, 0, 0, 1, 1, 1, 2, 3, 4, 5, 6, 7])
 #: Fewer poses than this per noise parameter: :data:`FEW_POSES_TIES` (a rotation and a
 #: translation level shared by the hand and the target).
-MIN_POSES_PER_NOISE = 3
+MIN_POSES_PER_NOISE = 2
 FEW_POSES_TIES = np.array([0, 1, 0, 0, 0, 1, 1, 1])
 #: A direction of the fit is undetermined when its information is below this fraction of the best.
 UNDETERMINED = 1e-9
+#: Residuals this correlated from one pose to the next (time order) are a drift: X is then
+#: fitted to consecutive motions.
+DRIFT_CORRELATION = 0.5
+_MOTION_ROUNDS = 4  # weight / solve rounds of the consecutive motions
 _MAX_ROUNDS = 8  # outlier rounds
 _MAX_GLS = 20  # weight / solve rounds per set
 _MAX_STEPS = 20  # Gauss-Newton steps per weight
@@ -411,7 +426,59 @@ def solve_likelihood(
         keep, h = new, OUTLIER_PROBABILITY
     lam, V = np.linalg.eigh(normal)
     null = V[:, lam <= UNDETERMINED * lam.max()].T
+    e = pose_residuals(H[keep], C[keep], X, Z, s)
+    if keep.sum() >= MIN_POSES_FOR_TRIPLES and drift_correlation(e) > DRIFT_CORRELATION:
+        # a drifting target trajectory: X's rotation from consecutive motions (nearly free of the
+        # drift), its translation and the scale from the poses, Z from both
+        X_motions, _, cov_motions = _fit_motions(H[keep], C[keep], X, s, estimate_scale)
+        X = homogeneous(X_motions[:3, :3], X[:3, 3])
+        Ci = inverse(C[keep])
+        Ci[:, :3, 3] /= s
+        Z = mean_pose(H[keep] @ X @ inverse(Ci))
+        cov[:3, :3] = cov_motions[:3, :3]
+        start += "; X's rotation from consecutive motions (drift)"
     return LikelihoodFit(X, Z, s, keep, np.exp(theta), cov, start, null)
+
+
+def drift_correlation(e: Array) -> float:
+    """Lag-one autocorrelation of time-ordered residuals (N, 6), each component centred and
+    scaled, averaged over the components: near 0 for independent noise, near 1 for a drift."""
+    z = (e - e.mean(axis=0)) / (e.std(axis=0) + 1e-300)
+    return float(np.mean(z[1:] * z[:-1]))
+
+
+def _motion_residuals(A: Array, B: Array, X: Array, s: float) -> Array:
+    """``log((A_i X)^-1 X B_i)`` of consecutive motions, ``B``'s translation divided by ``s``."""
+    Bm = B.copy()
+    Bm[:, :3, 3] /= s
+    E = inverse(A @ X) @ X @ Bm
+    return np.hstack([rotvec_from_matrix(E[:, :3, :3]), E[:, :3, 3]])
+
+
+def _fit_motions(
+    H: Array, C: Array, X: Array, s: float, with_scale: bool
+) -> tuple[Array, float, Array]:
+    """X (and the scale) from consecutive motions ``A X = X B``, weighted by their residuals'
+    covariance (iterated): a drifting target trajectory (visual odometry) leaves consecutive
+    motions nearly unbiased where absolute poses are not. Returns ``(X, s, covariance)``."""
+    A = inverse(H[1:]) @ H[:-1]
+    B = C[1:] @ inverse(C[:-1])
+    W = np.eye(6)
+    cov = np.full((7, 7), np.nan)
+    for _ in range(_MOTION_ROUNDS):
+
+        def fun(p: Array, X0: Array = X, s0: float = s, W: Array = W) -> Array:
+            sp = s0 * float(np.exp(p[6])) if with_scale else s0
+            return (_motion_residuals(A, B, X0 @ _exp(p[:6]), sp) @ W.T).ravel()
+
+        sol = least_squares(fun, np.zeros(7 if with_scale else 6), method="lm")
+        X = X @ _exp(sol.x[:6])
+        s = s * float(np.exp(sol.x[6])) if with_scale else s
+        e = _motion_residuals(A, B, X, s)
+        S = e.T @ e / len(e) + (1e-30 + 1e-12 * float(np.sum(e * e)) / len(e)) * np.eye(6)
+        W = np.linalg.inv(np.linalg.cholesky(S))
+        cov = np.asarray(np.linalg.pinv(sol.jac.T @ sol.jac), dtype=float)
+    return X, s, cov
 
 
 def solve_xz(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
@@ -422,6 +489,7 @@ def solve_xz(T_base_hand: Array, T_camera_target: Array) -> tuple[Array, Array]:
 
 __all__ = [
     "MIN_POSES_FOR_TRIPLES",
+    "DRIFT_CORRELATION",
     "FEW_POSES_TIES",
     "MIN_POSES_PER_NOISE",
     "NOISE_GROUPS",
@@ -431,6 +499,7 @@ __all__ = [
     "TRIPLES",
     "UNDETERMINED",
     "LikelihoodFit",
+    "drift_correlation",
     "pose_residuals",
     "solve_likelihood",
     "solve_xz",

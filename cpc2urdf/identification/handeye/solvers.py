@@ -243,6 +243,13 @@ def _gate_verdict(
             report = check_consistency(H[keep], Cm[keep], noise=noise, labels=kept)
         if report.code == "implausible":  # the gate's quick fit, or the poses, too far off?
             report = _level_of_the_fit(report, H[keep], Cm[keep], fit)
+    elif not report.consistent and 2 * fit.inliers.sum() >= len(H) and not fit.inliers.all():
+        # a mistake named on all poses, but the fit keeps a majority: do the kept poses agree?
+        kept = [str(x) for x, k in zip(names, fit.inliers, strict=True) if k]
+        verdict = check_consistency(H[fit.inliers], Cm[fit.inliers], noise=noise, labels=kept)
+        if verdict.consistent:
+            mistake = f"on all poses the gate read {report.cause}; the poses kept agree"
+            keep, report = fit.inliers, replace(verdict, warnings=(*verdict.warnings, mistake))
     _last_verdict[:] = [(key, fit, report, keep)]
     return fit, report, keep
 
