@@ -70,7 +70,8 @@ def evaluate(seq: Any) -> dict[str, Any]:
     row["runtime_ms"] = 1e3 * (time.perf_counter() - t0)
     row["X_rot_err_deg"], row["X_trans_err_mm"] = _errors(result.X, seq.X)
     row["Y_rot_err_deg"], row["Y_trans_err_mm"] = _errors(result.Z, seq.Y)
-    row.update(ok=True, error="", n_poses=len(H), warnings=len(result.warnings))
+    disagree = any(w.startswith("ml is ") for w in result.warnings)
+    row.update(ok=True, error="", n_poses=len(H), warnings=len(result.warnings), disagree=disagree)
     return row
 
 

@@ -74,7 +74,7 @@ from cpc2urdf.identification.handeye.likelihood import (
 )
 from cpc2urdf.identification.handeye.pose_file import HandEyePoses
 from cpc2urdf.identification.handeye.pose_noise import PoseNoise
-from cpc2urdf.transforms import Array, inverse
+from cpc2urdf.transforms import Array, inverse, project_to_rotation, rotation_error
 
 AX_XB = "AX = XB"
 AX_ZB = "AX = ZB"
@@ -279,6 +279,53 @@ def _level_of_the_fit(
     )
 
 
+#: Closed forms the default is compared with, and how far (times their spread plus its own
+#: standard deviation) it may be from what they agree on before it says so.
+CLOSED_FORMS = ("tsai", "park_martin", "kronecker", "dual_quaternion")
+DISAGREEMENT = 5.0
+
+
+def _against_closed_forms(H: Array, C: Array, fit: LikelihoodFit) -> list[str]:
+    """A warning when the closed forms agree with each other but not with ``fit`` beyond their
+    noise: which, by how much, and what differs (empty otherwise)."""
+    Xs = {}
+    for name in CLOSED_FORMS:
+        try:
+            Xs[name] = SOLVERS[name].solve(H, C)[0]
+        except (DegenerateDataError, np.linalg.LinAlgError):
+            continue
+    if len(Xs) < 3:
+        return []
+    t = np.array([X[:3, 3] for X in Xs.values()])
+    R = np.array([X[:3, :3] for X in Xs.values()])
+    t0, R0 = np.median(t, axis=0), project_to_rotation(R.mean(axis=0))
+    spread_t = float(np.median(np.linalg.norm(t - t0, axis=1)))
+    spread_r = float(np.median(rotation_error(R0[None], R)))
+    sd = np.sqrt(np.maximum(np.diag(fit.covariance)[:6], 0.0))
+    off_t = float(np.linalg.norm(fit.X[:3, 3] - t0))
+    off_r = float(rotation_error(R0, fit.X[:3, :3]))
+    far_t = off_t > DISAGREEMENT * (spread_t + float(np.linalg.norm(sd[3:6]))) and off_t > 1e-6
+    far_r = off_r > DISAGREEMENT * (spread_r + float(np.linalg.norm(sd[0:3]))) and off_r > 1e-6
+    if not (far_t or far_r):
+        return []
+    return [
+        f"ml is {off_t * 1e3:.3g} mm / {np.degrees(off_r):.3g} deg from what {', '.join(Xs)} agree "
+        f"on (within {spread_t * 1e3:.3g} mm / {np.degrees(spread_r):.3g} deg of each other; ml's "
+        f"own standard deviation {np.linalg.norm(sd[3:6]) * 1e3:.3g} mm / "
+        f"{np.degrees(np.linalg.norm(sd[0:3])):.3g} deg): it weights the poses by the noise it "
+        f"estimated ({_noise_words(fit.noise)}), they weight all alike; if that noise is not "
+        "your setup's, compare with --method all"
+    ]
+
+
+def _noise_words(sd: Array) -> str:
+    """The estimated noise levels of :data:`likelihood.NOISE_GROUPS`, in words."""
+    return (
+        f"hand {np.degrees(sd[0]):.2g} deg / {sd[1] * 1e3:.2g} mm, target "
+        f"{np.degrees(sd[2:5].max()):.2g} deg / {sd[5:8].max() * 1e3:.2g} mm at most per axis"
+    )
+
+
 def _partly_determined(H: Array, C: Array) -> str:
     """Why the hand rotations leave part of X and Z undetermined ("" if they do not, or if the
     data have other problems, which :func:`check_degenerate` then refuses)."""
@@ -348,6 +395,8 @@ def _run(
     if not keep.all():
         warnings.append(_dropped(keep, options.labels if options is not None else None))
     X, Z = (fit.X, fit.Z) if method == "ml" else solver.solve(H[keep], C[keep])
+    if method == "ml" and not partial:
+        warnings += _against_closed_forms(H[keep], C[keep], fit)
     result = make_result(method, H, C, X, Z, warnings)
     return replace(result, consistency=report) if report is not None else result
 
