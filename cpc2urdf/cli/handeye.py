@@ -214,23 +214,9 @@ def run(args: argparse.Namespace) -> int:
             refused[m] = str(e)
     if not results:  # every solver refused: the data is the problem, say it once
         raise DegenerateDataError(f"{args.poses}: {next(iter(refused.values()))}")
-    if model is not None:
-        out = calibrate_cameras(
-            model,
-            data,
-            args.method,
-            camera=args.camera,
-            hand=args.hand,
-            result=results[args.method],
-            accept_inconsistent=args.accept_inconsistent,
-        )
-        path = save_model(out, args.output)
-        camera, hand = args.camera or data.camera, args.hand or data.hand
-    if args.urdf is not None:  # the camera link's mount origin, in the link's own convention
-        from cpc2urdf.api import export_urdf
-
+    if model is not None or args.urdf is not None:  # a model's camera frame, or a URDF's link
         placed = calibrate_cameras(
-            args.urdf,
+            model if model is not None else args.urdf,
             data,
             args.method,
             camera=args.camera,
@@ -238,7 +224,13 @@ def run(args: argparse.Namespace) -> int:
             result=results[args.method],
             accept_inconsistent=args.accept_inconsistent,
         )
-        path = export_urdf(placed, args.output)
+        if model is not None:
+            path = save_model(placed, args.output)
+            camera, hand = args.camera or data.camera, args.hand or data.hand
+        else:  # the camera link's mount origin, in the link's own convention
+            from cpc2urdf.api import export_urdf
+
+            path = export_urdf(placed, args.output)
 
     if args.json:
         doc: dict[str, Any] = {
