@@ -1601,6 +1601,7 @@ def _study() -> list[Case]:
             "--max-poses",
         ),
         Case("study-stage2-poses-one", ("study", "stage2", "--poses", "1"), "--poses"),
+        Case("study-kinhec-no-dataset", ("study", "kinhec", "{tmp}/nothing"), "kinhec"),
         Case(
             "study-stage2-noise-nan",
             (

@@ -128,6 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         parser.error("this study needs KinHEC: pip install kinhec")
     root = Path(args.data)
+    results = Path(args.baselines) if args.baselines else root / "benchmarks" / "results.csv"
+    if not (root / "sequences.parquet").is_file():
+        parser.error(f"{root}: not a KinHEC dataset (no sequences.parquet; kinhec generate)")
+    if not results.is_file():
+        parser.error(f"{results}: no baseline results (kinhec benchmark {root})")
     manifest = load_manifest(root, args.tracks)
     rows = []
     t0 = time.time()
@@ -141,7 +146,6 @@ def main(argv: list[str] | None = None) -> int:
     ours = pd.DataFrame(rows)
     if args.out:
         ours.to_csv(args.out, index=False)
-    results = Path(args.baselines) if args.baselines else root / "benchmarks" / "results.csv"
     print(table(ours, _baseline_rows(results)))
     return 0
 
