@@ -62,6 +62,8 @@ START_QUANTILE = 0.4
 TRIPLES = 100
 MIN_POSES_FOR_TRIPLES = 8
 TAIL_RATIO = 4.0
+#: ... or a single pose's mismatch this many robust deviations (MAD) above the median.
+GROSS_MADS = 10.0
 #: The noise model's standard deviations (log) per noise column: hand rotation and translation
 #: (isotropic, hand axes), target rotation about its origin (target axes) and target translation
 #: (camera axes: depth is usually the worst), 8 parameters.
@@ -126,6 +128,8 @@ class LikelihoodFit:
                     for g, d in zip(sv, Vt, strict=True)
                     if g > 0.1
                 ]
+        if self.undetermined.shape[1] > 12 and np.abs(self.undetermined[:, 12]).max() > 0.1:
+            parts.append("the scale of the target translations")
         if not parts:
             return []
         return [
@@ -309,10 +313,20 @@ def _noise_fit(e: Array, A: Array, G: Array, theta: Array) -> Array:
         per_theta = np.bincount(NOISE_GROUPS, per_column, minlength=8)
         return value, np.bincount(ties, per_theta, minlength=int(ties.max()) + 1).astype(float)
 
-    lo = np.log(1e-12)
-    start = np.array([theta[ties == k].mean() for k in range(int(ties.max()) + 1)])
+    # each level within [1e-3, 20] times the residuals' robust scale (its kind: rotation or
+    # translation): no level collapses to zero for good, none absorbs a gross outlier
+    scale = 1.4826 * np.array([np.median(np.abs(e[:, :3])), np.median(np.abs(e[:, 3:]))])
+    kind = np.array([0, 1, 0, 0, 0, 1, 1, 1])  # rotation or translation, per level
+    free = [int(np.flatnonzero(ties == k)[0]) for k in range(int(ties.max()) + 1)]
+    lo = np.log(1e-3 * scale[kind[free]] + 1e-15)
+    hi = np.log(20.0 * scale[kind[free]] + 1e-14)
+    start = np.array([theta[ties == k].mean() for k in range(len(free))])
     sol = minimize(
-        nll, np.clip(start, lo, 1.0), jac=True, method="L-BFGS-B", bounds=[(lo, 1.0)] * len(start)
+        nll,
+        np.clip(start, lo, hi),
+        jac=True,
+        method="L-BFGS-B",
+        bounds=list(zip(lo, hi, strict=True)),
     )
     return np.asarray(sol.x)[ties]
 
@@ -411,20 +425,27 @@ def solve_likelihood(
     start, X, Z, s, m = _best_start(H, C, estimate_scale, np.random.default_rng(seed))
     # a heavy tail (the start's 90th percentile mismatch over TAIL_RATIO times its median: poses
     # it cannot explain): the fit starts on the half the start explains best
-    heavy = n >= MIN_POSES_FOR_TRIPLES and np.quantile(m, 0.9) > TAIL_RATIO * np.quantile(m, 0.5)
+    med, mad = np.median(m), 1.4826 * np.median(np.abs(m - np.median(m)))
+    heavy = n >= MIN_POSES_FOR_TRIPLES and (
+        np.quantile(m, 0.9) > TAIL_RATIO * med or m.max() > med + GROSS_MADS * mad
+    )
     keep = m <= np.quantile(m, 0.5) if heavy else np.ones(n, bool)
     h = 0.5 if heavy else 1.0
-    theta = _start_noise(pose_residuals(H[keep], C[keep], X, Z, s))
     limit = chi2.ppf(OUTLIER_PROBABILITY, 6)
     cov = np.full((12, 12), np.nan)
     for _ in range(_MAX_ROUNDS):
+        theta = _start_noise(pose_residuals(H[keep], C[keep], X, Z, s))  # fresh for each set
         X, Z, s, theta, normal = _gls(H[keep], C[keep], X, Z, s, theta, estimate_scale)
         cov = np.asarray(np.linalg.pinv(normal), dtype=float)
         new = _distances(H, C, X, Z, s, theta, cov, keep, h, estimate_scale) <= limit
         if new.sum() < max(3, n // 2) or np.array_equal(new, keep):
             break
         keep, h = new, OUTLIER_PROBABILITY
-    lam, V = np.linalg.eigh(normal)
+    # what the poses leave undetermined, from fixed weights (the noise fit's cannot be trusted
+    # there): rotations in metres at the camera-target distance
+    J = _jacobian(H[keep], C[keep], X, Z, s, estimate_scale)
+    J[:, :3] *= float(np.median(np.linalg.norm(C[keep, :3, 3], axis=1))) / s
+    lam, V = np.linalg.eigh(np.einsum("kai,kaj->ij", J, J))
     null = V[:, lam <= UNDETERMINED * lam.max()].T
     e = pose_residuals(H[keep], C[keep], X, Z, s)
     if keep.sum() >= MIN_POSES_FOR_TRIPLES and drift_correlation(e) > DRIFT_CORRELATION:
@@ -491,6 +512,7 @@ __all__ = [
     "MIN_POSES_FOR_TRIPLES",
     "DRIFT_CORRELATION",
     "FEW_POSES_TIES",
+    "GROSS_MADS",
     "MIN_POSES_PER_NOISE",
     "NOISE_GROUPS",
     "OUTLIER_PROBABILITY",

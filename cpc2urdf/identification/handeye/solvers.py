@@ -228,7 +228,9 @@ def _gate_verdict(
         return _last_verdict[0][1:]
     fit = solve_likelihood(H, C, estimate_scale=unknown_scale)
     Cm = _metric(C, fit.scale)
-    names = list(labels) if labels is not None else [f"pose {k}" for k in range(len(H))]
+    names = [f"pose {k}" for k in range(len(H))] if labels is None else [str(x) for x in labels]
+    if len(set(names)) < len(names):  # the gate names outliers by label: make them unique
+        names = [f"{x} (pose {k})" for k, x in enumerate(names)]
     report = check_consistency(H, Cm, noise=noise, labels=names)
     keep = np.ones(len(H), dtype=bool)
     if not report.consistent and report.code in _OUTLIER_CODES:
@@ -365,6 +367,7 @@ def _run(
     C = as_pose_stack(T_camera_target, "T_camera_target")
     options = Gate() if gate is True else gate or None
     partial = _partly_determined(H, C) if method == "ml" else ""
+    labels = options.labels if options is not None else None
     if partial:  # ml gives the determined part and names the rest
         warnings = [
             f"partly determined: {partial}",
@@ -393,7 +396,7 @@ def _run(
     keep = fit.inliers if method == "ml" else keep
     warnings += fit.undetermined_words() if method == "ml" else []
     if not keep.all():
-        warnings.append(_dropped(keep, options.labels if options is not None else None))
+        warnings.append(_dropped(keep, labels))
     X, Z = (fit.X, fit.Z) if method == "ml" else solver.solve(H[keep], C[keep])
     if method == "ml" and not partial:
         warnings += _against_closed_forms(H[keep], C[keep], fit)
