@@ -133,6 +133,11 @@ def test_unknown_scale_recovered() -> None:
     C[:, :3, 3] *= 2.5
     fit = solve_likelihood(H, C, estimate_scale=True)
     assert abs(fit.scale - 2.5) < 1e-9 and np.abs(fit.X - X).max() < EXACT
+    result = calibrate(H, C, "ml", gate=Gate(), unknown_scale=True)  # the command's path
+    assert np.abs(result.X - X).max() < EXACT and result.residual_translation.max() < 1e-9
+    assert "target translations were 2.5 times the metric ones" in result.warnings
+    with pytest.raises(DegenerateDataError, match="only ml estimates an unknown scale"):
+        calibrate(H, C, "kronecker", unknown_scale=True)
 
 
 def test_one_joint_gives_the_determined_part_and_names_the_rest() -> None:

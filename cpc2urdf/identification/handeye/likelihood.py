@@ -128,7 +128,7 @@ class LikelihoodFit:
                     for g, d in zip(sv, Vt, strict=True)
                     if g > 0.1
                 ]
-        if self.undetermined.shape[1] > 12 and np.abs(self.undetermined[:, 12]).max() > 0.1:
+        if self.undetermined.shape[1] > 12 and np.any(np.abs(self.undetermined[:, 12]) > 0.1):
             parts.append("the scale of the target translations")
         if not parts:
             return []
