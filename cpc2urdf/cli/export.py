@@ -40,16 +40,12 @@ def reports(args: argparse.Namespace) -> dict[str, str]:
     import os
 
     from cpc2urdf.argparsing import json_object
-    from cpc2urdf.urdf.report import report_paths
+    from cpc2urdf.urdf.report import written_reports
 
     doc = json_object(args.model) if os.path.isfile(args.model) else None
     if doc is None or not isinstance(doc.get("urdf"), dict):
         return {}
-    try:
-        json_path, text_path = report_paths(args.output)
-    except ValueError:  # no file name (-o .): refused by run, before writing
-        return {}
-    return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
+    return written_reports(args.output)
 
 
 def run(args: argparse.Namespace) -> int:

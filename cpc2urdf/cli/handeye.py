@@ -126,15 +126,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def _reports(args: argparse.Namespace) -> dict[str, str]:
     """With --urdf: the calibration report written next to -o (checked against the inputs before
     the command runs)."""
-    from cpc2urdf.urdf.report import report_paths
+    from cpc2urdf.urdf.report import written_reports
 
     if getattr(args, "urdf", None) is None or not args.output:
         return {}
-    try:
-        json_path, text_path = report_paths(args.output)
-    except ValueError:  # no file name (-o .): refused by run, before writing
-        return {}
-    return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
+    return written_reports(args.output)
 
 
 def _pose_line(T: Any) -> str:

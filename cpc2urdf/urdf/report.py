@@ -225,4 +225,21 @@ def report_paths(urdf_path: str | os.PathLike[str]) -> tuple[Path, Path]:
     return p.with_suffix(".report.json"), p.with_suffix(".report.txt")
 
 
-__all__ = ["REPORT_FORMAT", "CalibrationReport", "OriginStd", "calibration_report", "report_paths"]
+def written_reports(urdf_path: str | os.PathLike[str]) -> dict[str, str]:
+    """The report files a written-back URDF brings, as a command's ``written`` outputs (none for
+    a path without a file name, which the command refuses before writing)."""
+    try:
+        json_path, text_path = report_paths(urdf_path)
+    except ValueError:
+        return {}
+    return {"-o (its report)": str(json_path), "-o (its text report)": str(text_path)}
+
+
+__all__ = [
+    "REPORT_FORMAT",
+    "CalibrationReport",
+    "OriginStd",
+    "calibration_report",
+    "report_paths",
+    "written_reports",
+]
