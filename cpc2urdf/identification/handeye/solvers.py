@@ -166,7 +166,7 @@ SOLVERS: dict[str, HandEyeSolver] = {
             "ml",
             AX_ZB,
             "AX = ZB, joint maximum likelihood: noise estimated, outliers dropped",
-            lambda H, C: solve_xz(H, C),
+            solve_xz,
         ),
         HandEyeSolver(
             "refined",
