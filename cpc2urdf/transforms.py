@@ -222,6 +222,15 @@ def rotvec_from_matrix(R: Array) -> Array:
     return out
 
 
+def matrix_from_rotvec(r: Array) -> Array:
+    """Rodrigues' formula for one rotation vector (3,) [rad] -> (3, 3)."""
+    theta = float(np.linalg.norm(r))
+    K = skew(r)
+    if theta < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K
+
+
 def project_to_rotation(M: ArrayLike) -> Array:
     """Nearest rotation matrix to ``M`` in the Frobenius norm (polar decomposition via SVD)."""
     U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
@@ -323,6 +332,7 @@ __all__ = [
     "dual_quat_from_transform",
     "homogeneous",
     "inverse",
+    "matrix_from_rotvec",
     "matrix_from_rpy",
     "project_to_rotation",
     "quat_left_matrix",

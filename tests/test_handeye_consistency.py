@@ -30,7 +30,6 @@ from cpc2urdf.identification.handeye.gate import mistakes as mk
 from cpc2urdf.identification.handeye.gate.gate_report import InconsistentPosesError
 from cpc2urdf.identification.handeye.gate.handeye_gate import check_consistency
 from cpc2urdf.identification.handeye.gate.reference_fit import (
-    matrix_from_rotvec,
     residual_vectors,
 )
 from cpc2urdf.identification.handeye.pose_file import (
@@ -44,7 +43,7 @@ from cpc2urdf.identification.handeye.pose_noise import (
     residual_covariance,
 )
 from cpc2urdf.identification.handeye.solvers import ALL_METHODS, Gate, calibrate, calibrate_poses
-from cpc2urdf.transforms import homogeneous, inverse, rotvec_from_matrix
+from cpc2urdf.transforms import homogeneous, inverse, matrix_from_rotvec, rotvec_from_matrix
 
 NOISE = PoseNoise(0.0001, math.radians(0.02), 0.0003, math.radians(0.05))  # as handeye_mistakes
 

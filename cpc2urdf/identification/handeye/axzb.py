@@ -62,6 +62,16 @@ ROTATION_SCALE = 0.1
 SIGN_HUBS = 32
 
 
+def rotation_rows(RA: Array, RB: Array) -> Array:
+    """Li et al. eq. (17) per pose, ``[R_A kron I, -I kron R_B^T]`` acting on ``[vec R_X; vec R_Z]``
+    (row-major vec): ``R_A R_X - R_Z R_B`` as 9 rows; shape (N, 9, 18)."""
+    n, I3 = len(RA), np.eye(3)
+    M = np.empty((n, 9, 18))
+    M[:, :, :9] = np.einsum("kac,bd->kabcd", RA, I3).reshape(n, 9, 9)
+    M[:, :, 9:] = -np.einsum("ac,kdb->kabcd", I3, RB).reshape(n, 9, 9)
+    return M
+
+
 def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array, Array]:
     """Li et al. eq. (19): returns ``(X, Z)``; A, B absolute, shape (N, 4, 4) [m].
 
@@ -80,8 +90,7 @@ def solve_kronecker(A: Array, B: Array, length_unit: float = 1.0) -> tuple[Array
     I3 = np.eye(3)
     RA, tA, RB, tB = A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3]
     M = np.zeros((n, 12, 24))  # 12 rows per pose, built for all poses at once
-    M[:, :9, 0:9] = np.einsum("kac,bd->kabcd", RA, I3).reshape(n, 9, 9)  # eq. (17): RA kron I
-    M[:, :9, 9:18] = -np.einsum("ac,kdb->kabcd", I3, RB).reshape(n, 9, 9)  # I kron RB^T
+    M[:, :9, :18] = rotation_rows(RA, RB)
     M[:, 9:, 9:18] = np.einsum("ac,kd->kacd", I3, tB).reshape(n, 3, 9)  # eq. (18): I kron tB^T
     M[:, 9:, 18:21] = -RA
     M[:, 9:, 21:24] = I3
@@ -256,6 +265,7 @@ __all__ = [
     "SIGN_HUBS",
     "align_quaternion_signs",
     "refine",
+    "rotation_rows",
     "solve_dual_quaternion",
     "solve_kronecker",
     "solve_refined",

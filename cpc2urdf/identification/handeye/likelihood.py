@@ -41,7 +41,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares, minimize
-from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from cpc2urdf.identification.handeye.axxb import (
@@ -51,7 +50,14 @@ from cpc2urdf.identification.handeye.axxb import (
     target_from_x,
 )
 from cpc2urdf.identification.handeye.axzb import solve_dual_quaternion, solve_kronecker
-from cpc2urdf.transforms import Array, homogeneous, inverse, rotvec_from_matrix, skew
+from cpc2urdf.transforms import (
+    Array,
+    homogeneous,
+    inverse,
+    matrix_from_rotvec,
+    rotvec_from_matrix,
+    skew,
+)
 
 #: A pose is an outlier when its squared Mahalanobis distance exceeds this chi-square point (6 dof).
 OUTLIER_PROBABILITY = 0.999
@@ -242,7 +248,7 @@ def _best_start(
 
 def _exp(xi: Array) -> Array:
     """``exp`` of a twist (rotation vector, translation) to first order in the translation."""
-    return homogeneous(Rotation.from_rotvec(xi[:3]).as_matrix(), xi[3:6])
+    return homogeneous(matrix_from_rotvec(xi[:3]), xi[3:6])
 
 
 def _adjoint(T: Array) -> Array:

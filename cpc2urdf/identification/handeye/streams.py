@@ -29,7 +29,8 @@ from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation, Slerp
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.transforms import Array, project_to_rotation
+from cpc2urdf.identification.handeye.axzb import rotation_rows
+from cpc2urdf.transforms import Array, project_to_rotation, rotation_error, rotvec_from_matrix
 
 SPEED_WINDOW = 0.1  # [s] angular speed from poses this far apart (noise vs time resolution)
 GRID_RATE = 500.0  # [Hz] the cross-correlation's resampling grid
@@ -101,8 +102,7 @@ def angular_speed(t: Array, T: Array, window: float = SPEED_WINDOW) -> tuple[Arr
     i, j = i[j < len(t)], j[j < len(t)]
     if len(i) < 3:
         return np.zeros(0), np.zeros(0)
-    dR = np.swapaxes(T[i, :3, :3], -1, -2) @ T[j, :3, :3]
-    angle = Rotation.from_matrix(dR).magnitude()
+    angle = rotation_error(T[i, :3, :3], T[j, :3, :3])
     return 0.5 * (t[i] + t[j]), angle / (t[j] - t[i])
 
 
@@ -156,15 +156,12 @@ def rotation_residuals(A: Array, C: Array) -> Array:
     ``B = inv(C)``: the null vector of Li et al.'s eq. (17) rows (``[R_A ⊗ I, -I ⊗ R_Bᵀ]``, row-major
     vec, as :func:`~cpc2urdf.identification.handeye.axzb.solve_kronecker`), polar-projected."""
     RA, RB = A[:, :3, :3], np.swapaxes(C[:, :3, :3], -1, -2)
-    n, I3 = len(A), np.eye(3)
-    M = np.empty((n, 9, 18))
-    M[:, :, :9] = np.einsum("kac,bd->kabcd", RA, I3).reshape(n, 9, 9)
-    M[:, :, 9:] = -np.einsum("ac,kdb->kabcd", I3, RB).reshape(n, 9, 9)
+    M = rotation_rows(RA, RB)
     w = np.linalg.eigh(np.einsum("kri,krj->ij", M, M))[1][:, 0]
     w *= np.sign(np.linalg.det(w[:9].reshape(3, 3))) or 1.0
     RX, RZ = project_to_rotation(w[:9].reshape(3, 3)), project_to_rotation(w[9:].reshape(3, 3))
     E = np.swapaxes(RA @ RX, -1, -2) @ RZ @ RB
-    return Rotation.from_matrix(E).as_rotvec()
+    return rotvec_from_matrix(E)
 
 
 def refine_time_offset(
@@ -239,7 +236,7 @@ def select_keyframes(
     ``min_distance`` [m] from the last one kept; beyond ``max_keyframes``, evenly thinned."""
     keep, last = [0], T[0]
     for i in range(1, len(T)):
-        angle = Rotation.from_matrix(last[:3, :3].T @ T[i, :3, :3]).magnitude()
+        angle = float(rotation_error(last[:3, :3], T[i, :3, :3]))
         if angle >= min_angle or np.linalg.norm(T[i, :3, 3] - last[:3, 3]) >= min_distance:
             keep.append(i)
             last = T[i]

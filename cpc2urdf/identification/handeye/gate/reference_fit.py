@@ -19,7 +19,6 @@ base frame.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -32,20 +31,17 @@ from cpc2urdf.identification.handeye.pose_noise import (
     estimate_noise,
     residual_covariance,
 )
-from cpc2urdf.transforms import Array, homogeneous, inverse, rotvec_from_matrix, skew
+from cpc2urdf.transforms import (
+    Array,
+    homogeneous,
+    inverse,
+    matrix_from_rotvec,
+    rotvec_from_matrix,
+)
 
 # Residuals below these are rounding, not noise: floors of every level the gate compares.
 NUMERIC_POSITION = 1e-9  # [m]
 NUMERIC_ANGLE = 1e-9  # [rad]
-
-
-def matrix_from_rotvec(r: Array) -> Array:
-    """Rodrigues' formula for one rotation vector (3,) [rad] -> (3, 3)."""
-    theta = float(np.linalg.norm(r))
-    K = skew(r)
-    if theta < 1e-8:
-        return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + math.sin(theta) / theta * K + (1.0 - math.cos(theta)) / theta**2 * K @ K
 
 
 def residual_vectors(
@@ -217,7 +213,6 @@ __all__ = [
     "WeightedFit",
     "jacobian",
     "leverage_blocks",
-    "matrix_from_rotvec",
     "quick_fit",
     "residual_vectors",
     "weighted_fit",
