@@ -32,7 +32,7 @@ from cpc2urdf.identification.simulation.image_experiment import (
 )
 from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
 from cpc2urdf.identification.vision.boards.board_file import board_from_json, save_board
-from cpc2urdf.identification.vision.boards.board_poses import _solve, board_pose, detect_board
+from cpc2urdf.identification.vision.boards.board_poses import board_pose, detect_board, solve_pnp
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import inverse, rotation_error
@@ -187,7 +187,7 @@ def test_camera_frames_from_board_images_as_accurate_as_exact_poses_with_the_sam
             for C in _true_C(truth, folder, cam, obs.q):
                 uv, _ = cv2.projectPoints(P, cv2.Rodrigues(C[:3, :3])[0], C[:3, 3], intr.K, intr.D)
                 Ts.append(
-                    _solve(
+                    solve_pnp(
                         P, uv.reshape(-1, 2) + rng.normal(0.0, sigma, (len(P), 2)), intr.K, intr.D
                     )[0]
                 )

@@ -315,7 +315,7 @@ def _stage2(tmp: Path, n_poses: int, seed: int) -> dict[str, Any]:
     )
     from cpc2urdf.identification.simulation.image_experiment import render_head_board_experiment
     from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
-    from cpc2urdf.identification.vision.boards.board_poses import _solve, board_pose
+    from cpc2urdf.identification.vision.boards.board_poses import board_pose, solve_pnp
     from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
     from cpc2urdf.transforms import inverse
 
@@ -357,7 +357,7 @@ def _stage2(tmp: Path, n_poses: int, seed: int) -> dict[str, Any]:
                     P, cv2.Rodrigues(Ci[:3, :3])[0], Ci[:3, 3], intr.K, intr.D
                 )
                 Ts.append(
-                    _solve(
+                    solve_pnp(
                         P, uv.reshape(-1, 2) + rk.normal(0.0, sigma, (len(P), 2)), intr.K, intr.D
                     )[0]
                 )

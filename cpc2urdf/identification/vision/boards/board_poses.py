@@ -191,7 +191,9 @@ def detect_board(
 # ---- one camera: PnP -----------------------------------------------------------------------------
 
 
-def _solve(obj: Array, uv: Array, K: Array, D: Array) -> tuple[Array, float]:
+def solve_pnp(obj: Array, uv: Array, K: Array, D: Array) -> tuple[Array, float]:
+    """``T_camera_board`` of points ``obj`` (N, 3) seen at ``uv`` (N, 2) (IPPE, then LM), and the RMS
+    reprojection error [px]."""
     o = np.ascontiguousarray(obj, dtype=np.float64).reshape(-1, 1, 3)
     p = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
     ok, rvec, tvec = cv2.solvePnP(o, p, K, D, flags=cv2.SOLVEPNP_IPPE)
@@ -287,7 +289,7 @@ def board_pose(
     for order in orders:
         ids = found.ids[order]
         try:
-            T, rms = _solve(obj[ids], found.uv, Km, Dm)
+            T, rms = solve_pnp(obj[ids], found.uv, Km, Dm)
         except (ValueError, cv2.error):
             continue
         faces = -T[:3, 3] @ T[:3, 2] > 0
@@ -320,7 +322,7 @@ def board_pose(
         # A circle's image is an ellipse whose centre is not the projected centre (perspective):
         # predict the offset from this pose and solve again, as for the plates (plate_poses.py).
         uv = uv - _distorted_offset(Km, Dm, T, board)[ids]
-        T, rms = _solve(obj[ids], uv, Km, Dm)
+        T, rms = solve_pnp(obj[ids], uv, Km, Dm)
     order = np.argsort(ids)
     return BoardPose(T, ids[order], uv[order], rms)
 
@@ -450,5 +452,6 @@ __all__ = [
     "common_points",
     "detect_board",
     "pnp_pose_covariance",
+    "solve_pnp",
     "stereo_board_pose",
 ]
