@@ -4,7 +4,7 @@ Layers, lowest first (docs/architecture.md):
 
     core            cpc2urdf/*.py (model, transforms, errors, ...), cpc2urdf.files, cpc2urdf.urdf
                     and cpc2urdf.robots
-    identification  kinematics, vision  <  handeye  <  simulation  <  planning
+    identification  kinematics, vision  <  handeye, selfcal  <  simulation  <  planning
     validation      crosscheck, accuracy, gaze, view (what uses the calibrated URDF)
     api             cpc2urdf.api and the package's __init__ (re-exports the api)
     studies         cpc2urdf.studies (experiments, benchmarks)
@@ -32,6 +32,7 @@ RULES: list[tuple[str, tuple[int, int], str]] = [
     ("cpc2urdf.identification.kinematics", (1, 0), "kinematics"),
     ("cpc2urdf.identification.vision", (1, 0), "vision"),
     ("cpc2urdf.identification.handeye", (1, 1), "handeye"),
+    ("cpc2urdf.identification.selfcal", (1, 1), "selfcal"),
     ("cpc2urdf.identification.simulation", (1, 2), "simulation"),
     ("cpc2urdf.identification.planning", (1, 3), "planning"),
     ("cpc2urdf.identification", (1, 0), "identification"),

@@ -1,0 +1,263 @@
+"""One-stage calibration: maximum likelihood of the whole head on the board's corners in pixels.
+
+:func:`fit_pixels` is a bundle adjustment over the joints' geometry, the camera mounts and the
+board's pose (its placement on the robot when held), optionally the intrinsics, of
+:class:`~cpc2urdf.identification.selfcal.pixel_problem.PixelProblem`:
+
+1. **Undetermined directions** (a joint that never moved, joints shared by the camera's and a held
+   board's paths, the rigid motion of everything when only relative poses are seen) are found
+   from the column-scaled Jacobian's singular values at the start (the stage-1 rank rule,
+   :data:`~cpc2urdf.identification.kinematics.identifiability.RANK_TOL`); the fit moves only
+   within the determined subspace, so what the images cannot tell keeps the start's value (the
+   user's URDF) and is named.
+2. **Levenberg-Marquardt** (:func:`~cpc2urdf.identification.kinematics.refine.solve_least_squares`)
+   on the corners weighted by each camera's corner noise.
+3. **Outliers**: a corner farther than the chi-square(2) 1e-4 quantile of the robust noise scale
+   (a misdetected corner) is dropped; an image whose remaining corners together fail a
+   chi-square test at 1e-6, or with more than a third of its corners dropped (a blurred image, a
+   wrong grid order), is dropped whole. The chart is re-centred and the fit repeated until
+   nothing more is dropped. Each is named.
+4. **Noise and covariance**: each camera's corner noise is the ML estimate from its residuals with
+   the degrees of freedom of the fit; the covariance is ``(J^T J)^+`` in the determined subspace,
+   the Cramér-Rao bound of the pixel model at the estimate.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import gammaincc
+
+from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
+from cpc2urdf.identification.kinematics.refine import solve_least_squares
+from cpc2urdf.identification.selfcal.pixel_problem import (
+    CameraModel,
+    PixelData,
+    PixelProblem,
+)
+from cpc2urdf.model import CPCModel
+from cpc2urdf.transforms import Array
+
+CORNER_ALPHA = 1e-4  # a good corner is dropped with this probability
+IMAGE_ALPHA = 1e-6  # a good image is dropped with this probability
+IMAGE_DROPPED_SHARE = 1.0 / 3.0  # above this share of dropped corners the whole image goes
+MAX_ROUNDS = 5
+MIN_SIGMA = 1e-3  # [px] no detector is better; keeps noise-free data well-conditioned
+MAX_NFEV = 100
+
+
+@dataclass
+class PixelFit:
+    """What :func:`fit_pixels` found.
+
+    Attributes:
+        model: The calibrated model (world = the board when fixed, else the start's world).
+        cameras: Camera -> intrinsics (refined when asked, else as given).
+        sigma: Camera -> corner noise per pixel coordinate [px] (ML estimate).
+        chart: Chart centred on ``model``; ``x`` below are its coordinates then the intrinsics'.
+        names: Parameter names, chart first.
+        covariance: Of all parameters, shape (P, P) [m, rad, px]; zero along ``null_space``.
+        null_space: Directions the images do not determine, shape (P, k), unit columns.
+        undetermined: Parameters whose value the images cannot tell (kept at the start).
+        outliers: Dropped images and corners, each a sentence.
+        use: Per view, the corners used, shape (k,) booleans.
+        view_rms: Per view name (``camera/record``), the RMS residual of its used corners [px].
+        corners: Corners used.
+        rounds: Outlier rounds.
+        seconds: Time of the fit [s].
+    """
+
+    model: CPCModel
+    cameras: dict[str, CameraModel]
+    sigma: dict[str, float]
+    chart: Parametrization
+    names: list[str]
+    covariance: Array
+    null_space: Array
+    undetermined: list[str]
+    outliers: list[str]
+    use: list[NDArray[np.bool_]]
+    view_rms: dict[str, float]
+    corners: int
+    rounds: int
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+    def chart_covariance(self) -> Array:
+        """Covariance of the chart's parameters alone, shape (chart.n_params,) * 2."""
+        P = self.chart.n_params
+        return self.covariance[:P, :P]
+
+
+class _Reduced:
+    """A problem in the determined subspace: ``x = B z``."""
+
+    def __init__(self, problem: PixelProblem, B: Array) -> None:
+        self.problem, self.B = problem, B
+
+    def residuals(self, z: Array) -> Array:
+        return self.problem.residuals(self.B @ z)
+
+    def jacobian(self, z: Array) -> Array:
+        return self.problem.jacobian(self.B @ z) @ self.B
+
+
+def _subspace(J: Array) -> tuple[Array, Array, Array, Array]:
+    """Determined directions ``B`` (P, r), undetermined ``N`` (P, P - r), both unit columns, and
+    the pseudo-inverse of ``J^T J`` (P, P), by the column-scaled SVD (stage 1's rank rule)."""
+    norms = np.linalg.norm(J, axis=0)
+    d = np.where(norms > 0, norms, 1.0)
+    _, s, Vt = np.linalg.svd(triangular_factor(J / d))
+    keep = (s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL) & (norms.max() > 0)
+    Vk = Vt[keep].T / d[:, None]
+    cov = (Vk / s[keep] ** 2) @ Vk.T
+    B, N = Vt[keep].T / d[:, None], Vt[~keep].T / d[:, None]
+    return (
+        B / np.linalg.norm(B, axis=0),
+        N / np.maximum(np.linalg.norm(N, axis=0), 1e-300),
+        0.5 * (cov + cov.T),
+        s,
+    )
+
+
+def _robust_sigma(r: dict[int, Array], data: PixelData) -> dict[str, float]:
+    """Per camera, the MAD scale of its pixel residual coordinates [px]."""
+    out = {}
+    for c in data.cameras:
+        v = [r[k].ravel() for k in r if data.views[k].camera == c]
+        if v:
+            out[c] = max(MIN_SIGMA, 1.4826 * float(np.median(np.abs(np.concatenate(v)))))
+    return out
+
+
+def _ml_sigma(problem: PixelProblem, x: Array, rank: int) -> dict[str, float]:
+    """Per camera, ``sqrt(|r|^2 / (m - rank * m_c / m))``: the ML noise with the fit's dof shared."""
+    r = problem.pixel_residuals(x)
+    m = sum(v.size for v in r.values())
+    out = {}
+    for c in problem.data.cameras:
+        parts = [r[k].ravel() for k in r if problem.data.views[k].camera == c]
+        if parts:
+            v = np.concatenate(parts)
+            dof = max(v.size - rank * v.size / m, 1.0)
+            out[c] = max(MIN_SIGMA, float(np.sqrt(v @ v / dof)))
+    return out
+
+
+def _new_outliers(
+    data: PixelData, use: list[NDArray[np.bool_]], r: dict[int, Array], sigma: dict[str, float]
+) -> list[str]:
+    """Drop (in ``use``) the corners and images the tests reject; their descriptions."""
+    from scipy.special import chdtri
+
+    corner_limit = float(chdtri(2, CORNER_ALPHA))
+    out = []
+    for k, rk in r.items():
+        v = data.views[k]
+        s = sigma[v.camera]
+        idx = np.flatnonzero(use[k])
+        d2 = (rk**2).sum(1) / s**2
+        bad = d2 > corner_limit
+        name = data.view_name(k)
+        n_all = len(v.ids)
+        if bad.sum() + (n_all - len(idx)) > IMAGE_DROPPED_SHARE * n_all:
+            use[k][:] = False
+            out.append(
+                f"image {name}: {int(bad.sum())} of {len(idx)} corners off by more than "
+                f"{np.sqrt(corner_limit) * s:.2g} px (median {np.median(np.sqrt(d2)) * s:.2g} px): "
+                "board misdetected or image blurred; dropped"
+            )
+            continue
+        good = ~bad
+        chi2 = float(d2[good].sum())
+        if good.any() and gammaincc(good.sum(), 0.5 * chi2) < IMAGE_ALPHA:  # chi2(2n) tail
+            use[k][:] = False
+            rms = np.sqrt(chi2 / good.sum() / 2) * s
+            out.append(
+                f"image {name}: corner residuals {rms:.2g} px RMS against {s:.2g} px for this "
+                "camera (blurred or moving?); dropped"
+            )
+            continue
+        for i in np.flatnonzero(bad):
+            use[k][idx[i]] = False
+            out.append(
+                f"corner {int(v.ids[idx[i]])} of image {name}: off by {np.sqrt(d2[i]) * s:.2g} px "
+                f"(noise {s:.2g} px); dropped"
+            )
+    return out
+
+
+def fit_pixels(
+    start: CPCModel,
+    data: PixelData,
+    *,
+    intrinsics: bool = False,
+    sigma: dict[str, float] | None = None,
+) -> PixelFit:
+    """The one-stage fit of ``data`` from ``start`` (module docstring).
+
+    Args:
+        start: A model with every camera frame of ``data`` (and the board's frame when held),
+            placed in the board's world when the board is fixed.
+        data: The images' corners.
+        intrinsics: Refine each camera's ``fx, fy, cx, cy, k1, k2`` too.
+        sigma: Starting corner noise per camera [px] (default 0.5).
+    """
+    t0 = time.perf_counter()
+    frames = list(data.cameras) + ([data.board_frame] if data.board_frame else [])
+    use = [np.ones(len(v.ids), dtype=bool) for v in data.views]
+    sig = dict(sigma or {c: 0.5 for c in data.cameras})
+    model, cams = start, dict(data.cameras)
+    outliers: list[str] = []
+    rounds = 0
+    while rounds < MAX_ROUNDS:
+        rounds += 1
+        chart = Parametrization(model, frames)
+        problem = PixelProblem(chart, replace(data, cameras=cams), use, sig, intrinsics)
+        x0 = np.zeros(problem.n_params)
+        B, _, _, _ = _subspace(problem.jacobian(x0))
+        sol = solve_least_squares(_Reduced(problem, B), np.zeros(B.shape[1]), MAX_NFEV)
+        x = B @ sol.x
+        model, cams = chart.model_from_vector(x[: chart.n_params]), problem.camera_models(x)
+        r = problem.pixel_residuals(x)
+        sig = _robust_sigma(r, data)
+        more = _new_outliers(data, use, r, sig)
+        outliers += more
+        if not more:
+            break
+    chart = Parametrization(model, frames)
+    cam_data = replace(data, cameras=cams)
+    problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
+    x0 = np.zeros(problem.n_params)
+    J = problem.jacobian(x0)
+    B, N, _, _ = _subspace(J)
+    sig = _ml_sigma(problem, x0, B.shape[1])
+    problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
+    J = problem.jacobian(x0)
+    _, N, cov, _ = _subspace(J)
+    names = problem.names()
+    undetermined = [names[i] for i in np.flatnonzero(np.abs(N).max(axis=1) > 0.1)] if N.size else []
+    r = problem.pixel_residuals(x0)
+    return PixelFit(
+        model=model,
+        cameras=cams,
+        sigma=sig,
+        chart=chart,
+        names=names,
+        covariance=cov,
+        null_space=N,
+        undetermined=undetermined,
+        outliers=outliers,
+        use=use,
+        view_rms={data.view_name(k): float(np.sqrt((rk**2).sum(1).mean())) for k, rk in r.items()},
+        corners=sum(len(v) for v in r.values()),
+        rounds=rounds,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+__all__ = ["CORNER_ALPHA", "IMAGE_ALPHA", "PixelFit", "fit_pixels"]
