@@ -98,8 +98,13 @@ class UrdfCameraRig:
         return out
 
 
-def camera_rig(urdf: str | Path | UrdfTree, cameras: Sequence[str]) -> UrdfCameraRig:
+def camera_rig(
+    urdf: str | Path | UrdfTree, cameras: Sequence[str], *, links: Sequence[str] = ()
+) -> UrdfCameraRig:
     """The rig of ``cameras`` (URDF link names, each optionally ``LINK:optical``/``LINK:body``).
+
+    ``links``: more URDF links (e.g. a gripper holding a board) whose paths the model includes,
+    each as a frame of kind ``plate`` named like the link (:func:`~cpc2urdf.urdf.robot.urdf_robot`).
 
     Raises:
         InputFileError: A camera link the URDF cannot carry or whose convention cannot be told (one
@@ -117,7 +122,7 @@ def camera_rig(urdf: str | Path | UrdfTree, cameras: Sequence[str]) -> UrdfCamer
                 tree.source,
                 f"camera link {link!r} hangs below camera link {above[0]!r}; name one of them",
             )
-    robot = urdf_robot(tree, list(cams))
+    robot = urdf_robot(tree, [*cams, *(link for link in links if link not in cams)])
     assert robot.nominal is not None
     model = robot.nominal
     names = NameMap.of(tree)
