@@ -29,7 +29,7 @@ from cpc2urdf.identification.handeye import stage2
 from cpc2urdf.identification.handeye.stage2 import CameraIntrinsics
 from cpc2urdf.identification.simulation.placement import clear_placement
 from cpc2urdf.identification.simulation.stage1_experiment import simulate_experiment
-from cpc2urdf.identification.simulation.visibility import check_view
+from cpc2urdf.identification.simulation.visibility import board_in_view, check_view
 from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.identification.vision.image_folders import write_image
 from cpc2urdf.identification.vision.joints_csv import write_joints_csv
@@ -212,16 +212,8 @@ def _board_in_view(
     view: PinholeView, board: Board, T_world_board: Array, margin_px: float = 10.0
 ) -> bool:
     """The whole board (outline) in front of the camera, inside the image by ``margin_px``, face towards it."""
-    T = view.T_camera_world @ T_world_board
-    c = board.outline_corners() @ T[:3, :3].T + T[:3, 3]
-    if np.any(c[:, 2] < 0.05) or -T[:3, 3] @ T[:3, 2] <= 0:
-        return False
-    uv = PinholeView(view.K, view.D, view.image_size).project(c)
-    w, h = view.image_size
     return bool(
-        np.all(uv >= margin_px)
-        and np.all(uv[:, 0] <= w - 1 - margin_px)
-        and np.all(uv[:, 1] <= h - 1 - margin_px)
+        board_in_view(view, board, view.T_camera_world @ T_world_board, margin_px=margin_px)[0]
     )
 
 
@@ -388,23 +380,10 @@ def _write_head_images(
     image: Callable[[PinholeView], NDArray[np.uint8]],
     target: str,
 ) -> dict[str, Path]:
-    """Write a simulated stage-2 folder: per camera frame of ``truth``, ``<camera>.yaml`` and the
-    ``image(view)`` at each configuration of ``q`` (``<camera>/<record>.png``), then ``joints.csv``
-    and ``target_truth.json`` (the true ``T_base_target``; ``target`` names it). Returns the
-    written files by role."""
-    size = (intr.width, intr.height)
-    records = [f"{i:04d}" for i in range(len(q))]
-    paths: dict[str, Path] = {}
-    for c in cameras:
-        (out / c).mkdir(parents=True, exist_ok=True)
-        paths[c] = save_camera(intr.K, intr.D, size, out / f"{c}.yaml")
-        T_world_cam = truth.fk_frame(c, q)
-        for i, rec in enumerate(records):
-            write_image(
-                out / c / f"{rec}.png",
-                image(PinholeView(intr.K, intr.D, size, inverse(T_world_cam[i]))),
-            )
-    paths["joints"] = write_joints_csv(out / "joints.csv", truth.structure, records, q)
+    """Write a simulated stage-2 folder: :func:`write_camera_images` with the same image for
+    every record at a view, then ``target_truth.json`` (the true ``T_base_target``; ``target``
+    names it). Returns the written files by role."""
+    paths = write_camera_images(out, truth, dict.fromkeys(cameras, intr), q, lambda v, _: image(v))
     paths["target_truth"] = write_json(
         out / "target_truth.json",
         {
@@ -413,6 +392,35 @@ def _write_head_images(
             "units": {"length": "m"},
         },
     )
+    return paths
+
+
+def write_camera_images(
+    out: Path,
+    model: CPCModel,
+    intrinsics: Mapping[str, CameraIntrinsics],
+    q: Array,
+    image: Callable[[PinholeView, int], NDArray[np.uint8]],
+    *,
+    show_progress: bool = False,
+) -> dict[str, Path]:
+    """Write what a robot's own cameras see, in the layout ``measure_head`` reads: per camera
+    frame of ``model`` (the keys of ``intrinsics``, in order) ``<camera>.yaml`` and, at each
+    configuration ``q[i]``, ``image(view, i)`` as ``<camera>/<record>.png`` (records ``0000``,
+    ``0001``, ...; cameras outer, records inner); then ``joints.csv``. Returns the written
+    files by role (camera frame -> its ``.yaml``, ``joints``)."""
+    records = [f"{i:04d}" for i in range(len(q))]
+    paths: dict[str, Path] = {}
+    jobs = [(c, i) for c in intrinsics for i in range(len(q))]
+    T_world_cam = {c: model.fk_frame(c, q).reshape(-1, 4, 4) for c in intrinsics}
+    for c, intr in intrinsics.items():
+        (out / c).mkdir(parents=True, exist_ok=True)
+        paths[c] = save_camera(intr.K, intr.D, (intr.width, intr.height), out / f"{c}.yaml")
+    for c, i in progress(jobs, "render") if show_progress else jobs:
+        intr = intrinsics[c]
+        view = PinholeView(intr.K, intr.D, (intr.width, intr.height), inverse(T_world_cam[c][i]))
+        write_image(out / c / f"{records[i]}.png", image(view, i))
+    paths["joints"] = write_joints_csv(out / "joints.csv", model.structure, records, q)
     return paths
 
 
@@ -570,4 +578,5 @@ __all__ = [
     "render_experiment",
     "render_head_board_experiment",
     "render_head_experiment",
+    "write_camera_images",
 ]

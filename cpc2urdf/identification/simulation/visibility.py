@@ -6,7 +6,8 @@ another plate or by the plate's own back (a 3-D ray test against the plate recta
 :func:`~cpc2urdf.identification.vision.render.occluded_circles`, with ``OCCLUSION_MARGIN_PX`` of
 clearance). :func:`check_view` reports what fails, per (configuration, plate);
 :func:`visible_heldout` draws held-out configurations that pass it (a real validation set holds
-only poses the rig can measure).
+only poses the rig can measure). :func:`board_in_view` is the check for one camera and a
+standard board, vectorised over poses.
 
 Example::
 
@@ -24,7 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.identification.simulation.design import random_configurations
-from cpc2urdf.identification.vision.render import occluded_circles
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.render import PinholeView, occluded_circles
 from cpc2urdf.identification.vision.stereo import StereoRig
 from cpc2urdf.identification.vision.targets import PlateDesign, robot_plate_designs
 from cpc2urdf.model import CPCModel, RobotStructure
@@ -233,11 +235,55 @@ def visible_heldout(
     return q, redrawn
 
 
+def board_in_view(
+    view: PinholeView,
+    board: Board,
+    T_camera_board: ArrayLike,
+    *,
+    margin_px: float = 10.0,
+    near: float = 0.05,
+    max_angle: float = 0.5 * math.pi,
+    min_point_px: float = 0.0,
+) -> NDArray[np.bool_]:
+    """Per pose of ``board`` in the camera's optical frame (shape (4, 4) or (N, 4, 4)): whether the
+    camera ``view`` (its intrinsics; its pose is not used) sees the whole board: every outline
+    corner at least ``near`` [m] in front and ``margin_px`` inside the image, the printed face
+    (+z) towards the camera, less than ``max_angle`` [rad] between its normal and the line of
+    sight to its origin, and neighbouring points at least ``min_point_px`` apart in the image
+    (along the projected outline's shortest edge). Shape (N,)."""
+    T = np.asarray(T_camera_board, dtype=float).reshape(-1, 4, 4)
+    R, t = T[:, :3, :3], T[:, :3, 3]
+    c = board.outline_corners()
+    p = np.einsum("nij,kj->nki", R, c) + t[:, None, :]  # corners in the camera frame, (N, 4, 3)
+    dist = np.linalg.norm(t, axis=1)
+    ok = np.all(p[..., 2] >= near, axis=1) & (
+        -np.einsum("ni,ni->n", t, R[:, :, 2]) > math.cos(max_angle) * dist
+    )
+    w, h = view.image_size
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xn = p[..., :2] / p[..., 2:]
+    # a lens model's polynomial can fold points far outside the field of view back into the image
+    ok &= np.all(np.abs(xn) <= 2.0 * np.array([w / view.K[0, 0], h / view.K[1, 1]]), axis=(1, 2))
+    if not ok.any():
+        return ok
+    uv = np.full(p.shape[:2] + (2,), np.nan)
+    uv[ok] = PinholeView(view.K, view.D, view.image_size).project(p[ok]).reshape(-1, 4, 2)
+    m = margin_px
+    ok &= np.all((uv >= m) & (uv <= np.array([w - 1 - m, h - 1 - m])), axis=(1, 2))
+    if min_point_px > 0:
+        x0, x1, y0, y1 = board.outline
+        edge_px = np.linalg.norm(uv - np.roll(uv, -1, axis=1), axis=2)  # edges 01, 12, 23, 30
+        px_per_m = edge_px / np.array([x1 - x0, y1 - y0, x1 - x0, y1 - y0])
+        ok &= px_per_m.min(axis=1) * board.point_spacing >= min_point_px
+    return ok
+
+
 __all__ = [
     "MAX_VIEW_ANGLE",
     "OCCLUSION_MARGIN_PX",
     "VIEW_MARGIN_PX",
     "ViewReport",
+    "board_in_view",
     "check_view",
     "frame_points",
     "visible_heldout",
