@@ -16,15 +16,15 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from cpc2urdf.errors import InputFileError, SpecError
 from cpc2urdf.model import BASE, CPCModel, CPCParams, Frame
-from cpc2urdf.transforms import Array, homogeneous
-from cpc2urdf.urdf.camera_frames import CameraLink, camera_link
+from cpc2urdf.transforms import Array, homogeneous, inverse
+from cpc2urdf.urdf.camera_frames import CameraLink, camera_link, split_convention
 from cpc2urdf.urdf.robot import NameMap, UrdfSource, urdf_robot, urdf_source, with_urdf_source
 from cpc2urdf.urdf.tree import UrdfTree, read_urdf_tree
 from cpc2urdf.urdf.writeback import write_calibrated_urdf
@@ -116,6 +116,46 @@ def camera_links(tree: UrdfTree, links: Mapping[str, str | None]) -> dict[str, C
     return {link: camera_link(tree, link, convention) for link, convention in links.items()}
 
 
+def optical_frames_model(
+    tree: UrdfTree, cameras: Sequence[str], holding: str | None = None
+) -> tuple[CPCModel, dict[str, CameraLink]]:
+    """The URDF's sub-tree on the paths to ``cameras`` (link names, ``LINK:optical``/``LINK:body``
+    where the file cannot tell) and to the link ``holding`` a board, for a fit on pixels: each
+    camera link a frame of kind ``camera`` at its OPTICAL pose (named as the link's frame), the
+    holding link a measured frame where the URDF puts it. :func:`in_link_conventions` turns the
+    camera frames back into their links' conventions for the write-back.
+
+    Raises:
+        InputFileError: A camera link the URDF cannot carry or whose convention cannot be told; a
+            holding link that is not a link of the URDF.
+    """
+    if holding is not None and not tree.has_link(holding):
+        raise InputFileError(tree.source, f"board link {holding!r} is not a link of this URDF")
+    cams = camera_links(tree, dict(split_convention(c) for c in cameras))
+    model = urdf_robot(tree, [*cams, *([holding] if holding else [])]).nominal
+    assert model is not None
+    for link, cam in cams.items():
+        K, T_K_link = link_placement(model, tree, link)
+        model = model.with_frame(
+            Frame(frame_name(model, tree, link), K, "camera"),
+            CPCParams.from_matrix(T_K_link @ cam.T_link_optical),
+        )
+    return model, cams
+
+
+def in_link_conventions(
+    model: CPCModel, tree: UrdfTree, cams: Mapping[str, CameraLink]
+) -> CPCModel:
+    """``model`` of :func:`optical_frames_model` with each camera frame at its link's own pose
+    (an x-forward link stays x-forward when written back)."""
+    out = model
+    for link, cam in cams.items():
+        name = frame_name(model, tree, link)
+        T = model.frames[name].matrix() @ inverse(cam.T_link_optical)
+        out = out.with_frame(model.structure.frame(name), CPCParams.from_matrix(T))
+    return out
+
+
 def write_camera_mounts(
     urdf: str | os.PathLike[str],
     mounts: Mapping[str, Array],
@@ -152,7 +192,9 @@ def write_camera_mounts(
 __all__ = [
     "camera_links",
     "frame_name",
+    "in_link_conventions",
     "link_placement",
+    "optical_frames_model",
     "with_camera_links",
     "write_camera_mounts",
 ]

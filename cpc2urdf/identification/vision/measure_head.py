@@ -20,7 +20,7 @@ that cannot be measured is handled by the ``on_error`` policy of
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +71,8 @@ class HeadImageMeasurement:
         T_camera_target: Per camera, solvePnP target poses, shape (N_c, 4, 4).
         reprojection_rms: Per camera, the RMS reprojection error per record [px], shape (N_c,).
         problems: Skipped images with the reason.
+        corners: With a standard board: per camera and record, the detected points' ids and
+            pixels (``BoardPose.ids``, ``BoardPose.uv``), for a fit on pixels.
     """
 
     labels: dict[str, list[str]]
@@ -78,6 +80,7 @@ class HeadImageMeasurement:
     T_camera_target: dict[str, Array]
     reprojection_rms: dict[str, Array]
     problems: list[str]
+    corners: dict[str, list[tuple[NDArray[np.intp], Array]]] = field(default_factory=dict)
 
 
 def measure_head_images(
@@ -137,6 +140,7 @@ def measure_head_images(
     out_q: dict[str, list[Array]] = {c: [] for c in cameras}
     out_T: dict[str, list[Array]] = {c: [] for c in cameras}
     out_r: dict[str, list[float]] = {c: [] for c in cameras}
+    out_c: dict[str, list[tuple[NDArray[np.intp], Array]]] = {c: [] for c in cameras}
     jobs = [(i, c) for i in range(len(table.records)) for c in cameras]
     # The bar's "done" line only once the records are known to be usable (progress_checked).
     with progress_checked(jobs, "measure", show_progress) as bar:
@@ -180,6 +184,8 @@ def measure_head_images(
             out_q[c].append(table.q[i])
             out_T[c].append(r.T_camera_board if isinstance(r, BoardPose) else r.T_camera_target)
             out_r[c].append(r.reprojection_rms)
+            if isinstance(r, BoardPose):
+                out_c[c].append((r.ids, r.uv))
         for c in cameras:
             if len(out_T[c]) < 3:
                 raise DegenerateDataError(
@@ -192,6 +198,7 @@ def measure_head_images(
         {c: np.array(v) for c, v in out_T.items()},
         {c: np.array(v) for c, v in out_r.items()},
         problems,
+        out_c if board is not None else {},
     )
 
 

@@ -1,0 +1,108 @@
+"""A folder of head-camera images -> the board's corners per image (:class:`PixelData`).
+
+The layout is stage 2's (``docs/images.md``)::
+
+    IMAGES_DIR/
+      <camera frame>/<record>.png     one sub-folder per head camera
+      <camera frame>.yaml             its intrinsics (OpenCV FileStorage, cv2.calibrateCamera)
+      joints.csv                      the joint readings of every record
+      board.json                      the board (cpc2urdf/board@1), unless given
+
+Each image is read by :func:`~cpc2urdf.identification.vision.measure_head.measure_head_images`
+(OpenCV's detector for the board's kind; a grid's orientation resolved by PnP); the detected
+points (ellipse-centre corrected for circle grids) are what the pixel fit uses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from cpc2urdf.errors import InputFileError
+from cpc2urdf.identification.selfcal.pixel_problem import BoardView, CameraModel, PixelData
+from cpc2urdf.identification.vision.boards.board import Board
+from cpc2urdf.identification.vision.boards.board_file import load_board
+from cpc2urdf.identification.vision.measure_head import HeadCamera, measure_head_images
+from cpc2urdf.identification.vision.rig_file import load_camera
+from cpc2urdf.model import RobotStructure
+
+BOARD_FILE = "board.json"
+
+
+def folder_board(images_dir: str | Path, board: Board | str | Path | None) -> Board:
+    """``board``, a board file, or the folder's ``board.json``."""
+    if isinstance(board, Board):
+        return board
+    path = Path(board) if board is not None else Path(images_dir) / BOARD_FILE
+    if not path.is_file():
+        raise InputFileError(path, "no board file (give --board BOARD.json)")
+    return load_board(path)
+
+
+def folder_cameras(
+    images_dir: str | Path,
+    cameras: Sequence[str],
+    intrinsics: Mapping[str, str | Path] | None = None,
+) -> dict[str, CameraModel]:
+    """Each camera's intrinsics: its file in ``intrinsics``, else ``<camera>.yaml`` in the folder."""
+    out = {}
+    for c in cameras:
+        path = Path((intrinsics or {}).get(c) or Path(images_dir) / f"{c}.yaml")
+        if not path.is_file():
+            raise InputFileError(path, f"no intrinsics file for camera {c}")
+        K, D, size = load_camera(path)
+        out[c] = CameraModel(K, np.asarray(D, dtype=float), size)
+    return out
+
+
+def read_pixel_data(
+    images_dir: str | Path,
+    structure: RobotStructure,
+    cameras: Mapping[str, CameraModel],
+    board: Board,
+    *,
+    board_frame: str | None = None,
+    on_error: str = "skip",
+    show_progress: bool = False,
+    joint_aliases: Mapping[str, str] | None = None,
+) -> PixelData:
+    """The board's corners in every readable image of ``images_dir`` (module docstring).
+
+    Raises:
+        InputFileError, DegenerateDataError, ConfigurationError: As ``measure_head_images``.
+    """
+    m = measure_head_images(
+        images_dir,
+        {c: HeadCamera(cam.K, cam.D, cam.image_size) for c, cam in cameras.items()},
+        structure,
+        board=board,
+        on_error=on_error,
+        show_progress=show_progress,
+        joint_aliases=joint_aliases,
+    )
+    labels: list[str] = []
+    q: list[np.ndarray] = []
+    index: dict[str, int] = {}
+    views = []
+    for c in cameras:
+        for label, qi, (ids, uv) in zip(m.labels[c], m.q[c], m.corners[c], strict=True):
+            if label not in index:
+                index[label] = len(labels)
+                labels.append(label)
+                q.append(qi)
+            views.append(BoardView(c, index[label], ids, uv))
+    return PixelData(
+        np.array(q),
+        labels,
+        views,
+        dict(cameras),
+        board.object_points(),
+        board_frame,
+        source=str(images_dir),
+        notes=list(m.problems),
+    )
+
+
+__all__ = ["BOARD_FILE", "folder_board", "folder_cameras", "read_pixel_data"]
