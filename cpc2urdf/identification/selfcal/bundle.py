@@ -106,7 +106,7 @@ class _Reduced:
         return self.problem.jacobian(self.B @ z) @ self.B
 
 
-def _subspace(J: Array) -> tuple[Array, Array, Array, Array]:
+def subspace(J: Array) -> tuple[Array, Array, Array, Array]:
     """Determined directions ``B`` (P, r), undetermined ``N`` (P, P - r), both unit columns, and
     the pseudo-inverse of ``J^T J`` (P, P), by the column-scaled SVD (stage 1's rank rule)."""
     norms = np.linalg.norm(J, axis=0)
@@ -219,7 +219,7 @@ def fit_pixels(
         chart = Parametrization(model, frames)
         problem = PixelProblem(chart, replace(data, cameras=cams), use, sig, intrinsics)
         x0 = np.zeros(problem.n_params)
-        B, _, _, _ = _subspace(problem.jacobian(x0))
+        B, _, _, _ = subspace(problem.jacobian(x0))
         sol = solve_least_squares(_Reduced(problem, B), np.zeros(B.shape[1]), MAX_NFEV)
         x = B @ sol.x
         model, cams = chart.model_from_vector(x[: chart.n_params]), problem.camera_models(x)
@@ -234,11 +234,11 @@ def fit_pixels(
     problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
     x0 = np.zeros(problem.n_params)
     J = problem.jacobian(x0)
-    B, N, _, _ = _subspace(J)
+    B, N, _, _ = subspace(J)
     sig = _ml_sigma(problem, x0, B.shape[1])
     problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
     J = problem.jacobian(x0)
-    _, N, cov, _ = _subspace(J)
+    _, N, cov, _ = subspace(J)
     names = problem.names()
     undetermined = [names[i] for i in np.flatnonzero(np.abs(N).max(axis=1) > 0.1)] if N.size else []
     r = problem.pixel_residuals(x0)
@@ -260,4 +260,4 @@ def fit_pixels(
     )
 
 
-__all__ = ["CORNER_ALPHA", "IMAGE_ALPHA", "PixelFit", "fit_pixels"]
+__all__ = ["CORNER_ALPHA", "IMAGE_ALPHA", "PixelFit", "fit_pixels", "subspace"]
