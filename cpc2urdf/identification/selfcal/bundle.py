@@ -12,14 +12,18 @@ board's pose (its placement on the robot when held), optionally the intrinsics, 
    user's URDF) and is named.
 2. **Levenberg-Marquardt** (:func:`~cpc2urdf.identification.kinematics.refine.solve_least_squares`)
    on the corners weighted by each camera's corner noise.
-3. **Outliers**: a corner farther than the chi-square(2) 1e-4 quantile of the robust noise scale
-   (a misdetected corner) is dropped; an image whose remaining corners together fail a
-   chi-square test at 1e-6, or with more than a third of its corners dropped (a blurred image, a
-   wrong grid order), is dropped whole. The chart is re-centred and the fit repeated until
-   nothing more is dropped. Each is named.
-4. **Noise and covariance**: each camera's corner noise is the ML estimate from its residuals with
-   the degrees of freedom of the fit; the covariance is ``(J^T J)^+`` in the determined subspace,
-   the Cramér-Rao bound of the pixel model at the estimate.
+3. **Noise**: each image has its own corner noise (blur, distance and angle change it): its
+   residuals' scale, shrunk towards its camera's median by :data:`PRIOR_COORDINATES`
+   coordinates' weight; the corners are weighted by it. Robust (MAD) in the rounds, maximum
+   likelihood with the fit's degrees of freedom at the end.
+4. **Outliers**: an image whose corners are :data:`IMAGE_NOISE_FACTOR` times noisier than its
+   camera's typical image (blurred, moving), or with more than a third of its corners off (the
+   board misdetected), is dropped whole; a corner is dropped beyond the chi-square(2) quantile
+   of its image's noise at which a clean data set loses one with probability
+   :data:`CORNER_ALPHA`. The chart is re-centred and the fit repeated until nothing more is
+   dropped. Each is named.
+5. **Covariance**: ``(J^T J)^+`` in the determined subspace, the Cramér-Rao bound of the pixel
+   model at the estimate.
 """
 
 from __future__ import annotations
@@ -29,7 +33,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincc
 
 from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
@@ -42,8 +45,9 @@ from cpc2urdf.identification.selfcal.pixel_problem import (
 from cpc2urdf.model import CPCModel
 from cpc2urdf.transforms import Array
 
-CORNER_ALPHA = 1e-4  # a good corner is dropped with this probability
-IMAGE_ALPHA = 1e-6  # a good image is dropped with this probability
+CORNER_ALPHA = 1e-3  # a clean data set loses a good corner with this probability
+IMAGE_NOISE_FACTOR = 4.0  # an image whose corners are this much noisier than its camera's goes
+PRIOR_COORDINATES = 10.0  # an image's noise is its own, shrunk towards its camera's by this weight
 IMAGE_DROPPED_SHARE = 1.0 / 3.0  # above this share of dropped corners the whole image goes
 MAX_ROUNDS = 5
 MIN_SIGMA = 1e-3  # [px] no detector is better; keeps noise-free data well-conditioned
@@ -57,7 +61,9 @@ class PixelFit:
     Attributes:
         model: The calibrated model (world = the board when fixed, else the start's world).
         cameras: Camera -> intrinsics (refined when asked, else as given).
-        sigma: Camera -> corner noise per pixel coordinate [px] (ML estimate).
+        sigma: Camera -> corner noise per pixel coordinate [px] (RMS over its images).
+        view_sigma: Per view, its corner noise [px] (ML, shrunk towards its camera's), shape
+            (n_views,); NaN for views not used.
         chart: Chart centred on ``model``; ``x`` below are its coordinates then the intrinsics'.
         names: Parameter names, chart first.
         covariance: Of all parameters, shape (P, P) [m, rad, px]; zero along ``null_space``.
@@ -74,6 +80,7 @@ class PixelFit:
     model: CPCModel
     cameras: dict[str, CameraModel]
     sigma: dict[str, float]
+    view_sigma: Array
     chart: Parametrization
     names: list[str]
     covariance: Array
@@ -124,69 +131,75 @@ def subspace(J: Array) -> tuple[Array, Array, Array, Array]:
     )
 
 
-def _robust_sigma(r: dict[int, Array], data: PixelData) -> dict[str, float]:
-    """Per camera, the MAD scale of its pixel residual coordinates [px]."""
+def _view_sigma(r: dict[int, Array], data: PixelData, dof_share: float) -> Array:
+    """Per view, its corner noise [px]: the view's own scale (MAD in rounds, ML with the fit's
+    degrees of freedom shared, ``dof_share`` of each coordinate, at the end) shrunk towards its
+    camera's median by :data:`PRIOR_COORDINATES` coordinates' weight; NaN for unused views."""
+    own = np.full(len(data.views), np.nan)
+    n = np.zeros(len(data.views))
+    for k, rk in r.items():
+        v = rk.ravel()
+        n[k] = v.size
+        if dof_share < 0:
+            own[k] = 1.4826 * float(np.median(np.abs(v)))
+        else:
+            own[k] = float(np.sqrt(v @ v / max(v.size * (1.0 - dof_share), 1.0)))
+    out = np.full(len(data.views), np.nan)
+    for c in data.cameras:
+        ks = [k for k in r if data.views[k].camera == c]
+        if ks:
+            m = float(np.median(own[ks]))
+            out[ks] = np.sqrt(
+                (n[ks] * own[ks] ** 2 + PRIOR_COORDINATES * m**2) / (n[ks] + PRIOR_COORDINATES)
+            )
+    return np.maximum(out, MIN_SIGMA)
+
+
+def camera_sigma(data: PixelData, sigma: Array, use: list[NDArray[np.bool_]]) -> dict[str, float]:
+    """Per camera, the RMS of its used views' corner noise [px]."""
     out = {}
     for c in data.cameras:
-        v = [r[k].ravel() for k in r if data.views[k].camera == c]
-        if v:
-            out[c] = max(MIN_SIGMA, 1.4826 * float(np.median(np.abs(np.concatenate(v)))))
-    return out
-
-
-def _ml_sigma(problem: PixelProblem, x: Array, rank: int) -> dict[str, float]:
-    """Per camera, ``sqrt(|r|^2 / (m - rank * m_c / m))``: the ML noise with the fit's dof shared."""
-    r = problem.pixel_residuals(x)
-    m = sum(v.size for v in r.values())
-    out = {}
-    for c in problem.data.cameras:
-        parts = [r[k].ravel() for k in r if problem.data.views[k].camera == c]
-        if parts:
-            v = np.concatenate(parts)
-            dof = max(v.size - rank * v.size / m, 1.0)
-            out[c] = max(MIN_SIGMA, float(np.sqrt(v @ v / dof)))
+        ks = [k for k, v in enumerate(data.views) if v.camera == c and use[k].any()]
+        if ks:
+            out[c] = float(np.sqrt(np.mean(sigma[ks] ** 2)))
     return out
 
 
 def _new_outliers(
-    data: PixelData, use: list[NDArray[np.bool_]], r: dict[int, Array], sigma: dict[str, float]
+    data: PixelData, use: list[NDArray[np.bool_]], r: dict[int, Array], sigma: Array
 ) -> list[str]:
     """Drop (in ``use``) the corners and images the tests reject; their descriptions."""
     from scipy.special import chdtri
 
-    corner_limit = float(chdtri(2, CORNER_ALPHA))
+    corner_limit = float(chdtri(2, CORNER_ALPHA / max(sum(len(rk) for rk in r.values()), 1)))
+    typical = camera_sigma(data, sigma, use)
     out = []
     for k, rk in r.items():
         v = data.views[k]
-        s = sigma[v.camera]
-        idx = np.flatnonzero(use[k])
-        d2 = (rk**2).sum(1) / s**2
-        bad = d2 > corner_limit
         name = data.view_name(k)
-        n_all = len(v.ids)
-        if bad.sum() + (n_all - len(idx)) > IMAGE_DROPPED_SHARE * n_all:
+        own = 1.4826 * float(np.median(np.abs(rk)))
+        if own > IMAGE_NOISE_FACTOR * typical[v.camera]:
+            use[k][:] = False
+            out.append(
+                f"image {name}: corners {own:.2g} px off (typical {typical[v.camera]:.2g} px for "
+                "this camera): blurred, moving, or the board misdetected; dropped"
+            )
+            continue
+        idx = np.flatnonzero(use[k])
+        d2 = (rk**2).sum(1) / sigma[k] ** 2
+        bad = d2 > corner_limit
+        if bad.sum() + (len(v.ids) - len(idx)) > IMAGE_DROPPED_SHARE * len(v.ids):
             use[k][:] = False
             out.append(
                 f"image {name}: {int(bad.sum())} of {len(idx)} corners off by more than "
-                f"{np.sqrt(corner_limit) * s:.2g} px (median {np.median(np.sqrt(d2)) * s:.2g} px): "
-                "board misdetected or image blurred; dropped"
-            )
-            continue
-        good = ~bad
-        chi2 = float(d2[good].sum())
-        if good.any() and gammaincc(good.sum(), 0.5 * chi2) < IMAGE_ALPHA:  # chi2(2n) tail
-            use[k][:] = False
-            rms = np.sqrt(chi2 / good.sum() / 2) * s
-            out.append(
-                f"image {name}: corner residuals {rms:.2g} px RMS against {s:.2g} px for this "
-                "camera (blurred or moving?); dropped"
+                f"{np.sqrt(corner_limit) * sigma[k]:.2g} px: the board misdetected; dropped"
             )
             continue
         for i in np.flatnonzero(bad):
             use[k][idx[i]] = False
             out.append(
-                f"corner {int(v.ids[idx[i]])} of image {name}: off by {np.sqrt(d2[i]) * s:.2g} px "
-                f"(noise {s:.2g} px); dropped"
+                f"corner {int(v.ids[idx[i]])} of image {name}: off by "
+                f"{np.sqrt(d2[i]) * sigma[k]:.2g} px (noise {sigma[k]:.2g} px); dropped"
             )
     return out
 
@@ -206,11 +219,13 @@ def fit_pixels(
         data: The images' corners.
         intrinsics: Refine each camera's ``fx, fy, cx, cy, k1, k2`` too.
         sigma: Starting corner noise per camera [px] (default 0.5).
+
+    Every round's outliers are judged on a robust noise scale; the result's noise is the ML one.
     """
     t0 = time.perf_counter()
     frames = list(data.cameras) + ([data.board_frame] if data.board_frame else [])
     use = [np.ones(len(v.ids), dtype=bool) for v in data.views]
-    sig = dict(sigma or {c: 0.5 for c in data.cameras})
+    sig = np.array([(sigma or {}).get(v.camera, 0.5) for v in data.views])
     model, cams = start, dict(data.cameras)
     outliers: list[str] = []
     rounds = 0
@@ -224,7 +239,7 @@ def fit_pixels(
         x = B @ sol.x
         model, cams = chart.model_from_vector(x[: chart.n_params]), problem.camera_models(x)
         r = problem.pixel_residuals(x)
-        sig = _robust_sigma(r, data)
+        sig = _view_sigma(r, data, -1.0)
         more = _new_outliers(data, use, r, sig)
         outliers += more
         if not more:
@@ -235,7 +250,8 @@ def fit_pixels(
     x0 = np.zeros(problem.n_params)
     J = problem.jacobian(x0)
     B, N, _, _ = subspace(J)
-    sig = _ml_sigma(problem, x0, B.shape[1])
+    r = problem.pixel_residuals(x0)
+    sig = _view_sigma(r, data, B.shape[1] / (2.0 * sum(len(v) for v in r.values())))
     problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
     J = problem.jacobian(x0)
     _, N, cov, _ = subspace(J)
@@ -245,7 +261,8 @@ def fit_pixels(
     return PixelFit(
         model=model,
         cameras=cams,
-        sigma=sig,
+        sigma=camera_sigma(data, sig, use),
+        view_sigma=sig,
         chart=chart,
         names=names,
         covariance=cov,
@@ -260,4 +277,11 @@ def fit_pixels(
     )
 
 
-__all__ = ["CORNER_ALPHA", "IMAGE_ALPHA", "PixelFit", "fit_pixels", "subspace"]
+__all__ = [
+    "CORNER_ALPHA",
+    "IMAGE_NOISE_FACTOR",
+    "PixelFit",
+    "camera_sigma",
+    "fit_pixels",
+    "subspace",
+]

@@ -14,8 +14,8 @@ For a held board the world is the robot's base and only relative poses are seen:
 the camera's and the board's paths, and a rigid motion of everything, are not determined; the
 fit (:mod:`bundle`) keeps them where they start.
 
-Residuals are ``(uv_detected - uv) / sigma_camera`` (unit variance when ``sigma`` is the
-detector's corner noise). Parameters: the chart's (:class:`Parametrization`, the cameras and the
+Residuals are ``(uv_detected - uv) / sigma_image`` (unit variance when ``sigma`` is the
+detector's corner noise in that image: blur, distance and angle change it from image to image). Parameters: the chart's (:class:`Parametrization`, the cameras and the
 held board as measured frames), then optionally each camera's ``fx, fy, cx, cy, k1, k2``.
 Jacobian: the chart's spatial twists (:meth:`Parametrization.pose_jacobian`) chained through the
 rigid transforms and ``cv2.projectPoints``' own derivatives; checked against finite differences
@@ -24,12 +24,12 @@ in ``tests/test_selfcal.py``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
@@ -123,7 +123,7 @@ class PixelProblem:
         chart: Chart centred on the current model (cameras and, if held, the board as frames).
         data: The images.
         use: Per view, which of its corners take part, shape (k,) booleans.
-        sigma: Camera -> corner noise per pixel coordinate [px].
+        sigma: Per view, the corner noise per pixel coordinate [px], shape (n_views,).
         intrinsics: Estimate each camera's ``fx, fy, cx, cy, k1, k2`` too.
     """
 
@@ -132,10 +132,11 @@ class PixelProblem:
         chart: Parametrization,
         data: PixelData,
         use: Sequence[NDArray[np.bool_]],
-        sigma: Mapping[str, float],
+        sigma: ArrayLike,
         intrinsics: bool = False,
     ) -> None:
-        self.chart, self.data, self.sigma = chart, data, dict(sigma)
+        self.chart, self.data = chart, data
+        self.sigma = np.asarray(sigma, dtype=float)
         self.views = [k for k, u in enumerate(use) if u.any()]
         self.points = {k: data.board_points[data.views[k].ids[use[k]]] for k in self.views}
         self.uv = {k: data.views[k].uv[use[k]] for k in self.views}
@@ -192,7 +193,7 @@ class PixelProblem:
         out = []
         for k in self.views:
             uv, _, _, Xc = self._project(k, T, cams)
-            r = (self.uv[k] - uv) / self.sigma[self.data.views[k].camera]
+            r = (self.uv[k] - uv) / self.sigma[k]
             out.append(np.where(Xc[:, 2:3] > 0, r, 1e6).ravel())
         return np.concatenate(out)
 
@@ -202,7 +203,7 @@ class PixelProblem:
         out, i = {}, 0
         for k in self.views:
             n = len(self.uv[k])
-            out[k] = r[i : i + 2 * n].reshape(n, 2) * self.sigma[self.data.views[k].camera]
+            out[k] = r[i : i + 2 * n].reshape(n, 2) * self.sigma[k]
             i += 2 * n
         return out
 
@@ -229,7 +230,7 @@ class PixelProblem:
             if v.camera in self.cams:
                 i = P + n_i * self.cams.index(v.camera)
                 Jk[:, i : i + n_i] = jac[:, [6, 7, 8, 9, 10, 11]]
-            rows.append(-Jk / self.sigma[v.camera])
+            rows.append(-Jk / self.sigma[k])
         return np.concatenate(rows, axis=0)
 
 
