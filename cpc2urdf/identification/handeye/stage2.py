@@ -97,11 +97,12 @@ def default_target_placement(
     model: CPCModel,
     cameras: Sequence[str] = tuple(HAND_OF_CAMERA),
     distance: float = DEFAULT_TARGET_DISTANCE,
+    q: Array | None = None,
 ) -> Array:
-    """``T_base_target``: the target ``distance`` [m] ahead of the cameras at the home
-    configuration, on their mean optical axis, its disks facing them (target z = -optical axis,
-    target x = the cameras' mean x). Shape (4, 4)."""
-    q = home_configuration(model)[None]
+    """``T_base_target``: the target ``distance`` [m] ahead of the cameras at configuration ``q``
+    (default the home configuration), on their mean optical axis, its disks facing them (target
+    z = -optical axis, target x = the cameras' mean x). Shape (4, 4)."""
+    q = (home_configuration(model) if q is None else np.asarray(q, dtype=float)).reshape(1, -1)
     T = np.concatenate([base_poses(model, c, q) for c in cameras])
     d = T[:, :3, 2].mean(axis=0)
     d /= np.linalg.norm(d)
