@@ -15,6 +15,8 @@ joint's calibration range, then, for each joint in turn, ``M`` values evenly spr
 calibration range (ends included) with the other joints at ``q0``: ``n M + 1`` records (6M+1 for
 the IIS-head; the paper chooses M = 9). Held-out and random-design experiments draw
 configurations uniformly in the box of calibration ranges (:func:`random_configurations`).
+Where only a thin part of the box is usable (a board every camera must see), :func:`walk_configurations`
+explores it from a usable start and :func:`farthest_points` spreads a selection over it.
 
 Example::
 
@@ -25,7 +27,7 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -125,6 +127,48 @@ def random_configurations(ranges: ArrayLike, n: int, rng: np.random.Generator) -
     return r[:, 0] + (r[:, 1] - r[:, 0]) * rng.random((n, r.shape[0]))
 
 
+def walk_configurations(
+    usable: Callable[[Array], NDArray[np.bool_]],
+    start: ArrayLike,
+    ranges: ArrayLike,
+    rng: np.random.Generator,
+    steps: int,
+    line_points: int = 24,
+) -> Array:
+    """The configurations a random walk in the box ``ranges`` (n, 2) visits, starting at the
+    usable ``start`` (n,): each step tries ``line_points`` points on a random line through the
+    current configuration (of a random length, up to the whole box, clipped to it) and moves to
+    one that ``usable`` (a batch (K, n) -> (K,) bool) accepts. Shape (visited, n), distinct rows."""
+    lo, hi = np.asarray(ranges, dtype=float).T
+    span = np.where(hi > lo, hi - lo, 1.0)
+    u = np.clip((np.asarray(start, dtype=float) - lo) / span, 0.0, 1.0)
+    visited = [u]
+    for _ in range(steps):
+        v = rng.normal(size=len(u))
+        t = 10.0 ** rng.uniform(-2.0, 0.3) * np.linspace(-1.0, 1.0, line_points)
+        cand = np.clip(u + t[:, None] * v / np.linalg.norm(v), 0.0, 1.0)
+        good = np.flatnonzero(usable(lo + cand * span))
+        if good.size:
+            u = cand[rng.choice(good)]
+            visited.append(u)
+    return np.asarray(lo + np.unique(np.array(visited), axis=0) * span, dtype=float)
+
+
+def farthest_points(q: ArrayLike, n: int, ranges: ArrayLike, rng: np.random.Generator) -> Array:
+    """``n`` of the configurations ``q`` (K, n_joints), K >= n, spread by farthest-point selection
+    (a random first, then each the farthest from those chosen, in units of the ranges (n_joints, 2)).
+    Shape (n, n_joints)."""
+    qq = np.asarray(q, dtype=float)
+    lo, hi = np.asarray(ranges, dtype=float).T
+    u = qq / np.where(hi > lo, hi - lo, 1.0)
+    pick = [int(rng.integers(len(u)))]
+    d = np.linalg.norm(u - u[pick[0]], axis=1)
+    while len(pick) < n:
+        pick.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(u - u[pick[-1]], axis=1))
+    return qq[pick]
+
+
 def measured_frames(structure: RobotStructure) -> list[str]:
     """The frames stage 1 measures: those of kind ``"plate"``."""
     return [f.name for f in structure.frames if f.kind == "plate"]
@@ -135,8 +179,10 @@ __all__ = [
     "DEFAULT_RANGE_SHARE",
     "PROTOCOL_JITTER",
     "calibration_ranges",
+    "farthest_points",
     "measured_frames",
     "protocol_configurations",
     "protocol_q",
     "random_configurations",
+    "walk_configurations",
 ]
