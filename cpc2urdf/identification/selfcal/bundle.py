@@ -7,11 +7,11 @@ board's pose (its placement on the robot when held), optionally the intrinsics, 
 1. **Undetermined directions** (a joint that never moved, joints shared by the camera's and a held
    board's paths, the rigid motion of everything when only relative poses are seen) are found
    from the column-scaled Jacobian's singular values at the start (the stage-1 rank rule,
-   :data:`~cpc2urdf.identification.kinematics.identifiability.RANK_TOL`); the fit moves only
-   within the determined subspace, so what the images cannot tell keeps the start's value (the
-   user's URDF) and is named.
+   :data:`~cpc2urdf.identification.kinematics.identifiability.RANK_TOL`). Per direction, the
+   parameter it moves most (pivoted QR) stays at the start's value (the user's URDF) and is
+   named; the fit moves the others, which absorb what it would have changed.
 2. **Levenberg-Marquardt** (:func:`~cpc2urdf.identification.kinematics.refine.solve_least_squares`)
-   on the corners weighted by each camera's corner noise.
+   on the corners weighted by each image's corner noise.
 3. **Noise**: each image has its own corner noise (blur, distance and angle change it): its
    residuals' scale, shrunk towards its camera's median by :data:`PRIOR_COORDINATES`
    coordinates' weight; the corners are weighted by it. Robust (MAD) in the rounds, maximum
@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import qr
 
 from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
@@ -50,6 +51,7 @@ IMAGE_NOISE_FACTOR = 4.0  # an image whose corners are this much noisier than it
 PRIOR_COORDINATES = 10.0  # an image's noise is its own, shrunk towards its camera's by this weight
 IMAGE_DROPPED_SHARE = 1.0 / 3.0  # above this share of dropped corners the whole image goes
 MAX_ROUNDS = 5
+ZERO_COLUMN = 1e-10  # [-] a Jacobian column this small relative to the largest is rounding
 MIN_SIGMA = 1e-3  # [px] no detector is better; keeps noise-free data well-conditioned
 MAX_NFEV = 100
 
@@ -66,15 +68,17 @@ class PixelFit:
             (n_views,); NaN for views not used.
         chart: Chart centred on ``model``; ``x`` below are its coordinates then the intrinsics'.
         names: Parameter names, chart first.
-        covariance: Of all parameters, shape (P, P) [m, rad, px]; zero along ``null_space``.
+        covariance: Of all parameters, shape (P, P) [m, rad, px]; zero for ``undetermined``.
         null_space: Directions the images do not determine, shape (P, k), unit columns.
-        undetermined: Parameters whose value the images cannot tell (kept at the start).
+        undetermined: One parameter per such direction, kept at the start's value (the one the
+            direction moves most); the others absorb what it would have changed.
         outliers: Dropped images and corners, each a sentence.
         use: Per view, the corners used, shape (k,) booleans.
         view_rms: Per view name (``camera/record``), the RMS residual of its used corners [px].
         corners: Corners used.
         rounds: Outlier rounds.
         seconds: Time of the fit [s].
+        board_scale: The board's scale the images say (1 unless refined).
     """
 
     model: CPCModel
@@ -92,6 +96,7 @@ class PixelFit:
     corners: int
     rounds: int
     seconds: float
+    board_scale: float = 1.0
     notes: list[str] = field(default_factory=list)
 
     def chart_covariance(self) -> Array:
@@ -101,33 +106,66 @@ class PixelFit:
 
 
 class _Reduced:
-    """A problem in the determined subspace: ``x = B z``."""
+    """A problem in its free parameters (the others stay 0)."""
 
-    def __init__(self, problem: PixelProblem, B: Array) -> None:
-        self.problem, self.B = problem, B
+    def __init__(self, problem: PixelProblem, free: NDArray[np.intp]) -> None:
+        self.problem, self.free = problem, free
+
+    def full(self, z: Array) -> Array:
+        x = np.zeros(self.problem.n_params)
+        x[self.free] = z
+        return x
 
     def residuals(self, z: Array) -> Array:
-        return self.problem.residuals(self.B @ z)
+        return self.problem.residuals(self.full(z))
 
     def jacobian(self, z: Array) -> Array:
-        return self.problem.jacobian(self.B @ z) @ self.B
+        return self.problem.jacobian(self.full(z))[:, self.free]
 
 
-def subspace(J: Array) -> tuple[Array, Array, Array, Array]:
-    """Determined directions ``B`` (P, r), undetermined ``N`` (P, P - r), both unit columns, and
-    the pseudo-inverse of ``J^T J`` (P, P), by the column-scaled SVD (stage 1's rank rule)."""
+def subspace(J: Array, prefer: Array | None = None) -> tuple[NDArray[np.intp], Array, Array]:
+    """What ``J`` determines: the parameters to keep fixed (one per undetermined direction, the
+    one each direction moves most, weighted by ``prefer`` (P,), by pivoted QR), the undetermined
+    directions (P, k) (unit columns) and the covariance ``(J_free^T J_free)^-1`` embedded in
+    (P, P), zero for the fixed.
+
+    Directions by the column-scaled SVD (stage 1's rank rule). A column at rounding level (a joint
+    on both the camera's and a held board's paths) is zero: scaled to unit length its rounding
+    would pass for information.
+    """
     norms = np.linalg.norm(J, axis=0)
-    d = np.where(norms > 0, norms, 1.0)
-    _, s, Vt = np.linalg.svd(triangular_factor(J / d))
-    keep = (s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL) & (norms.max() > 0)
-    Vk = Vt[keep].T / d[:, None]
-    cov = (Vk / s[keep] ** 2) @ Vk.T
-    B, N = Vt[keep].T / d[:, None], Vt[~keep].T / d[:, None]
-    return (
-        B / np.linalg.norm(B, axis=0),
-        N / np.maximum(np.linalg.norm(N, axis=0), 1e-300),
-        0.5 * (cov + cov.T),
-        s,
+    zero = norms <= ZERO_COLUMN * norms.max()
+    d = np.where(zero, 1.0, norms)
+    A = np.where(zero, 0.0, J / d)
+    _, s, Vt = np.linalg.svd(triangular_factor(A))
+    null = ~(s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL)
+    fixed = np.zeros(0, dtype=np.intp)
+    if null.any():
+        w = np.ones(J.shape[1]) if prefer is None else prefer
+        _, _, piv = qr(Vt[null] * w, pivoting=True, mode="economic")
+        fixed = np.sort(piv[: int(null.sum())])
+    free = np.setdiff1d(np.arange(J.shape[1]), fixed)
+    R = triangular_factor(A[:, free])
+    Ri = np.linalg.inv(R) / d[free, None]
+    cov = np.zeros((J.shape[1], J.shape[1]))
+    cov[np.ix_(free, free)] = Ri @ Ri.T
+    N = Vt[null].T / d[:, None]
+    return fixed, N / np.maximum(np.linalg.norm(N, axis=0), 1e-300), cov
+
+
+def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
+    """Which parameter an undetermined direction keeps at the user's value: a joint the records
+    never move first, a held board's placement (not the user's) last."""
+    still = {
+        j
+        for i, j in enumerate(
+            problem.chart.model_from_vector(np.zeros(problem.chart.n_params)).structure.joint_names
+        )
+        if np.ptp(data.q[:, i]) == 0.0
+    }
+    owner = [n.rsplit(".", 1)[0] for n in problem.names()]
+    return np.array(
+        [100.0 if o in still else 0.01 if o == data.board_frame else 1.0 for o in owner]
     )
 
 
@@ -172,16 +210,19 @@ def _new_outliers(
     from scipy.special import chdtri
 
     corner_limit = float(chdtri(2, CORNER_ALPHA / max(sum(len(rk) for rk in r.values()), 1)))
-    typical = camera_sigma(data, sigma, use)
+    own = {k: 1.4826 * float(np.median(np.abs(rk))) for k, rk in r.items()}
+    typical = {
+        c: float(np.median([s for k, s in own.items() if data.views[k].camera == c] or [np.nan]))
+        for c in data.cameras
+    }
     out = []
     for k, rk in r.items():
         v = data.views[k]
         name = data.view_name(k)
-        own = 1.4826 * float(np.median(np.abs(rk)))
-        if own > IMAGE_NOISE_FACTOR * typical[v.camera]:
+        if own[k] > IMAGE_NOISE_FACTOR * max(typical[v.camera], MIN_SIGMA):
             use[k][:] = False
             out.append(
-                f"image {name}: corners {own:.2g} px off (typical {typical[v.camera]:.2g} px for "
+                f"image {name}: corners {own[k]:.2g} px off (typical {typical[v.camera]:.2g} px for "
                 "this camera): blurred, moving, or the board misdetected; dropped"
             )
             continue
@@ -209,6 +250,7 @@ def fit_pixels(
     data: PixelData,
     *,
     intrinsics: bool = False,
+    board_scale: bool = False,
     sigma: dict[str, float] | None = None,
 ) -> PixelFit:
     """The one-stage fit of ``data`` from ``start`` (module docstring).
@@ -218,6 +260,7 @@ def fit_pixels(
             placed in the board's world when the board is fixed.
         data: The images' corners.
         intrinsics: Refine each camera's ``fx, fy, cx, cy, k1, k2`` too.
+        board_scale: Refine the board's scale too (a wrong square size).
         sigma: Starting corner noise per camera [px] (default 0.5).
 
     Every round's outliers are judged on a robust noise scale; the result's noise is the ML one.
@@ -226,44 +269,55 @@ def fit_pixels(
     frames = list(data.cameras) + ([data.board_frame] if data.board_frame else [])
     use = [np.ones(len(v.ids), dtype=bool) for v in data.views]
     sig = np.array([(sigma or {}).get(v.camera, 0.5) for v in data.views])
-    model, cams = start, dict(data.cameras)
+    model, cur = start, data
+    prefer = _keep_first(
+        PixelProblem(Parametrization(model, frames), cur, use, sig, intrinsics, board_scale), data
+    )
     outliers: list[str] = []
-    rounds = 0
+    rounds, scale = 0, 1.0
+
+    def problem_at(model: CPCModel, sig: Array) -> PixelProblem:
+        return PixelProblem(Parametrization(model, frames), cur, use, sig, intrinsics, board_scale)
+
     while rounds < MAX_ROUNDS:
         rounds += 1
-        chart = Parametrization(model, frames)
-        problem = PixelProblem(chart, replace(data, cameras=cams), use, sig, intrinsics)
-        x0 = np.zeros(problem.n_params)
-        B, _, _, _ = subspace(problem.jacobian(x0))
-        sol = solve_least_squares(_Reduced(problem, B), np.zeros(B.shape[1]), MAX_NFEV)
-        x = B @ sol.x
-        model, cams = chart.model_from_vector(x[: chart.n_params]), problem.camera_models(x)
+        problem = problem_at(model, sig)
+        fixed, _, _ = subspace(problem.jacobian(np.zeros(problem.n_params)), prefer)
+        reduced = _Reduced(problem, np.setdiff1d(np.arange(problem.n_params), fixed))
+        sol = solve_least_squares(reduced, np.zeros(len(reduced.free)), MAX_NFEV)
+        x = reduced.full(sol.x)
+        model = problem.chart.model_from_vector(x[: problem.chart.n_params])
         r = problem.pixel_residuals(x)
+        if board_scale:
+            scale *= 1.0 + x[-1]
+        cur = replace(
+            data, cameras=problem.camera_models(x), board_points=data.board_points * scale
+        )
         sig = _view_sigma(r, data, -1.0)
         more = _new_outliers(data, use, r, sig)
         outliers += more
         if not more:
             break
-    chart = Parametrization(model, frames)
-    cam_data = replace(data, cameras=cams)
-    problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
+    problem = problem_at(model, sig)
     x0 = np.zeros(problem.n_params)
-    J = problem.jacobian(x0)
-    B, N, _, _ = subspace(J)
+    fixed, _, _ = subspace(problem.jacobian(x0), prefer)
     r = problem.pixel_residuals(x0)
-    sig = _view_sigma(r, data, B.shape[1] / (2.0 * sum(len(v) for v in r.values())))
-    problem = PixelProblem(chart, cam_data, use, sig, intrinsics)
-    J = problem.jacobian(x0)
-    _, N, cov, _ = subspace(J)
+    rank = problem.n_params - len(fixed)
+    problem = problem_at(
+        model, _view_sigma(r, data, rank / (2.0 * sum(len(v) for v in r.values())))
+    )
+    fixed, N, cov = subspace(problem.jacobian(x0), prefer)
     names = problem.names()
-    undetermined = [names[i] for i in np.flatnonzero(np.abs(N).max(axis=1) > 0.1)] if N.size else []
+    undetermined = [names[i] for i in fixed]
     r = problem.pixel_residuals(x0)
+    sig = problem.sigma
+    cams = cur.cameras
     return PixelFit(
         model=model,
         cameras=cams,
         sigma=camera_sigma(data, sig, use),
         view_sigma=sig,
-        chart=chart,
+        chart=problem.chart,
         names=names,
         covariance=cov,
         null_space=N,
@@ -274,6 +328,7 @@ def fit_pixels(
         corners=sum(len(v) for v in r.values()),
         rounds=rounds,
         seconds=time.perf_counter() - t0,
+        board_scale=scale,
     )
 
 

@@ -8,8 +8,9 @@
 - **fit** on pixels (:func:`~cpc2urdf.identification.selfcal.bundle.fit_pixels`);
 - **gate**: the corners must fit to a detector's precision (:data:`MAX_CORNER_NOISE`), and the fit
   must not move a joint or camera implausibly far from the user's model (:data:`MAX_SHIFT`,
-  :data:`MAX_TURN`). The cause is named by refitting the likely mistake: intrinsics that do not
-  fit the images (refit with the intrinsics free).
+  :data:`MAX_TURN`). The cause is named by refitting the likely mistakes in turn, the first
+  whose fit passes: intrinsics that do not fit the images (refit with them free), a board whose
+  file has the wrong square size (refit with its scale free).
 
 The model carries ``provenance`` (the corners, the noise, the start, the parameters the images
 do not determine), ``uncertainty`` (the pixel model's covariance) and ``notes`` (outliers).
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cpc2urdf.errors import InconsistentDataError
+from cpc2urdf.identification.kinematics.start import on_the_parts
 from cpc2urdf.identification.selfcal.bundle import PixelFit, fit_pixels
 from cpc2urdf.identification.selfcal.pixel_problem import PixelData
 from cpc2urdf.identification.selfcal.start import held_board_start, two_stage_fit
@@ -53,7 +55,9 @@ class HeadCalibration:
 
 
 def _moved(fitted: CPCModel, start: CPCModel) -> tuple[str, float, float]:
-    """The placement (joint or frame) that moved most from ``start``: name, shift [m], turn [rad]."""
+    """The placement (joint or frame) that moved most from ``start``, what the images cannot see
+    chosen closest to it first (:func:`on_the_parts`): name, shift [m], turn [rad]."""
+    fitted = on_the_parts(fitted, start)
     worst = ("", 0.0, 0.0)
     for kind, a, b in (
         ("joint", fitted.joints, start.joints),
@@ -68,36 +72,52 @@ def _moved(fitted: CPCModel, start: CPCModel) -> tuple[str, float, float]:
     return worst
 
 
-def _gate(fit: PixelFit, start: CPCModel, data: PixelData, intrinsics: bool) -> str | None:
-    """Why the fit is inconsistent with the images (module docstring), or None."""
-    noisy = {c: s for c, s in fit.sigma.items() if s > MAX_CORNER_NOISE}
-    if noisy:
-        c, s = max(noisy.items(), key=lambda kv: kv[1])
-        why = (
-            f"camera {c}'s corners fit to {s:.3g} px RMS, more than a detector's "
-            f"{MAX_CORNER_NOISE:g} px"
-        )
-        if not intrinsics:
-            other = fit_pixels(fit.model, data, intrinsics=True)
-            if max(other.sigma.values()) <= MAX_CORNER_NOISE:
-                cam = other.cameras[c]
-                return (
-                    f"{why}: the intrinsics do not fit the images (with fx, fy, cx, cy, k1, k2 "
-                    f"refined the corners fit to {other.sigma[c]:.3g} px, fx = {cam.K[0, 0]:.1f}, "
-                    f"fy = {cam.K[1, 1]:.1f} px); recalibrate the camera or refine them (--intrinsics)"
-                )
-        return (
-            f"{why}, and the intrinsics do not explain it: the joint readings, the board file or "
-            "the camera frames do not match the images (or the board moved between images)"
-        )
-    name, shift, turn = _moved(fit.model, start)
+def _inconsistency(fit: PixelFit, user: CPCModel) -> str | None:
+    """Why ``fit`` does not look like the user's robot seen by a detector, or None."""
+    c, s = max(fit.sigma.items(), key=lambda kv: kv[1])
+    if s > MAX_CORNER_NOISE:
+        return f"camera {c}'s corners fit to {s:.3g} px RMS, more than a detector's {MAX_CORNER_NOISE:g} px"
+    name, shift, turn = _moved(fit.model, user)
     if shift > MAX_SHIFT or turn > MAX_TURN:
         return (
-            f"the fit moves {name} {shift * 1e3:.1f} mm / {np.degrees(turn):.1f} deg from the "
-            f"user's model (plausible: {MAX_SHIFT * 1e3:g} mm / {np.degrees(MAX_TURN):g} deg): a "
-            "joint's sign or zero, a camera link, or the board's size differs from the images'"
+            f"the fit moves {name} {shift * 1e3:.1f} mm / {np.degrees(turn):.1f} deg from the user's "
+            f"model (plausible: {MAX_SHIFT * 1e3:g} mm / {np.degrees(MAX_TURN):g} deg)"
         )
     return None
+
+
+def _intrinsics_say(fit: PixelFit) -> str:
+    fx = ", ".join(
+        f"{c} fx = {m.K[0, 0]:.1f}, fy = {m.K[1, 1]:.1f} px" for c, m in fit.cameras.items()
+    )
+    return f"the intrinsics do not fit the images (refined: {fx}); recalibrate the cameras or refine them (--intrinsics)"
+
+
+def _board_says(fit: PixelFit) -> str:
+    return f"the board is {fit.board_scale:.4g} times the size its file says; fix the square size in the board file"
+
+
+def _gate(
+    fit: PixelFit, begin: CPCModel, user: CPCModel, data: PixelData, intrinsics: bool
+) -> str | None:
+    """Why the fit is inconsistent with the images (module docstring), or None. The cause is the
+    first likely mistake whose refit is consistent: intrinsics, then the board's size."""
+    why = _inconsistency(fit, user)
+    if why is None:
+        return None
+    for refine_intrinsics, scale, says in (
+        (True, False, _intrinsics_say),
+        (intrinsics, True, _board_says),
+    ):
+        if refine_intrinsics == intrinsics and not scale:
+            continue  # the intrinsics were refined already
+        other = fit_pixels(begin, data, intrinsics=refine_intrinsics, board_scale=scale)
+        if _inconsistency(other, user) is None:
+            return f"{why}: {says(other)}"
+    return (
+        f"{why}; neither the intrinsics nor the board's size explain it: the joint readings (a "
+        "sign, a zero), the camera links or the board's mounting do not match the images"
+    )
 
 
 def _covariance(fit: PixelFit) -> Covariance:
@@ -151,7 +171,7 @@ def calibrate_head(
             + ", ".join(fit.undetermined)
         )
     # A closed-form start is the images' own: only the noise is checked then.
-    reason = _gate(fit, fit.model if kind == "closed-form" else user, data, intrinsics)
+    reason = _gate(fit, begin, fit.model if kind == "closed-form" else user, data, intrinsics)
     if reason is not None:
         if not accept_inconsistent:
             raise InconsistentDataError(f"{data.source}: {reason}")

@@ -125,6 +125,8 @@ class PixelProblem:
         use: Per view, which of its corners take part, shape (k,) booleans.
         sigma: Per view, the corner noise per pixel coordinate [px], shape (n_views,).
         intrinsics: Estimate each camera's ``fx, fy, cx, cy, k1, k2`` too.
+        board_scale: Estimate the board's scale too (its last parameter, ``ds``: the points are
+            ``(1 + ds) X_b``), to tell a wrong square size.
     """
 
     def __init__(
@@ -134,6 +136,7 @@ class PixelProblem:
         use: Sequence[NDArray[np.bool_]],
         sigma: ArrayLike,
         intrinsics: bool = False,
+        board_scale: bool = False,
     ) -> None:
         self.chart, self.data = chart, data
         self.sigma = np.asarray(sigma, dtype=float)
@@ -142,13 +145,15 @@ class PixelProblem:
         self.uv = {k: data.views[k].uv[use[k]] for k in self.views}
         self.cams = list(data.cameras) if intrinsics else []
         n_i = len(INTRINSIC_PARAMS)
-        self.n_params = chart.n_params + n_i * len(self.cams)
+        self.scaled = board_scale
+        self.n_params = chart.n_params + n_i * len(self.cams) + int(board_scale)
         self.n_residuals = 2 * sum(len(p) for p in self.points.values())
         frames = sorted({data.views[k].camera for k in self.views})
         self.frames = frames + ([data.board_frame] if data.board_frame else [])
 
     def names(self) -> list[str]:
-        return list(self.chart.names) + [f"{c}.{p}" for c in self.cams for p in INTRINSIC_PARAMS]
+        names = [f"{c}.{p}" for c in self.cams for p in INTRINSIC_PARAMS]
+        return list(self.chart.names) + names + (["board.scale"] if self.scaled else [])
 
     def camera_models(self, x: Array) -> dict[str, CameraModel]:
         out = dict(self.data.cameras)
@@ -163,21 +168,21 @@ class PixelProblem:
             return self.chart.pose_jacobian(xc, self.data.q)
         return self.chart.model_from_vector(xc).fk(self.data.q, self.frames), {}
 
-    def _board_world(self, k: int, T: dict[str, Array]) -> tuple[Array, Array | None]:
+    def _board_world(self, k: int, T: dict[str, Array], x: Array) -> tuple[Array, Array | None]:
         """Corners of view ``k`` in world, and the board's pose at its record (None if fixed)."""
-        X = self.points[k]
+        X = self.points[k] * (1.0 + x[-1]) if self.scaled else self.points[k]
         if self.data.board_frame is None:
             return X, None
         Tb = T[self.data.board_frame][self.data.views[k].record]
         return X @ Tb[:3, :3].T + Tb[:3, 3], Tb
 
     def _project(
-        self, k: int, T: dict[str, Array], cams: dict[str, CameraModel]
+        self, k: int, T: dict[str, Array], cams: dict[str, CameraModel], x: Array
     ) -> tuple[Array, Array, Array, Array]:
         """Predicted pixels (k, 2), projection Jacobian (2k, 10 + n_D), corners in world and camera."""
         v = self.data.views[k]
         Tc = T[v.camera][v.record]
-        Xw, _ = self._board_world(k, T)
+        Xw, _ = self._board_world(k, T, x)
         Xc = (Xw - Tc[:3, 3]) @ Tc[:3, :3]
         cam = cams[v.camera]
         uv, jac = cv2.projectPoints(Xc.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.D)
@@ -192,7 +197,7 @@ class PixelProblem:
         cams = self.camera_models(x)
         out = []
         for k in self.views:
-            uv, _, _, Xc = self._project(k, T, cams)
+            uv, _, _, Xc = self._project(k, T, cams, x)
             r = (self.uv[k] - uv) / self.sigma[k]
             out.append(np.where(Xc[:, 2:3] > 0, r, 1e6).ravel())
         return np.concatenate(out)
@@ -215,7 +220,7 @@ class PixelProblem:
         rows = []
         for k in self.views:
             v = self.data.views[k]
-            _, jac, Xw, _ = self._project(k, T, cams)
+            _, jac, Xw, _ = self._project(k, T, cams, x)
             Tc, Dc = T[v.camera][v.record], D[v.camera][v.record]
             # dX_c = R_c^T (dX_w - dp_c - w_c x (X_w - p_c)); dX_w = dp_b + w_b x (X_w - p_b) if held
             dXw = -Dc[None, :3, :] + _skew_cross(Xw - Tc[:3, 3], Dc[3:])
@@ -230,6 +235,10 @@ class PixelProblem:
             if v.camera in self.cams:
                 i = P + n_i * self.cams.index(v.camera)
                 Jk[:, i : i + n_i] = jac[:, [6, 7, 8, 9, 10, 11]]
+            if self.scaled:  # d X_w / d ds = R_b X_b
+                Xb = self.points[k]
+                dX = Xb if self.data.board_frame is None else Xb @ Tb[:3, :3].T
+                Jk[:, -1] = np.einsum("kuj,kj->ku", Jpi, dX @ Tc[:3, :3]).ravel()
             rows.append(-Jk / self.sigma[k])
         return np.concatenate(rows, axis=0)
 
