@@ -15,6 +15,7 @@ from __future__ import annotations
 from cpc2urdf.api import (
     accuracy,
     calibrate_cameras,
+    calibrate_head,
     calibration_report,
     check_urdf,
     export_urdf,
@@ -42,6 +43,7 @@ __all__ = [
     "__version__",
     "accuracy",
     "calibrate_cameras",
+    "calibrate_head",
     "calibration_report",
     "check_urdf",
     "export_urdf",

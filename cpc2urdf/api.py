@@ -322,6 +322,61 @@ def _cpc_joints(ms: MeasurementSet, joints: Sequence[str]) -> list[str]:
     return out
 
 
+def calibrate_head(
+    images: PathLike,
+    urdf: PathLike,
+    cameras: Sequence[str],
+    *,
+    board: PathLike | None = None,
+    board_link: str | None = None,
+    intrinsics: bool = False,
+    accept_inconsistent: bool = False,
+    on_error: str = "skip",
+    show_progress: bool = False,
+) -> CPCModel:
+    """Calibrate a URDF robot's head from its own cameras' images of a board
+    (``cpc2urdf identify IMAGES_DIR --robot ROBOT.urdf --cameras LINK``; docs/selfcal.md).
+
+    One stage: every joint on the paths to the camera links (and, with ``board_link``, to the link
+    holding the board), every camera's mount and the board's pose are fitted to the board's
+    corners in pixels. What the images cannot determine keeps the URDF's values and is named in
+    the notes.
+
+    Args:
+        images: ``<camera link>/<record>.png``, ``<camera link>.yaml``, ``joints.csv`` (the URDF's
+            joint names) and ``board.json``.
+        urdf: The robot's URDF.
+        cameras: Camera link names (``LINK:optical``/``LINK:body`` where the file cannot tell).
+        board: The board file (default: the folder's ``board.json``).
+        board_link: The link holding the board (a gripper); None: the board is fixed.
+        intrinsics: Refine each camera's ``fx, fy, cx, cy, k1, k2`` too.
+        accept_inconsistent: Keep a model the consistency gate refuses (the reason in its notes).
+        on_error: An unreadable image: ``"skip"`` it or ``"stop"``.
+        show_progress: Progress bar on stderr while reading the images.
+
+    Returns:
+        The calibrated model: :func:`export_urdf` writes the URDF back (joints and camera links in
+        their own conventions); ``metadata.provenance`` holds the corner noise, the board's pose.
+
+    Raises:
+        InconsistentDataError: The images do not fit the URDF's robot (the likely cause named).
+    """
+    from cpc2urdf.identification.selfcal.urdf_head import calibrate_urdf_head
+
+    model, _ = calibrate_urdf_head(
+        images,
+        urdf,
+        cameras,
+        board=board,
+        board_link=board_link,
+        intrinsics=intrinsics,
+        accept_inconsistent=accept_inconsistent,
+        on_error=on_error,
+        show_progress=show_progress,
+    )
+    return model
+
+
 def load_handeye_poses(
     path: PathLike,
     camera: PathLike | None = None,
@@ -762,6 +817,7 @@ def write_view(
 __all__ = [
     "accuracy",
     "calibrate_cameras",
+    "calibrate_head",
     "calibration_report",
     "camera_mount",
     "check_urdf",

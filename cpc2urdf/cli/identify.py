@@ -93,6 +93,28 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
         "notes and provenance",
     )
+    img = p.add_argument_group(
+        "the head's own images (measurements: a folder <camera link>/<record>.png, "
+        "<camera link>.yaml, joints.csv, board.json; one-stage fit on the board's corners)"
+    )
+    img.add_argument(
+        "--cameras",
+        nargs="+",
+        metavar="LINK",
+        help="the URDF's camera links (LINK:optical / LINK:body where the file cannot tell)",
+    )
+    img.add_argument(
+        "--board", metavar="FILE", help="the board file (default: the folder's board.json)"
+    )
+    img.add_argument(
+        "--board-link",
+        metavar="LINK",
+        help="the URDF link holding the board (a gripper): arm and head calibrated together; "
+        "default: the board is fixed in the world",
+    )
+    img.add_argument(
+        "--intrinsics", action="store_true", help="refine the cameras' fx, fy, cx, cy, k1, k2 too"
+    )
     csv = p.add_argument_group("tracker CSV export or FIGAROH CSV (measurements ending in .csv)")
     csv.add_argument(
         "--link",
@@ -230,9 +252,54 @@ def _read(args: argparse.Namespace) -> MeasurementSet:
     )
 
 
+def _run_images(args: argparse.Namespace) -> int:
+    """``identify IMAGES_DIR --robot ROBOT.urdf --cameras LINK ...``: the one-stage calibration."""
+    from cpc2urdf.api import calibrate_head, save_model
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import is_urdf_ref
+
+    if not args.robot or not is_urdf_ref(args.robot):
+        raise ConfigurationError(
+            f"{args.measurements}: a folder of images needs --robot ROBOT.urdf (the robot's URDF)"
+        )
+    if not args.cameras:
+        raise ConfigurationError(
+            f"{args.measurements}: name the camera links the images come from (--cameras LINK ...)"
+        )
+    for option in ("method", "level", "joints", "noise", "link", "joints_csv"):
+        if getattr(args, option):
+            raise ConfigurationError(
+                f"--{option.replace('_', '-')} does not apply to a folder of images"
+            )
+    model = calibrate_head(
+        args.measurements,
+        args.robot,
+        args.cameras,
+        board=args.board,
+        board_link=args.board_link,
+        intrinsics=args.intrinsics,
+        accept_inconsistent=args.accept_inconsistent,
+        show_progress=True,
+    )
+    path = save_model(model, args.output)
+    prov = model.metadata.provenance
+    assert prov is not None
+    d = prov.details
+    noise = ", ".join(f"{c} {s:.3f} px" for c, s in d["pixel_noise_px"].items())
+    print(
+        f"wrote {path}: one-stage calibration of {model.structure.name!r} from {d['images']} images, "
+        f"{d['corners']} corners in {d['seconds']:.1f} s; corner noise {noise}"
+    )
+    print(f"  start: {d['start']}")
+    for note in model.metadata.notes:
+        print(f"  note: {note}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     import math
     import time
+    from pathlib import Path
 
     from cpc2urdf.api import identify, save_model
     from cpc2urdf.errors import ConfigurationError
@@ -241,6 +308,14 @@ def run(args: argparse.Namespace) -> int:
     from cpc2urdf.model_metadata import Provenance
 
     check_output_path(args.output)  # a bad -o is refused before the identification, not after it
+    images = ("--cameras", args.cameras), ("--board", args.board), ("--board-link", args.board_link)
+    if Path(args.measurements).is_dir():
+        return _run_images(args)
+    given = [k for k, v in (*images, ("--intrinsics", args.intrinsics)) if v]
+    if given:
+        raise ConfigurationError(
+            f"{given[0]} applies to a folder of images; {args.measurements} is a file"
+        )
     ms = _read(args)
     if args.noise is not None:
         ms.metadata["noise"] = _noise(args.noise, bool(ms.frames))

@@ -15,6 +15,7 @@ points (ellipse-centre corrected for circle grids) are what the pixel fit uses.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -31,7 +32,9 @@ from cpc2urdf.model import RobotStructure
 BOARD_FILE = "board.json"
 
 
-def folder_board(images_dir: str | Path, board: Board | str | Path | None) -> Board:
+def folder_board(
+    images_dir: str | os.PathLike[str], board: Board | str | os.PathLike[str] | None
+) -> Board:
     """``board``, a board file, or the folder's ``board.json``."""
     if isinstance(board, Board):
         return board
@@ -42,9 +45,9 @@ def folder_board(images_dir: str | Path, board: Board | str | Path | None) -> Bo
 
 
 def folder_cameras(
-    images_dir: str | Path,
+    images_dir: str | os.PathLike[str],
     cameras: Sequence[str],
-    intrinsics: Mapping[str, str | Path] | None = None,
+    intrinsics: Mapping[str, str | os.PathLike[str]] | None = None,
 ) -> dict[str, CameraModel]:
     """Each camera's intrinsics: its file in ``intrinsics``, else ``<camera>.yaml`` in the folder."""
     out = {}
@@ -58,7 +61,7 @@ def folder_cameras(
 
 
 def read_pixel_data(
-    images_dir: str | Path,
+    images_dir: str | os.PathLike[str],
     structure: RobotStructure,
     cameras: Mapping[str, CameraModel],
     board: Board,
@@ -74,7 +77,7 @@ def read_pixel_data(
         InputFileError, DegenerateDataError, ConfigurationError: As ``measure_head_images``.
     """
     m = measure_head_images(
-        images_dir,
+        Path(images_dir),
         {c: HeadCamera(cam.K, cam.D, cam.image_size) for c, cam in cameras.items()},
         structure,
         board=board,

@@ -11,8 +11,8 @@ forward, REP-103). The held board's placement on its link and the board's pose i
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 from cpc2urdf.identification.selfcal.calibrate import HeadCalibration, calibrate_head
 from cpc2urdf.identification.selfcal.images import folder_board, folder_cameras, read_pixel_data
@@ -44,13 +44,13 @@ def head_model(
 
 
 def calibrate_urdf_head(
-    images_dir: str | Path,
-    urdf: str | Path,
+    images_dir: str | os.PathLike[str],
+    urdf: str | os.PathLike[str],
     cameras: Sequence[str],
     *,
-    board: Board | str | Path | None = None,
+    board: Board | str | os.PathLike[str] | None = None,
     board_link: str | None = None,
-    intrinsics_files: Mapping[str, str | Path] | None = None,
+    intrinsics_files: Mapping[str, str | os.PathLike[str]] | None = None,
     intrinsics: bool = False,
     accept_inconsistent: bool = False,
     on_error: str = "skip",
