@@ -238,3 +238,40 @@ def test_walk_stays_usable_and_spread_reaches_the_ends() -> None:
     line = np.linspace(0.0, 1.0, 11)[:, None]
     picked = farthest_points(line, 3, np.array([[0.0, 1.0]]), rng)
     assert {0.0, 1.0} <= set(picked.ravel().tolist())
+
+
+def test_cli_simulate_images(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``cpc2urdf simulate TIAGO --cameras xtion_link --board B --board-link HAND --images DIR``
+    writes the folder; bad input gets one line and exit 2, before anything is written."""
+    from cpc2urdf.cli import main
+    from cpc2urdf.identification.vision.boards.board_file import save_board
+
+    board = save_board(CHARUCO, tmp_path / "charuco.json")
+    out = tmp_path / "images"
+    argv = ["simulate", str(TIAGO), "--cameras", "xtion_link", "--board", str(board)]
+    held = [*argv, "--board-link", HAND, "--images", str(out), "--poses", "3", "--seed", "5"]
+    assert main(held) == 0
+    assert "3 records x 1 cameras (xtion_frame), the board held by" in capsys.readouterr().out
+    assert len(list((out / "xtion_frame").glob("*.png"))) == 3
+    assert json.loads((out / "selfcal_truth.json").read_text())["board_link"] == HAND
+    capsys.readouterr()
+    bad = [
+        ([*argv, "--images", str(tmp_path / "x"), "-o", str(tmp_path / "y")], "takes no -o"),
+        (argv, "--board needs --images"),
+        ([*argv, "--images", str(out / "board.json")], "exists and is not a folder"),
+        (
+            ["simulate", "iis_head", "--cameras", "c", "--board", str(board), "--images", "z"],
+            "URDF",
+        ),
+        ([*argv, "--board-link", "nope", "--images", str(tmp_path / "x")], "no link 'nope'"),
+        ([*argv, "--images", str(tmp_path / "x"), "--poses", "0"], "--poses"),
+    ]
+    for args, expected in bad:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    save_board(Board("chessboard", (6, 6), square_size=0.03), tmp_path / "sym.json")
+    sym = [*argv[:-1], str(tmp_path / "sym.json"), "--images", str(tmp_path / "x")]
+    assert main(sym) == 2
+    assert "180 deg" in capsys.readouterr().err

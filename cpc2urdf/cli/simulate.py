@@ -8,7 +8,11 @@ each measured frame of the same true robot, their points with ``--marker-sigma-m
 same configurations, and their true points in the held-out file.
 
 ``--cameras LINK [LINK ...]`` (a URDF robot) simulates stage 2 instead: hand-eye pose files of
-those camera links and their true mounts (docs/handeye.md).
+those camera links and their true mounts (docs/handeye.md). With ``--board BOARD.json --images DIR``
+it renders what those cameras see of the board instead (fixed in the world, or held by
+``--board-link LINK``, a gripper), for a one-stage calibration of the head by its own cameras:
+the folder ``measure`` reads, plus the truth
+(:mod:`~cpc2urdf.identification.simulation.selfcal_experiment`).
 
 A URDF robot needs ``--measure LINK [LINK ...]``: the links the rig measures (plate, marker or
 camera links on fixed joints, docs/urdf.md). The records then read only the joints on the paths
@@ -67,11 +71,32 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "DIR/handeye_truth.urdf (docs/handeye.md)",
     )
     p.add_argument(
+        "--board",
+        metavar="BOARD.json",
+        default=None,
+        help="--cameras: render the cameras' images of this board (cpc2urdf/board@1) into --images "
+        "DIR instead of writing hand-eye poses",
+    )
+    p.add_argument(
+        "--board-link",
+        metavar="LINK",
+        default=None,
+        help="--board: the URDF link holding the board (a gripper); default: the board is fixed "
+        "in front of the cameras",
+    )
+    p.add_argument(
+        "--images",
+        metavar="DIR",
+        default=None,
+        help="--board: the images folder to write (created if missing; instead of -o)",
+    )
+    p.add_argument(
         "--poses",
         type=int,
         default=20,
         metavar="N",
-        help="--cameras: configurations with the target in view of every camera (default 20)",
+        help="--cameras: configurations with the target (or --board) in view of every camera "
+        "(default 20)",
     )
     p.add_argument(
         "--pixel-noise",
@@ -93,7 +118,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="--cameras: true mounts turned by this about a random axis [deg] (default 3)",
     )
     p.add_argument(
-        "-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)"
+        "-o", "--output", metavar="DIR", help="output folder (created if missing; required)"
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -194,11 +219,81 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
 def written_files(args: argparse.Namespace) -> dict[str, str]:
     """The files written into the output folder (checked against the inputs before the command runs)."""
     names: tuple[str, ...] = FILES
+    if args.images:
+        names = IMAGE_FILES
+        return {f"--images (its {name})": os.path.join(args.images, name) for name in names}
     if args.cameras:
         from cpc2urdf.identification.handeye.urdf_stage2 import TRUTH_FILES, pose_file_name
 
         names = (*(pose_file_name(c) for c in args.cameras), *TRUTH_FILES)
     return {f"-o (its {name})": os.path.join(args.output, name) for name in names}
+
+
+IMAGE_FILES = (
+    "joints.csv",
+    "board.json",
+    "selfcal_truth.json",
+    "truth_model.json",
+    "nominal_model.json",
+)  # what --images writes besides each camera's folder and .yaml
+
+
+def _run_images(args: argparse.Namespace) -> int:
+    """``--cameras --board --images``: what a URDF robot's cameras see of a board, as images."""
+    import numpy as np
+
+    from cpc2urdf.argparsing import check_outputs_are_not_inputs
+    from cpc2urdf.errors import ConfigurationError, OutputError
+    from cpc2urdf.files.robot_ref import is_urdf_ref
+    from cpc2urdf.identification.simulation import selfcal_experiment as selfcal
+    from cpc2urdf.identification.vision.boards.board_file import load_board
+
+    for flag, needs in (("board", "images"), ("images", "board"), ("board_link", "board")):
+        if getattr(args, flag) is not None and getattr(args, needs) is None:
+            raise ConfigurationError(
+                f"--{flag.replace('_', '-')} needs --{needs} (--cameras LINK --board BOARD.json "
+                "--images DIR)"
+            )
+    if not args.cameras:
+        raise ConfigurationError(
+            "--board renders the images of camera links: name them with --cameras"
+        )
+    if not is_urdf_ref(args.robot):
+        raise ConfigurationError(f"--board needs a URDF robot; {args.robot!r} is not a URDF")
+    for flag in ("measure", "plan", "markers", "output"):
+        if getattr(args, flag) is not None:
+            what = "-o (the folder is --images DIR)" if flag == "output" else f"--{flag}"
+            raise ConfigurationError(f"--board --images renders images; it takes no {what}")
+    if args.poses < 1:
+        raise ConfigurationError(f"--poses must be at least 1, got {args.poses}")
+    if args.seed < 0:
+        raise ConfigurationError(f"--seed must be a non-negative integer, got {args.seed}")
+    if Path(args.images).exists() and not Path(args.images).is_dir():
+        raise OutputError(f"{args.images}: exists and is not a folder")
+    args.output = args.images  # so that the outputs are checked against the inputs
+    check_outputs_are_not_inputs(args)
+    board = load_board(args.board)
+    if board.pose_ambiguity:
+        raise ConfigurationError(f"--board {args.board}: {board.pose_ambiguity}; use another board")
+    scene = selfcal.selfcal_scene(
+        args.robot,
+        args.cameras,
+        board=board,
+        board_link=args.board_link,
+        seed=args.seed,
+        sigma_t=args.geometry_error_mm / 1000,
+        sigma_r=math.radians(args.geometry_error_deg),
+    )
+    rng = np.random.default_rng([args.seed, 2])  # its own stream: the scene's come from the seed
+    q = selfcal.selfcal_configurations(scene, args.poses, rng)
+    selfcal.render_selfcal_experiment(args.images, scene, q, seed=args.seed)
+    held = f"held by {args.board_link}" if args.board_link else "fixed in the world"
+    print(
+        f"wrote {args.images}: {len(q)} records x {len(scene.cameras)} cameras "
+        f"({', '.join(scene.cameras)}), the board {held}; the truth in selfcal_truth.json, "
+        "truth_model.json"
+    )
+    return 0
 
 
 def _run_handeye(args: argparse.Namespace, out: Path) -> int:
@@ -332,6 +427,10 @@ def run(args: argparse.Namespace) -> int:
     )
     from cpc2urdf.identification.vision.stereo import StereoRig
 
+    if args.board is not None or args.images is not None or args.board_link is not None:
+        return _run_images(args)
+    if args.output is None:
+        raise ConfigurationError("the following arguments are required: -o/--output")
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a folder")
