@@ -41,6 +41,10 @@ STUDIES: dict[str, tuple[str, str]] = {
         "cpc2urdf.studies.free_configs",
         "refined held-out error: random configurations vs the one-joint protocol",
     ),
+    "selfcal": (
+        "cpc2urdf.studies.selfcal",
+        "a head calibrated by its own cameras: one stage vs two, covariance and CRB checks",
+    ),
     "real-data": (
         "cpc2urdf.studies.real_data",
         "calibration held out on three real robots (TIAGo, TALOS, UR10) vs their URDFs and FIGAROH",
