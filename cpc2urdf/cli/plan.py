@@ -1,5 +1,10 @@
 """``cpc2urdf plan ROBOT (--n N | --target-error MM) -o plan.json``: plan a stage-1 experiment.
 
+``cpc2urdf plan ROBOT --cameras LINK [LINK ...] --board BOARD.json [--board-link LINK] --poses N
+-o plan.json``: plan a one-stage calibration of the head by its own cameras (configurations where
+every camera sees the whole board, minimising the predicted camera pose error,
+:mod:`~cpc2urdf.identification.planning.selfcal_plan`); writes ``plan.json`` and ``plan.csv``.
+
 Chooses the configurations to measure that minimise the predicted held-out position error over a
 task region (I-optimal, greedy + Fedorov exchange over candidates the rig can see), predicts the
 accuracy before any measurement, and compares with D-optimal selection and the paper's
@@ -36,7 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         metavar="PLAN.json",
         help="plan file (PLAN.csv and PLAN.png next to it)",
     )
-    size = p.add_mutually_exclusive_group(required=True)
+    size = p.add_mutually_exclusive_group()
     size.add_argument("--n", type=int, help="configurations to plan")
     size.add_argument(
         "--target-error",
@@ -136,6 +141,39 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         help="plan sizes of the predicted-error curve (default: the protocol's joints*M+1 for M = 2, 3, 5, 9, "
         "and the plan's N)",
     )
+    one = p.add_argument_group(
+        "one-stage calibration (the head's own cameras see a board; instead of --n/--target-error)"
+    )
+    one.add_argument(
+        "--cameras",
+        nargs="+",
+        metavar="LINK",
+        default=[],
+        help="the head's camera links (a URDF's, LINK:optical or LINK:body where it cannot tell; a "
+        "spec's optical frames): plan the configurations where every one sees the whole board",
+    )
+    one.add_argument("--board", metavar="BOARD.json", help="the board (cpc2urdf/board@1)")
+    one.add_argument(
+        "--board-link",
+        metavar="LINK",
+        help="the link holding the board (its frame: origin at the pattern's centre, z out of the "
+        "printed face); default: the board is fixed in front of the cameras",
+    )
+    one.add_argument("--poses", type=int, metavar="N", help="configurations to plan")
+    one.add_argument(
+        "--board-distance",
+        type=float,
+        metavar="M",
+        help="a fixed board's distance ahead of the cameras at the middle of the ranges [m] "
+        "(default: where it spans a third of the image's width)",
+    )
+    one.add_argument(
+        "--intrinsics",
+        nargs="+",
+        metavar="CAMERA.yaml",
+        help="each camera's intrinsics (OpenCV FileStorage, one per --cameras; default 640 x 480, "
+        "f = 500 px); --pixel-sigma is the corner noise",
+    )
     p.set_defaults(run=run, written=companions)
 
 
@@ -164,6 +202,13 @@ def run(args: argparse.Namespace) -> int:
     )
 
     output_paths(args.output)  # a bad -o is refused before the work
+    if args.cameras or args.poses is not None or args.board or args.board_link:
+        return _run_selfcal(args)
+    if args.n is None and args.target_error is None:
+        raise ConfigurationError(
+            "one of the arguments --n --target-error is required (or --cameras, --board and "
+            "--poses for a one-stage plan)"
+        )
     if args.markers < 0:
         raise ConfigurationError(
             f"--markers must be >= 0 markers per measured frame, got {args.markers}"
@@ -252,6 +297,83 @@ def run(args: argparse.Namespace) -> int:
     same = [c for c in out.result.curve if c.n == len(out.result.q)]
     for c in same:
         print(f"  {c.strategy:>10} at N = {c.n}: {_mm(c.position_rms)}")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _run_selfcal(args: argparse.Namespace) -> int:
+    """``--cameras ... --board ... --poses N``: a one-stage plan."""
+    from cpc2urdf.cli._ranges import parse_ranges
+    from cpc2urdf.errors import ConfigurationError
+    from cpc2urdf.files.robot_ref import load_robot
+    from cpc2urdf.identification.planning.selfcal_plan_file import (
+        plan_selfcal_robot,
+        write_selfcal_plan,
+    )
+    from cpc2urdf.identification.selfcal.pixel_problem import CameraModel
+    from cpc2urdf.identification.vision.boards.board_file import load_board
+    from cpc2urdf.identification.vision.rig_file import load_camera
+
+    if not args.cameras or not args.board or args.poses is None:
+        raise ConfigurationError(
+            "a one-stage plan needs --cameras LINK [LINK ...], --board BOARD.json and --poses N"
+        )
+    stage1 = {
+        "--n": args.n is not None,
+        "--target-error": args.target_error is not None,
+        "--measure": bool(args.measure),
+        "--rig": bool(args.rig),
+        "--noise": args.noise != "fig10",
+        "--markers": args.markers != 0,
+        "--one-joint": args.one_joint,
+        "--grid": args.grid,
+        "--task-region": args.task_region != "calibration",
+        "--curve": bool(args.curve),
+    }
+    given = [k for k, v in stage1.items() if v]
+    if given:
+        raise ConfigurationError(
+            f"{given[0]} is for stage-1 plans; a one-stage plan (--cameras) takes --poses N"
+        )
+    if args.poses < 1:
+        raise ConfigurationError(f"--poses must be at least 1, got {args.poses}")
+    if args.candidates < args.poses:
+        raise ConfigurationError(
+            f"--candidates {args.candidates} is fewer than --poses {args.poses}"
+        )
+    if not (math.isfinite(args.pixel_sigma) and args.pixel_sigma > 0):
+        raise ConfigurationError(f"--pixel-sigma must be a positive number, got {args.pixel_sigma}")
+    spec = load_robot(args.robot)
+    board = load_board(args.board)
+    intrinsics = None
+    if args.intrinsics:
+        intrinsics = []
+        for path in args.intrinsics:
+            K, D, size = load_camera(path)
+            intrinsics.append(CameraModel(K, D, size))
+    out = plan_selfcal_robot(
+        spec,
+        args.cameras,
+        board,
+        args.poses,
+        robot_ref=str(args.robot),
+        board_link=args.board_link,
+        intrinsics=intrinsics,
+        sigma=args.pixel_sigma,
+        distance=args.board_distance,
+        ranges=parse_ranges(args.range, spec),
+        n_candidates=args.candidates,
+        seed=args.seed,
+    )
+    paths = write_selfcal_plan(out, args.output)
+    pred, plan = out.plan.prediction, out.plan
+    print(
+        f"plan: {len(plan.q)} configurations (I-optimal, one-stage: {len(out.setup.cameras)} cameras "
+        f"see the whole board); predicted camera pose error in the board's frame: "
+        f"{_mm(pred.position_rms)}, {_deg(pred.rotation_rms)} RMS over {len(plan.heldout)} held-out "
+        f"configurations ({len(plan.random)} random plans of {len(plan.q)} candidates: median "
+        f"{_mm(plan.random_position_rms())}); {pred.rank} of {pred.n_params} parameters determined"
+    )
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 

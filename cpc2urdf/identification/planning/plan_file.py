@@ -64,6 +64,7 @@ from cpc2urdf.model import RobotStructure
 Array = NDArray[np.float64]
 
 PLAN_FORMAT = "cpc2urdf/plan@1"
+SELFCAL_NOISE_MODEL = "pixels"  # a one-stage plan's (planning/selfcal_plan_file.py)
 
 
 def plan_to_json(
@@ -254,7 +255,16 @@ def load_plan(path: str | os.PathLike[str], structure: RobotStructure | None = N
         raise InputFileError(p, str(e)) from None
 
 
-def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
+def parse_configurations(
+    doc: Any, structure: RobotStructure | None
+) -> tuple[Array, list[str], list[str], Units, dict[str, float]]:
+    """A plan document's configurations: ``q`` [m]/[rad] (in the structure's joint order when
+    given, checked within its limits), labels, joint names, the file's units and each joint's
+    scale (file unit -> SI) by name.
+
+    Raises:
+        ValueError: Naming the field (the caller adds the file).
+    """
     u = Units.from_json(doc.get("units"))
     joints = doc.get("joints")
     if not isinstance(joints, list) or not joints:
@@ -302,21 +312,31 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
                     f"configurations[{k}].q: joint {j.name!r} reads {q[k, i] / sc:g} {unit}, "
                     f"outside its limits [{j.lower / sc:g}, {j.upper / sc:g}] {unit}"
                 )
+    return q, labels, names, u, dict(zip([j["name"] for j in joints], scale, strict=True))
+
+
+def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
+    q, labels, names, u, factor = parse_configurations(doc, structure)
     setup = doc.get("setup")
     if not isinstance(setup, dict):
         raise ValueError("setup must be an object with noise, rig and T_world_base")
     noise = setup.get("noise")
     if not isinstance(noise, dict):
         raise ValueError("setup.noise must be an object {model, sigma_t_mm, sigma_r_deg}")
-    sigma_t = finite_float(noise.get("sigma_t_mm"), "setup.noise.sigma_t_mm") * 1e-3
-    sigma_r = math.radians(finite_float(noise.get("sigma_r_deg"), "setup.noise.sigma_r_deg"))
-    if sigma_t <= 0 or sigma_r <= 0:
-        raise ValueError("setup.noise sigmas must be > 0")
     model = noise.get("model", "fig10")
+    if model == SELFCAL_NOISE_MODEL:
+        raise ValueError(
+            "a one-stage plan (head cameras seeing a board, `cpc2urdf plan --cameras`), not a "
+            "stage-1 one: its configurations are in its .csv"
+        )
     if model not in SETUP_NOISE_MODELS:
         raise ValueError(
             f"setup.noise.model must be one of {list(SETUP_NOISE_MODELS)}, got {model!r}"
         )
+    sigma_t = finite_float(noise.get("sigma_t_mm"), "setup.noise.sigma_t_mm") * 1e-3
+    sigma_r = math.radians(finite_float(noise.get("sigma_r_deg"), "setup.noise.sigma_r_deg"))
+    if sigma_t <= 0 or sigma_r <= 0:
+        raise ValueError("setup.noise sigmas must be > 0")
     pixel_sigma = DEFAULT_PIXEL_SIGMA
     if model == "stereo":
         pixel_sigma = finite_float(noise.get("pixel_sigma_px"), "setup.noise.pixel_sigma_px")
@@ -368,7 +388,6 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     ranges = None
     if setup.get("ranges") is not None:
         doc_ranges = setup["ranges"]
-        factor = dict(zip([j["name"] for j in joints], scale, strict=True))
         if not isinstance(doc_ranges, dict) or set(doc_ranges) != set(names):
             raise ValueError(f"setup.ranges must be {{joint: [lo, hi]}} for the joints {names}")
         ranges = {}
@@ -398,4 +417,11 @@ def _parse(doc: Any, p: Path, structure: RobotStructure | None) -> LoadedPlan:
     )
 
 
-__all__ = ["PLAN_FORMAT", "LoadedPlan", "load_plan", "plan_to_json"]
+__all__ = [
+    "PLAN_FORMAT",
+    "SELFCAL_NOISE_MODEL",
+    "LoadedPlan",
+    "load_plan",
+    "parse_configurations",
+    "plan_to_json",
+]
