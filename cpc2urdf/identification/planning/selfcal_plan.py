@@ -13,8 +13,8 @@ minimise the predicted error of the camera poses relative to the board.
 - **Prediction**: ``C`` = the inverse of the summed information in its determined subspace
   (:func:`~cpc2urdf.identification.selfcal.bundle.subspace`, the fit's own covariance; what the
   images cannot tell is held, and the camera poses' variance does not depend on how, as long as
-  they are determined); at held-out configurations, each
-  camera's pose in the board frame (for a held board: relative to the board) moves by ``G x``
+  they are determined); at held-out configurations, each camera's pose in the board frame (for
+  a held board: relative to the board) moves by ``G x``
   (:meth:`Parametrization.pose_jacobian`), so its predicted RMS position error is
   ``sqrt(mean_q trace(G_p C G_p^T))`` [m] and rotation error ``sqrt(mean_q trace(G_r C G_r^T))``
   [rad] (:func:`predicted_camera_pose_error`); ``inf`` where the pose moves along an undetermined
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -246,7 +246,6 @@ class SelfcalPlan:
     candidates: tuple[int, int]
     swaps: int
     seconds: float
-    notes: list[str] = field(default_factory=list)
 
     def random_position_rms(self) -> float:
         """Median over the random plans of their RMS camera position error [m]."""
