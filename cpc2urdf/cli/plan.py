@@ -87,7 +87,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         type=float,
         default=0.15,
         metavar="PX",
-        help="stereo: std of each pixel coordinate of a circle centre [px] (default 0.15)",
+        help="stereo: std of each pixel coordinate of a circle centre; --cameras: of each board corner "
+        "[px] (default 0.15)",
     )
     p.add_argument(
         "--markers",
