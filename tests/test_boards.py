@@ -22,10 +22,10 @@ from cpc2urdf.identification.simulation.image_experiment import random_board_pos
 from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.identification.vision.boards.board_file import board_from_json, load_board, save_board
 from cpc2urdf.identification.vision.boards.board_poses import (
-    _solve,
     board_pose,
     detect_board,
     pnp_pose_covariance,
+    solve_pnp,
 )
 from cpc2urdf.identification.vision.detect import PlateAmbiguousError, PlateNotFoundError
 from cpc2urdf.identification.vision.render import PinholeView, render_board_view
@@ -160,7 +160,7 @@ def test_pnp_covariance_matches_monte_carlo() -> None:
     rng = np.random.default_rng(0)
     errs = []
     for _ in range(400):
-        Te, _ = _solve(b.object_points(), uv + rng.normal(0.0, 0.1, uv.shape), K, D)
+        Te, _ = solve_pnp(b.object_points(), uv + rng.normal(0.0, 0.1, uv.shape), K, D)
         errs.append(np.concatenate([_rotvec_error(Te, T), Te[:3, 3] - T[:3, 3]]))
     mc = np.cov(np.array(errs).T)
     pred = pnp_pose_covariance(K, D, T, b.object_points(), 0.1)

@@ -258,13 +258,10 @@ def _run_images(args: argparse.Namespace) -> int:
     from cpc2urdf.errors import ConfigurationError
     from cpc2urdf.files.robot_ref import is_urdf_ref
 
-    if not args.robot or not is_urdf_ref(args.robot):
+    if not args.robot or not is_urdf_ref(args.robot) or not args.cameras:
         raise ConfigurationError(
-            f"{args.measurements}: a folder of images needs --robot ROBOT.urdf (the robot's URDF)"
-        )
-    if not args.cameras:
-        raise ConfigurationError(
-            f"{args.measurements}: name the camera links the images come from (--cameras LINK ...)"
+            f"{args.measurements}: is a folder; a folder of the head's own images needs --robot "
+            "ROBOT.urdf and --cameras LINK ... (the camera links the images come from)"
         )
     for option in ("method", "level", "joints", "noise", "link", "joints_csv"):
         if getattr(args, option):
