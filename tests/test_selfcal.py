@@ -211,5 +211,7 @@ def test_a_wrong_square_size_is_named():
     q = configurations(12, 0)
     data = data_of(truth, q, 0.1, 0)
     data.board_points = data.board_points * 0.93  # the file says 27.9 mm, the print is 30 mm
-    with pytest.raises(InconsistentDataError, match=r"the board is 1\.07\d* times the size its file says"):
+    with pytest.raises(
+        InconsistentDataError, match=r"the board is 1\.07\d* times the size its file says"
+    ):
         calibrate_head(nom, data)

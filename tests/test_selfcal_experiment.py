@@ -56,15 +56,16 @@ def _measure(folder: Path, scene: SelfcalScene) -> tuple[int, float]:
     coordinate of the corners found vs :func:`exact_corners` [px]."""
     model = load_model(folder / "nominal_model.json")
     board = load_board(folder / "board.json")
-    cams = {c: HeadCamera(*load_camera(folder / f"{c}.yaml")) for c in scene.cameras}
+    links = scene.camera_links  # the sub-folders are named as the user names the cameras
+    cams = {c: HeadCamera(*load_camera(folder / f"{c}.yaml")) for c in links}
     found = measure_head_images(folder, cams, model.structure, board=board, on_error="stop")
-    q = np.array([[float(v) for v in r] for r in found.q[scene.cameras[0]]])
+    q = np.array([[float(v) for v in r] for r in found.q[links[0]]])
     exact = exact_corners(scene, q)
     res = []
-    for c in scene.cameras:
+    for c, link in zip(scene.cameras, links, strict=True):
         for i in range(len(q)):
-            img = read_grey(folder / c / f"{i:04d}.png")
-            p = board_pose(img, cams[c].K, cams[c].D, board)
+            img = read_grey(folder / link / f"{i:04d}.png")
+            p = board_pose(img, cams[link].K, cams[link].D, board)
             assert not isinstance(p, Exception), p
             assert len(p.ids) == board.n_points
             res.append(p.uv - exact[c][i][p.ids])
@@ -100,8 +101,8 @@ def test_talos_fixed_board_images_round_trip(tmp_path: Path) -> None:
         "board.json",
         "joints.csv",
         "nominal_model.json",
-        "rgbd_frame",
-        "rgbd_frame.yaml",
+        "rgbd_link",
+        "rgbd_link.yaml",
         "selfcal_truth.json",
         "truth_model.json",
     ]
@@ -200,7 +201,7 @@ def test_per_camera_intrinsics(tmp_path: Path) -> None:
     uv = exact_corners(scene, q, {"xtion_frame": wide})["xtion_frame"]
     assert not np.allclose(uv, exact_corners(scene, q)["xtion_frame"])
     render_selfcal_experiment(tmp_path / "w", scene, q, intrinsics={"xtion_frame": wide})
-    K, D, size = load_camera(tmp_path / "w" / "xtion_frame.yaml")
+    K, D, size = load_camera(tmp_path / "w" / "xtion_link.yaml")
     np.testing.assert_allclose(K, wide.K)
     np.testing.assert_allclose(D, wide.D)
 
@@ -251,8 +252,8 @@ def test_cli_simulate_images(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     argv = ["simulate", str(TIAGO), "--cameras", "xtion_link", "--board", str(board)]
     held = [*argv, "--board-link", HAND, "--images", str(out), "--poses", "3", "--seed", "5"]
     assert main(held) == 0
-    assert "3 records x 1 cameras (xtion_frame), the board held by" in capsys.readouterr().out
-    assert len(list((out / "xtion_frame").glob("*.png"))) == 3
+    assert "3 records x 1 cameras (xtion_link), the board held by" in capsys.readouterr().out
+    assert len(list((out / "xtion_link").glob("*.png"))) == 3
     assert json.loads((out / "selfcal_truth.json").read_text())["board_link"] == HAND
     capsys.readouterr()
     bad = [

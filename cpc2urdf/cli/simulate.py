@@ -194,7 +194,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
     p.add_argument(
         "--plan",
         metavar="PLAN.json",
-        help="measure the configurations of a plan (cpc2urdf plan) instead of the one-joint protocol, "
+        help="measure the configurations of a plan (cpc2urdf plan) instead of the one-joint protocol "
+        "(with --board --images: render them, the board where the plan put it), "
         "from where the plan put the robot, with the plan's rig and noise (unless --sigma-mm/--sigma-deg "
         "are given); --M, --range and the rig options then do not apply",
     )
@@ -245,6 +246,7 @@ def _run_images(args: argparse.Namespace) -> int:
     from cpc2urdf.argparsing import check_outputs_are_not_inputs
     from cpc2urdf.errors import ConfigurationError, OutputError
     from cpc2urdf.files.robot_ref import is_urdf_ref
+    from cpc2urdf.identification.planning.selfcal_plan_file import load_selfcal_plan
     from cpc2urdf.identification.simulation import selfcal_experiment as selfcal
     from cpc2urdf.identification.vision.boards.board_file import load_board
 
@@ -260,7 +262,7 @@ def _run_images(args: argparse.Namespace) -> int:
         )
     if not is_urdf_ref(args.robot):
         raise ConfigurationError(f"--board needs a URDF robot; {args.robot!r} is not a URDF")
-    for flag in ("measure", "plan", "markers", "output"):
+    for flag in ("measure", "markers", "output"):
         if getattr(args, flag) is not None:
             what = "-o (the folder is --images DIR)" if flag == "output" else f"--{flag}"
             raise ConfigurationError(f"--board --images renders images; it takes no {what}")
@@ -275,6 +277,18 @@ def _run_images(args: argparse.Namespace) -> int:
     board = load_board(args.board)
     if board.pose_ambiguity:
         raise ConfigurationError(f"--board {args.board}: {board.pose_ambiguity}; use another board")
+    plan = load_selfcal_plan(args.plan) if args.plan else None
+    placement = None
+    if plan is not None:  # the plan's board: fixed where it planned it, or the link's own frame
+        if (plan.T_board_base is None) != bool(args.board_link):
+            held = plan.T_board_base is None
+            raise ConfigurationError(
+                f"{args.plan} was planned for a board {'held' if held else 'fixed'}; "
+                + ("give --board-link" if held else "drop --board-link")
+            )
+        placement = (
+            plan.T_joint_board if plan.T_board_base is None else np.linalg.inv(plan.T_board_base)
+        )
     scene = selfcal.selfcal_scene(
         args.robot,
         args.cameras,
@@ -283,14 +297,21 @@ def _run_images(args: argparse.Namespace) -> int:
         seed=args.seed,
         sigma_t=args.geometry_error_mm / 1000,
         sigma_r=math.radians(args.geometry_error_deg),
+        placement=placement,
     )
-    rng = np.random.default_rng([args.seed, 2])  # its own stream: the scene's come from the seed
-    q = selfcal.selfcal_configurations(scene, args.poses, rng)
+    if plan is not None:
+        if sorted(plan.cameras) != sorted(scene.cameras):
+            raise ConfigurationError(f"{args.plan} was planned for cameras {plan.cameras}")
+        order = [plan.joint_names.index(j) for j in scene.truth.structure.joint_names]
+        q = plan.q[:, order]
+    else:
+        rng = np.random.default_rng([args.seed, 2])  # its own stream: the scene's from the seed
+        q = selfcal.selfcal_configurations(scene, args.poses, rng)
     selfcal.render_selfcal_experiment(args.images, scene, q, seed=args.seed)
-    held = f"held by {args.board_link}" if args.board_link else "fixed in the world"
+    where = f"held by {args.board_link}" if args.board_link else "fixed in the world"
     print(
         f"wrote {args.images}: {len(q)} records x {len(scene.cameras)} cameras "
-        f"({', '.join(scene.cameras)}), the board {held}; the truth in selfcal_truth.json, "
+        f"({', '.join(scene.camera_links)}), the board {where}; the truth in selfcal_truth.json, "
         "truth_model.json"
     )
     return 0

@@ -27,6 +27,7 @@ from cpc2urdf.identification.handeye.stage2 import (
     default_target_placement,
 )
 from cpc2urdf.identification.selfcal.pixel_problem import CameraModel
+from cpc2urdf.identification.simulation.design import walk_configurations
 from cpc2urdf.identification.simulation.selfcal_experiment import SelfcalScene
 from cpc2urdf.identification.simulation.visibility import board_in_view
 from cpc2urdf.identification.vision.boards.board import Board
@@ -59,6 +60,8 @@ class PixelSetup:
         ranges: Calibration ranges, shape (n, 2) [m]/[rad] (default the model's).
         margin_px, max_angle, min_point_px: Planning margins of :func:`board_seen` (default
             :data:`MIN_POINT_PX`, ChArUco :data:`MIN_POINT_PX_CHARUCO`).
+        start: A configuration where every camera sees the board: where candidates are walked
+            from when few uniform draws see it (a board held by an arm), shape (n,).
     """
 
     nominal: CPCModel
@@ -70,6 +73,7 @@ class PixelSetup:
     margin_px: float = VIEW_MARGIN_PX
     max_angle: float = MAX_VIEW_ANGLE
     min_point_px: float | None = None
+    start: Array | None = None
 
     @property
     def frames(self) -> list[str]:
@@ -126,20 +130,32 @@ def board_seen(setup: PixelSetup, q: ArrayLike, *, margins: bool = True) -> NDAr
 
 
 def draw_configurations(setup: PixelSetup, n: int, rng: np.random.Generator) -> tuple[Array, int]:
-    """``n`` configurations uniform in the calibration ranges where every camera sees the whole
-    board (:func:`board_seen`), shape (n, joints), and how many were drawn.
+    """``n`` configurations where every camera sees the whole board (:func:`board_seen`), shape
+    (n, joints), and how many were tried: uniform in the calibration ranges, or, when few of those
+    see it and the setup has a ``start``, a random walk from there through the usable part of the
+    ranges (:func:`~cpc2urdf.identification.simulation.design.walk_configurations`), ``n`` of its
+    visits drawn at random.
 
     Raises:
-        DegenerateDataError: Fewer than ``n`` in ``DRAWS_PER_CANDIDATE * n`` draws.
+        DegenerateDataError: Fewer than ``n`` in ``DRAWS_PER_CANDIDATE * n`` draws (or visits).
     """
     lo, hi = setup.calibration_ranges().T
+
+    def usable(q: Array) -> NDArray[np.bool_]:
+        return np.asarray(board_seen(setup, q).all(axis=1), dtype=bool)
+
     kept: list[Array] = []
     drawn, batch = 0, max(4 * n, 256)
-    while sum(len(k) for k in kept) < n and drawn < DRAWS_PER_CANDIDATE * n:
+    limit = DRAWS_PER_CANDIDATE * n if setup.start is None else 20 * batch
+    while sum(len(k) for k in kept) < n and drawn < limit:
         q = rng.uniform(lo, hi, (batch, len(lo)))
         drawn += batch
-        kept.append(q[board_seen(setup, q).all(axis=1)])
+        kept.append(q[usable(q)])
     got = np.concatenate(kept)
+    if len(got) < n and setup.start is not None and usable(setup.start[None])[0]:
+        visited = walk_configurations(usable, setup.start, np.stack([lo, hi], 1), rng, 4 * n)
+        drawn += 4 * n * 24
+        got = visited[rng.permutation(len(visited))]
     if len(got) < n:
         raise DegenerateDataError(
             f"only {len(got)} of {drawn} random configurations let every camera "
@@ -166,7 +182,7 @@ def setup_from_scene(
         assert scene.T_world_board is not None
         T_board_base = inverse(scene.T_world_board) @ model.T_world_base()
         model = model.with_params(world_to_base=CPCParams.from_matrix(T_board_base))
-    return PixelSetup(model, cams, scene.board, scene.board_frame, sigma)
+    return PixelSetup(model, cams, scene.board, scene.board_frame, sigma, start=scene.presentation)
 
 
 __all__ = [

@@ -67,8 +67,10 @@ def selfcal_setup(
 ) -> tuple[PixelSetup, dict[str, str]]:
     """The planning setup of a robot's ``cameras`` (a URDF's links, ``LINK:optical``/``LINK:body``
     where it cannot tell, or a spec's optical frames) and ``board``, fixed in front of the cameras
-    (:func:`board_in_front`, ``distance``) or, with ``board_link``, that link's frame (origin at the
-    pattern's centre, z out of the printed face). Also: camera frame -> the name the user gave.
+    (:func:`board_in_front`, ``distance``) or, with ``board_link``, held by that link: a URDF's
+    board is placed as the simulator places it (facing the cameras at a presentation
+    configuration found by search, candidates walked from there); a spec's is that frame.
+    Also: camera frame -> the name the user gave.
 
     Raises:
         ConfigurationError, InputFileError: A camera or board link the robot lacks; intrinsics
@@ -85,11 +87,21 @@ def selfcal_setup(
         raise ConfigurationError(
             f"{len(intrinsics)} intrinsics files for {len(cameras)} cameras: give one per camera"
         )
-    if isinstance(spec, UrdfRobot):
+    start = None
+    if isinstance(spec, UrdfRobot) and board_link:  # the simulator's: facing the camera in front
+        from cpc2urdf.identification.simulation.selfcal_experiment import selfcal_scene
+
+        assert spec.tree is not None
+        scene = selfcal_scene(
+            spec.tree, cameras, board=board, board_link=board_link, sigma_t=0.0, sigma_r=0.0
+        )
+        model, board_frame, start = scene.nominal, scene.board_frame, scene.presentation
+        names = dict(zip(scene.cameras, scene.camera_links, strict=True))
+    elif isinstance(spec, UrdfRobot):
         assert spec.tree is not None
         model, cams = optical_frames_model(spec.tree, cameras, board_link)
         names = {frame_name(model, spec.tree, link): link for link in cams}
-        board_frame = frame_name(model, spec.tree, board_link) if board_link else None
+        board_frame = None
     else:
         model = spec.nominal_model()
         frames = model.structure.frame_names
@@ -108,7 +120,16 @@ def selfcal_setup(
     if board_frame is None:
         model = board_in_front(model, cam, board, distance)
     r = model.structure.calibration_ranges(ranges)
-    return PixelSetup(model, cam, board, board_frame, sigma, r), names
+    return PixelSetup(model, cam, board, board_frame, sigma, r, start=start), names
+
+
+def _joint_board(setup: PixelSetup, u: Units) -> list[list[float]]:
+    """A held board's placement on its link, in the model's frame of that link's joint (file
+    units): what ``simulate --plan`` renders."""
+    assert setup.board_frame is not None
+    T = setup.nominal.frames[setup.board_frame].matrix().copy()
+    T[:3, 3] /= u.length
+    return [[float(v) for v in row] for row in T]
 
 
 def selfcal_plan_to_json(
@@ -156,6 +177,7 @@ def selfcal_plan_to_json(
             "board": setup.board.to_json(),
             "board_frame": setup.board_frame,
             "T_world_base": T.tolist(),
+            **({"T_joint_board": _joint_board(setup, u)} if setup.board_frame else {}),
             "ranges": {
                 j.name: [float(v) for v in lo_hi[i] / scale[i]] for i, j in enumerate(s.joints)
             },
@@ -234,7 +256,9 @@ def write_selfcal_plan(out: SelfcalOutputs, path: str | os.PathLike[str]) -> tup
 
 @dataclass
 class LoadedSelfcalPlan:
-    """A one-stage plan file's configurations (SI) and what it predicted (mm / deg)."""
+    """A one-stage plan file's configurations (SI), what it predicted (mm / deg) and where the
+    board is [m]: fixed, the base's pose in the board's frame; held, the board's placement in
+    the model's frame of its link's joint."""
 
     q: Array
     labels: list[str]
@@ -242,6 +266,8 @@ class LoadedSelfcalPlan:
     cameras: list[str]
     board_frame: str | None
     prediction: dict[str, Any]
+    T_board_base: Array | None = None
+    T_joint_board: Array | None = None
 
 
 def load_selfcal_plan(
@@ -267,8 +293,21 @@ def load_selfcal_plan(
     if not isinstance(cams, list) or not cams or not all(isinstance(c, str) for c in cams):
         raise InputFileError(p, "measured_frames must be the cameras' frame names")
     pred = doc.get("prediction")
+    key = "T_world_base" if setup.get("board_frame") is None else "T_joint_board"
+    T = np.asarray(setup.get(key), dtype=float)  # a fixed board: the plan's world is the board
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise InputFileError(p, f"setup.{key} must be a 4 x 4 matrix")
+    T[:3, 3] *= Units.from_json(doc.get("units")).length
+    held = setup.get("board_frame") is not None
     return LoadedSelfcalPlan(
-        q, labels, names, cams, setup.get("board_frame"), pred if isinstance(pred, dict) else {}
+        q,
+        labels,
+        names,
+        cams,
+        setup.get("board_frame"),
+        pred if isinstance(pred, dict) else {},
+        None if held else T,
+        T if held else None,
     )
 
 

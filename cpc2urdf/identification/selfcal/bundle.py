@@ -153,6 +153,23 @@ def subspace(J: Array, prefer: Array | None = None) -> tuple[NDArray[np.intp], A
     return fixed, N / np.maximum(np.linalg.norm(N, axis=0), 1e-300), cov
 
 
+def _closest_to_start(
+    model: CPCModel, chart: Parametrization, N: Array, norms: Array, prefer: Array
+) -> CPCModel:
+    """``model`` moved along the start's undetermined directions ``N`` (P, k) to the point closest
+    to the start (the user's model) in the column-scaled metric weighted by ``prefer``: what the
+    images cannot tell changes as little as the fit allows (to first order the fit is the same).
+    Directions that move the intrinsics or the board's scale are left as they are."""
+    P = chart.n_params
+    N = N[:, np.abs(N[P:]).max(axis=0, initial=0.0) < 1e-12][:P] if N.size else N[:P]
+    if not N.size:
+        return model
+    x = chart.vector_from_model(model)
+    w = np.where(norms[:P] > ZERO_COLUMN * norms.max(), norms[:P], norms.max()) * prefer[:P]
+    c, *_ = np.linalg.lstsq(w[:, None] * N, w * x, rcond=None)
+    return chart.model_from_vector(x - N @ c)
+
+
 def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
     """Which parameter an undetermined direction keeps at the user's value: a joint the records
     never move first, a held board's placement (not the user's) last."""
@@ -164,9 +181,7 @@ def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
         if np.ptp(data.q[:, i]) == 0.0
     }
     owner = [n.rsplit(".", 1)[0] for n in problem.names()]
-    return np.array(
-        [100.0 if o in still else 0.01 if o == data.board_frame else 1.0 for o in owner]
-    )
+    return np.array([1e6 if o in still else 0.01 if o == data.board_frame else 1.0 for o in owner])
 
 
 def _view_sigma(r: dict[int, Array], data: PixelData, dof_share: float) -> Array:
@@ -279,10 +294,14 @@ def fit_pixels(
     def problem_at(model: CPCModel, sig: Array) -> PixelProblem:
         return PixelProblem(Parametrization(model, frames), cur, use, sig, intrinsics, board_scale)
 
+    first: tuple[Parametrization, Array, Array] | None = None
     while rounds < MAX_ROUNDS:
         rounds += 1
         problem = problem_at(model, sig)
-        fixed, _, _ = subspace(problem.jacobian(np.zeros(problem.n_params)), prefer)
+        J = problem.jacobian(np.zeros(problem.n_params))
+        fixed, N, _ = subspace(J, prefer)
+        if first is None:
+            first = (problem.chart, N, np.linalg.norm(J, axis=0))
         reduced = _Reduced(problem, np.setdiff1d(np.arange(problem.n_params), fixed))
         sol = solve_least_squares(reduced, np.zeros(len(reduced.free)), MAX_NFEV)
         x = reduced.full(sol.x)
@@ -298,6 +317,8 @@ def fit_pixels(
         outliers += more
         if not more:
             break
+    assert first is not None
+    model = _closest_to_start(model, *first, prefer)
     problem = problem_at(model, sig)
     x0 = np.zeros(problem.n_params)
     fixed, _, _ = subspace(problem.jacobian(x0), prefer)

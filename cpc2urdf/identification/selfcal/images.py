@@ -3,8 +3,8 @@
 The layout is stage 2's (``docs/images.md``)::
 
     IMAGES_DIR/
-      <camera frame>/<record>.png     one sub-folder per head camera
-      <camera frame>.yaml             its intrinsics (OpenCV FileStorage, cv2.calibrateCamera)
+      <camera link>/<record>.png      one sub-folder per head camera
+      <camera link>.yaml              its intrinsics (OpenCV FileStorage, cv2.calibrateCamera)
       joints.csv                      the joint readings of every record
       board.json                      the board (cpc2urdf/board@1), unless given
 
@@ -70,8 +70,12 @@ def read_pixel_data(
     on_error: str = "skip",
     show_progress: bool = False,
     joint_aliases: Mapping[str, str] | None = None,
+    frame_of: Mapping[str, str] | None = None,
 ) -> PixelData:
     """The board's corners in every readable image of ``images_dir`` (module docstring).
+
+    ``cameras`` are keyed by their sub-folders (the camera links the user names); ``frame_of``
+    maps a sub-folder to the model's camera frame (default: the same name).
 
     Raises:
         InputFileError, DegenerateDataError, ConfigurationError: As ``measure_head_images``.
@@ -85,6 +89,10 @@ def read_pixel_data(
         show_progress=show_progress,
         joint_aliases=joint_aliases,
     )
+
+    def frame(c: str) -> str:
+        return (frame_of or {}).get(c, c)
+
     labels: list[str] = []
     q: list[np.ndarray] = []
     index: dict[str, int] = {}
@@ -95,12 +103,12 @@ def read_pixel_data(
                 index[label] = len(labels)
                 labels.append(label)
                 q.append(qi)
-            views.append(BoardView(c, index[label], ids, uv))
+            views.append(BoardView(frame(c), index[label], ids, uv))
     return PixelData(
         np.array(q),
         labels,
         views,
-        dict(cameras),
+        {frame(c): cam for c, cam in cameras.items()},
         board.object_points(),
         board_frame,
         source=str(images_dir),

@@ -11,13 +11,18 @@ forward, REP-103). The held board's placement on its link and the board's pose i
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
+import numpy as np
+
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.selfcal.calibrate import HeadCalibration, calibrate_head
 from cpc2urdf.identification.selfcal.images import folder_board, folder_cameras, read_pixel_data
 from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.model import CPCModel, CPCParams, Frame
+from cpc2urdf.model_metadata import Covariance
 from cpc2urdf.transforms import inverse
 from cpc2urdf.urdf.camera_frames import CameraLink
 from cpc2urdf.urdf.camera_mounts import (
@@ -29,6 +34,7 @@ from cpc2urdf.urdf.camera_mounts import (
 from cpc2urdf.urdf.tree import UrdfTree, read_urdf_tree
 
 BOARD_FRAME = "board"
+CARRY_STEP = 1e-6  # [m] or [rad] per chart coordinate
 
 
 def head_model(
@@ -59,13 +65,13 @@ def calibrate_urdf_head(
     """Calibrate ``urdf``'s head from ``images_dir`` (module docstring).
 
     Args:
-        images_dir: ``<camera frame>/<record>.png``, ``<camera frame>.yaml``, ``joints.csv``
+        images_dir: ``<camera link>/<record>.png``, ``<camera link>.yaml``, ``joints.csv``
             (columns: the URDF's joint names), ``board.json`` (:mod:`images`).
         urdf: The user's URDF.
         cameras: Camera link names (``LINK:optical``/``LINK:body`` where the file cannot tell).
         board: The board, or its file (default: the folder's ``board.json``).
         board_link: The link holding the board (None: the board is fixed in the world).
-        intrinsics_files: Camera link -> intrinsics file (default: ``<camera frame>.yaml``).
+        intrinsics_files: Camera link -> intrinsics file (default: ``<camera link>.yaml``).
         intrinsics: Refine the intrinsics too.
         accept_inconsistent: Keep a model the gate refuses, the reason in its notes.
         on_error: An unreadable image: ``"skip"`` it or ``"stop"``.
@@ -78,16 +84,16 @@ def calibrate_urdf_head(
 
     tree = read_urdf_tree(urdf)
     model, frames, cams = head_model(tree, cameras, board_link)
-    files = {f: (intrinsics_files or {}).get(link) for f, link in zip(frames, cams, strict=True)}
     data = read_pixel_data(
         images_dir,
         model.structure,
-        folder_cameras(images_dir, frames, {f: p for f, p in files.items() if p}),
+        folder_cameras(images_dir, list(cams), intrinsics_files),
         folder_board(images_dir, board),
         board_frame=BOARD_FRAME if board_link else None,
         on_error=on_error,
         show_progress=show_progress,
         joint_aliases=urdf_joint_columns(model),
+        frame_of=dict(zip(cams, frames, strict=True)),
     )
     cal = calibrate_head(
         model, data, intrinsics=intrinsics, accept_inconsistent=accept_inconsistent
@@ -97,15 +103,52 @@ def calibrate_urdf_head(
     assert prov is not None
     if board_link is not None:
         _, T_K_link = link_placement(model, tree, board_link)
-        placed = {
-            f"T_{board_link}_board": (inverse(T_K_link) @ out.frames[BOARD_FRAME].matrix()).tolist()
-        }
-        out = out.without_frames(["frame"])
+        T = inverse(T_K_link) @ out.frames[BOARD_FRAME].matrix()
+        placed = {f"T_{board_link}_board": T.tolist()}
     else:
         placed = {"T_base_board": inverse(out.T_world_base()).tolist()}
-    out = in_link_conventions(out, tree, cams)
-    meta = out.metadata.replace(provenance=prov.with_details(**placed, images_dir=str(images_dir)))
-    return out.with_params(metadata=meta), cal
+
+    def for_export(m: CPCModel) -> CPCModel:
+        return in_link_conventions(m.without_frames(["frame"]), tree, cams)
+
+    exported = for_export(out)
+    noise = {cam: cal.fit.sigma[f] for f, cam in zip(frames, cams, strict=True)}
+    meta = exported.metadata.replace(
+        provenance=prov.with_details(**placed, pixel_noise_px=noise, images_dir=str(images_dir)),
+        uncertainty=_carried(cal, exported, for_export),
+    )
+    return exported.with_params(metadata=meta), cal
+
+
+def _carried(
+    cal: HeadCalibration, out: CPCModel, convert: Callable[[CPCModel], CPCModel]
+) -> Covariance:
+    """The fit's covariance in the chart of ``out = convert(fit model)``: camera links in their
+    conventions, a held board's placement dropped (marginalised), the holding link a measured
+    frame where the URDF puts it. ``C' = G C G^T`` with ``G`` by central differences."""
+    fit = cal.fit
+    cov = cal.model.metadata.uncertainty
+    assert cov is not None
+    chart = Parametrization(out, list(out.structure.frame_names))
+    P = fit.chart.n_params
+    G = np.zeros((chart.n_params, P))
+    for k in range(P):
+        x = np.zeros(P)
+        x[k] = CARRY_STEP
+        plus = chart.vector_from_model(convert(fit.chart.model_from_vector(x)))
+        minus = chart.vector_from_model(convert(fit.chart.model_from_vector(-x)))
+        G[:, k] = (plus - minus) / (2.0 * CARRY_STEP)
+    N = G @ cov.null_space
+    N = N[:, np.linalg.norm(N, axis=0) > 1e-9]
+    C = G @ cov.matrix @ G.T
+    return dataclasses.replace(
+        cov,
+        names=tuple(chart.names),
+        units=tuple(chart.units),
+        frames=tuple(chart.frames),
+        matrix=0.5 * (C + C.T),
+        null_space=N / np.linalg.norm(N, axis=0) if N.size else np.zeros((chart.n_params, 0)),
+    )
 
 
 __all__ = ["BOARD_FRAME", "calibrate_urdf_head", "head_model"]

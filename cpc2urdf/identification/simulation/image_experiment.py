@@ -403,23 +403,27 @@ def write_camera_images(
     image: Callable[[PinholeView, int], NDArray[np.uint8]],
     *,
     show_progress: bool = False,
+    folders: Mapping[str, str] | None = None,
 ) -> dict[str, Path]:
     """Write what a robot's own cameras see, in the layout ``measure_head`` reads: per camera
     frame of ``model`` (the keys of ``intrinsics``, in order) ``<camera>.yaml`` and, at each
     configuration ``q[i]``, ``image(view, i)`` as ``<camera>/<record>.png`` (records ``0000``,
-    ``0001``, ...; cameras outer, records inner); then ``joints.csv``. Returns the written
-    files by role (camera frame -> its ``.yaml``, ``joints``)."""
+    ``0001``, ...; cameras outer, records inner), ``<camera>`` the frame's name in ``folders``
+    (default the frame's own); then ``joints.csv``. Returns the written files by role (camera
+    frame -> its ``.yaml``, ``joints``)."""
     records = [f"{i:04d}" for i in range(len(q))]
     paths: dict[str, Path] = {}
     jobs = [(c, i) for c in intrinsics for i in range(len(q))]
     T_world_cam = {c: model.fk_frame(c, q).reshape(-1, 4, 4) for c in intrinsics}
+    name = {c: (folders or {}).get(c, c) for c in intrinsics}
     for c, intr in intrinsics.items():
-        (out / c).mkdir(parents=True, exist_ok=True)
-        paths[c] = save_camera(intr.K, intr.D, (intr.width, intr.height), out / f"{c}.yaml")
+        (out / name[c]).mkdir(parents=True, exist_ok=True)
+        size = (intr.width, intr.height)
+        paths[c] = save_camera(intr.K, intr.D, size, out / f"{name[c]}.yaml")
     for c, i in progress(jobs, "render") if show_progress else jobs:
         intr = intrinsics[c]
         view = PinholeView(intr.K, intr.D, (intr.width, intr.height), inverse(T_world_cam[c][i]))
-        write_image(out / c / f"{records[i]}.png", image(view, i))
+        write_image(out / name[c] / f"{records[i]}.png", image(view, i))
     paths["joints"] = write_joints_csv(out / "joints.csv", model.structure, records, q)
     return paths
 

@@ -9,8 +9,8 @@
 2. :func:`selfcal_configurations`: configurations where every camera sees the whole board
    (:func:`~cpc2urdf.identification.simulation.visibility.board_in_view`), explored by a seeded
    random walk from there and spread by farthest-point selection (excitation).
-3. :func:`render_selfcal_experiment`: the folder ``measure_head`` reads (``<camera>/<record>.png``,
-   ``<camera>.yaml``, ``joints.csv``) plus ``board.json``, ``selfcal_truth.json``
+3. :func:`render_selfcal_experiment`: the folder ``measure_head`` reads (``<camera link>/<record>.png``,
+   ``<camera link>.yaml``, ``joints.csv``) plus ``board.json``, ``selfcal_truth.json``
    (:data:`TRUTH_FORMAT`), ``truth_model.json`` and ``nominal_model.json``.
 4. :func:`exact_corners`: the true pixels of the board's points, to score a detector.
 """
@@ -120,6 +120,7 @@ def selfcal_scene(
     sigma_t: float = DEFAULT_GEOMETRY_ERROR_T,
     sigma_r: float = DEFAULT_GEOMETRY_ERROR_R,
     distance: float = DEFAULT_DISTANCE,
+    placement: ArrayLike | None = None,
 ) -> SelfcalScene:
     """The scene of a head seeing ``board`` (module docstring).
 
@@ -131,6 +132,8 @@ def selfcal_scene(
         seed: Seed of the presentation search and of the truth.
         sigma_t, sigma_r: The truth's geometric errors [m] per CPC offset, [rad].
         distance: How far ahead of the cameras the board is at home / presentation [m].
+        placement: The board's nominal placement instead (a plan's): ``T_base_board`` when fixed;
+            when held, its pose in the model's frame of ``board_link``'s joint; shape (4, 4) [m].
 
     Raises:
         InputFileError: As :func:`~cpc2urdf.identification.handeye.urdf_stage2.camera_rig` (also
@@ -154,11 +157,23 @@ def selfcal_scene(
         nominal = base
         truth = perturbed_model(nominal, perturb, sigma_t, sigma_r)
         start = home_configuration(truth)
-        T_world_board = truth.T_world_base() @ default_target_placement(truth, cams, distance)
+        T_base_board = (
+            default_target_placement(truth, cams, distance)
+            if placement is None
+            else np.asarray(placement, dtype=float)
+        )
+        T_world_board = truth.T_world_base() @ T_base_board
     else:
         grip = NameMap.of(tree).links[board_link]
-        start = _presentation(base, cams, grip, distance + STANDOFF, search)
-        nominal = _with_held_board(base, cams, grip, start)
+        if placement is None:
+            start = _presentation(base, cams, grip, distance + STANDOFF, search)
+            nominal = _with_held_board(base, cams, grip, start)
+        else:  # as given, in the frame of the link's joint
+            start = home_configuration(base)
+            nominal = base.without_frames(["plate"]).with_frame(
+                Frame(BOARD_FRAME, base.structure.frame(grip).parent, "frame"),
+                CPCParams.from_matrix(np.asarray(placement, dtype=float)),
+            )
         truth = perturbed_model(nominal, perturb, sigma_t, sigma_r)
     return SelfcalScene(
         Path(tree.source),
@@ -359,7 +374,10 @@ def render_selfcal_experiment(
 
     if show_progress is None:
         show_progress = len(qq) * len(intr) * SECONDS_PER_IMAGE > 2.0
-    paths = write_camera_images(out, scene.truth, intr, qq, image, show_progress=show_progress)
+    folders = dict(zip(scene.cameras, scene.camera_links, strict=True))  # as the user names them
+    paths = write_camera_images(
+        out, scene.truth, intr, qq, image, show_progress=show_progress, folders=folders
+    )
     paths["board"] = save_board(scene.board, out / "board.json")
     paths["truth_model"] = save_model(scene.truth, out / "truth_model.json")
     paths["nominal_model"] = save_model(scene.nominal, out / "nominal_model.json")
