@@ -191,9 +191,10 @@ def trial(name: str, seed: int, images: int, noise_free: bool, folder: Path) -> 
     data = read_pixel_data(
         out,
         scene.nominal.structure,
-        folder_cameras(out, scene.cameras),
+        folder_cameras(out, scene.camera_links),
         board,
         board_frame=scene.board_frame,
+        frame_of=dict(zip(scene.camera_links, scene.cameras, strict=True)),
     )
     exact = sx.exact_corners(scene, q)
     detector = np.concatenate(

@@ -153,6 +153,16 @@ def subspace(J: Array, prefer: Array | None = None) -> tuple[NDArray[np.intp], A
     return fixed, N / np.maximum(np.linalg.norm(N, axis=0), 1e-300), cov
 
 
+def _solve_round(problem: PixelProblem, prefer: Array) -> tuple[Array, Array, Array]:
+    """Levenberg-Marquardt from ``x = 0`` with one parameter per undetermined direction held:
+    the solution, those directions and the Jacobian's column norms at the start."""
+    J = problem.jacobian(np.zeros(problem.n_params))
+    fixed, N, _ = subspace(J, prefer)
+    reduced = _Reduced(problem, np.setdiff1d(np.arange(problem.n_params), fixed))
+    sol = solve_least_squares(reduced, np.zeros(len(reduced.free)), MAX_NFEV)
+    return reduced.full(sol.x), N, np.linalg.norm(J, axis=0)
+
+
 def _closest_to_start(
     model: CPCModel, chart: Parametrization, N: Array, norms: Array, prefer: Array
 ) -> CPCModel:
@@ -298,13 +308,8 @@ def fit_pixels(
     while rounds < MAX_ROUNDS:
         rounds += 1
         problem = problem_at(model, sig)
-        J = problem.jacobian(np.zeros(problem.n_params))
-        fixed, N, _ = subspace(J, prefer)
-        if first is None:
-            first = (problem.chart, N, np.linalg.norm(J, axis=0))
-        reduced = _Reduced(problem, np.setdiff1d(np.arange(problem.n_params), fixed))
-        sol = solve_least_squares(reduced, np.zeros(len(reduced.free)), MAX_NFEV)
-        x = reduced.full(sol.x)
+        x, N, norms = _solve_round(problem, prefer)
+        first = first or (problem.chart, N, norms)
         model = problem.chart.model_from_vector(x[: problem.chart.n_params])
         r = problem.pixel_residuals(x)
         if board_scale:
@@ -318,7 +323,12 @@ def fit_pixels(
         if not more:
             break
     assert first is not None
-    model = _closest_to_start(model, *first, prefer)
+    if first[1].size:  # what the images cannot tell: closest to the start, then refit the rest
+        problem = problem_at(_closest_to_start(model, *first, prefer), sig)
+        x, _, _ = _solve_round(problem, prefer)
+        model = problem.chart.model_from_vector(x[: problem.chart.n_params])
+        scale *= 1.0 + x[-1] if board_scale else 1.0
+        cur = replace(cur, cameras=problem.camera_models(x), board_points=data.board_points * scale)
     problem = problem_at(model, sig)
     x0 = np.zeros(problem.n_params)
     fixed, _, _ = subspace(problem.jacobian(x0), prefer)
