@@ -59,12 +59,31 @@ from cpc2urdf.identification.planning.measuring import SETUP_NOISE_MODELS, Measu
 from cpc2urdf.identification.planning.plan_selection import PlanResult
 from cpc2urdf.identification.simulation.measure_poses import DEFAULT_PIXEL_SIGMA
 from cpc2urdf.identification.vision.stereo import StereoRig
-from cpc2urdf.model import RobotStructure
+from cpc2urdf.model import CPCModel, RobotStructure
+from cpc2urdf.urdf.robot import urdf_source
 
 Array = NDArray[np.float64]
 
 PLAN_FORMAT = "cpc2urdf/plan@1"
 SELFCAL_NOISE_MODEL = "pixels"  # a one-stage plan's (planning/selfcal_plan_file.py)
+
+
+def joints_json(model: CPCModel, u: Units) -> list[dict[str, Any]]:
+    """A plan file's ``joints``: name, type, unit and the URDF's own name when it has one."""
+    src = urdf_source(model)
+    return [
+        {
+            "name": j.name,
+            "type": j.type,
+            "unit": u.length_name if j.type == "prismatic" else u.angle_name,
+            **(
+                {"urdf_joint": src.joints[j.name]}
+                if src is not None and j.name in src.joints
+                else {}
+            ),
+        }
+        for j in model.structure.joints
+    ]
 
 
 def plan_to_json(
@@ -103,19 +122,7 @@ def plan_to_json(
         "format": PLAN_FORMAT,
         "robot": robot,
         "units": u.to_json(),
-        "joints": [
-            {
-                "name": j.name,
-                "type": j.type,
-                "unit": u.length_name if j.type == "prismatic" else u.angle_name,
-                **(
-                    {"urdf_joint": src.joints[j.name]}
-                    if src is not None and j.name in src.joints
-                    else {}
-                ),
-            }
-            for j in s.joints
-        ],
+        "joints": joints_json(setup.nominal, u),
         "measured_frames": list(setup.frames),
         **(
             {

@@ -34,6 +34,7 @@ from cpc2urdf.identification.planning.pixel_setup import DEFAULT_SIGMA, PixelSet
 from cpc2urdf.identification.planning.plan_file import (
     PLAN_FORMAT,
     SELFCAL_NOISE_MODEL,
+    joints_json,
     parse_configurations,
 )
 from cpc2urdf.identification.planning.selfcal_plan import SelfcalPlan, plan_selfcal
@@ -136,11 +137,9 @@ def selfcal_plan_to_json(
     plan: SelfcalPlan, setup: PixelSetup, *, robot: str, names: Mapping[str, str], seed: int
 ) -> dict[str, Any]:
     """The plan file's content (module docstring); joints in mm / deg."""
-    from cpc2urdf.urdf.robot import urdf_source
 
     u = Units("mm", "deg")
     s = setup.nominal.structure
-    src = urdf_source(setup.nominal)
     scale = np.array([u.joint_scale(j.type) for j in s.joints])
     T = setup.nominal.T_world_base().copy()
     T[:3, 3] /= u.length
@@ -150,15 +149,7 @@ def selfcal_plan_to_json(
         "format": PLAN_FORMAT,
         "robot": robot,
         "units": u.to_json(),
-        "joints": [
-            {
-                "name": j.name,
-                "type": j.type,
-                "unit": u.length_name if j.type == "prismatic" else u.angle_name,
-                **({"urdf_joint": src.joints[j.name]} if src and j.name in src.joints else {}),
-            }
-            for j in s.joints
-        ],
+        "joints": joints_json(setup.nominal, u),
         "measured_frames": list(setup.cameras),
         "strategy": "I-optimal",
         "one_joint": False,
