@@ -110,7 +110,7 @@ def test_stage2_refusal_is_the_only_line(
     assert main(["measure", str(blank), "--stage2", "--model", "iis_head", "-o", str(out)]) == 2
     _one_line(
         capsys,
-        "camera camera_left_optical saw the target in 0 records; hand-eye calibration needs at least 3",
+        "camera camera_left_optical saw the target in 0 records; a calibration needs at least 3",
     )
     assert not out.exists()
 

@@ -102,6 +102,27 @@ def test_bad_image_folders_get_one_line(talos: Path, tmp_path: Path, capsys):
     assert not out.exists()
 
 
+def test_joint_states_with_every_joint_and_too_few_images(talos: Path, tmp_path: Path, capsys):
+    """A joints.csv with the robot's other joints too (as a ROS joint_states) is read; three
+    images are refused in one line, not with a traceback."""
+    import shutil
+
+    folder = tmp_path / "img"
+    shutil.copytree(talos, folder)
+    rows = (folder / "joints.csv").read_text().splitlines()
+    rows = [r + (",arm_left_1_joint" if i == 0 else ",0.1") for i, r in enumerate(rows)]
+    (folder / "joints.csv").write_text("\n".join(rows) + "\n")
+    argv = ["identify", str(folder), "--robot", str(TALOS), "--cameras", "rgbd_link"]
+    assert main([*argv, "-o", str(tmp_path / "m.json")]) == 0
+    for png in sorted((folder / "rgbd_link").glob("*.png"))[3:]:
+        png.unlink()
+    capsys.readouterr()
+    assert main([*argv, "-o", str(tmp_path / "m3.json")]) == 2
+    err = capsys.readouterr().err
+    assert "3 images of the board" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "m3.json").exists()
+
+
 @pytest.mark.slow
 def test_cli_chain_calibrates_tiago_arm_and_head_together(tmp_path: Path):
     img = _chain(tmp_path, TIAGO, "xtion_link", "arm_tool_link", 20)

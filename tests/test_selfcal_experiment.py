@@ -172,7 +172,7 @@ def test_held_board_moves_with_the_arm(held: SelfcalScene, tmp_path: Path) -> No
     uv = exact_corners(held, q)[held.cameras[0]]
     assert np.linalg.norm(uv[1] - uv[0], axis=1).min() > 2.0
     render_selfcal_experiment(tmp_path / "arm", held, q, noise_sigma=0.0, seed=0)
-    a, b = (read_grey(tmp_path / "arm" / held.cameras[0] / f"{i:04d}.png") for i in (0, 1))
+    a, b = (read_grey(tmp_path / "arm" / held.camera_links[0] / f"{i:04d}.png") for i in (0, 1))
     assert np.abs(a.astype(int) - b.astype(int)).max() > 100
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import qr
 
+from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.refine import solve_least_squares
@@ -43,7 +44,7 @@ from cpc2urdf.identification.selfcal.pixel_problem import (
     PixelData,
     PixelProblem,
 )
-from cpc2urdf.model import CPCModel
+from cpc2urdf.model import BASE, CPCModel
 from cpc2urdf.transforms import Array
 
 CORNER_ALPHA = 1e-3  # a clean data set loses a good corner with this probability
@@ -164,25 +165,41 @@ def _solve_round(problem: PixelProblem, prefer: Array) -> tuple[Array, Array, Ar
 
 
 def _closest_to_start(
-    model: CPCModel, chart: Parametrization, N: Array, norms: Array, prefer: Array
-) -> CPCModel:
-    """``model`` moved along the start's undetermined directions ``N`` (P, k) to the point closest
-    to the start (the user's model) in the column-scaled metric weighted by ``prefer``: what the
-    images cannot tell changes as little as the fit allows (to first order the fit is the same).
-    Directions that move the intrinsics or the board's scale are left as they are."""
+    model: CPCModel,
+    scale: float,
+    chart: Parametrization,
+    N: Array,
+    norms: Array,
+    prefer: Array,
+    scaled: bool,
+) -> tuple[CPCModel, float]:
+    """``model`` (and the board's ``scale`` when ``scaled``) moved along the start's undetermined
+    directions ``N`` to the point closest to the start (the user's model) in the column-scaled
+    metric weighted by ``prefer``: what the images cannot tell changes as little as the fit
+    allows (to first order the fit is the same). A free board scale is so settled by the
+    user's lengths. Directions that move the intrinsics are left as they are."""
     P = chart.n_params
-    N = N[:, np.abs(N[P:]).max(axis=0, initial=0.0) < 1e-12][:P] if N.size else N[:P]
+    rows = np.r_[np.arange(P), [N.shape[0] - 1] if scaled else []].astype(int)
+    other = np.setdiff1d(np.arange(N.shape[0]), rows)
+    N = N[:, np.abs(N[other]).max(axis=0, initial=0.0) < 1e-12][rows] if N.size else N[rows]
     if not N.size:
-        return model
-    x = chart.vector_from_model(model)
-    w = np.where(norms[:P] > ZERO_COLUMN * norms.max(), norms[:P], norms.max()) * prefer[:P]
+        return model, scale
+    try:
+        x = np.r_[chart.vector_from_model(model), [scale - 1.0] if scaled else []]
+    except DegenerateDataError:  # the fit went far from the start: the gate will say so
+        return model, scale
+    n = norms[rows]
+    w = np.where(n > ZERO_COLUMN * norms.max(), n, norms.max()) * prefer[rows]
     c, *_ = np.linalg.lstsq(w[:, None] * N, w * x, rcond=None)
-    return chart.model_from_vector(x - N @ c)
+    x = x - N @ c
+    return chart.model_from_vector(x[:P]), (1.0 + x[-1]) if scaled else scale
 
 
 def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
     """Which parameter an undetermined direction keeps at the user's value: a joint the records
-    never move first, a held board's placement (not the user's) last."""
+    never move first; last, what is not the user's: a held board's placement, the board's
+    scale, and (a fixed board) the first joints' lines, which place the robot in the board's
+    world."""
     still = {
         j
         for i, j in enumerate(
@@ -190,8 +207,12 @@ def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
         )
         if np.ptp(data.q[:, i]) == 0.0
     }
+    s = problem.chart.model_from_vector(np.zeros(problem.chart.n_params)).structure
+    placing = {j.name for j in s.joints if j.parent == BASE and data.board_frame is None}
     owner = [n.rsplit(".", 1)[0] for n in problem.names()]
-    return np.array([1e6 if o in still else 0.01 if o == data.board_frame else 1.0 for o in owner])
+    cheap = {data.board_frame, *placing}
+    w = [1e6 if o in still else 0.01 if o in cheap else 1.0 for o in owner]
+    return np.array(w[:-1] + [0.01] if problem.scaled else w)
 
 
 def _view_sigma(r: dict[int, Array], data: PixelData, dof_share: float) -> Array:
@@ -323,12 +344,15 @@ def fit_pixels(
         if not more:
             break
     assert first is not None
-    if first[1].size:  # what the images cannot tell: closest to the start, then refit the rest
-        problem = problem_at(_closest_to_start(model, *first, prefer), sig)
-        x, _, _ = _solve_round(problem, prefer)
-        model = problem.chart.model_from_vector(x[: problem.chart.n_params])
-        scale *= 1.0 + x[-1] if board_scale else 1.0
-        cur = replace(cur, cameras=problem.camera_models(x), board_points=data.board_points * scale)
+    # What the images cannot tell: closest to the start; then the rest refitted (also after the
+    # last round's outliers).
+    model, scale = _closest_to_start(model, scale, *first, prefer, board_scale)
+    cur = replace(cur, board_points=data.board_points * scale)
+    problem = problem_at(model, sig)
+    x, _, _ = _solve_round(problem, prefer)
+    model = problem.chart.model_from_vector(x[: problem.chart.n_params])
+    scale *= 1.0 + x[-1] if board_scale else 1.0
+    cur = replace(cur, cameras=problem.camera_models(x), board_points=data.board_points * scale)
     problem = problem_at(model, sig)
     x0 = np.zeros(problem.n_params)
     fixed, _, _ = subspace(problem.jacobian(x0), prefer)

@@ -6,11 +6,13 @@
   for one-joint-at-a-time records, else the user's model placed in the board's world), or, for a
   board the robot holds, the user's model with the board's placement from PnP;
 - **fit** on pixels (:func:`~cpc2urdf.identification.selfcal.bundle.fit_pixels`);
-- **gate**: the corners must fit to a detector's precision (:data:`MAX_CORNER_NOISE`), and the fit
-  must not move a joint or camera implausibly far from the user's model (:data:`MAX_SHIFT`,
-  :data:`MAX_TURN`). The cause is named by refitting the likely mistakes in turn, the first
-  whose fit passes: intrinsics that do not fit the images (refit with them free), a board whose
-  file has the wrong square size (refit with its scale free).
+- **gate**: the likely mistakes are refitted first, since a few % off still fits, only worse:
+  intrinsics that do not fit the images (refitted free, the corners fit
+  :data:`INTRINSICS_GAIN` times closer), a board whose file has the wrong square size (its scale
+  refitted free and settled by the user's lengths, off by more than :data:`MAX_BOARD_SCALE`).
+  Then the corners must fit to a detector's precision (:data:`MAX_CORNER_NOISE`), no joint axis
+  may turn the other way, and no joint or camera may move implausibly far from the user's model
+  (:data:`MAX_SHIFT`, :data:`MAX_TURN`).
 
 The model carries ``provenance`` (the corners, the noise, the start, the parameters the images
 do not determine), ``uncertainty`` (the pixel model's covariance) and ``notes`` (outliers).
@@ -22,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cpc2urdf.errors import InconsistentDataError
+from cpc2urdf.errors import DegenerateDataError, InconsistentDataError
 from cpc2urdf.identification.kinematics.start import on_the_parts
 from cpc2urdf.identification.selfcal.bundle import PixelFit, fit_pixels
 from cpc2urdf.identification.selfcal.pixel_problem import PixelData
@@ -35,6 +37,8 @@ METHOD = "pixels"
 MAX_CORNER_NOISE = 2.0  # [px]: corners fitting worse than this are not a detector's noise
 MAX_SHIFT = 0.03  # [m]: a joint or camera placement moved farther from the user's is implausible
 MAX_TURN = np.radians(10.0)  # [rad]
+INTRINSICS_GAIN = 1.3  # refined intrinsics fitting the corners this much closer: they were off
+MAX_BOARD_SCALE = 0.02  # [-] a board this much off its file's size (the URDF's lengths say)
 
 
 @dataclass
@@ -54,11 +58,20 @@ class HeadCalibration:
     start: str
 
 
-def _moved(fitted: CPCModel, start: CPCModel) -> tuple[str, float, float]:
+def _moved(fitted: CPCModel, start: CPCModel) -> tuple[str, float, float, list[str]]:
     """The placement (joint or frame) that moved most from ``start``, what the images cannot see
-    chosen closest to it first (:func:`on_the_parts`): name, shift [m], turn [rad]."""
-    fitted = on_the_parts(fitted, start)
+    chosen closest to it first (:func:`on_the_parts`): name, shift [m], turn [rad]; and the
+    joints whose axis the fit reverses."""
+    try:
+        fitted = on_the_parts(fitted, start)
+    except DegenerateDataError:  # no gauge brings it near the user's model
+        return "the robot", float("inf"), float("inf"), []
     worst = ("", 0.0, 0.0)
+    reversed_ = [
+        n
+        for n in fitted.joints
+        if fitted.joints[n].matrix()[:3, 2] @ start.joints[n].matrix()[:3, 2] < 0
+    ]
     for kind, a, b in (
         ("joint", fitted.joints, start.joints),
         ("frame", fitted.frames, start.frames),
@@ -69,51 +82,63 @@ def _moved(fitted: CPCModel, start: CPCModel) -> tuple[str, float, float]:
             turn = float(rotation_error(A[:3, :3], B[:3, :3]))
             if shift / MAX_SHIFT + turn / MAX_TURN > worst[1] / MAX_SHIFT + worst[2] / MAX_TURN:
                 worst = (f"{kind} {n}", shift, turn)
-    return worst
+    return (*worst, reversed_)
 
 
-def _inconsistency(fit: PixelFit, user: CPCModel) -> str | None:
+def _inconsistency(fit: PixelFit, user: CPCModel, data: PixelData) -> str | None:
     """Why ``fit`` does not look like the user's robot seen by a detector, or None."""
     c, s = max(fit.sigma.items(), key=lambda kv: kv[1])
     if s > MAX_CORNER_NOISE:
-        return f"camera {c}'s corners fit to {s:.3g} px RMS, more than a detector's {MAX_CORNER_NOISE:g} px"
-    name, shift, turn = _moved(fit.model, user)
+        return (
+            f"camera {data.name(c)}'s corners fit to {s:.3g} px RMS, more than a detector's "
+            f"{MAX_CORNER_NOISE:g} px"
+        )
+    name, shift, turn, flipped = _moved(fit.model, user)
+    if flipped:
+        return (
+            f"joint {flipped[0]} turns the other way than in the URDF (the images reverse its "
+            "axis): a sign in the joint readings or in the URDF's <axis>"
+        )
     if shift > MAX_SHIFT or turn > MAX_TURN:
         return (
-            f"the fit moves {name} {shift * 1e3:.1f} mm / {np.degrees(turn):.1f} deg from the user's "
-            f"model (plausible: {MAX_SHIFT * 1e3:g} mm / {np.degrees(MAX_TURN):g} deg)"
+            f"the fit moves {data.name(name)} {shift * 1e3:.1f} mm / {np.degrees(turn):.1f} deg "
+            f"from the user's model (plausible: {MAX_SHIFT * 1e3:g} mm / {np.degrees(MAX_TURN):g} deg)"
         )
     return None
-
-
-def _intrinsics_say(fit: PixelFit) -> str:
-    fx = ", ".join(
-        f"{c} fx = {m.K[0, 0]:.1f}, fy = {m.K[1, 1]:.1f} px" for c, m in fit.cameras.items()
-    )
-    return f"the intrinsics do not fit the images (refined: {fx}); recalibrate the cameras or refine them (--intrinsics)"
-
-
-def _board_says(fit: PixelFit) -> str:
-    return f"the board is {fit.board_scale:.4g} times the size its file says; fix the square size in the board file"
 
 
 def _gate(
     fit: PixelFit, begin: CPCModel, user: CPCModel, data: PixelData, intrinsics: bool
 ) -> str | None:
-    """Why the fit is inconsistent with the images (module docstring), or None. The cause is the
-    first likely mistake whose refit is consistent: intrinsics, then the board's size."""
-    why = _inconsistency(fit, user)
-    if why is None:
-        return None
-    for refine_intrinsics, scale, says in (
-        (True, False, _intrinsics_say),
-        (intrinsics, True, _board_says),
+    """Why the fit is inconsistent with the images (module docstring), or None. The likely
+    mistakes are refitted whatever the first fit says (a few % off still fits, worse), and named
+    when their refit is consistent: intrinsics that do not fit the images, then a board whose
+    file has the wrong size (its scale settled by the user's lengths); then the corners' noise
+    and how far the fit moved."""
+    if not intrinsics:
+        other = fit_pixels(begin, data, intrinsics=True)
+        gain = max(fit.sigma[c] / other.sigma[c] for c in fit.sigma)
+        if gain > INTRINSICS_GAIN and _inconsistency(other, user, data) is None:
+            fx = ", ".join(
+                f"{data.name(c)} fx = {m.K[0, 0]:.1f}, fy = {m.K[1, 1]:.1f} px"
+                for c, m in other.cameras.items()
+            )
+            return (
+                f"the intrinsics do not fit the images: refined ({fx}) the corners fit "
+                f"{gain:.3g} times closer; recalibrate the cameras or refine them (--intrinsics)"
+            )
+    scaled = fit_pixels(user, data, intrinsics=intrinsics, board_scale=True)
+    if (
+        abs(scaled.board_scale - 1.0) > MAX_BOARD_SCALE
+        and _inconsistency(scaled, user, data) is None
     ):
-        if refine_intrinsics == intrinsics and not scale:
-            continue  # the intrinsics were refined already
-        other = fit_pixels(begin, data, intrinsics=refine_intrinsics, board_scale=scale)
-        if _inconsistency(other, user) is None:
-            return f"{why}: {says(other)}"
+        return (
+            f"the board is about {scaled.board_scale:.3g} times the size its file says (the "
+            "URDF's lengths against the images'); fix the square size in the board file"
+        )
+    why = _inconsistency(fit, user, data)
+    if why is None or "turns the other way" in why:
+        return why
     return (
         f"{why}; neither the intrinsics nor the board's size explain it: the joint readings (a "
         "sign, a zero), the camera links or the board's mounting do not match the images"
@@ -158,20 +183,19 @@ def calibrate_head(
     """
     two: CPCModel | None = None
     if data.board_frame is None:
-        res, kind = two_stage_fit(data, nominal)
-        two, user, begin = res.model, res.start, res.model
+        res, kind, user = two_stage_fit(data, nominal)
+        two, begin = res.model, res.model
     else:
         kind = "nominal, board from PnP"
         user = begin = held_board_start(data, nominal)
     fit = fit_pixels(begin, data, intrinsics=intrinsics)
-    notes = [f"outlier: {o}" for o in fit.outliers]
+    notes = [f"skipped: {p}" for p in data.notes] + [f"outlier: {o}" for o in fit.outliers]
     if fit.undetermined:
         notes.append(
-            "not determined by the images, kept at the user's values: "
-            + ", ".join(fit.undetermined)
+            "not determined by the images (chosen closest to the user's model): "
+            + data.name(", ".join(fit.undetermined))
         )
-    # A closed-form start is the images' own: only the noise is checked then.
-    reason = _gate(fit, begin, fit.model if kind == "closed-form" else user, data, intrinsics)
+    reason = _gate(fit, begin, user, data, intrinsics)
     if reason is not None:
         if not accept_inconsistent:
             raise InconsistentDataError(f"{data.source}: {reason}")
@@ -203,6 +227,8 @@ def calibrate_head(
 
 
 __all__ = [
+    "INTRINSICS_GAIN",
+    "MAX_BOARD_SCALE",
     "MAX_CORNER_NOISE",
     "MAX_SHIFT",
     "MAX_TURN",

@@ -16,7 +16,7 @@ points (ellipse-centre corrected for circle grids) are what the pixel fit uses.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,9 @@ from cpc2urdf.identification.vision.rig_file import load_camera
 from cpc2urdf.model import RobotStructure
 
 BOARD_FILE = "board.json"
+PNP_RMS_PX = (
+    20.0  # [px] looser than stage 2's: intrinsics a few % off still give the fit its corners
+)
 
 
 def folder_board(
@@ -71,11 +74,15 @@ def read_pixel_data(
     show_progress: bool = False,
     joint_aliases: Mapping[str, str] | None = None,
     frame_of: Mapping[str, str] | None = None,
+    other_joints: Collection[str] = (),
 ) -> PixelData:
     """The board's corners in every readable image of ``images_dir`` (module docstring).
 
     ``cameras`` are keyed by their sub-folders (the camera links the user names); ``frame_of``
-    maps a sub-folder to the model's camera frame (default: the same name).
+    maps a sub-folder to the model's camera frame (default: the same name). ``joints.csv``'s
+    columns of ``other_joints`` are skipped. A board is kept when its PnP pose reprojects within
+    :data:`PNP_RMS_PX` (the fit refines or refuses intrinsics that are off; a misdetected grid is
+    its outlier).
 
     Raises:
         InputFileError, DegenerateDataError, ConfigurationError: As ``measure_head_images``.
@@ -88,6 +95,8 @@ def read_pixel_data(
         on_error=on_error,
         show_progress=show_progress,
         joint_aliases=joint_aliases,
+        other_joints=other_joints,
+        max_rms_px=PNP_RMS_PX,
     )
 
     def frame(c: str) -> str:
@@ -113,6 +122,7 @@ def read_pixel_data(
         board_frame,
         source=str(images_dir),
         notes=list(m.problems),
+        names={frame(c): c for c in cameras if frame(c) != c},
     )
 
 

@@ -95,6 +95,8 @@ class PixelData:
         board_frame: None when the board is fixed in the world; else the model frame it is
             (on a link of the robot, e.g. held by a gripper).
         source: Where the data came from, for messages.
+        notes: What reading the images said (images skipped and why).
+        names: Camera frame -> the user's name for it (its folder), for messages.
     """
 
     q: Array
@@ -105,10 +107,17 @@ class PixelData:
     board_frame: str | None = None
     source: str = "<memory>"
     notes: list[str] = field(default_factory=list)
+    names: dict[str, str] = field(default_factory=dict)
+
+    def name(self, text: str) -> str:
+        """``text`` with the model's camera frame names as the user names them (:attr:`names`)."""
+        for frame, user in self.names.items():
+            text = text.replace(frame, user)
+        return text
 
     def view_name(self, k: int) -> str:
         v = self.views[k]
-        return f"{v.camera}/{self.labels[v.record]}"
+        return f"{self.name(v.camera)}/{self.labels[v.record]}"
 
 
 def _skew_cross(a: Array, w: Array) -> Array:

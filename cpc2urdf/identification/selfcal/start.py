@@ -16,8 +16,9 @@ from scipy.spatial.transform import Rotation
 
 from cpc2urdf.errors import DegenerateDataError
 from cpc2urdf.files.measurements import MeasurementSet
+from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.refine import RefinementResult, refine
-from cpc2urdf.identification.kinematics.start import on_the_parts, refinement_start
+from cpc2urdf.identification.kinematics.start import align_base, on_the_parts, refinement_start
 from cpc2urdf.identification.selfcal.pixel_problem import PixelData
 from cpc2urdf.identification.vision.boards.board_poses import solve_pnp
 from cpc2urdf.model import CPCModel, CPCParams
@@ -26,34 +27,55 @@ from cpc2urdf.transforms import Array, homogeneous, inverse
 # Relative weights of the PnP poses (the covariance is scaled a posteriori).
 PNP_SIGMA_T = 1e-3  # [m]
 PNP_SIGMA_R = np.radians(0.1)  # [rad]
+PNP_OUTLIER = 5.0  # an image's PnP reprojection this many times its camera's median: no start
 
 
 def pnp_poses(data: PixelData) -> dict[str, Array]:
-    """Camera -> ``T_camera_board`` per record by PnP, shape (R, 4, 4), NaN where not seen."""
+    """Camera -> ``T_camera_board`` per record by PnP, shape (R, 4, 4); NaN where not seen, or
+    where the pose reprojects :data:`PNP_OUTLIER` times worse than the camera's median image (a
+    misdetected board: the pixel fit names it)."""
     R = len(data.q)
     out = {c: np.full((R, 4, 4), np.nan) for c in data.cameras}
+    rms: dict[str, list[tuple[int, float]]] = {c: [] for c in data.cameras}
     for v in data.views:
         cam = data.cameras[v.camera]
-        T, _ = solve_pnp(data.board_points[v.ids], v.uv, cam.K, cam.D)
+        T, e = solve_pnp(data.board_points[v.ids], v.uv, cam.K, cam.D)
         out[v.camera][v.record] = T
+        rms[v.camera].append((v.record, e))
+    for c, found in rms.items():
+        typical = float(np.median([e for _, e in found])) if found else 0.0
+        for r, e in found:
+            if e > PNP_OUTLIER * max(typical, 0.1):
+                out[c][r] = np.nan
     return out
 
 
 def pose_measurements(data: PixelData, nominal: CPCModel) -> MeasurementSet:
     """The PnP poses of a fixed board as stage-1 measurements: ``T_board_camera`` per record."""
-    poses = {
-        c: np.asarray(np.linalg.inv(T), float) for c, T in pnp_poses(data).items()
-    }  # NaN stays NaN
+    poses = {c: np.asarray(np.linalg.inv(T), float) for c, T in pnp_poses(data).items()}
     return MeasurementSet(
         nominal.structure, data.q, poses, source=data.source, labels=list(data.labels)
     )
 
 
-def two_stage_fit(data: PixelData, nominal: CPCModel) -> tuple[RefinementResult, str]:
-    """PnP poses, then the pose refinement: the two-stage answer and where it started."""
+def two_stage_fit(data: PixelData, nominal: CPCModel) -> tuple[RefinementResult, str, CPCModel]:
+    """PnP poses, then the pose refinement: the two-stage answer, where it started, and the
+    user's model placed in the board's world by the same poses (what the gate compares with).
+
+    Raises:
+        DegenerateDataError: Fewer board poses than the head's parameters need.
+    """
     if data.board_frame is not None:
         raise DegenerateDataError("the pose pipeline needs a board fixed in the world")
     ms = pose_measurements(data, nominal)
+    cams = list(data.cameras)
+    needed = Parametrization(nominal, cams).n_params // 6 + 1
+    seen = sum(int(ms.has_pose(c).sum()) for c in cams)
+    if seen < needed:
+        raise DegenerateDataError(
+            f"{data.source}: {seen} images of the board; the head's cameras and joints need at "
+            f"least {needed}"
+        )
     start, kind, _ = refinement_start(ms, nominal)
     if kind == "closed-form":
         start = on_the_parts(start, nominal)
@@ -62,11 +84,11 @@ def two_stage_fit(data: PixelData, nominal: CPCModel) -> tuple[RefinementResult,
         ms,
         PNP_SIGMA_T,
         PNP_SIGMA_R,
-        frames=list(data.cameras),
+        frames=cams,
         covariance_scale="a_posteriori",
         warn=False,
     )
-    return res, kind
+    return res, kind, align_base(nominal, ms, cams)
 
 
 def held_board_start(data: PixelData, nominal: CPCModel) -> CPCModel:

@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from cpc2urdf.errors import ConfigurationError
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.selfcal.calibrate import HeadCalibration, calibrate_head
 from cpc2urdf.identification.selfcal.images import folder_board, folder_cameras, read_pixel_data
@@ -24,13 +25,14 @@ from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.model import CPCModel, CPCParams, Frame
 from cpc2urdf.model_metadata import Covariance
 from cpc2urdf.transforms import inverse
-from cpc2urdf.urdf.camera_frames import CameraLink
+from cpc2urdf.urdf.camera_frames import CameraLink, split_convention
 from cpc2urdf.urdf.camera_mounts import (
     frame_name,
     in_link_conventions,
     link_placement,
     optical_frames_model,
 )
+from cpc2urdf.urdf.robot import NameMap
 from cpc2urdf.urdf.tree import UrdfTree, read_urdf_tree
 
 BOARD_FRAME = "board"
@@ -42,6 +44,10 @@ def head_model(
 ) -> tuple[CPCModel, list[str], dict[str, CameraLink]]:
     """The user's model for a pixel fit: camera frames (optical) and, when held, a ``board``
     frame at ``board_link``; the camera frames' names; the camera links."""
+    links = [split_convention(c)[0] for c in cameras]
+    twice = sorted({c for c in links if links.count(c) > 1})
+    if twice:
+        raise ConfigurationError(f"camera link {twice[0]!r} is given twice")
     model, cams = optical_frames_model(tree, cameras, board_link)
     if board_link is not None:
         K, T = link_placement(model, tree, board_link)
@@ -94,6 +100,7 @@ def calibrate_urdf_head(
         show_progress=show_progress,
         joint_aliases=urdf_joint_columns(model),
         frame_of=dict(zip(cams, frames, strict=True)),
+        other_joints={*tree.joints, *NameMap.of(tree).joints.values()},
     )
     cal = calibrate_head(
         model, data, intrinsics=intrinsics, accept_inconsistent=accept_inconsistent

@@ -19,7 +19,7 @@ import csv
 import io
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,7 +55,11 @@ class JointTable:
 
 
 def read_joints_csv(
-    path: str | Path, structure: RobotStructure, *, aliases: Mapping[str, str] | None = None
+    path: str | Path,
+    structure: RobotStructure,
+    *,
+    aliases: Mapping[str, str] | None = None,
+    ignore: Collection[str] = (),
 ) -> JointTable:
     """Read a ``joints.csv`` (see the module docstring); joint values in SI ([m], [rad]).
 
@@ -64,6 +68,8 @@ def read_joints_csv(
         structure: The robot: one column per joint.
         aliases: Other column names for its joints (column name -> joint name), e.g. a URDF
             robot's own joint names (:func:`urdf_joint_columns`), which ``cpc2urdf plan`` writes.
+        ignore: Columns of other joints of the same robot, skipped (a ROS ``joint_states`` has
+            every joint; the calibration needs those on its paths).
 
     Raises:
         InputFileError: Naming the file, the row and the column: missing/unknown/duplicate
@@ -97,6 +103,14 @@ def read_joints_csv(
         scales.append(m.group(2))
     if len(set(names)) != len(names):
         raise InputFileError(p, f"duplicate column in header {rows[0]}")
+    keep = [
+        i
+        for i, n in enumerate(names)
+        if n not in ignore or n in structure.joint_names or n in alias
+    ]
+    if len(keep) < len(names):
+        rows = [[r[i] for i in keep if i < len(r)] for r in rows]
+        names, scales = [names[i] for i in keep], [scales[i] for i in keep]
     if "record" not in names:
         raise InputFileError(p, "missing column 'record' (the image file name without extension)")
     joint_cols = [n for n in names if n not in ("record", "label")]

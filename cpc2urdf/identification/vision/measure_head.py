@@ -19,7 +19,7 @@ that cannot be measured is handled by the ``on_error`` policy of
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +38,7 @@ from cpc2urdf.identification.vision.image_folders import (
     report_problem,
 )
 from cpc2urdf.identification.vision.joints_csv import read_joints_csv
-from cpc2urdf.identification.vision.plate_poses import TargetPose, target_pose
+from cpc2urdf.identification.vision.plate_poses import MAX_PNP_RMS_PX, TargetPose, target_pose
 from cpc2urdf.identification.vision.targets import PlateDesign, target_design
 from cpc2urdf.model import RobotStructure
 from cpc2urdf.progress import progress_checked
@@ -95,6 +95,8 @@ def measure_head_images(
     correct_bias: bool = True,
     show_progress: bool = False,
     joint_aliases: Mapping[str, str] | None = None,
+    other_joints: Collection[str] = (),
+    max_rms_px: float = MAX_PNP_RMS_PX,
 ) -> HeadImageMeasurement:
     """Stage-2 target poses ``T_camera_target`` from the head cameras' images.
 
@@ -112,6 +114,9 @@ def measure_head_images(
         show_progress: Progress bar on stderr.
         joint_aliases: Other names of the joint columns (a URDF's own joint names,
             :func:`~cpc2urdf.identification.vision.joints_csv.urdf_joint_columns`).
+        other_joints: Columns of the robot's other joints, skipped.
+        max_rms_px: A board's PnP pose must reproject within this [px] RMS (wrong intrinsics
+            otherwise; a fit that refines them takes a looser limit).
 
     Raises:
         InputFileError, DetectionError, DegenerateDataError: as
@@ -132,7 +137,9 @@ def measure_head_images(
     for c in cameras:
         if not (root / c).is_dir():
             raise InputFileError(root, f"missing sub-folder {c}/ for camera {c}")
-    table = read_joints_csv(joints or root / "joints.csv", structure, aliases=joint_aliases)
+    table = read_joints_csv(
+        joints or root / "joints.csv", structure, aliases=joint_aliases, ignore=other_joints
+    )
     design = design or target_design()
     target = board.name if board is not None else design.name
     problems: list[str] = []
@@ -172,7 +179,9 @@ def measure_head_images(
                 continue
             r: TargetPose | BoardPose | DetectionError
             if board is not None:
-                r = board_pose(img, cam.K, cam.D, board, image_name=str(path))
+                r = board_pose(
+                    img, cam.K, cam.D, board, image_name=str(path), max_rms_px=max_rms_px
+                )
             else:
                 r = target_pose(
                     img, cam.K, cam.D, design, image_name=str(path), correct_bias=correct_bias
@@ -189,7 +198,7 @@ def measure_head_images(
         for c in cameras:
             if len(out_T[c]) < 3:
                 raise DegenerateDataError(
-                    f"{root}: camera {c} saw the target in {len(out_T[c])} records; hand-eye calibration needs at least 3"
+                    f"{root}: camera {c} saw the target in {len(out_T[c])} records; a calibration needs at least 3"
                     + (f"; first problem: {problems[0]}" if problems else "")
                 )
     return HeadImageMeasurement(
