@@ -31,6 +31,32 @@ NOT_BETTER_EXIT = (
 )
 
 
+def _add_image_options(p: argparse.ArgumentParser) -> None:
+    """The options of a folder of the head's own images (the one-stage calibration)."""
+    img = p.add_argument_group(
+        "the head's own images (measurements: a folder <camera link>/<record>.png, "
+        "<camera link>.yaml, joints.csv, board.json; one-stage fit on the board's corners)"
+    )
+    img.add_argument(
+        "--cameras",
+        nargs="+",
+        metavar="LINK",
+        help="the URDF's camera links (LINK:optical / LINK:body where the file cannot tell)",
+    )
+    img.add_argument(
+        "--board", metavar="FILE", help="the board file (default: the folder's board.json)"
+    )
+    img.add_argument(
+        "--board-link",
+        metavar="LINK",
+        help="the URDF link holding the board (a gripper): arm and head calibrated together; "
+        "default: the board is fixed in the world",
+    )
+    img.add_argument(
+        "--intrinsics", action="store_true", help="refine the cameras' fx, fy, cx, cy, k1, k2 too"
+    )
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     from cpc2urdf.files.units import ANGLE_UNITS, LENGTH_UNITS
     from cpc2urdf.identification.kinematics.methods import DEFAULT_METHOD, METHODS
@@ -93,28 +119,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[
         "stated noise, an implausible size, gross outliers); the diagnosis is stored in the model's "
         "notes and provenance",
     )
-    img = p.add_argument_group(
-        "the head's own images (measurements: a folder <camera link>/<record>.png, "
-        "<camera link>.yaml, joints.csv, board.json; one-stage fit on the board's corners)"
-    )
-    img.add_argument(
-        "--cameras",
-        nargs="+",
-        metavar="LINK",
-        help="the URDF's camera links (LINK:optical / LINK:body where the file cannot tell)",
-    )
-    img.add_argument(
-        "--board", metavar="FILE", help="the board file (default: the folder's board.json)"
-    )
-    img.add_argument(
-        "--board-link",
-        metavar="LINK",
-        help="the URDF link holding the board (a gripper): arm and head calibrated together; "
-        "default: the board is fixed in the world",
-    )
-    img.add_argument(
-        "--intrinsics", action="store_true", help="refine the cameras' fx, fy, cx, cy, k1, k2 too"
-    )
+    _add_image_options(p)
     csv = p.add_argument_group("tracker CSV export or FIGAROH CSV (measurements ending in .csv)")
     csv.add_argument(
         "--link",
