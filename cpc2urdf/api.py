@@ -41,6 +41,8 @@ if TYPE_CHECKING:  # the stages are imported inside the functions that use them
     from cpc2urdf.identification.handeye.urdf_stage2 import HandEyeSimulation
     from cpc2urdf.identification.planning.outputs import PlanOutputs
     from cpc2urdf.identification.planning.plan_file import LoadedPlan
+    from cpc2urdf.identification.planning.selfcal_plan_file import SelfcalOutputs
+    from cpc2urdf.identification.simulation.selfcal_experiment import SelfcalScene
     from cpc2urdf.identification.simulation.stage1_experiment import Experiment
     from cpc2urdf.model import RobotStructure
     from cpc2urdf.urdf.report import CalibrationReport
@@ -139,6 +141,10 @@ def simulate(
     pixel_noise: float = ...,
     camera_error_mm: float = ...,
     camera_error_deg: float = ...,
+    board: None = ...,
+    board_link: None = ...,
+    plan: None = ...,
+    images: None = ...,
 ) -> Experiment: ...
 
 
@@ -157,7 +163,33 @@ def simulate(
     pixel_noise: float = ...,
     camera_error_mm: float = ...,
     camera_error_deg: float = ...,
+    board: None = ...,
+    board_link: None = ...,
+    plan: None = ...,
+    images: None = ...,
 ) -> HandEyeSimulation: ...
+
+
+@overload
+def simulate(
+    robot: RobotRef = ...,
+    *,
+    measure: Sequence[str] | None = ...,
+    seed: int = ...,
+    M: int = ...,
+    sigma_mm: float = ...,
+    sigma_deg: float = ...,
+    heldout: int = ...,
+    cameras: Sequence[str],
+    poses: int = ...,
+    pixel_noise: float = ...,
+    camera_error_mm: float = ...,
+    camera_error_deg: float = ...,
+    board: PathLike,
+    board_link: str | None = ...,
+    plan: PathLike | None = ...,
+    images: PathLike,
+) -> SelfcalScene: ...
 
 
 def simulate(
@@ -174,7 +206,11 @@ def simulate(
     pixel_noise: float = 0.1,
     camera_error_mm: float = 5.0,
     camera_error_deg: float = 3.0,
-) -> Experiment | HandEyeSimulation:
+    board: PathLike | None = None,
+    board_link: str | None = None,
+    plan: PathLike | None = None,
+    images: PathLike | None = None,
+) -> Experiment | HandEyeSimulation | SelfcalScene:
     """A simulated stage-1 experiment in memory (``cpc2urdf simulate``): a true robot (the nominal
     one with random geometric error), its plates measured with Fig. 10 pose noise while one joint
     moves at a time, and held-out configurations with their true poses. With ``cameras``, stage 2
@@ -193,6 +229,10 @@ def simulate(
         pixel_noise: Stage 2: std of the image noise per coordinate [px].
         camera_error_mm, camera_error_deg: Stage 2: the true mounts are the URDF's moved by up to
             this per axis and turned by this about a random axis.
+        board, board_link, plan, images: With ``cameras``: render the cameras' images of this
+            board (its file), fixed or held by ``board_link``, into the folder ``images``, at a
+            one-stage plan's configurations (``plan``) or ``poses`` of the simulator's own, the
+            robot 1 mm / 0.5 deg off the URDF (``simulate --board --images``, docs/selfcal.md).
 
     Returns:
         ``(truth, measured, heldout)``, as :class:`cpc2urdf.identification.simulation.stage1_experiment.Experiment`;
@@ -205,6 +245,29 @@ def simulate(
     )
 
     ref = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else None
+    if images is not None or board is not None:
+        from cpc2urdf.identification.planning.selfcal_plan_file import render_head_images
+        from cpc2urdf.identification.vision.boards.board_file import load_board
+
+        if (
+            cameras is None
+            or board is None
+            or images is None
+            or ref is None
+            or not is_urdf_ref(ref)
+        ):
+            raise ConfigurationError("images need a URDF path, cameras=, board= and images=")
+        scene, _ = render_head_images(
+            ref,
+            cameras,
+            load_board(board),
+            images,
+            board_link=board_link,
+            plan=plan,
+            poses=poses,
+            seed=seed,
+        )
+        return scene
     if cameras is not None:
         from cpc2urdf.identification.handeye.urdf_stage2 import simulate_handeye
 
@@ -682,7 +745,11 @@ def plan_experiment(
     task_region: str | ArrayLike = "calibration",
     candidates: int = 500,
     seed: int = 0,
-) -> PlanOutputs:
+    cameras: Sequence[str] | None = None,
+    board: PathLike | None = None,
+    board_link: str | None = None,
+    output: PathLike | None = None,
+) -> PlanOutputs | SelfcalOutputs:
     """The I-optimal measurement plan for ``robot`` and its predicted accuracy (``cpc2urdf plan``).
 
     Exactly one of ``n`` (configurations to measure) and ``target_error_mm`` (the smallest plan
@@ -697,10 +764,36 @@ def plan_experiment(
         one_joint: Keep the one-joint-at-a-time structure the closed form needs.
         task_region: ``"calibration"`` (the calibration ranges), ``"limits"`` or task configurations (N, n) [SI].
         candidates: Size of the seeded candidate set.
+        cameras, board, board_link: A one-stage plan instead (``plan --cameras --board``,
+            docs/selfcal.md): configurations where the camera links see the board (its file),
+            fixed or held by ``board_link``, minimising the predicted camera-pose error (``n``).
+        output: Write the plan's files there (``plan.json``, ``plan.csv``), all or none.
     """
-    from cpc2urdf.identification.planning.outputs import plan_robot
+    from cpc2urdf.identification.planning.outputs import plan_robot, write_plan_outputs
 
-    return plan_robot(
+    if cameras is not None:
+        from cpc2urdf.identification.planning.selfcal_plan_file import (
+            plan_selfcal_robot,
+            write_selfcal_plan,
+        )
+        from cpc2urdf.identification.vision.boards.board_file import load_board
+
+        if board is None or n is None:
+            raise ConfigurationError("a one-stage plan (cameras=) needs board= and n=")
+        one = plan_selfcal_robot(
+            load_robot(robot),
+            cameras,
+            load_board(board),
+            n,
+            robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
+            board_link=board_link,
+            n_candidates=candidates,
+            seed=seed,
+        )
+        if output is not None:
+            write_selfcal_plan(one, output)
+        return one
+    out = plan_robot(
         load_robot(robot),
         robot_ref=os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else "robot",
         measured=measure,
@@ -713,6 +806,9 @@ def plan_experiment(
         n_candidates=candidates,
         seed=seed,
     )
+    if output is not None:
+        write_plan_outputs(out, output)
+    return out
 
 
 def gaze_solver(

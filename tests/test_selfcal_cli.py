@@ -77,10 +77,25 @@ def test_cli_chain_calibrates_talos_head_better_than_its_urdf(talos: Path, capsy
 
 
 def test_python_quick_start_gives_the_same_model(talos: Path, tmp_path: Path):
-    model = cpc2urdf.calibrate_head(talos, TALOS, ["rgbd_link"])
+    """docs/selfcal.md's Python block: the same plan, images and model as the commands."""
+    tmp = talos.parent
+    plan = cpc2urdf.plan_experiment(
+        TALOS, n=12, cameras=["rgbd_link"], board=tmp / "board.json", output=tmp_path / "plan.json"
+    )
+    assert (tmp_path / "plan.json").read_text() == (tmp / "plan.json").read_text()
+    assert plan.plan.q.shape == (12, 4)
+    images = tmp_path / "images"
+    cpc2urdf.simulate(
+        TALOS,
+        cameras=["rgbd_link"],
+        board=tmp / "board.json",
+        plan=tmp / "plan.json",
+        images=images,
+    )
+    model = cpc2urdf.calibrate_head(images, TALOS, ["rgbd_link"])
     cpc2urdf.export_urdf(model, tmp_path / "cal.urdf")
     assert cpc2urdf.check_urdf(model, tmp_path / "cal.urdf").ok
-    cli = load_model(talos.parent / "model.json")
+    cli = load_model(tmp / "model.json")
     q = np.zeros((1, 4))
     assert np.allclose(model.fk_frame("rgbd_frame", q), cli.fk_frame("rgbd_frame", q), atol=1e-9)
 

@@ -241,13 +241,11 @@ IMAGE_FILES = (
 
 def _run_images(args: argparse.Namespace) -> int:
     """``--cameras --board --images``: what a URDF robot's cameras see of a board, as images."""
-    import numpy as np
 
     from cpc2urdf.argparsing import check_outputs_are_not_inputs
     from cpc2urdf.errors import ConfigurationError, OutputError
     from cpc2urdf.files.robot_ref import is_urdf_ref
-    from cpc2urdf.identification.planning.selfcal_plan_file import load_selfcal_plan
-    from cpc2urdf.identification.simulation import selfcal_experiment as selfcal
+    from cpc2urdf.identification.planning.selfcal_plan_file import render_head_images
     from cpc2urdf.identification.vision.boards.board_file import load_board
 
     for flag, needs in (("board", "images"), ("images", "board"), ("board_link", "board")):
@@ -274,40 +272,18 @@ def _run_images(args: argparse.Namespace) -> int:
         raise OutputError(f"{args.images}: exists and is not a folder")
     args.output = args.images  # so that the outputs are checked against the inputs
     check_outputs_are_not_inputs(args)
-    board = load_board(args.board)
-    if board.pose_ambiguity:
-        raise ConfigurationError(f"--board {args.board}: {board.pose_ambiguity}; use another board")
-    plan = load_selfcal_plan(args.plan) if args.plan else None
-    placement = None
-    if plan is not None:  # the plan's board: fixed where it planned it, or the link's own frame
-        if (plan.T_board_base is None) != bool(args.board_link):
-            held = plan.T_board_base is None
-            raise ConfigurationError(
-                f"{args.plan} was planned for a board {'held' if held else 'fixed'}; "
-                + ("give --board-link" if held else "drop --board-link")
-            )
-        placement = (
-            plan.T_joint_board if plan.T_board_base is None else np.linalg.inv(plan.T_board_base)
-        )
-    scene = selfcal.selfcal_scene(
+    scene, q = render_head_images(
         args.robot,
         args.cameras,
-        board=board,
+        load_board(args.board),
+        args.images,
         board_link=args.board_link,
+        plan=args.plan,
+        poses=args.poses,
         seed=args.seed,
         sigma_t=args.geometry_error_mm / 1000,
         sigma_r=math.radians(args.geometry_error_deg),
-        placement=placement,
     )
-    if plan is not None:
-        if sorted(plan.cameras) != sorted(scene.cameras):
-            raise ConfigurationError(f"{args.plan} was planned for cameras {plan.cameras}")
-        order = [plan.joint_names.index(j) for j in scene.truth.structure.joint_names]
-        q = plan.q[:, order]
-    else:
-        rng = np.random.default_rng([args.seed, 2])  # its own stream: the scene's from the seed
-        q = selfcal.selfcal_configurations(scene, args.poses, rng)
-    selfcal.render_selfcal_experiment(args.images, scene, q, seed=args.seed)
     where = f"held by {args.board_link}" if args.board_link else "fixed in the world"
     print(
         f"wrote {args.images}: {len(q)} records x {len(scene.cameras)} cameras "

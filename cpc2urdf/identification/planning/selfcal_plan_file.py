@@ -39,6 +39,11 @@ from cpc2urdf.identification.planning.plan_file import (
 )
 from cpc2urdf.identification.planning.selfcal_plan import SelfcalPlan, plan_selfcal
 from cpc2urdf.identification.selfcal.pixel_problem import CameraModel
+from cpc2urdf.identification.simulation.selfcal_experiment import SelfcalScene
+from cpc2urdf.identification.simulation.truth import (
+    DEFAULT_GEOMETRY_ERROR_R,
+    DEFAULT_GEOMETRY_ERROR_T,
+)
 from cpc2urdf.identification.vision.boards.board import Board
 from cpc2urdf.identification.vision.joints_csv import urdf_joint_columns
 from cpc2urdf.model import RobotStructure
@@ -302,11 +307,73 @@ def load_selfcal_plan(
     )
 
 
+def render_head_images(
+    urdf: str | os.PathLike[str],
+    cameras: Sequence[str],
+    board: Board,
+    folder: str | os.PathLike[str],
+    *,
+    board_link: str | None = None,
+    plan: str | os.PathLike[str] | None = None,
+    poses: int = 20,
+    seed: int = 0,
+    sigma_t: float = DEFAULT_GEOMETRY_ERROR_T,
+    sigma_r: float = DEFAULT_GEOMETRY_ERROR_R,
+) -> tuple[SelfcalScene, Array]:
+    """Render what ``urdf``'s cameras see of ``board`` into ``folder`` (``cpc2urdf simulate
+    --cameras --board --images``): a true robot ``sigma_t`` / ``sigma_r`` off the URDF, at a
+    plan's configurations with its board (``plan``), or at ``poses`` configurations of the
+    simulator's walk. Returns the scene (the truth, the board's placement) and the joint
+    readings, shape (N, n).
+
+    Raises:
+        ConfigurationError: A plan for another board placement or other cameras; a board that
+            gives no unique pose.
+    """
+    from cpc2urdf.identification.simulation import selfcal_experiment as sx
+
+    if board.pose_ambiguity:
+        raise ConfigurationError(f"{board.name}: {board.pose_ambiguity}; use another board")
+    loaded = load_selfcal_plan(plan) if plan is not None else None
+    placement = None
+    if loaded is not None:  # the plan's board: fixed where it planned it, or on the link
+        if (loaded.T_board_base is None) != (board_link is not None):
+            held = loaded.T_board_base is None
+            raise ConfigurationError(
+                f"{plan} was planned for a board {'held' if held else 'fixed'}; "
+                + ("name the link holding it" if held else "it is not held")
+            )
+        placement = (
+            loaded.T_joint_board
+            if loaded.T_board_base is None
+            else np.linalg.inv(loaded.T_board_base)
+        )
+    scene = sx.selfcal_scene(
+        Path(urdf),
+        cameras,
+        board=board,
+        board_link=board_link,
+        seed=seed,
+        sigma_t=sigma_t,
+        sigma_r=sigma_r,
+        placement=placement,
+    )
+    if loaded is not None:
+        if sorted(loaded.cameras) != sorted(scene.cameras):
+            raise ConfigurationError(f"{plan} was planned for cameras {loaded.cameras}")
+        q = loaded.q[:, [loaded.joint_names.index(j) for j in scene.truth.structure.joint_names]]
+    else:
+        q = sx.selfcal_configurations(scene, poses, np.random.default_rng([seed, 2]))
+    sx.render_selfcal_experiment(Path(folder), scene, q, seed=seed)
+    return scene, q
+
+
 __all__ = [
     "LoadedSelfcalPlan",
     "SelfcalOutputs",
     "load_selfcal_plan",
     "plan_selfcal_robot",
+    "render_head_images",
     "selfcal_plan_to_json",
     "selfcal_setup",
     "write_selfcal_plan",
