@@ -127,10 +127,8 @@ def optical_frames_model(
 
     Raises:
         InputFileError: A camera link the URDF cannot carry or whose convention cannot be told; a
-            holding link that is not a link of the URDF.
+            holding link that is not a link of the URDF (:func:`urdf_robot`'s refusal).
     """
-    if holding is not None and not tree.has_link(holding):
-        raise InputFileError(tree.source, f"board link {holding!r} is not a link of this URDF")
     cams = camera_links(tree, dict(split_convention(c) for c in cameras))
     model = urdf_robot(tree, [*cams, *([holding] if holding else [])]).nominal
     assert model is not None

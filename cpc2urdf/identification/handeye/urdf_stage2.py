@@ -52,6 +52,7 @@ from cpc2urdf.urdf.camera_mounts import (
     camera_links,
     frame_name,
     link_placement,
+    optical_frames_model,
     with_camera_links,
 )
 from cpc2urdf.urdf.origins import writeback_plan
@@ -99,22 +100,20 @@ class UrdfCameraRig:
 
 
 def camera_rig(
-    urdf: str | Path | UrdfTree, cameras: Sequence[str], *, links: Sequence[str] = ()
+    urdf: str | Path | UrdfTree, cameras: Sequence[str], *, holding: str | None = None
 ) -> UrdfCameraRig:
-    """The rig of ``cameras`` (URDF link names, each optionally ``LINK:optical``/``LINK:body``).
-
-    ``links``: more URDF links (e.g. a gripper holding a board) whose paths the model includes,
-    each as a frame of kind ``plate`` named like the link (:func:`~cpc2urdf.urdf.robot.urdf_robot`).
+    """The rig of ``cameras`` (URDF link names, each optionally ``LINK:optical``/``LINK:body``):
+    :func:`~cpc2urdf.urdf.camera_mounts.optical_frames_model` (with the link ``holding`` a board,
+    if any) plus each camera's hand frame.
 
     Raises:
         InputFileError: A camera link the URDF cannot carry or whose convention cannot be told (one
             line naming the link); a camera link below another.
     """
     tree = urdf if isinstance(urdf, UrdfTree) else read_urdf_tree(urdf)
-    stated = dict(split_convention(c) for c in cameras)
-    if not stated:
+    if not cameras:
         raise ConfigurationError("name at least one camera link")
-    cams = camera_links(tree, stated)
+    model, cams = optical_frames_model(tree, cameras, holding)
     for link in cams:
         above = [j.parent for j in tree.path(link) if j.parent in cams]
         if above:
@@ -122,20 +121,12 @@ def camera_rig(
                 tree.source,
                 f"camera link {link!r} hangs below camera link {above[0]!r}; name one of them",
             )
-    robot = urdf_robot(tree, [*cams, *(link for link in links if link not in cams)])
-    assert robot.nominal is not None
-    model = robot.nominal
-    names = NameMap.of(tree)
     optical, hand = {}, {}
     for link, cam in cams.items():
         K, T_K_hand = link_placement(model, tree, cam.hand)
-        hand[link] = names.links[cam.hand]
-        optical[link] = names.links[link]
-        T_K_optical = T_K_hand @ cam.mount.origin @ cam.T_link_optical
+        hand[link] = NameMap.of(tree).links[cam.hand]
+        optical[link] = frame_name(model, tree, link)
         model = model.with_frame(Frame(hand[link], K, "frame"), CPCParams.from_matrix(T_K_hand))
-        model = model.with_frame(
-            Frame(optical[link], K, "camera"), CPCParams.from_matrix(T_K_optical)
-        )
     return UrdfCameraRig(tree, cams, model, optical, hand)
 
 

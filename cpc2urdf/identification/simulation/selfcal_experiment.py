@@ -145,7 +145,7 @@ def selfcal_scene(
         if not (math.isfinite(v) and v >= 0):
             raise ConfigurationError(f"{what} must be a finite number >= 0, got {v:g}")
     tree = urdf if isinstance(urdf, UrdfTree) else read_urdf_tree(urdf)
-    rig = camera_rig(tree, cameras, links=[board_link] if board_link else [])
+    rig = camera_rig(tree, cameras, holding=board_link)
     links = tuple(rig.cameras)
     cams = tuple(rig.optical[link] for link in links)
     if board_link in rig.cameras or BOARD_FRAME in cams:
