@@ -24,6 +24,7 @@ from cpc2urdf.transforms import Array
 # A direction whose singular value, relative to the largest of the column-scaled weighted
 # Jacobian, is below this is not determined by the data (exact rank deficiency lands at ~1e-15).
 RANK_TOL = 1e-9  # [-]
+ZERO_COLUMN = 1e-10  # [-] a Jacobian column this small against the largest is rounding
 # Above this condition number of the column-scaled Jacobian the estimate is determined only in
 # principle: a warning says which combination is weakest.
 ILL_CONDITIONED = 1e6  # [-]
@@ -121,9 +122,7 @@ def analyze_jacobian(
     if len(names) != P:
         raise ValueError(f"{len(names)} names for a Jacobian with {P} columns")
     norms = np.linalg.norm(J, axis=0)
-    scale = np.where(norms > 0, norms, 1.0)
-    Js = J / scale
-    _, s, Vt = np.linalg.svd(triangular_factor(Js))  # = SVD of Js (see triangular_factor)
+    scale, s, Vt = scaled_svd(J)
     s_max = s[0] if s.size and s[0] > 0 else 1.0
     null = s / s_max < RANK_TOL
     rank = int(np.sum(~null))
@@ -165,6 +164,20 @@ def analyze_jacobian(
         for f in findings:
             warnings.warn(f, IdentifiabilityWarning, stacklevel=2)
     return IdentifiabilityReport(names, s, norms, rank, cond, V0, undetermined, reasons, findings)
+
+
+def scaled_svd(J: ArrayLike) -> tuple[Array, Array, Array]:
+    """``(d, s, Vt)``: the SVD ``J / d = U diag(s) Vt`` of ``J`` (m, P) with its columns scaled to
+    unit norm by ``d`` (P,), so that metres and radians compare fairly. A column at rounding
+    level against the largest (:data:`ZERO_COLUMN`; a joint that moves every measured frame alike
+    when only relative poses are seen) is zero, ``d = 1``: scaled to unit length its rounding
+    would pass for information."""
+    J = np.asarray(J, dtype=float)
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= ZERO_COLUMN * norms.max(initial=0.0)
+    d = np.where(zero, 1.0, norms)
+    _, s, Vt = np.linalg.svd(triangular_factor(np.where(zero, 0.0, J / d)))
+    return d, s, Vt
 
 
 def triangular_factor(A: ArrayLike) -> Array:
@@ -253,9 +266,11 @@ def data_reasons(
 __all__ = [
     "ILL_CONDITIONED",
     "RANK_TOL",
+    "ZERO_COLUMN",
     "IdentifiabilityReport",
     "IdentifiabilityWarning",
     "analyze_jacobian",
     "data_reasons",
+    "scaled_svd",
     "triangular_factor",
 ]

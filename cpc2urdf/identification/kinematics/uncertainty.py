@@ -33,7 +33,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
+from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, scaled_svd
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.problem import IdentificationProblem
 from cpc2urdf.model import CPCModel
@@ -69,9 +69,7 @@ def covariance_from_jacobian(
         raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
-    norms = np.linalg.norm(J, axis=0)
-    d = np.where(norms > 0, norms, 1.0)
-    _, s, Vt = np.linalg.svd(triangular_factor(J / d))  # = SVD of J / d, cheaper under load
+    d, s, Vt = scaled_svd(J)
     keep = s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL
     rank = int(keep.sum())
     # (J^T J)^+ restricted to the identifiable subspace, undoing the column scaling.

@@ -36,7 +36,12 @@ from numpy.typing import NDArray
 from scipy.linalg import qr
 
 from cpc2urdf.errors import DegenerateDataError
-from cpc2urdf.identification.kinematics.identifiability import RANK_TOL, triangular_factor
+from cpc2urdf.identification.kinematics.identifiability import (
+    RANK_TOL,
+    ZERO_COLUMN,
+    scaled_svd,
+    triangular_factor,
+)
 from cpc2urdf.identification.kinematics.parametrization import Parametrization
 from cpc2urdf.identification.kinematics.refine import solve_least_squares
 from cpc2urdf.identification.selfcal.pixel_problem import (
@@ -52,7 +57,6 @@ IMAGE_NOISE_FACTOR = 4.0  # an image whose corners are this much noisier than it
 PRIOR_COORDINATES = 10.0  # an image's noise is its own, shrunk towards its camera's by this weight
 IMAGE_DROPPED_SHARE = 1.0 / 3.0  # above this share of dropped corners the whole image goes
 MAX_ROUNDS = 5
-ZERO_COLUMN = 1e-10  # [-] a Jacobian column this small relative to the largest is rounding
 MIN_SIGMA = 1e-3  # [px] no detector is better; keeps noise-free data well-conditioned
 MAX_NFEV = 100
 
@@ -130,15 +134,10 @@ def subspace(J: Array, prefer: Array | None = None) -> tuple[NDArray[np.intp], A
     directions (P, k) (unit columns) and the covariance ``(J_free^T J_free)^-1`` embedded in
     (P, P), zero for the fixed.
 
-    Directions by the column-scaled SVD (stage 1's rank rule). A column at rounding level (a joint
-    on both the camera's and a held board's paths) is zero: scaled to unit length its rounding
-    would pass for information.
+    Directions by the column-scaled SVD and stage 1's rank rule (:func:`scaled_svd`, which
+    zeroes a column at rounding level: a joint on both the camera's and a held board's paths).
     """
-    norms = np.linalg.norm(J, axis=0)
-    zero = norms <= ZERO_COLUMN * norms.max()
-    d = np.where(zero, 1.0, norms)
-    A = np.where(zero, 0.0, J / d)
-    _, s, Vt = np.linalg.svd(triangular_factor(A))
+    d, s, Vt = scaled_svd(J)
     null = ~(s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL)
     fixed = np.zeros(0, dtype=np.intp)
     if null.any():
@@ -146,7 +145,7 @@ def subspace(J: Array, prefer: Array | None = None) -> tuple[NDArray[np.intp], A
         _, _, piv = qr(Vt[null] * w, pivoting=True, mode="economic")
         fixed = np.sort(piv[: int(null.sum())])
     free = np.setdiff1d(np.arange(J.shape[1]), fixed)
-    R = triangular_factor(A[:, free])
+    R = triangular_factor(J[:, free] / d[free])
     Ri = np.linalg.inv(R) / d[free, None]
     cov = np.zeros((J.shape[1], J.shape[1]))
     cov[np.ix_(free, free)] = Ri @ Ri.T

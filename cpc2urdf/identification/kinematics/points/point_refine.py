@@ -29,6 +29,7 @@ from cpc2urdf.files.measurements import Marker, MeasurementSet
 from cpc2urdf.identification.kinematics.identifiability import (
     IdentifiabilityReport,
     analyze_jacobian,
+    scaled_svd,
 )
 from cpc2urdf.identification.kinematics.points.circle_point import (
     circle_point_start,
@@ -113,9 +114,7 @@ def undetermined_by_points(ms: MeasurementSet, markers: list[str]) -> list[str]:
 
 def _covariance(J: Array, r: Array, names: tuple[str, ...]) -> tuple[Array, Array, int, float]:
     """``(C, null, dof, s0)``: pseudo-inverse covariance of ``J``'s parameters (column-scaled)."""
-    norms = np.linalg.norm(J, axis=0)
-    d = np.where(norms > 0, norms, 1.0)
-    _, s, Vt = np.linalg.svd(J / d, full_matrices=False)
+    d, s, Vt = scaled_svd(J)
     keep = s / (s[0] if s[0] > 0 else 1.0) >= RANK_TOL
     Vk = Vt[keep].T / d[:, None]
     C = (Vk / s[keep] ** 2) @ Vk.T
