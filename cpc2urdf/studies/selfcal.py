@@ -38,7 +38,7 @@ import numpy as np
 
 from cpc2urdf.argparsing import OneLineParser
 from cpc2urdf.errors import Cpc2UrdfError
-from cpc2urdf.transforms import Array, inverse, rotation_error
+from cpc2urdf.transforms import Array, inverse, rotation_error, rotvec_from_matrix
 
 ROBOTS: dict[str, tuple[str, tuple[str, ...], str | None]] = {
     "iis_head": ("", ("camera_left_optical", "camera_right_optical"), None),
@@ -88,28 +88,6 @@ def _errors(A: dict[str, Array], B: dict[str, Array]) -> tuple[float, float]:
     return float(np.sqrt(np.mean(dp**2)) * 1e3), float(np.degrees(np.sqrt(np.mean(dr**2))))
 
 
-def _pose_jacobians(fit: Any, q: Array, board_frame: str | None) -> dict[str, Array]:
-    """Per camera, d(camera pose in the board's frame) / d(chart), (N, 6, P): origin, rotation."""
-    T, D = fit.chart.pose_jacobian(np.zeros(fit.chart.n_params), q)
-    out = {}
-    for c in fit.chart.frames:
-        if c == board_frame:
-            continue
-        Dc = D[c]
-        if board_frame is not None:  # relative to the board: subtract its motion, in its frame
-            Tb, Db = T[board_frame], D[board_frame]
-            lever = T[c][:, :3, 3] - Tb[:, :3, 3]
-            dp = (
-                Dc[:, :3]
-                - Db[:, :3]
-                - np.cross(np.swapaxes(Db[:, 3:], 1, 2), lever[:, None]).swapaxes(1, 2)
-            )
-            R = np.swapaxes(Tb[:, :3, :3], 1, 2)
-            Dc = np.concatenate([R @ dp, R @ (Dc[:, 3:] - Db[:, 3:])], axis=1)
-        out[c] = Dc
-    return out
-
-
 def _urdf_as_is(scene: Any, data: Any) -> Any:
     """The URDF unchanged, placed by the images: in the board's world by a rigid fit of the PnP
     camera poses (fixed), or with the held board where PnP puts it on average."""
@@ -122,17 +100,21 @@ def _urdf_as_is(scene: Any, data: Any) -> Any:
 
 
 def _uncertainty_checks(
-    fit: Any, scene: Any, q: Array, est: dict[str, Array], true: dict[str, Array]
+    cal: Any, scene: Any, data: Any, q: Array, est: dict[str, Array], true: dict[str, Array]
 ) -> tuple[float, float]:
-    """(measured / predicted RMS position error, sqrt(mean Mahalanobis / 6)) at ``q``."""
-    C = fit.chart_covariance()
+    """(measured / predicted RMS position error, sqrt(mean Mahalanobis / 6)) at ``q``: the
+    camera poses in the board's frame and their covariance from the fit's (the planner's
+    :func:`~cpc2urdf.identification.planning.selfcal_plan.relative_pose_jacobians`)."""
+    from cpc2urdf.identification.planning.pixel_setup import PixelSetup
+    from cpc2urdf.identification.planning.selfcal_plan import relative_pose_jacobians
+
+    setup = PixelSetup(cal.model, data.cameras, scene.board, scene.board_frame)
+    C = cal.fit.chart_covariance()
     m2, pred, meas = [], [], []
-    for c, Dc in _pose_jacobians(fit, q, scene.board_frame).items():
-        cov = np.einsum("nip,pq,njq->nij", Dc, C, Dc)
-        for i in range(len(q)):
-            dR = true[c][i][:3, :3] @ est[c][i][:3, :3].T
-            w = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]]) / 2.0
-            e = np.r_[true[c][i][:3, 3] - est[c][i][:3, 3], w]
+    for c, G in relative_pose_jacobians(setup, q).items():
+        cov = np.einsum("nip,pq,njq->nij", G, C, G)
+        w = rotvec_from_matrix(true[c][:, :3, :3] @ np.swapaxes(est[c][:, :3, :3], 1, 2))
+        for i, e in enumerate(np.concatenate([true[c][:, :3, 3] - est[c][:, :3, 3], w], axis=1)):
             m2.append(float(e @ np.linalg.lstsq(cov[i], e, rcond=1e-12)[0]))
             pred.append(np.trace(cov[i][:3, :3]))
             meas.append(e[:3] @ e[:3])
@@ -216,7 +198,7 @@ def trial(name: str, seed: int, images: int, noise_free: bool, folder: Path) -> 
         if cal.two_stage is None
         else _errors(_camera_poses(scene, cal.two_stage, qh, True), true),
     }
-    row["pred"], row["maha"] = _uncertainty_checks(cal.fit, scene, qh, est, true)
+    row["pred"], row["maha"] = _uncertainty_checks(cal, scene, data, qh, est, true)
     row["crb"] = _crb_ratio(cal, scene, data, exact)
     return row
 

@@ -199,14 +199,8 @@ def _keep_first(problem: PixelProblem, data: PixelData) -> Array:
     never move first; last, what is not the user's: a held board's placement, the board's
     scale, and (a fixed board) the first joints' lines, which place the robot in the board's
     world."""
-    still = {
-        j
-        for i, j in enumerate(
-            problem.chart.model_from_vector(np.zeros(problem.chart.n_params)).structure.joint_names
-        )
-        if np.ptp(data.q[:, i]) == 0.0
-    }
-    s = problem.chart.model_from_vector(np.zeros(problem.chart.n_params)).structure
+    s = problem.chart.reference.structure
+    still = {j for i, j in enumerate(s.joint_names) if np.ptp(data.q[:, i]) == 0.0}
     placing = {j.name for j in s.joints if j.parent == BASE and data.board_frame is None}
     owner = [n.rsplit(".", 1)[0] for n in problem.names()]
     cheap = {data.board_frame, *placing}
@@ -348,18 +342,16 @@ def fit_pixels(
     model, scale = _closest_to_start(model, scale, *first, prefer, board_scale)
     cur = replace(cur, board_points=data.board_points * scale)
     problem = problem_at(model, sig)
-    x, _, _ = _solve_round(problem, prefer)
+    x, N, _ = _solve_round(problem, prefer)
     model = problem.chart.model_from_vector(x[: problem.chart.n_params])
     scale *= 1.0 + x[-1] if board_scale else 1.0
     cur = replace(cur, cameras=problem.camera_models(x), board_points=data.board_points * scale)
-    problem = problem_at(model, sig)
-    x0 = np.zeros(problem.n_params)
-    fixed, _, _ = subspace(problem.jacobian(x0), prefer)
-    r = problem.pixel_residuals(x0)
-    rank = problem.n_params - len(fixed)
+    r = problem.pixel_residuals(x)  # the refitted model's: its chart's x = 0 below
+    rank = problem.n_params - N.shape[1]
     problem = problem_at(
         model, _view_sigma(r, data, rank / (2.0 * sum(len(v) for v in r.values())))
     )
+    x0 = np.zeros(problem.n_params)
     fixed, N, cov = subspace(problem.jacobian(x0), prefer)
     names = problem.names()
     undetermined = [names[i] for i in fixed]
