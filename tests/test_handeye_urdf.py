@@ -109,42 +109,12 @@ def test_a_link_of_unknown_convention_is_refused_in_one_line(tmp_path: Path) -> 
 
 def test_cli_refuses_an_unknown_convention_and_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cpc2urdf",
-            "simulate",
-            str(TALOS),
-            "--cameras",
-            "imu_link",
-            "-o",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-    )
+    run = _cli("simulate", str(TALOS), "--cameras", "imu_link", "-o", str(out))
     assert run.returncode == 2, run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
     assert "imu_link" in run.stderr and "optical" in run.stderr and "body" in run.stderr
     assert not out.exists()
-    ok = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cpc2urdf",
-            "simulate",
-            str(TALOS),
-            "--cameras",
-            "rgbd_link",
-            "--poses",
-            "5",
-            "-o",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-    )
+    ok = _cli("simulate", str(TALOS), "--cameras", "rgbd_link", "--poses", "5", "-o", str(out))
     assert ok.returncode == 0, ok.stderr
     assert "rgbd_link: body link on head_2_link (joint rgbd_joint" in ok.stdout
     names = sorted(p.name for p in out.iterdir())
