@@ -306,8 +306,7 @@ def with_camera_frame(
     extra: dict[str, Any] | None = None,
 ) -> CPCModel:
     """A copy of ``model`` with frame ``camera`` (kind ``camera``) on the link carrying ``hand``,
-    at ``T_link_hand @ X``, and the solution recorded in ``metadata.handeye[camera]`` (a :class:`~cpc2urdf.model_metadata.HandEyeRecord`;
-    the consistency gate's report, if the gate ran, under ``details["consistency"]``).
+    at ``T_link_hand @ X``, and the solution recorded (:func:`with_handeye_record`).
 
     Raises:
         UnknownNameError: ``hand`` is not a frame of the model.
