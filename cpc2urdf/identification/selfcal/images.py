@@ -107,12 +107,20 @@ def read_pixel_data(
     index: dict[str, int] = {}
     views = []
     for c in cameras:
-        for label, qi, (ids, uv) in zip(m.labels[c], m.q[c], m.corners[c], strict=True):
+        found = zip(
+            m.labels[c],
+            m.q[c],
+            m.corners[c],
+            m.T_camera_target[c],
+            m.reprojection_rms[c],
+            strict=True,
+        )
+        for label, qi, (ids, uv), T, rms in found:
             if label not in index:
                 index[label] = len(labels)
                 labels.append(label)
                 q.append(qi)
-            views.append(BoardView(frame(c), index[label], ids, uv))
+            views.append(BoardView(frame(c), index[label], ids, uv, (T, float(rms))))
     return PixelData(
         np.array(q),
         labels,

@@ -74,12 +74,15 @@ class BoardView:
         record: Index of the record (row of :attr:`PixelData.q`).
         ids: Corner ids (rows of :attr:`PixelData.board_points`), shape (k,).
         uv: Detected pixels (distorted, as in the image) [px], shape (k, 2).
+        pnp: The detector's own PnP pose of the board, ``T_camera_board`` (4, 4), and its RMS
+            reprojection error [px], when it solved one (reading images does).
     """
 
     camera: str
     record: int
     ids: NDArray[np.intp]
     uv: Array
+    pnp: tuple[Array, float] | None = None
 
 
 @dataclass

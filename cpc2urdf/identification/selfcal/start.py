@@ -31,15 +31,15 @@ PNP_OUTLIER = 5.0  # an image's PnP reprojection this many times its camera's me
 
 
 def pnp_poses(data: PixelData) -> dict[str, Array]:
-    """Camera -> ``T_camera_board`` per record by PnP, shape (R, 4, 4); NaN where not seen, or
-    where the pose reprojects :data:`PNP_OUTLIER` times worse than the camera's median image (a
-    misdetected board: the pixel fit names it)."""
+    """Camera -> ``T_camera_board`` per record by PnP (the detector's own when it solved one),
+    shape (R, 4, 4); NaN where not seen, or where the pose reprojects :data:`PNP_OUTLIER` times
+    worse than the camera's median image (a misdetected board: the pixel fit names it)."""
     R = len(data.q)
     out = {c: np.full((R, 4, 4), np.nan) for c in data.cameras}
     rms: dict[str, list[tuple[int, float]]] = {c: [] for c in data.cameras}
     for v in data.views:
         cam = data.cameras[v.camera]
-        T, e = solve_pnp(data.board_points[v.ids], v.uv, cam.K, cam.D)
+        T, e = v.pnp or solve_pnp(data.board_points[v.ids], v.uv, cam.K, cam.D)
         out[v.camera][v.record] = T
         rms[v.camera].append((v.record, e))
     for c, found in rms.items():
