@@ -164,7 +164,13 @@ def camera_pose_error(
     """RMS over ``q_heldout`` of each camera's predicted pose error for a chart ``covariance``
     (P, P), e.g. a plan's or a fit's (:meth:`PixelFit.chart_covariance`); ``inf`` where the pose
     moves along ``null_space`` (P, k)."""
-    G = relative_pose_jacobians(setup, q_heldout)
+    return _pose_error(relative_pose_jacobians(setup, q_heldout), covariance, null_space)
+
+
+def _pose_error(
+    G: dict[str, Array], covariance: Array, null_space: Array | None
+) -> CameraPoseError:
+    """:func:`camera_pose_error` from the held-out configurations' pose Jacobians ``G``."""
     pos, rot = {}, {}
     for c, Gc in G.items():
         v = np.einsum("nip,pq,niq->ni", Gc, covariance, Gc).mean(axis=0)
@@ -190,9 +196,9 @@ def determined(J: Array) -> tuple[NDArray[np.intp], Array, Array]:
     return np.setdiff1d(np.arange(J.shape[1]), fixed), N, C
 
 
-def _error_of_factors(setup: PixelSetup, F: Array, q_heldout: ArrayLike) -> CameraPoseError:
+def _error_of_factors(F: Array, G: dict[str, Array]) -> CameraPoseError:
     _, N, C = determined(F.reshape(-1, F.shape[-1]))
-    return camera_pose_error(setup, C, q_heldout, N)
+    return _pose_error(G, C, N)
 
 
 def predicted_camera_pose_error(
@@ -214,10 +220,11 @@ def predicted_camera_pose_error(
     return camera_pose_error(setup, C, q_heldout, N)
 
 
-def task_matrix(setup: PixelSetup, q_heldout: ArrayLike, length: float = ROTATION_LENGTH) -> Array:
-    """``A`` of the I-criterion: ``mean_q sum_cameras (G_p^T G_p + length^2 G_r^T G_r)``, (P, P)."""
+def task_matrix(G_all: dict[str, Array], length: float = ROTATION_LENGTH) -> Array:
+    """``A`` of the I-criterion from the held-out pose Jacobians (:func:`relative_pose_jacobians`):
+    ``mean_q sum_cameras (G_p^T G_p + length^2 G_r^T G_r)``, (P, P)."""
     A = 0.0
-    for G in relative_pose_jacobians(setup, q_heldout).values():
+    for G in G_all.values():
         W = np.concatenate([G[:, :3], length * G[:, 3:]], axis=1)
         A = A + np.einsum("nip,niq->pq", W, W) / len(G)
     return np.asarray(A)
@@ -288,18 +295,16 @@ def plan_selfcal(
         q_h = np.atleast_2d(np.asarray(heldout, dtype=float))
     F = candidate_information(setup, q_c)
     free, _, _ = determined(F.reshape(-1, F.shape[-1]))  # what all the candidates determine
-    A = task_matrix(setup, q_h, length)[np.ix_(free, free)]
+    G = relative_pose_jacobians(setup, q_h)  # once, for every plan predicted below
+    A = task_matrix(G, length)[np.ix_(free, free)]
     sel = select(F[:, :, free], n, criterion="I", A=A)
     idx = np.sort(sel.indices)
     rng = np.random.default_rng([seed, 2])
-    rand = [
-        _error_of_factors(setup, F[rng.choice(len(F), n, replace=False)], q_h)
-        for _ in range(n_random)
-    ]
+    rand = [_error_of_factors(F[rng.choice(len(F), n, replace=False)], G) for _ in range(n_random)]
     return SelfcalPlan(
         q_c[idx],
         [f"candidate {i}" for i in idx],
-        _error_of_factors(setup, F[idx], q_h),
+        _error_of_factors(F[idx], G),
         rand,
         q_h,
         (len(q_c), drawn),
